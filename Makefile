@@ -1,0 +1,31 @@
+# pneumatic_unload: the two commands of README.md are `make demo` and `make test`.
+SHELL := /bin/bash
+VENV ?= .venv
+PY := $(VENV)/bin/python
+
+.PHONY: setup demo test lint bench lock bags clean
+
+setup:
+	@bash scripts/setup_venv.sh
+
+demo: setup
+	@$(PY) -m pneumatic_unload.demo
+
+test: setup
+	@$(VENV)/bin/ruff check .
+	@$(PY) -m pytest -q test
+
+lint: setup
+	@$(VENV)/bin/ruff check .
+
+bench: setup
+	@for b in bench/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+bags: setup
+	@$(PY) bags/regenerate.py
+
+lock:
+	@bash scripts/lock.sh
+
+clean:
+	rm -rf build install log runs

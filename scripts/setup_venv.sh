@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# Create .venv with the pinned dependency set, repair the ROS wheels' CMake paths,
+# build the pneumatic_unload_msgs interface package into the venv and install
+# pneumatic_unload in editable mode. Idempotent: every step skips work already done.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+VENV="${VENV:-.venv}"
+PYTHON="${PYTHON:-python3}"
+
+if [ ! -x "$VENV/bin/python" ]; then
+  echo "[setup] creating $VENV"
+  "$PYTHON" -m venv "$VENV"
+fi
+VPY="$VENV/bin/python"
+VENV_ABS="$(cd "$VENV" && pwd)"
+
+if ! cmp -s requirements.lock "$VENV/.requirements.lock"; then
+  echo "[setup] installing the pinned set (requirements.lock)"
+  "$VPY" -m pip install --disable-pip-version-check -q -r requirements.lock
+  cp requirements.lock "$VENV/.requirements.lock"
+  rm -f "$VENV/.msgs-built"
+fi
+
+# The wheels' exported CMake files hard-code the wheel-build host's include dirs.
+PYINC="$("$VPY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')"
+NPINC="$("$VPY" -c 'import numpy; print(numpy.get_include())')"
+grep -rlZ --include='*.cmake' '/opt/python/cp3' "$VENV_ABS/share" 2>/dev/null | xargs -0 -r sed -i -E \
+  -e "s#/opt/python/cp3[0-9]+-cp3[0-9]+/include/python3\.[0-9]+#$PYINC#g" \
+  -e "s#/opt/python/cp3[0-9]+-cp3[0-9]+/lib/python3\.[0-9]+/site-packages/numpy/_core/include#$NPINC#g" \
+  || true
+
+# Build the interface package when its sources changed since the last build.
+MSG_HASH="$(cat msg_defs/package.xml msg_defs/CMakeLists.txt msg_defs/msg/* msg_defs/action/* | sha256sum | cut -d' ' -f1)"
+if [ "$(cat "$VENV/.msgs-built" 2>/dev/null)" != "$MSG_HASH" ]; then
+  echo "[setup] building msg_defs (pneumatic_unload_msgs) into $VENV"
+  rm -rf build/msg_defs && mkdir -p build
+  AMENT_PREFIX_PATH="$VENV_ABS" cmake -S msg_defs -B build/msg_defs \
+    -DCMAKE_PREFIX_PATH="$VENV_ABS" -DCMAKE_INSTALL_PREFIX="$VENV_ABS" \
+    -DPython3_EXECUTABLE="$VENV_ABS/bin/python" -DBUILD_TESTING=OFF >build/msg_defs.log 2>&1 \
+    || { cat build/msg_defs.log; exit 1; }
+  AMENT_PREFIX_PATH="$VENV_ABS" cmake --build build/msg_defs -j 2 >>build/msg_defs.log 2>&1 \
+    || { tail -50 build/msg_defs.log; exit 1; }
+  cmake --install build/msg_defs >>build/msg_defs.log 2>&1 || { tail -50 build/msg_defs.log; exit 1; }
+  echo "$MSG_HASH" > "$VENV/.msgs-built"
+fi
+
+PKG_HASH="$(cat setup.py setup.cfg package.xml | sha256sum | cut -d' ' -f1)"
+if [ "$(cat "$VENV/.pkg-installed" 2>/dev/null)" != "$PKG_HASH" ]; then
+  echo "[setup] installing pneumatic_unload (editable)"
+  "$VPY" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
+  echo "$PKG_HASH" > "$VENV/.pkg-installed"
+fi
+"$VPY" -c "import rclpy, pneumatic_unload, pneumatic_unload_msgs.msg" \
+  || { echo "[setup] import check failed" >&2; exit 1; }

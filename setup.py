@@ -1,0 +1,35 @@
+"""ament_python package definition of pneumatic_unload (colcon and pip both use it)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "pneumatic_unload"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+    ],
+    install_requires=["setuptools", "numpy", "scipy", "rosbags", "mcap", "PyYAML"],
+    extras_require={"test": ["pytest"]},
+    zip_safe=True,
+    maintainer="pneumatic_unload maintainers",
+    maintainer_email="maintainers@pneumatic-unload.invalid",
+    description="Sonic conductance of pneumatic components from a tank discharge (ROS 2).",
+    license="Apache-2.0",
+    python_requires=">=3.10",
+    entry_points={
+        "console_scripts": [
+            f"estimator = {PACKAGE}.nodes.estimator:main",
+            f"simulator = {PACKAGE}.nodes.simulator:main",
+            f"recorder = {PACKAGE}.nodes.recorder:main",
+            f"replay = {PACKAGE}.nodes.replay:main",
+            f"pneumatic-unload = {PACKAGE}.cli:main",
+        ],
+    },
+)
