@@ -1,0 +1,977 @@
+"""The unloading-time method as a streaming estimator (live node and offline analysis).
+
+:class:`StreamingEstimator` is fed pressure samples one at a time (:meth:`push`) or in
+blocks (:meth:`push_block`); both paths take exactly the same decisions, because every
+decision is taken at a sample index from the samples up to that index only, and the block
+path merely finds the next decision index with numpy. :func:`analyze` is the batch
+function over arrays.
+
+Per unload it: detects the start of the step (trigger, confirmation, then a sub-sample
+hinge fit of the valve-opening instant); takes p10 from the pre-step plateau and p_atm from
+a parameter or the final plateau; computes p* (eq 40); finds the p* crossing by a local
+quadratic regression (noise-robust, sub-sample); returns tau_exp and C by eq 39, plus the
+model-based C that removes eq 39's known bias (exact inversion of the discharge model at
+the crossing); reports an aborted unload (valve closed before p*) and, when the recovery
+plateau is recorded, the SSE value (eq 23); then re-arms for the next unload.
+
+Only relative values matter for tau_exp: the input may be any linear signal (volts) when
+``signal_gain``/``signal_offset`` convert it, or when only tau_exp is wanted; p10, p_atm and
+T10 must be absolute for C. SI units: s, Pa absolute, K, m^3, m^3/(s Pa).
+"""
+
+from __future__ import annotations
+
+import math
+from array import array
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pneumatic_unload import physics
+from pneumatic_unload.physics import AIR, P_STAR_FRACTION, T_N
+
+FloatArray = NDArray[np.float64]
+
+#: Statuses of an :class:`UnloadResult` (same order as the message's STATUS_* constants).
+STATUSES = ("ok", "aborted_sse", "aborted", "not_choked", "bad_data")
+
+
+class EstimationError(ValueError):
+    """Input that cannot be analysed at all (too few samples, wrong shapes...)."""
+
+
+@dataclass(frozen=True)
+class EstimatorSettings:
+    """Settings of the unloading-time estimator.
+
+    Attributes
+    ----------
+    volume : float
+        Tank volume V [m^3].
+    initial_temperature : float
+        Initial gas temperature T10 [K].
+    atmosphere : float or None
+        Atmospheric pressure [Pa absolute]; None: from the final plateau (auto).
+    length_diameter_ratio : float
+        Tank L/D [-] (natural-convection model of the model-based C).
+    wall_temperature : float or None
+        Wall temperature [K]; None: equal to T10.
+    heat_model : str
+        'natural' (natural-convection wall heat transfer) or 'adiabatic' for the model-based C.
+    critical_ratio : float
+        b [-] assumed by the model-based inversion at the crossing (the curve fit refines it).
+    signal_gain : float
+        Pressure per unit of input signal [Pa per unit] (1 for an input in Pa).
+    signal_offset : float
+        Pressure at zero input [Pa] (0 for an input in Pa absolute).
+    trigger_sigma : float
+        Drop below the plateau that triggers detection, in noise standard deviations [-].
+    min_plateau : int
+        Samples of pre-step plateau needed before a trigger is accepted [-].
+    max_gap_factor : float
+        A stamp step larger than this many nominal periods is a gap [-].
+    curve_fit : bool
+        Run the full-curve least-squares fit (C, b) when the unload ends.
+    gas_constant, gamma : float
+        Gas properties [J/(kg K)], [-].
+    """
+
+    volume: float = 5e-3
+    initial_temperature: float = T_N
+    atmosphere: float | None = 101325.0
+    length_diameter_ratio: float = 2.0
+    wall_temperature: float | None = None
+    heat_model: str = "natural"
+    critical_ratio: float = 0.5
+    signal_gain: float = 1.0
+    signal_offset: float = 0.0
+    trigger_sigma: float = 8.0
+    min_plateau: int = 32
+    max_gap_factor: float = 5.0
+    curve_fit: bool = True
+    gas_constant: float = AIR.gas_constant
+    gamma: float = AIR.gamma
+
+    def __post_init__(self) -> None:
+        """Validate (raises :class:`EstimationError`)."""
+        checks = [
+            (self.volume > 0, "volume must be > 0 m^3"),
+            (self.initial_temperature > 0, "initial_temperature must be > 0 K"),
+            (self.atmosphere is None or self.atmosphere > 0, "atmosphere must be > 0 Pa"),
+            (self.heat_model in ("natural", "adiabatic"),
+             "heat_model must be 'natural' or 'adiabatic'"),
+            (0.0 <= self.critical_ratio < 1.0, "critical_ratio must be in [0, 1)"),
+            (self.signal_gain != 0 and math.isfinite(self.signal_gain),
+             "signal_gain must be finite and non-zero"),
+            (self.trigger_sigma > 0, "trigger_sigma must be > 0"),
+            (self.min_plateau >= 4, "min_plateau must be >= 4 samples"),
+        ]
+        for ok, msg in checks:
+            if not ok:
+                raise EstimationError(msg)
+
+    @property
+    def gas(self) -> physics.Gas:
+        """Gas properties."""
+        return physics.Gas(gas_constant=self.gas_constant, gamma=self.gamma)
+
+
+@dataclass
+class UnloadResult:
+    """One unload analysed by the unloading-time method (all SI; NaN when unknown).
+
+    ``conductance`` is the paper's eq 39 value, always reported as it is;
+    ``conductance_model`` removes its known bias by inverting the discharge model at the
+    measured crossing (``final=False``), or comes from the full-curve fit once the unload has
+    ended (``final=True``).
+    """
+
+    index: int
+    status: str
+    status_text: str
+    t_start: float
+    t_cross: float
+    tau_exp: float
+    tau_exp_std: float
+    p10: float
+    p_atm: float
+    p_star: float
+    initial_temperature: float
+    volume: float
+    conductance: float
+    conductance_model: float
+    conductance_model_std: float
+    critical_ratio: float = math.nan
+    critical_ratio_std: float = math.nan
+    conductance_isentropic: float = math.nan
+    quality: float = 0.0
+    method: str = ""
+    final: bool = False
+    noise_std: float = math.nan
+    i_start: int = -1
+    i_cross: int = -1
+    i_complete: int = -1
+    t_complete: float = math.nan
+    t_end: float = math.nan
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def bias(self) -> float:
+        """Relative difference conductance/conductance_model - 1 [-]."""
+        return self.conductance / self.conductance_model - 1.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (NaN mapped to None) with the CLI's key names."""
+        d = asdict(self)
+        d["critical_ratio"] = self.critical_ratio
+        out: dict[str, Any] = {}
+        for k, v in d.items():
+            if isinstance(v, float) and not math.isfinite(v):
+                v = None
+            out[k] = v
+        return out
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    """A state change or an input problem, for /diagnostics and logs.
+
+    Attributes
+    ----------
+    level : str
+        'ok', 'warn' or 'error'.
+    state : str
+        Estimator state after the event.
+    message : str
+        What happened, specifically.
+    t : float
+        Sample time [s] (NaN when the sample had no valid time).
+    """
+
+    level: str
+    state: str
+    message: str
+    t: float
+
+
+# --------------------------------------------------------------------------- helpers
+def _robust_sigma(x: FloatArray) -> float:
+    """Noise standard deviation from first differences (MAD, drift-insensitive) [unit of x]."""
+    if x.size < 3:
+        return 0.0
+    d = np.diff(x)
+    mad = float(np.median(np.abs(d - np.median(d))))
+    return 1.4826 * mad / math.sqrt(2.0)
+
+
+def _rms_sigma(x: FloatArray) -> float:
+    """Noise standard deviation from first differences (RMS) [unit of x]."""
+    if x.size < 3:
+        return 0.0
+    return float(np.std(np.diff(x))) / math.sqrt(2.0)
+
+
+def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
+              ) -> tuple[float, float, float, float, float]:
+    """Fit p = p10 (t < t0), p10 - s u + c u^2 (u = t - t0 >= 0) with t0 in [t_lo, t_hi].
+
+    Sub-sample t0 by minimising the profiled sum of squares (linear in p10, s, c for each
+    t0) with a bracketed golden-section search after a grid search on the sample instants.
+
+    Parameters
+    ----------
+    t, p : ndarray
+        Window of samples [s], [Pa].
+    t_lo, t_hi : float
+        Search interval for t0 [s].
+
+    Returns
+    -------
+    tuple
+        (t0 [s], p10 [Pa], s [Pa/s], c [Pa/s^2], residual rms [Pa]).
+    """
+    tc = t - t[0]
+    scale_t = max(tc[-1], 1e-12)
+
+    def solve(t0: float) -> tuple[float, FloatArray]:
+        u = np.clip(tc - (t0 - t[0]), 0.0, None) / scale_t
+        a = np.column_stack((np.ones_like(u), -u, u * u))
+        coef, *_ = np.linalg.lstsq(a, p, rcond=None)
+        r = p - a @ coef
+        return float(r @ r), coef
+
+    cand = t[(t >= t_lo) & (t <= t_hi)]
+    if cand.size == 0:
+        cand = np.array([0.5 * (t_lo + t_hi)])
+    if cand.size > 64:
+        cand = cand[np.linspace(0, cand.size - 1, 64).astype(int)]
+    sse = [solve(float(c))[0] for c in cand]
+    k = int(np.argmin(sse))
+    step = (cand[1] - cand[0]) if cand.size > 1 else (t_hi - t_lo)
+    a_, b_ = max(t_lo, float(cand[k]) - step), min(t_hi, float(cand[k]) + step)
+    gr = (math.sqrt(5.0) - 1.0) / 2.0
+    x1, x2 = b_ - gr * (b_ - a_), a_ + gr * (b_ - a_)
+    f1, f2 = solve(x1)[0], solve(x2)[0]
+    for _ in range(48):
+        if b_ - a_ < 1e-6 * max(step, 1e-12):
+            break
+        if f1 <= f2:
+            b_, x2, f2 = x2, x1, f1
+            x1 = b_ - gr * (b_ - a_)
+            f1 = solve(x1)[0]
+        else:
+            a_, x1, f1 = x1, x2, f2
+            x2 = a_ + gr * (b_ - a_)
+            f2 = solve(x2)[0]
+    t0 = 0.5 * (a_ + b_)
+    sse0, coef = solve(t0)
+    rms = math.sqrt(sse0 / max(p.size - 4, 1))
+    return t0, float(coef[0]), float(coef[1]) / scale_t, float(coef[2]) / scale_t**2, rms
+
+
+def crossing_fit(t: FloatArray, p: FloatArray, level: float
+                 ) -> tuple[float, float, float]:
+    """Sub-sample time at which a local quadratic regression of p(t) crosses ``level``.
+
+    Parameters
+    ----------
+    t, p : ndarray
+        Samples around the crossing [s], [Pa]; p decreasing overall.
+    level : float
+        Threshold [Pa].
+
+    Returns
+    -------
+    tuple
+        (crossing time [s], its standard deviation [s], slope at the crossing [Pa/s]).
+    """
+    tm = float(np.mean(t))
+    x = t - tm
+    a = np.column_stack((np.ones_like(x), x, x * x))
+    coef, *_ = np.linalg.lstsq(a, p, rcond=None)
+    r = p - a @ coef
+    dof = max(p.size - 3, 1)
+    s2 = float(r @ r) / dof
+    c0, c1, c2 = (float(v) for v in coef)
+    # root of c2 x^2 + c1 x + (c0 - level) nearest the window centre
+    if abs(c2) < 1e-30 or abs(c2 * (x[-1] - x[0]) ** 2) < 1e-12 * abs(c1 * (x[-1] - x[0])):
+        xr = (level - c0) / c1
+    else:
+        disc = c1 * c1 - 4.0 * c2 * (c0 - level)
+        if disc < 0:
+            xr = (level - c0) / c1
+        else:
+            sq = math.sqrt(disc)
+            r1, r2 = (-c1 + sq) / (2 * c2), (-c1 - sq) / (2 * c2)
+            xr = r1 if abs(r1) < abs(r2) else r2
+    slope = c1 + 2.0 * c2 * xr
+    # delta method: var(f(xr)) / slope^2 with f = c0 + c1 x + c2 x^2
+    try:
+        cov = s2 * np.linalg.inv(a.T @ a)
+        g = np.array([1.0, xr, xr * xr])
+        var_f = float(g @ cov @ g)
+    except np.linalg.LinAlgError:
+        var_f = math.inf
+    std = math.sqrt(max(var_f, 0.0)) / abs(slope) if slope != 0 else math.inf
+    return tm + xr, std, slope
+
+
+# --------------------------------------------------------------------------- estimator
+_WAITING, _CONFIRM, _UNLOADING, _TAIL, _RECOVERY = (
+    "waiting", "confirming", "unloading", "tail", "recovery")
+
+
+class StreamingEstimator:
+    """Sample-by-sample unloading-time estimator; see the module docstring.
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Tank, gas and detection settings.
+
+    Examples
+    --------
+    >>> est = StreamingEstimator(EstimatorSettings(volume=5e-3))
+    >>> results = []
+    >>> for ti, pi in zip(t, p):  # doctest: +SKIP
+    ...     results += est.push(ti, pi)
+    >>> results += est.finish()  # doctest: +SKIP
+    """
+
+    #: Samples between periodic checks [-].
+    PERIOD = 64
+    #: Samples used for the plateau level and noise [-].
+    PLATEAU = 1024
+    #: Samples that must confirm a trigger [-].
+    CONFIRM = 16
+
+    def __init__(self, settings: EstimatorSettings | None = None) -> None:
+        self.settings = settings or EstimatorSettings()
+        self._t = array("d")
+        self._p = array("d")
+        self.diagnostics: list[Diagnostic] = []
+        self.results: list[UnloadResult] = []
+        self._n_unloads = 0
+        self._last_t = -math.inf
+        self._dt_nominal = math.nan
+        self._shift = 0  # samples trimmed from the buffer's start
+        self._to_waiting(0)
+
+    # ------------------------------------------------------------------ public API
+    @property
+    def state(self) -> str:
+        """'waiting', 'confirming', 'unloading', 'tail' or 'recovery'."""
+        return self._state
+
+    @property
+    def n_samples(self) -> int:
+        """Valid samples received so far [-]."""
+        return len(self._p) + self._shift
+
+    def push(self, t: float, p: float) -> list[UnloadResult]:
+        """Feed one sample.
+
+        Parameters
+        ----------
+        t : float
+            Sample instant [s] (strictly increasing).
+        p : float
+            Pressure [Pa absolute], or the raw signal when ``signal_gain`` converts it.
+
+        Returns
+        -------
+        list of UnloadResult
+            Results completed by this sample (usually empty).
+        """
+        if not t > self._last_t:  # also catches NaN stamps
+            self._reject(t, p)
+            return []
+        if p != p or p in (math.inf, -math.inf):
+            self._diag("warn", f"non-finite pressure sample {p!r} at t={t:.6f} s ignored", t)
+            return []
+        if t - self._last_t > self._gap_limit:
+            self._on_gap(t)
+        self._last_t = t
+        self._t.append(t)
+        self._p.append(p)
+        i = len(self._p) - 1
+        if i == self._next_check or (p < self._level if self._below else p > self._level):
+            out = self._step(i)
+            if out:
+                self.results += out
+            return out
+        return []
+
+    def push_block(self, t: ArrayLike, p: ArrayLike) -> list[UnloadResult]:
+        """Feed a block of samples; same results as calling :meth:`push` on each.
+
+        Parameters
+        ----------
+        t : array_like
+            Sample instants [s].
+        p : array_like
+            Pressures [Pa absolute] (or raw signal, see :meth:`push`).
+
+        Returns
+        -------
+        list of UnloadResult
+            Results completed inside the block.
+        """
+        t = np.asarray(t, dtype=float).ravel()
+        p = np.asarray(p, dtype=float).ravel()
+        if t.shape != p.shape:
+            raise EstimationError(f"t and p differ in length: {t.size} vs {p.size}")
+        if t.size == 0:
+            return []
+        # vectorised validity: finite, strictly increasing against the last accepted stamp
+        fin_p = np.isfinite(p)
+        prev_max = np.maximum.accumulate(np.concatenate(([self._last_t], t[:-1])))
+        ok_t = (t > prev_max) & np.isfinite(t)
+        if not (ok_t.all() and fin_p.all()):
+            return self._push_slow(t, p)
+        dts = np.diff(np.concatenate(([self._last_t], t)))
+        if np.any(dts > self._gap_limit) and len(self._p) > 0:
+            return self._push_slow(t, p)
+        out: list[UnloadResult] = []
+        start = len(self._p)
+        self._t.extend(t)
+        self._p.extend(p)
+        self._last_t = float(t[-1])
+        end = len(self._p)
+        pv = np.frombuffer(self._p, dtype=float)
+        i = start
+        while i < end:
+            # next decision index: periodic check or level condition
+            hi = min(end, self._next_check + 1) if self._next_check >= i else end
+            seg = pv[i:hi]
+            hit = np.flatnonzero(seg < self._level if self._below else seg > self._level)
+            j = i + int(hit[0]) if hit.size else hi
+            if j == hi and self._next_check < hi and self._next_check >= i:
+                j = self._next_check
+            if j >= end:
+                break
+            shift = self._shift
+            out += self._step(j)
+            trimmed = self._shift - shift
+            i, end = j + 1 - trimmed, end - trimmed
+            pv = np.frombuffer(self._p, dtype=float)
+        self.results += out
+        return out
+
+    def finish(self) -> list[UnloadResult]:
+        """End of stream: report an unload still pending (aborted, or crossing not reached).
+
+        Returns
+        -------
+        list of UnloadResult
+            The pending unload's result, if any.
+        """
+        n = len(self._p)
+        out: list[UnloadResult] = []
+        if self._state == _RECOVERY:
+            out.append(self._abort_result(n - 1, recovered=False))
+        elif self._state == _UNLOADING:
+            self._diag("warn", "stream ended before the p* crossing", self._last_t)
+            res = self._abort_result(n - 1, recovered=False,
+                                     text="stream ended before the p* crossing")
+            out.append(res)
+        elif self._state == _TAIL and self._pending is not None:
+            out += self._finish_tail(n - 1, ended=True)
+        self._to_waiting(n)
+        self.results += out
+        return out
+
+    # ------------------------------------------------------------------ internals
+    @property
+    def _gap_limit(self) -> float:
+        if math.isnan(self._dt_nominal):
+            return math.inf
+        return self.settings.max_gap_factor * self._dt_nominal
+
+    def _reject(self, t: float, p: float) -> None:
+        if t != t:
+            self._diag("warn", "sample with a NaN stamp ignored", t)
+        elif t == self._last_t:
+            self._diag("warn", f"duplicate stamp t={t:.9f} s ignored", t)
+        else:
+            self._diag("warn", f"stamp going backwards ({t:.9f} s after {self._last_t:.9f} s)"
+                       " ignored", t)
+
+    def _push_slow(self, t: FloatArray, p: FloatArray) -> list[UnloadResult]:
+        out: list[UnloadResult] = []  # push() records them in self.results
+        for ti, pi in zip(t.tolist(), p.tolist(), strict=True):
+            out += self.push(ti, pi)
+        return out
+
+    def _diag(self, level: str, message: str, t: float) -> None:
+        self.diagnostics.append(Diagnostic(level, self._state, message, t))
+
+    def _on_gap(self, t: float) -> None:
+        gap = t - self._last_t
+        self._diag("warn", f"gap of {gap:.6f} s in the samples before t={t:.6f} s", t)
+        if self._state in (_CONFIRM, _UNLOADING):
+            self._gap_in_unload = True
+
+    def _arrays(self, n: int) -> tuple[FloatArray, FloatArray]:
+        """Buffer views up to (excluding) index n."""
+        tv = np.frombuffer(self._t, dtype=float)[:n]
+        pv = np.frombuffer(self._p, dtype=float)[:n]
+        return tv, pv
+
+    def _to_waiting(self, n: int) -> None:
+        self._state = _WAITING
+        self._below = True
+        self._level = -math.inf
+        self._next_check = n + self.settings.min_plateau - 1
+        self._arm_index = n
+        self._pending: UnloadResult | None = None
+        self._gap_in_unload = False
+        self._plateau_level = math.nan
+        self._sigma = math.nan
+
+    def _trim(self, n: int) -> None:
+        """Drop samples that no later decision can need (keeps memory bounded)."""
+        keep = min(n - 4 * self.PLATEAU, self._arm_index)
+        if keep > 65536 and self._state == _WAITING:
+            del self._t[:keep]
+            del self._p[:keep]
+            self._next_check -= keep
+            self._arm_index -= keep
+            self._shift += keep
+
+    def _step(self, i: int) -> list[UnloadResult]:
+        """Decision at buffer index i (a periodic check or a level condition)."""
+        state = self._state
+        if state == _WAITING:
+            return self._step_waiting(i)
+        if state == _CONFIRM:
+            return self._step_confirm(i)
+        if state == _UNLOADING:
+            return self._step_unloading(i)
+        if state == _TAIL:
+            return self._step_tail(i)
+        return self._step_recovery(i)
+
+    # waiting: plateau level and trigger
+    def _step_waiting(self, i: int) -> list[UnloadResult]:
+        n = i + 1
+        tv, pv = self._arrays(n)
+        if math.isnan(self._dt_nominal) and n >= 8:
+            self._dt_nominal = float(np.median(np.diff(tv[max(0, n - 256):n])))
+        if i == self._next_check or self._level == -math.inf:
+            lo = max(self._arm_index, n - self.PLATEAU)
+            win = pv[lo:n]
+            # the trigger level lags one period behind so a fast drop is not absorbed
+            self._plateau_level = float(np.median(win))
+            sig = _robust_sigma(win)
+            if sig == 0.0:
+                sig = _rms_sigma(win)
+            self._sigma = sig
+            floor = 1e-4 * abs(self._plateau_level) + 1e-12
+            self._level = self._plateau_level - self.settings.trigger_sigma * max(sig, floor)
+            self._next_check = i + self.PERIOD
+            if pv[i] >= self._level:
+                self._trim(n)
+                return []
+        # trigger
+        if i - self._arm_index < self.settings.min_plateau:
+            self._next_check = i + self.PERIOD
+            return []
+        self._trigger = i
+        self._state = _CONFIRM
+        self._next_check = i + self.CONFIRM
+        self._below, self._level = True, -math.inf
+        return []
+
+    def _step_confirm(self, i: int) -> list[UnloadResult]:
+        n = i + 1
+        _tv, pv = self._arrays(n)
+        seg = pv[self._trigger + 1:n]
+        sig = max(self._sigma, 1e-4 * abs(self._plateau_level))
+        if float(np.median(seg)) < self._plateau_level - 3.0 * sig:
+            self._state = _UNLOADING
+            self._diag("ok", "unload step detected", float(self._t[self._trigger]))
+            return self._start_unloading(i)
+        self._diag("warn", "trigger not confirmed (spike or noise); still waiting",
+                   float(self._t[self._trigger]))
+        self._state = _WAITING
+        self._below, self._level = True, -math.inf
+        self._next_check = i + 1
+        return []
+
+    def _start_unloading(self, i: int) -> list[UnloadResult]:
+        s = self.settings
+        p_plateau = self._plateau_level
+        p_atm = s.atmosphere
+        atm_signal = math.nan
+        if p_atm is not None:
+            atm_signal = (p_atm - s.signal_offset) / s.signal_gain
+        self._atm_signal = atm_signal
+        guess_atm = (atm_signal if p_atm is not None
+                     else (101325.0 - s.signal_offset) / s.signal_gain)
+        dp = p_plateau - guess_atm
+        if p_atm is not None and dp * math.copysign(1.0, s.signal_gain) <= 0:
+            return self._bad(i, f"p10 ({self._to_pa(p_plateau):.0f} Pa) is not above p_atm "
+                                f"({p_atm:.0f} Pa): nothing to unload")
+        self._dp_guess = abs(dp) if math.isfinite(dp) else abs(p_plateau) * 0.5
+        # refine the start once the drop reaches 10 % of the pressure change
+        self._refined = False
+        self._below = True
+        self._level = p_plateau - 0.1 * self._dp_guess
+        self._next_check = i + self.PERIOD
+        return []
+
+    def _to_pa(self, x: float) -> float:
+        return self.settings.signal_offset + self.settings.signal_gain * x
+
+    def _bad(self, i: int, text: str) -> list[UnloadResult]:
+        self._diag("error", text, float(self._t[i]))
+        res = self._empty_result("bad_data", text, i)
+        self._to_waiting(i + 1)
+        return [res]
+
+    def _empty_result(self, status: str, text: str, i: int) -> UnloadResult:
+        s = self.settings
+        nan = math.nan
+        res = UnloadResult(
+            index=self._n_unloads, status=status, status_text=text, t_start=nan, t_cross=nan,
+            tau_exp=nan, tau_exp_std=nan, p10=nan, p_atm=s.atmosphere or nan, p_star=nan,
+            initial_temperature=s.initial_temperature, volume=s.volume, conductance=nan,
+            conductance_model=nan, conductance_model_std=nan, quality=0.0,
+            method="unloading-time", i_complete=i + self._shift, t_complete=float(self._t[i]))
+        self._n_unloads += 1
+        return res
+
+    def _step_unloading(self, i: int) -> list[UnloadResult]:
+        n = i + 1
+        _tv, pv = self._arrays(n)
+        if not self._refined:
+            if pv[i] < self._level:
+                return self._refine_start(i)
+            if i == self._next_check:
+                self._next_check = i + self.PERIOD
+                if self._stalled(i):
+                    return self._on_abort(i)
+            return []
+        if pv[i] < self._level and math.isfinite(self._pstar_signal):
+            return self._complete_crossing(i)
+        if i == self._next_check:
+            self._next_check = i + self.PERIOD
+            if not math.isfinite(self._pstar_signal):
+                return self._check_final_plateau_auto(i)
+            if self._stalled(i):
+                return self._on_abort(i)
+        return []
+
+    def _check_final_plateau_auto(self, i: int) -> list[UnloadResult]:
+        """p_atm auto: once the final plateau is reached, set p* and find the crossing."""
+        tv, pv = self._arrays(i + 1)
+        tau_guess = (float(tv[i]) - self._t0) / 4.0
+        if not self._flat(i, tau_guess):
+            return []
+        w = self._flat_window(tau_guess)
+        level = float(np.mean(pv[i - w + 1:i + 1]))
+        drop = self._p10_signal - level
+        if drop < 0.5 * self._dp_guess:
+            return self._on_abort(i)
+        self._set_pstar(level)
+        below = np.flatnonzero(pv[self._i0:i + 1] < self._pstar_signal - self._half)
+        if below.size == 0:
+            return self._on_abort(i)
+        return self._complete_crossing(self._i0 + int(below[0]), settle_index=i)
+
+    def _refine_start(self, i: int) -> list[UnloadResult]:
+        n = i + 1
+        tv, pv = self._arrays(n)
+        trig = self._trigger
+        back = i - trig + 4 * self.CONFIRM
+        lo = max(self._arm_index, trig - back - self.PLATEAU)
+        t_lo = float(tv[max(self._arm_index, trig - back)])
+        t0, p10, slope, _curv, rms = hinge_fit(tv[lo:n], pv[lo:n], t_lo, float(tv[trig]))
+        pre = pv[lo:int(np.searchsorted(tv, t0))]
+        sig_pre = _rms_sigma(pre) if pre.size > 3 else rms
+        if pre.size >= 8:
+            vmax = float(np.max(pre))
+            frac_at_max = float(np.mean(pre == vmax))
+            if frac_at_max > 0.5 and sig_pre == 0.0 and rms > 0.0:
+                return self._bad(
+                    i, f"sensor saturated on the pre-step plateau at {vmax!r}: p10 unknown")
+        self._t0 = t0
+        self._i0 = int(np.searchsorted(tv, t0))
+        self._p10_signal = p10
+        self._slope0 = slope
+        self._sigma = max(rms, 1e-12)
+        self._refined = True
+        s = self.settings
+        if s.atmosphere is not None:
+            self._set_pstar(self._atm_signal)
+        else:
+            self._pstar_signal = math.nan
+            self._below, self._level = True, -math.inf
+        self._next_check = i + self.PERIOD
+        return []
+
+    def _set_pstar(self, atm_signal: float) -> None:
+        self._atm_signal = atm_signal
+        dp = self._p10_signal - atm_signal
+        self._pstar_signal = atm_signal + P_STAR_FRACTION * dp
+        self._half = max(6.0 * self._sigma, 0.03 * abs(dp))
+        self._below = True
+        self._level = self._pstar_signal - self._half
+
+    def _stalled(self, i: int) -> bool:
+        """True when the pressure has stopped falling well above p* (valve closed)."""
+        if not self._refined:
+            ref_slope = None
+        else:
+            ref_slope = self._slope0
+        tv, pv = self._arrays(i + 1)
+        i0 = self._i0 if self._refined else self._trigger
+        span = i - i0
+        w = int(min(max(32, span // 4), 8192))
+        if span < 2 * w or ref_slope is None or ref_slope <= 0:
+            return False
+        a = pv[i - 2 * w + 1:i - w + 1]
+        b = pv[i - w + 1:i + 1]
+        dt = float(tv[i] - tv[i - w])
+        drop = float(np.mean(a) - np.mean(b))
+        se = self._sigma * math.sqrt(2.0 / w)
+        return drop < 0.05 * ref_slope * dt and drop < 4.0 * se
+
+    def _complete_crossing(self, i: int, settle_index: int | None = None
+                           ) -> list[UnloadResult]:
+        """Crossing window closed at index i (first sample below p* - half)."""
+        n = i + 1
+        tv, pv = self._arrays(n)
+        lvl_hi = self._pstar_signal + self._half
+        # last sample above the upper bound before i
+        above = np.flatnonzero(pv[self._i0:n] > lvl_hi)
+        j_lo = self._i0 + (int(above[-1]) if above.size else 0)
+        tw, pw = tv[j_lo:n], pv[j_lo:n]
+        if tw.size < 5:
+            tw, pw = tv[max(self._i0, n - 5):n], pv[max(self._i0, n - 5):n]
+        t_cross, t_std, _slope = crossing_fit(tw, pw, self._pstar_signal)
+        gap = bool(np.any(np.diff(tw) > self._gap_limit)) if tw.size > 1 else False
+        k = i if settle_index is None else settle_index
+        res = self._make_result(k, t_cross, t_std, gap)
+        self._pending = res
+        self._state = _TAIL
+        self._below, self._level = True, -math.inf
+        self._next_check = k + self.PERIOD
+        if settle_index is not None:
+            return [res, *self._finish_tail(k, ended=False)]
+        return [res]
+
+    def _make_result(self, i: int, t_cross: float, t_std: float, gap: bool) -> UnloadResult:
+        s = self.settings
+        gas = s.gas
+        p10 = self._to_pa(self._p10_signal)
+        p_atm = self._to_pa(self._atm_signal)
+        p_star = self._to_pa(self._pstar_signal)
+        tau = t_cross - self._t0
+        t0_std = self._t0_std()
+        tau_std = math.hypot(t_std, t0_std)
+        status, text, quality = "ok", "p* crossing found", 1.0
+        c39 = physics.conductance_eq39(tau, p10, p_atm, s.volume, s.initial_temperature, gas)
+        c_isen = physics.conductance_isentropic_inversion(
+            tau, p_star, p10, s.volume, s.initial_temperature, gas)
+        if s.critical_ratio > 0 and p_star < p_atm / s.critical_ratio:
+            status, text = "not_choked", (
+                f"flow subsonic before p* (p* = {p_star:.0f} Pa < p_atm/b = "
+                f"{p_atm / s.critical_ratio:.0f} Pa): eq 39 assumes choked flow")
+            quality = 0.5
+        c_model, c_model_std, method = self._model_inversion(tau, tau_std, p10, p_atm, p_star,
+                                                             c_isen)
+        if gap or self._gap_in_unload:
+            text += "; gap in the samples during the unload"
+            quality = min(quality, 0.5)
+        if tau_std / tau > 0.01:
+            quality = min(quality, 0.5)
+        res = UnloadResult(
+            index=self._n_unloads, status=status, status_text=text, t_start=self._t0,
+            t_cross=t_cross, tau_exp=tau, tau_exp_std=tau_std, p10=p10, p_atm=p_atm,
+            p_star=p_star, initial_temperature=s.initial_temperature, volume=s.volume,
+            conductance=c39, conductance_model=c_model, conductance_model_std=c_model_std,
+            conductance_isentropic=c_isen, quality=quality, method=method,
+            noise_std=abs(self._sigma * s.signal_gain), i_start=self._i0 + self._shift,
+            i_cross=self._shift + int(np.searchsorted(
+                np.frombuffer(self._t, dtype=float)[:i + 1], t_cross)),
+            i_complete=i + self._shift, t_complete=float(self._t[i]))
+        self._n_unloads += 1
+        return res
+
+    def _t0_std(self) -> float:
+        """Standard deviation of the start time from the hinge fit's local slope [s]."""
+        if self._slope0 <= 0:
+            return math.inf
+        # information of the kink: slope s, noise sigma, a few samples either side
+        return self._sigma / self._slope0 / math.sqrt(8.0)
+
+    def _model_inversion(self, tau: float, tau_std: float, p10: float, p_atm: float,
+                         p_star: float, c_isen: float) -> tuple[float, float, str]:
+        """Model-based C: exact inversion of the discharge model at the crossing."""
+        s = self.settings
+        if s.heat_model == "adiabatic":
+            c = c_isen
+            std = c * tau_std / tau
+            return c, std, "eq39+isentropic-inversion"
+        from pneumatic_unload.fitting import invert_crossing  # local: keeps import light
+
+        c, std = invert_crossing(
+            tau, tau_std, p10=p10, p_atm=p_atm, p_star=p_star, settings=s, c_start=c_isen)
+        return c, std, "eq39+model-inversion(natural-convection)"
+
+    def _step_tail(self, i: int) -> list[UnloadResult]:
+        if i != self._next_check:
+            return []
+        self._next_check = i + self.PERIOD
+        res = self._pending
+        if res is not None and self._flat(i, res.tau_exp):
+            return self._finish_tail(i, ended=False)
+        return []
+
+    def _flat_window(self, tau: float) -> int:
+        dt = self._dt_nominal if math.isfinite(self._dt_nominal) else 1e-3
+        return int(min(max(128, 0.5 * tau / dt), 16384))
+
+    def _flat(self, i: int, tau: float) -> bool:
+        """True when the signal has settled on its final plateau (tau: time scale [s])."""
+        _tv, pv = self._arrays(i + 1)
+        dt = self._dt_nominal if math.isfinite(self._dt_nominal) else 1e-3
+        w = self._flat_window(tau)
+        if i - self._i0 < 2 * w + int(tau / dt):
+            return False
+        a = pv[i - 2 * w + 1:i - w + 1]
+        b = pv[i - w + 1:i + 1]
+        dp_total = abs(self._p10_signal - float(np.mean(b)))
+        change = abs(float(np.mean(a) - np.mean(b)))
+        se = self._sigma * math.sqrt(2.0 / w)
+        return change < max(4.0 * se, 0.002 * dp_total)
+
+    def _finish_tail(self, i: int, ended: bool) -> list[UnloadResult]:
+        res = self._pending
+        self._pending = None
+        out: list[UnloadResult] = []
+        if res is not None:
+            res.t_end = float(self._t[i])
+            if self.settings.curve_fit:
+                from pneumatic_unload.fitting import refine_with_curve_fit
+
+                tv, pv = self._arrays(i + 1)
+                lo = max(self._arm_index, self._i0 - 2 * self.PLATEAU)
+                fin = refine_with_curve_fit(
+                    res, tv[lo:i + 1], self._to_pa_array(pv[lo:i + 1]), self.settings,
+                    noise_std=abs(self._sigma * self.settings.signal_gain))
+                if fin is not None:
+                    fin.i_complete, fin.t_complete = i + self._shift, float(self._t[i])
+                    out.append(fin)
+        self._to_waiting(i + 1)
+        return out
+
+    def _to_pa_array(self, x: FloatArray) -> FloatArray:
+        s = self.settings
+        return s.signal_offset + s.signal_gain * x
+
+    # aborted unload and SSE
+    def _on_abort(self, i: int) -> list[UnloadResult]:
+        tv, pv = self._arrays(i + 1)
+        self._diag("warn", "unload stopped before p*: valve closed (aborted unload)",
+                   float(tv[i]))
+        # closing instant: the minimum of a smoothed signal since the start
+        seg = pv[self._i0:i + 1]
+        k = max(1, min(seg.size // 20, 256))
+        sm = np.convolve(seg, np.ones(k) / k, mode="valid")
+        j = int(np.argmin(sm)) + k // 2
+        self._i_close = self._i0 + j
+        self._t_close = float(tv[self._i_close])
+        self._state = _RECOVERY
+        self._below, self._level = True, -math.inf
+        self._next_check = i + self.PERIOD
+        return []
+
+    def _step_recovery(self, i: int) -> list[UnloadResult]:
+        if i != self._next_check:
+            return []
+        self._next_check = i + self.PERIOD
+        _tv, pv = self._arrays(i + 1)
+        span = i - self._i_close
+        w = int(min(max(128, span // 4), 16384))
+        if span < 2 * w:
+            return []
+        a = pv[i - 2 * w + 1:i - w + 1]
+        b = pv[i - w + 1:i + 1]
+        change = abs(float(np.mean(b) - np.mean(a)))
+        rise = float(np.mean(b)) - float(pv[self._i_close])
+        se = self._sigma * math.sqrt(2.0 / w)
+        if change < max(4.0 * se, 0.01 * abs(rise)):
+            res = self._abort_result(i, recovered=True)
+            self._to_waiting(i + 1)
+            return [res]
+        return []
+
+    def _abort_result(self, i: int, recovered: bool, text: str = "") -> UnloadResult:
+        s = self.settings
+        res = self._empty_result("aborted", text or "valve closed before p*; no recovery "
+                                 "plateau recorded (SSE needs it)", i)
+        if not getattr(self, "_refined", False):
+            return res
+        p10 = self._to_pa(self._p10_signal)
+        res.p10, res.t_start = p10, self._t0
+        res.i_start = self._i0 + self._shift
+        if recovered:
+            _tv, pv = self._arrays(i + 1)
+            w = int(min(max(128, (i - self._i_close) // 4), 16384))
+            p_inf = self._to_pa(float(np.mean(pv[i - w + 1:i + 1])))
+            t_star = self._t_close - self._t0
+            c = physics.conductance_sse(t_star, p10, p_inf, s.volume, s.initial_temperature,
+                                        s.gas)
+            res.status = "aborted_sse"
+            res.status_text = (f"valve closed after {t_star:.4f} s before p*; SSE (eq 23) "
+                               f"from the recovery plateau {p_inf:.0f} Pa")
+            res.conductance = c
+            res.conductance_model = c
+            res.conductance_model_std = c * 0.02
+            res.quality = 0.7
+            res.method = "sse-eq23"
+            res.extra = {"t_star": t_star, "p1_inf": p_inf}
+        return res
+
+
+def analyze(
+    t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | None = None
+) -> list[UnloadResult]:
+    """Batch analysis of a trace: every unload found, in order.
+
+    Parameters
+    ----------
+    t : array_like
+        Sample instants [s], strictly increasing.
+    p : array_like
+        Pressure [Pa absolute] (or a linear signal with ``signal_gain``/``signal_offset``).
+    settings : EstimatorSettings, optional
+        Tank and detection settings.
+
+    Returns
+    -------
+    list of UnloadResult
+        Results as the streaming estimator emits them (crossing estimates, then the
+        curve-fit refinement with ``final=True`` when the unload's end was recorded).
+
+    Raises
+    ------
+    EstimationError
+        Too few samples or mismatched arrays.
+    """
+    t = np.asarray(t, dtype=float)
+    p = np.asarray(p, dtype=float)
+    if t.shape != p.shape or t.ndim != 1:
+        raise EstimationError(f"t and p must be 1-D arrays of equal length, got {t.shape} "
+                              f"and {p.shape}")
+    if t.size < 16:
+        raise EstimationError(f"too few samples ({t.size}); need at least 16")
+    est = StreamingEstimator(settings)
+    out = est.push_block(t, p)
+    out += est.finish()
+    return out
