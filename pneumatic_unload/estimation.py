@@ -975,3 +975,18 @@ def analyze(
     out = est.push_block(t, p)
     out += est.finish()
     return out
+
+
+def merge_final(results: list[UnloadResult]) -> list[UnloadResult]:
+    """One result per unload: the final (curve-fit) one where it exists, else the first.
+
+    Parameters
+    ----------
+    results : list of UnloadResult
+        Results as emitted (crossing estimate, then final refinement).
+    """
+    by_index: dict[int, UnloadResult] = {}
+    for r in results:
+        if r.index not in by_index or r.final:
+            by_index[r.index] = r
+    return [by_index[k] for k in sorted(by_index)]

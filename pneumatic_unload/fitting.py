@@ -214,7 +214,10 @@ def fit_curve(
     CurveFit
         Fitted values with standard deviations.
     """
-    t = np.asarray(t, dtype=float)
+    t_abs = np.asarray(t, dtype=float)
+    t_ref = float(t_abs[0])
+    t = t_abs - t_ref  # relative times: absolute stamps (~1.7e9 s) ruin finite differences
+    t_start = t_start - t_ref
     p = np.asarray(p, dtype=float)
     edges = _bins(t.size, max_points)
     counts = np.diff(edges)
@@ -280,7 +283,7 @@ def fit_curve(
     h_std = math.exp(d["logh"]) * float(sd["logh"]) if fit_heat else math.nan
     return CurveFit(
         conductance=c, conductance_std=c_std, critical_ratio=b, critical_ratio_std=b_std,
-        t_start=d["t0"], p10=d["p10"], p_atm=d["p_atm"], heat_scale=math.exp(d["logh"]),
+        t_start=d["t0"] + t_ref, p10=d["p10"], p_atm=d["p_atm"], heat_scale=math.exp(d["logh"]),
         heat_scale_std=h_std, rms=math.sqrt(s2), n=int(t.size), success=bool(sol.success))
 
 

@@ -1,0 +1,276 @@
+"""``pneumatic-unload``: offline analysis, simulation and bag repair.
+
+Sub-commands
+------------
+analyze PATH     unloading-time analysis of a bag (directory or .mcap) or a CSV log
+simulate --out   write a simulated run as a rosbag2/MCAP bag, no ROS needed
+recover BAG      make a bag whose writer was killed readable again
+
+Errors on unreadable input exit with status 2 and one line on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pneumatic_unload.config import ConfigError, RigConfig
+from pneumatic_unload.estimation import (
+    EstimationError,
+    EstimatorSettings,
+    UnloadResult,
+    analyze,
+    merge_final,
+)
+
+PRESSURE_UNITS = {"Pa": 1.0, "kPa": 1e3, "bar": 1e5, "MPa": 1e6, "psi": 6894.757293168361}
+
+
+class CliError(Exception):
+    """A user-facing error: printed as one line, exit status 2."""
+
+
+# --------------------------------------------------------------------------- input
+def load_trace(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """Time [s], pressure [Pa absolute] and stored rig configuration of the input PATH."""
+    path = Path(args.path)
+    if not path.exists():
+        raise CliError(f"{path}: no such file or directory")
+    if path.suffix.lower() in (".csv", ".txt"):
+        from pneumatic_unload.io.csvlog import CsvFormatError, read_csv_trace
+
+        try:
+            tr = read_csv_trace(
+                path, time_column=args.time_column, pressure_column=args.pressure_column,
+                pressure_unit=args.pressure_unit, gauge=args.gauge,
+                atmosphere=args.atmosphere)
+        except (CsvFormatError, ValueError, OSError) as exc:
+            raise CliError(f"{path}: {exc}") from exc
+        meta: dict[str, Any] = {}
+        if tr.temperature is not None and tr.temperature.size:
+            meta["measured_initial_temperature"] = float(tr.temperature[0])
+        return np.asarray(tr.t, float), np.asarray(tr.p, float), meta
+    from pneumatic_unload.io.bag import BagError, read_config, read_pressure
+
+    try:
+        series = read_pressure(path, topic=args.topic)
+        cfg = read_config(path) or {}
+    except BagError as exc:
+        raise CliError(str(exc)) from exc
+    t_ns, p = series[0], series[1]
+    return np.asarray(t_ns, dtype=np.int64) * 1e-9, np.asarray(p, float), cfg
+
+
+def settings_from(args: argparse.Namespace, cfg: dict[str, Any]) -> EstimatorSettings:
+    """Estimator settings: command-line values first, then the bag's rig configuration."""
+    volume = args.volume if args.volume is not None else cfg.get("volume")
+    if volume is None:
+        raise CliError("--volume M3 is required (the input carries no rig configuration)")
+    t10 = args.initial_temperature or cfg.get("initial_temperature") or \
+        cfg.get("measured_initial_temperature") or 293.15
+    if args.atmosphere_auto:
+        atm = None
+    else:
+        atm = args.atmosphere if args.atmosphere is not None else cfg.get("atmosphere", 101325.0)
+    try:
+        return EstimatorSettings(
+            volume=float(volume), initial_temperature=float(t10), atmosphere=atm,
+            length_diameter_ratio=float(args.length_diameter_ratio
+                                        or cfg.get("length_diameter_ratio", 2.0)),
+            wall_temperature=args.wall_temperature or cfg.get("wall_temperature"),
+            heat_model=args.heat_model, critical_ratio=args.critical_ratio,
+            curve_fit=not args.no_curve_fit)
+    except EstimationError as exc:
+        raise CliError(str(exc)) from exc
+
+
+def _unload_json(r: UnloadResult) -> dict[str, Any]:
+    d = r.to_dict()
+    d.pop("extra", None)
+    return d
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    """Run the unloading-time analysis and print the estimates."""
+    t, p, cfg = load_trace(args)
+    settings = settings_from(args, cfg)
+    try:
+        published = analyze(t, p, settings)
+    except EstimationError as exc:
+        raise CliError(f"{args.path}: {exc}") from exc
+    unloads = merge_final(published)
+    if args.json:
+        out = {"source": str(args.path), "samples": int(t.size),
+               "settings": {k: v for k, v in vars(settings).items()},
+               "unloads": [_unload_json(r) for r in unloads],
+               "published": [_unload_json(r) for r in published]}
+        print(json.dumps(out, indent=2, allow_nan=False, default=_json_default))
+    else:
+        print(f"{args.path}: {t.size} samples, {len(unloads)} unload(s)")
+        for r in unloads:
+            print(format_result(r))
+    if args.plot:
+        from pneumatic_unload.plotting import plot_analysis
+
+        plot_analysis(t, p, unloads, settings, args.plot)
+        if not args.json:
+            print(f"plot written to {args.plot}")
+    return 0 if unloads else 1
+
+
+def _json_default(o: object) -> object:
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def format_result(r: UnloadResult) -> str:
+    """Human-readable summary of one unload (trade units alongside SI)."""
+    def dm3(c: float) -> str:
+        return f"{c / 1e-8:.4f} dm^3/(s bar)" if math.isfinite(c) else "n/a"
+
+    lines = [f"unload {r.index}: {r.status} ({r.status_text})"]
+    if math.isfinite(r.tau_exp):
+        lines.append(f"  tau_exp        = {r.tau_exp:.6f} s  (+- {r.tau_exp_std:.2g} s)")
+        lines.append(f"  p10 / p_atm / p* = {r.p10:.0f} / {r.p_atm:.0f} / {r.p_star:.0f} Pa")
+    lines.append(f"  C (eq 39)      = {r.conductance:.5g} m^3/(s Pa) = {dm3(r.conductance)}")
+    if math.isfinite(r.conductance_model):
+        lines.append(
+            f"  C (model)      = {r.conductance_model:.5g} +- {r.conductance_model_std:.2g}"
+            f" m^3/(s Pa) = {dm3(r.conductance_model)}  [{r.method}]")
+        lines.append(f"  eq 39 - model  = {100 * r.bias:+.2f} %")
+    if math.isfinite(r.critical_ratio):
+        lines.append(f"  b              = {r.critical_ratio:.3f} +- {r.critical_ratio_std:.3f}")
+    return "\n".join(lines)
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Simulate a run and write it as a bag."""
+    from pneumatic_unload.io.bag import BagError
+    from pneumatic_unload.runs import write_simulated_bag
+
+    try:
+        cfg = config_from_args(args)
+    except ConfigError as exc:
+        raise CliError(str(exc)) from exc
+    try:
+        info = write_simulated_bag(cfg, Path(args.out), analyze_live=not args.no_estimate)
+    except (BagError, FileExistsError) as exc:
+        raise CliError(str(exc)) from exc
+    print(json.dumps(info, indent=2, default=_json_default) if args.json else
+          f"wrote {info['samples']} samples to {args.out}")
+    return 0
+
+
+def cmd_recover(args: argparse.Namespace) -> int:
+    """Recover a bag whose writer died."""
+    from pneumatic_unload.io.bag import BagError, recover
+
+    try:
+        report = recover(Path(args.bag))
+    except BagError as exc:
+        raise CliError(str(exc)) from exc
+    print(report)
+    return 0
+
+
+# --------------------------------------------------------------------------- parser
+def add_config_options(parser: argparse.ArgumentParser) -> None:
+    """One option per :class:`RigConfig` field (name with dashes), with unit and range."""
+    for row in RigConfig.describe():
+        name = row["name"]
+        flag = "--" + name.replace("_", "-")
+        unit = f" [{row['unit']}]" if row.get("unit") else ""
+        if name == "effects":
+            parser.add_argument(flag, default=None, help="comma-separated effects: "
+                                + ", ".join(row["choices"]))
+        elif "choices" in row:
+            parser.add_argument(flag, default=None, choices=row["choices"], help=row["doc"])
+        elif name == "seed":
+            parser.add_argument(flag, type=int, default=None, help=row["doc"])
+        else:
+            parser.add_argument(flag, type=float, default=None, metavar="X",
+                                help=f"{row['doc']}{unit}, default {row['default']:g}, "
+                                     f"range [{row['min']:g}, {row['max']:g}]")
+
+
+def config_from_args(args: argparse.Namespace) -> RigConfig:
+    """RigConfig from the options of :func:`add_config_options` (unset: defaults)."""
+    kw = {row["name"]: getattr(args, row["name"]) for row in RigConfig.describe()
+          if getattr(args, row["name"], None) is not None}
+    return RigConfig.from_dict(kw)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pneumatic-unload``."""
+    ap = argparse.ArgumentParser(
+        prog="pneumatic-unload",
+        description="Sonic conductance of pneumatic components from tank discharges "
+                    "(unloading-time method with model-based bias correction).")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    an = sub.add_parser("analyze", help="estimate C, b and tau_exp from a bag or a CSV log")
+    an.add_argument("path", help="rosbag2 directory, .mcap file or .csv log")
+    an.add_argument("--volume", type=float, help="tank volume [m^3] (default: from the bag)")
+    an.add_argument("--initial-temperature", type=float, help="T10 [K]")
+    an.add_argument("--atmosphere", type=float,
+                    help="atmospheric pressure [Pa absolute] (default 101325 or the bag's)")
+    an.add_argument("--atmosphere-auto", action="store_true",
+                    help="take p_atm from the final plateau")
+    an.add_argument("--length-diameter-ratio", type=float, help="tank L/D [-]")
+    an.add_argument("--wall-temperature", type=float, help="wall temperature [K]")
+    an.add_argument("--heat-model", choices=("natural", "adiabatic"), default="natural",
+                    help="wall heat transfer assumed by the model-based C")
+    an.add_argument("--critical-ratio", type=float, default=0.5,
+                    help="b assumed before the curve fit [-]")
+    an.add_argument("--no-curve-fit", action="store_true", help="skip the full-curve fit")
+    an.add_argument("--topic", default="/tank/pressure", help="pressure topic of a bag")
+    an.add_argument("--time-column", help="CSV time column [s]")
+    an.add_argument("--pressure-column", help="CSV pressure column")
+    an.add_argument("--pressure-unit", choices=tuple(PRESSURE_UNITS), default=None,
+                    help="CSV pressure unit (default: from the header, else Pa)")
+    an.add_argument("--gauge", action="store_true",
+                    help="CSV pressures are gauge: add --atmosphere to every reading")
+    an.add_argument("--json", action="store_true", help="print a JSON object")
+    an.add_argument("--plot", metavar="FILE.png", help="write a plot of the analysis")
+    an.set_defaults(func=cmd_analyze)
+
+    si = sub.add_parser("simulate", help="write a simulated run as a rosbag2/MCAP bag")
+    si.add_argument("--out", required=True, help="bag directory to create")
+    si.add_argument("--no-estimate", action="store_true",
+                    help="do not record the estimator's results in the bag")
+    si.add_argument("--json", action="store_true", help="print a JSON summary")
+    add_config_options(si)
+    si.set_defaults(func=cmd_simulate)
+
+    rc = sub.add_parser("recover", help="repair a bag whose writer was killed")
+    rc.add_argument("bag", help="bag directory")
+    rc.set_defaults(func=cmd_recover)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``pneumatic-unload``; returns the exit status."""
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    if getattr(args, "gauge", False) and args.atmosphere is None:
+        print("pneumatic-unload: error: --gauge needs --atmosphere PA", file=sys.stderr)
+        return 2
+    try:
+        return int(args.func(args))
+    except CliError as exc:
+        print(f"pneumatic-unload: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
