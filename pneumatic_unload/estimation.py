@@ -345,7 +345,9 @@ class StreamingEstimator:
     #: Samples used for the plateau level and noise [-].
     PLATEAU = 1024
     #: Samples that must confirm a trigger [-].
-    CONFIRM = 16
+    CONFIRM = 64
+    #: Samples between the end of the reference plateau window and now [-].
+    LAG = 256
 
     def __init__(self, settings: EstimatorSettings | None = None) -> None:
         self.settings = settings or EstimatorSettings()
@@ -453,6 +455,7 @@ class StreamingEstimator:
             if j >= end:
                 break
             shift = self._shift
+            del pv, seg, hit  # no buffer views may be alive while a step trims the buffer
             out += self._step(j)
             trimmed = self._shift - shift
             i, end = j + 1 - trimmed, end - trimmed
@@ -535,8 +538,9 @@ class StreamingEstimator:
         """Drop samples that no later decision can need (keeps memory bounded)."""
         keep = min(n - 4 * self.PLATEAU, self._arm_index)
         if keep > 65536 and self._state == _WAITING:
-            del self._t[:keep]
-            del self._p[:keep]
+            # new arrays (not in-place deletion): views held by callers stay valid
+            self._t = array("d", self._t[keep:])
+            self._p = array("d", self._p[keep:])
             self._next_check -= keep
             self._arm_index -= keep
             self._shift += keep
@@ -556,41 +560,59 @@ class StreamingEstimator:
 
     # waiting: plateau level and trigger
     def _step_waiting(self, i: int) -> list[UnloadResult]:
+        """Periodic plateau update with a block-mean test, or a single-sample trigger.
+
+        The reference level comes from a window that ends LAG samples ago, so a slow
+        discharge cannot drag it along; the mean of the last PERIOD samples is tested
+        against it (sensitive to slow drops), and each sample against ``trigger_sigma``
+        noise deviations (fast drops, no waiting for the period).
+        """
         n = i + 1
         tv, pv = self._arrays(n)
         if math.isnan(self._dt_nominal) and n >= 8:
             self._dt_nominal = float(np.median(np.diff(tv[max(0, n - 256):n])))
-        if i == self._next_check or self._level == -math.inf:
-            lo = max(self._arm_index, n - self.PLATEAU)
-            win = pv[lo:n]
-            # the trigger level lags one period behind so a fast drop is not absorbed
+        if i == self._next_check:
+            self._next_check = i + self.PERIOD
+            avail = n - self._arm_index
+            lag = min(self.LAG, max(avail - self.settings.min_plateau, 0))
+            hi = n - lag
+            lo = max(self._arm_index, hi - self.PLATEAU)
+            win = pv[lo:hi]
             self._plateau_level = float(np.median(win))
             sig = _robust_sigma(win)
             if sig == 0.0:
                 sig = _rms_sigma(win)
             self._sigma = sig
-            floor = 1e-4 * abs(self._plateau_level) + 1e-12
-            self._level = self._plateau_level - self.settings.trigger_sigma * max(sig, floor)
-            self._next_check = i + self.PERIOD
-            if pv[i] >= self._level:
+            sig_eff = max(sig, 1e-4 * abs(self._plateau_level) + 1e-12)
+            self._level = self._plateau_level - self.settings.trigger_sigma * sig_eff
+            block = pv[max(self._arm_index, n - self.PERIOD):n]
+            mean_low = (lag >= self.PERIOD and
+                        float(np.mean(block)) < self._plateau_level - self._block_threshold())
+            if pv[i] >= self._level and not mean_low:
+                del tv, pv, win, block  # release the buffer views before trimming
                 self._trim(n)
                 return []
+        elif self._level == -math.inf:
+            return []
         # trigger
         if i - self._arm_index < self.settings.min_plateau:
-            self._next_check = i + self.PERIOD
             return []
         self._trigger = i
         self._state = _CONFIRM
-        self._next_check = i + self.CONFIRM
+        self._next_check = i + self.PERIOD
         self._below, self._level = True, -math.inf
         return []
+
+    def _block_threshold(self) -> float:
+        """Drop of a PERIOD-sample mean that counts as a step [signal units]."""
+        sig_eff = max(self._sigma, 1e-4 * abs(self._plateau_level) + 1e-12)
+        return 6.0 * sig_eff / math.sqrt(self.PERIOD)
 
     def _step_confirm(self, i: int) -> list[UnloadResult]:
         n = i + 1
         _tv, pv = self._arrays(n)
         seg = pv[self._trigger + 1:n]
-        sig = max(self._sigma, 1e-4 * abs(self._plateau_level))
-        if float(np.median(seg)) < self._plateau_level - 3.0 * sig:
+        if float(np.mean(seg)) < self._plateau_level - self._block_threshold():
             self._state = _UNLOADING
             self._diag("ok", "unload step detected", float(self._t[self._trigger]))
             return self._start_unloading(i)
@@ -700,6 +722,9 @@ class StreamingEstimator:
                     i, f"sensor saturated on the pre-step plateau at {vmax!r}: p10 unknown")
         self._t0 = t0
         self._i0 = int(np.searchsorted(tv, t0))
+        n_pre, n_post = max(self._i0 - lo, 1), max(n - self._i0, 1)
+        self._t0_sd = (rms / slope * math.sqrt(1.0 / n_pre + 4.0 / n_post)
+                       if slope > 0 else math.inf)
         self._p10_signal = p10
         self._slope0 = slope
         self._sigma = max(rms, 1e-12)
@@ -717,7 +742,7 @@ class StreamingEstimator:
         self._atm_signal = atm_signal
         dp = self._p10_signal - atm_signal
         self._pstar_signal = atm_signal + P_STAR_FRACTION * dp
-        self._half = max(6.0 * self._sigma, 0.03 * abs(dp))
+        self._half = max(6.0 * self._sigma, 0.05 * abs(dp))
         self._below = True
         self._level = self._pstar_signal - self._half
 
@@ -753,6 +778,13 @@ class StreamingEstimator:
         if tw.size < 5:
             tw, pw = tv[max(self._i0, n - 5):n], pv[max(self._i0, n - 5):n]
         t_cross, t_std, _slope = crossing_fit(tw, pw, self._pstar_signal)
+        # second pass on a window symmetric in time about the first estimate: the ends of
+        # the first window were chosen by noisy sample values, which biases the fit
+        h = float(tv[n - 1]) - t_cross
+        if h > 0:
+            k0 = int(np.searchsorted(tv, t_cross - h))
+            if n - k0 >= 5:
+                t_cross, t_std, _slope = crossing_fit(tv[k0:n], pv[k0:n], self._pstar_signal)
         gap = bool(np.any(np.diff(tw) > self._gap_limit)) if tw.size > 1 else False
         k = i if settle_index is None else settle_index
         res = self._make_result(k, t_cross, t_std, gap)
@@ -803,11 +835,9 @@ class StreamingEstimator:
         return res
 
     def _t0_std(self) -> float:
-        """Standard deviation of the start time from the hinge fit's local slope [s]."""
-        if self._slope0 <= 0:
-            return math.inf
-        # information of the kink: slope s, noise sigma, a few samples either side
-        return self._sigma / self._slope0 / math.sqrt(8.0)
+        """Standard deviation of the start time [s]: noise over the initial slope, with the
+        plateau (p10) and post-start samples of the hinge fit."""
+        return self._t0_sd
 
     def _model_inversion(self, tau: float, tau_std: float, p10: float, p_atm: float,
                          p_star: float, c_isen: float) -> tuple[float, float, str]:

@@ -254,7 +254,7 @@ def fit_curve(
         cfg = rig_from_settings(settings, conductance=math.exp(d["logC"]), p10=d["p10"],
                                 p_atm=d["p_atm"], critical_ratio=d["b"],
                                 heat_scale=math.exp(d["logh"]))
-        pm, _ = discharge(cfg, t, d["t0"], rtol=1e-7)
+        pm, _ = discharge(cfg, t, d["t0"], rtol=1e-9)
         pm = sensor_response(t, pm, cfg)
         return np.add.reduceat(pm, edges[:-1]) / counts - pb
 

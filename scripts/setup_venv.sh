@@ -16,7 +16,9 @@ VENV_ABS="$(cd "$VENV" && pwd)"
 
 if ! cmp -s requirements.lock "$VENV/.requirements.lock"; then
   echo "[setup] installing the pinned set (requirements.lock)"
-  "$VPY" -m pip install --disable-pip-version-check -q -r requirements.lock
+  # (pip's "Location ... is ignored" lines come from this machine's pip config: noise)
+  "$VPY" -m pip install --disable-pip-version-check -q -r requirements.lock 2>&1 \
+    | { grep -v "is ignored: it is neither a file nor a directory" || true; }
   cp requirements.lock "$VENV/.requirements.lock"
   rm -f "$VENV/.msgs-built"
 fi
@@ -47,7 +49,8 @@ fi
 PKG_HASH="$(cat setup.py setup.cfg package.xml | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$VENV/.pkg-installed" 2>/dev/null)" != "$PKG_HASH" ]; then
   echo "[setup] installing pneumatic_unload (editable)"
-  "$VPY" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
+  "$VPY" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e . 2>&1 \
+    | { grep -v "is ignored: it is neither a file nor a directory" || true; }
   echo "$PKG_HASH" > "$VENV/.pkg-installed"
 fi
 "$VPY" -c "import rclpy, pneumatic_unload, pneumatic_unload_msgs.msg" \

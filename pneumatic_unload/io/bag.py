@@ -639,8 +639,10 @@ class BagRecorder:
         self._config_stamp_ns = (
             None if config_stamp_ns is None else _check_t_ns(config_stamp_ns, "config_stamp_ns")
         )
-        self._writer = _Rosbag2Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
         try:
+            self._writer = _Rosbag2Writer(
+                self.path, version=9, storage_plugin=StoragePlugin.MCAP
+            )
             self._writer.open()
         except (WriterError, OSError) as err:
             raise BagWriteError(f"cannot create bag {self.path}: {err}") from err
@@ -1474,12 +1476,19 @@ class RecoverReport:
         return "\n".join(lines)
 
 
-def _salvage_chunk_prefix(chunk: McapChunk) -> list[Any]:
-    """Intact Schema/Channel/Message records at the start of a torn uncompressed chunk."""
+def _salvage_torn_chunk(tail: bytes) -> list[Any]:
+    """Intact Schema/Channel/Message records at the start of a torn uncompressed chunk.
+
+    ``tail`` holds the file bytes after the last complete record. A kill during a chunk
+    write leaves a prefix of the chunk; its complete inner records are still good.
+    """
     out: list[Any] = []
-    if chunk.compression:
+    if len(tail) < 41 or tail[0] != _OP_CHUNK:
         return out
-    data = chunk.data
+    (clen,) = struct.unpack_from("<I", tail, 37)
+    if clen != 0:  # compressed: a prefix cannot be decompressed
+        return out
+    data = tail[49:]
     pos = 0
     while pos + 9 <= len(data):
         op, length = _RECORD_HEAD.unpack_from(data, pos)
@@ -1499,7 +1508,7 @@ def _salvage_chunk_prefix(chunk: McapChunk) -> list[Any]:
                         data=body[22:],
                     )
                 )
-            elif op in (0x03, 0x04):
+            elif op in (0x03, 0x04):  # schema, channel
                 sub = McapChunk(
                     compression="",
                     data=data[pos:end],
@@ -1515,23 +1524,24 @@ def _salvage_chunk_prefix(chunk: McapChunk) -> list[Any]:
     return out
 
 
-def _expand_record(record: Any, *, last: bool) -> list[Any]:
-    """Schema/Channel/Message records of one stream record; a torn ``last`` one is salvaged."""
+def _expand_record(record: Any) -> list[Any]:
+    """Schema/Channel/Message records of one complete stream record (chunks CRC-checked)."""
     if isinstance(record, McapChunk):
         try:
             return list(breakup_chunk(record, validate_crc=True))
         except Exception:
-            return _salvage_chunk_prefix(record) if last else []
-    if isinstance(record, McapMessage) and last:
-        return []  # cannot tell whether its payload is complete
+            return []  # corrupt chunk: skip it
     if isinstance(record, McapSchema | McapChannel | McapMessage):
         return [record]
     return []
 
 
 def _mcap_records(mcap_file: Path) -> tuple[Iterator[Any], Callable[[], int]]:
-    """Intact inner records of a possibly truncated MCAP file and a function giving the
-    number of unusable tail bytes [bytes] once the iterator is exhausted.
+    """Intact inner records of a possibly truncated MCAP file, and a function giving the size
+    of the torn tail [bytes] (after the last complete record) once the iterator is exhausted.
+
+    mcap's stream reader yields only records whose full declared length was read, so every
+    record it yields is complete; the torn tail ends the iteration with an exception.
     """
     size = mcap_file.stat().st_size
     state = {"good_end": 0}
@@ -1541,24 +1551,17 @@ def _mcap_records(mcap_file: Path) -> tuple[Iterator[Any], Callable[[], int]]:
             if f.read(8) != _MCAP_MAGIC:
                 raise BagFormatError(f"{mcap_file} is not an MCAP file (bad magic)")
             f.seek(0)
+            state["good_end"] = 8
             reader = StreamReader(f, emit_chunks=True, record_size_limit=1 << 32)
-            held: Any = None
-            held_end = 8
             try:
                 for record in reader.records:
-                    if held is not None:
-                        yield from _expand_record(held, last=False)
-                        state["good_end"] = held_end
-                    held, held_end = record, f.tell()
+                    end = f.tell()
+                    yield from _expand_record(record)
+                    state["good_end"] = end
             except Exception:  # torn tail: EndOfFile, struct.error, ... from the library
-                if held is not None:
-                    # the held record is complete unless it reached the end of the file
-                    yield from _expand_record(held, last=held_end >= size)
-                    if held_end < size:
-                        state["good_end"] = held_end
+                f.seek(state["good_end"])
+                yield from _salvage_torn_chunk(f.read())
                 return
-            if held is not None:
-                yield from _expand_record(held, last=False)
             state["good_end"] = size
 
     return gen(), lambda: max(0, size - state["good_end"])

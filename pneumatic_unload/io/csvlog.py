@@ -55,8 +55,13 @@ TIME_UNITS: Final[dict[str, float]] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "min": 
 UnitSource = Literal["argument", "header", "default"]
 
 _HEADER_RE = re.compile(r"^(?P<name>.*?)\s*[\[(](?P<unit>[^\])]*)[\])]\s*$")
-_GAUGE_SUFFIXES: Final = (("gauge", True), ("(g)", True), ("g", True),
-                          ("absolute", False), ("abs", False), ("(a)", False), ("a", False))
+_GAUGE_SUFFIXES: Final = (
+    ("gauge", True),
+    ("g", True),
+    ("absolute", False),
+    ("abs", False),
+    ("a", False),
+)
 
 
 class CsvError(Exception):
@@ -133,7 +138,7 @@ def _pressure_unit(text: str) -> tuple[str, bool | None] | None:
     """('kPa', True) for 'kPa g' / 'kPag' / 'kPa(gauge)'; None if not a pressure unit."""
     if (unit := _lookup(text, PRESSURE_UNITS)) is not None:
         return unit, None
-    key = _norm(text)
+    key = _norm(text).replace("(", "").replace(")", "")
     for suffix, is_gauge in _GAUGE_SUFFIXES:
         if key.endswith(suffix) and (unit := _lookup(key[: -len(suffix)], PRESSURE_UNITS)):
             return unit, is_gauge
@@ -300,8 +305,8 @@ def read_csv_trace(
     i_press = locate("pressure", pressure_column, _is_pressure, True)
     i_temp = locate("temperature", temperature_column, _is_temperature, False)
     assert i_time is not None and i_press is not None
-    if len({i_time, i_press, i_temp} - {None}) < len([i for i in (i_time, i_press, i_temp)
-                                                      if i is not None]):
+    used = [i for i in (i_time, i_press, i_temp) if i is not None]
+    if len(set(used)) < len(used):
         raise CsvOptionError("time, pressure and temperature must be different columns")
 
     # units ----------------------------------------------------------------------------
@@ -331,8 +336,10 @@ def read_csv_trace(
             )
     g_from: UnitSource
     if gauge is None:
-        is_gauge, g_from = (header_gauge, "header") if header_gauge is not None else (
-            False, "default")
+        if header_gauge is not None:
+            is_gauge, g_from = header_gauge, "header"
+        else:
+            is_gauge, g_from = False, "default"
     else:
         if header_gauge is not None and header_gauge != gauge:
             raise CsvOptionError(
@@ -435,7 +442,7 @@ def read_csv_trace(
         pressure_unit_from=p_from,
         gauge=is_gauge,
         gauge_from=g_from,
-        atmosphere=atmosphere if is_gauge else None,
+        atmosphere=float(atmosphere) if is_gauge and atmosphere is not None else None,
         temperature_unit=temp_unit,
         temperature_unit_from=temp_from,
     )
