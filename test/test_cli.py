@@ -1,0 +1,70 @@
+"""The ``pneumatic-unload`` command line: analyze (bags, CSV, real data), simulate, errors."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pneumatic_unload.cli import main
+from pneumatic_unload.io.bag import read_estimates
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real-data" / "aerolab"
+RULE_OF_THUMB = {"orifice_0.094in.csv": 0.73e-8, "orifice_0.125in.csv": 1.29e-8}
+
+
+def _run(capsys, *argv):
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.mark.parametrize("name", sorted(RULE_OF_THUMB))
+def test_analyze_real_aerolab_csv_within_30_percent(capsys, name):
+    path = REAL / name
+    if not path.exists():
+        pytest.skip(f"real data not present at {path}")
+    code, out, _ = _run(capsys, "analyze", str(path), "--volume", "0.125", "--gauge",
+                        "--atmosphere", "101500", "--pressure-unit", "kPa", "--json")
+    assert code == 0
+    data = json.loads(out)
+    u = data["unloads"][0]
+    for key in ("conductance", "conductance_model", "conductance_model_std",
+                "critical_ratio", "tau_exp", "p10", "p_atm", "p_star", "t_start", "t_cross",
+                "status"):
+        assert key in u
+    ref = RULE_OF_THUMB[name]
+    assert u["conductance"] == pytest.approx(ref, rel=0.3)
+    assert u["conductance_model"] == pytest.approx(ref, rel=0.3)
+
+
+def test_simulate_then_analyze_reproduces_recorded_estimates(tmp_path, capsys):
+    bag = tmp_path / "run"
+    code, _, err = _run(capsys, "simulate", "--out", str(bag), "--volume", "0.001",
+                        "--conductance", "5e-9", "--effects", "heat_transfer", "--seed", "3")
+    assert code == 0, err
+    code, out, err = _run(capsys, "analyze", str(bag), "--json")
+    assert code == 0, err
+    published = json.loads(out)["published"]
+    recorded = read_estimates(bag)
+    assert len(recorded) == len(published) >= 2
+    for rec, pub in zip(recorded, published, strict=True):
+        assert rec["conductance"] == pytest.approx(pub["conductance"], rel=1e-9)
+        assert rec["conductance_model"] == pytest.approx(pub["conductance_model"], rel=1e-9)
+        assert rec["tau_exp"] == pytest.approx(pub["tau_exp"], rel=1e-9)
+    assert json.loads(out)["unloads"][0]["conductance_model"] == pytest.approx(5e-9, rel=0.02)
+
+
+def test_unreadable_input_exits_nonzero_with_one_line(tmp_path):
+    bad = tmp_path / "junk.mcap"
+    bad.write_bytes(b"not a bag at all")
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(bad),
+                           "--volume", "0.001"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert "error" in proc.stderr
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze",
+                           str(tmp_path / "missing.csv"), "--volume", "0.001"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "no such file" in proc.stderr
