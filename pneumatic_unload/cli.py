@@ -49,7 +49,7 @@ def load_trace(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, dict[s
         try:
             tr = read_csv_trace(
                 path, time_column=args.time_column, pressure_column=args.pressure_column,
-                pressure_unit=args.pressure_unit, gauge=args.gauge,
+                pressure_unit=args.pressure_unit, gauge=args.gauge or None,
                 atmosphere=args.atmosphere)
         except (CsvFormatError, ValueError, OSError) as exc:
             raise CliError(f"{path}: {exc}") from exc

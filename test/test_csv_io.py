@@ -108,10 +108,11 @@ def test_gauge_marker_in_header(tmp_path):
         read_csv_trace(path, gauge=False)
 
 
-def test_atmosphere_with_absolute_pressure_is_rejected(tmp_path):
+def test_atmosphere_is_ignored_for_absolute_pressure(tmp_path):
     path = _write(tmp_path, "time,pressure\n0,200000\n1,150000\n")
-    with pytest.raises(CsvOptionError, match="gauge=True"):
-        read_csv_trace(path, atmosphere=101_325.0)
+    trace = read_csv_trace(path, atmosphere=101_325.0)
+    np.testing.assert_array_equal(trace.p, [200_000.0, 150_000.0])
+    assert trace.source.gauge is False and trace.source.atmosphere is None
 
 
 def test_explicit_columns_by_name_or_full_header(tmp_path):

@@ -36,6 +36,7 @@ import sys
 import threading
 import time
 import zlib
+from collections import defaultdict
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
@@ -55,7 +56,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer, WriterError
 from rosbags.rosbag2.metadata import parse_qos
-from rosbags.rosbag2.storage_mcap import McapWriter
+from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -333,6 +334,27 @@ def _encode_stamped_pairs(
     return out.view(np.uint8).reshape(stamps.size, dtype.itemsize)
 
 
+@lru_cache(maxsize=64)
+def _stamped_pair_struct(frame_id: str) -> tuple[struct.Struct, bytes]:
+    """struct layout of one FluidPressure/Temperature CDR payload for ``frame_id``."""
+    frame = frame_id.encode()
+    if b"\x00" in frame:
+        raise BagWriteError("frame_id must not contain NUL characters")
+    n_str = len(frame) + 1
+    pad = (-(12 + n_str)) % 8
+    return struct.Struct(f"<4siII{n_str}s{pad}xdd"), frame
+
+
+def _encode_stamped_pair(t_ns: int, a: float, b: float, *, frame_id: str) -> bytes:
+    """CDR payload of one FluidPressure/Temperature message (stamp [ns], a, variance b)."""
+    layout, frame = _stamped_pair_struct(frame_id)
+    sec, nsec = divmod(t_ns, _NS_PER_S)
+    try:
+        return layout.pack(b"\x00\x01\x00\x00", sec, nsec, len(frame) + 1, frame, a, b)
+    except struct.error as err:
+        raise BagWriteError(f"cannot encode stamp {t_ns} ns / values {a}, {b}: {err}") from err
+
+
 class _NotFastDecodable(Exception):
     """The raw messages cannot go through the numpy decoder (e.g. big-endian CDR)."""
 
@@ -411,6 +433,10 @@ class _FlushingMcapWriter(McapWriter):
         times.append(timestamp)
         offsets.append(offset)
         self.channel_stats[cid] += 1
+        if timestamp < self.message_start_time:
+            self.message_start_time = timestamp
+        if timestamp > self.message_end_time:
+            self.message_end_time = timestamp
         chunk = self.chunk
         if timestamp < chunk.message_start_time:
             chunk.message_start_time = timestamp
@@ -520,7 +546,7 @@ class _FlushingMcapWriter(McapWriter):
         rec.write(struct.pack("<QQ", len(compressed), self.chunk.bio.tell()))
         self.chunks.append(rec)
 
-        self.chunk = type(self.chunk)(2**63 - 1, 0, BytesIO(), self.chunk.msgs.__class__(list))
+        self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
         self._index = {}
 
     def flush(self, *, fsync: bool = False) -> None:
@@ -530,10 +556,6 @@ class _FlushingMcapWriter(McapWriter):
         self.bio.flush()
         if fsync:
             os.fsync(self.bio.fileno())
-
-    def pending_bytes(self) -> int:
-        """Size of the pending (not yet written) chunk [bytes]."""
-        return self.chunk.bio.tell()
 
 
 class _Rosbag2Writer(Writer):
@@ -611,8 +633,10 @@ class BagRecorder:
                 message on ``/rig/config`` and into the metadata ``custom_data`` under
                 :data:`CONFIG_METADATA_KEY`.
             chunk_size: MCAP chunk size limit [bytes] (>= 1024).
-            flush_interval: maximal age of unwritten data [s]: on each write, a pending chunk
-                older than this is closed and handed to the OS (``math.inf``: only by size).
+            flush_interval: maximal age of unwritten data [s]: on each write, the pending
+                chunk is closed and handed to the OS if the last flush is this long ago
+                (``math.inf``: only by size). A writer that may go idle should also call
+                :meth:`flush` from a timer.
             fsync: also ``fsync`` at each flush (survives power loss, not only ``kill -9``).
             config_stamp_ns: log time of the ``/rig/config`` message [ns]; by default the log
                 time of the first other message written (or 0 for a bag with no messages).
@@ -801,10 +825,8 @@ class BagRecorder:
         """
         stamp = _check_t_ns(t_ns)
         log_time = stamp if log_time_ns is None else _check_t_ns(log_time_ns, "log_time_ns")
-        payload = _encode_stamped_pairs(
-            np.array([stamp], np.int64), p_pa, variance, frame_id=frame_id
-        )
-        self._write(TOPIC_PRESSURE, MSGTYPE_PRESSURE, log_time, payload.tobytes())
+        payload = _encode_stamped_pair(stamp, float(p_pa), float(variance), frame_id=frame_id)
+        self._write(TOPIC_PRESSURE, MSGTYPE_PRESSURE, log_time, payload)
 
     def write_pressures(
         self,
@@ -848,13 +870,10 @@ class BagRecorder:
         """
         stamp = _check_t_ns(t_ns)
         log_time = stamp if log_time_ns is None else _check_t_ns(log_time_ns, "log_time_ns")
-        payload = _encode_stamped_pairs(
-            np.array([stamp], np.int64),
-            float(temperature_k) - ZERO_CELSIUS,
-            variance,
-            frame_id=frame_id,
+        payload = _encode_stamped_pair(
+            stamp, float(temperature_k) - ZERO_CELSIUS, float(variance), frame_id=frame_id
         )
-        self._write(TOPIC_TEMPERATURE, MSGTYPE_TEMPERATURE, log_time, payload.tobytes())
+        self._write(TOPIC_TEMPERATURE, MSGTYPE_TEMPERATURE, log_time, payload)
 
     def write_temperatures(
         self,
@@ -1450,7 +1469,9 @@ class RecoverReport:
     path: Path  #: the bag directory
     messages: dict[str, int]  #: messages in the repaired bag per topic
     already_complete: bool  #: the bag was readable: nothing was changed
-    dropped_bytes: int  #: bytes of the old MCAP tail that held no intact record [bytes]
+    #: size of the torn tail after the last complete MCAP record [bytes] (complete messages
+    #: inside a torn uncompressed chunk are still recovered)
+    dropped_bytes: int
     skipped_messages: int  #: intact messages dropped (channel or schema record lost)
     kept_originals: tuple[Path, ...]  #: where the original files were moved
 
@@ -1464,10 +1485,12 @@ class RecoverReport:
         if self.already_complete:
             head = f"bag {self.path} is complete; nothing to recover ({self.total} messages)"
         else:
-            head = (
-                f"recovered bag {self.path}: {self.total} messages, "
-                f"{self.dropped_bytes} bytes of torn tail dropped"
-            )
+            head = f"recovered bag {self.path}: {self.total} messages"
+            if self.dropped_bytes:
+                head += (
+                    f" (torn tail of {self.dropped_bytes} bytes after the last complete "
+                    "record; its intact messages were kept)"
+                )
         lines = [head] + [f"  {t}: {n}" for t, n in sorted(self.messages.items())]
         if self.skipped_messages:
             lines.append(f"  skipped {self.skipped_messages} messages without channel/schema")
@@ -1599,7 +1622,7 @@ def recover(path: str | os.PathLike[str], *, keep_original: bool = True) -> Reco
     chunk is kept), writes a complete MCAP file with summary and footer plus
     ``metadata.yaml`` (with the rig configuration in custom_data if the bag has a
     ``/rig/config`` message), and replaces the old files. A bag that already opens is left
-    unchanged.
+    unchanged. Do not run it on a bag that a live process is still writing.
 
     Args:
         path: the bag directory (or an ``.mcap`` file in it).

@@ -257,7 +257,7 @@ def read_csv_trace(
         gauge: True if the pressures are gauge readings (relative to ``atmosphere``);
             None: from a gauge/absolute marker in the header, else absolute.
         atmosphere: atmospheric pressure added to gauge readings [Pa absolute]; required
-            with gauge pressures and not allowed with absolute ones.
+            with gauge pressures, ignored with absolute ones (``source.atmosphere`` is None).
         delimiter: field separator; default: sniffed from the header (',', ';' or tab).
 
     Returns:
@@ -267,8 +267,8 @@ def read_csv_trace(
         CsvFormatError: empty file, missing or ambiguous column (the available ones are
             listed), non-numeric or non-finite cell (with its line number), time not
             increasing, unknown unit in a header, pressure not positive once absolute.
-        CsvOptionError: unknown unit argument, unit contradicting the header, gauge without
-            atmosphere, or atmosphere with absolute pressures.
+        CsvOptionError: unknown unit argument, unit or gauge flag contradicting the header,
+            gauge without atmosphere.
     """
     file = Path(path)
     lines = _read_lines(file)
@@ -355,11 +355,6 @@ def read_csv_trace(
             )
         if not (math.isfinite(atmosphere) and atmosphere > 0.0):
             raise CsvOptionError(f"atmosphere must be a positive pressure [Pa], got {atmosphere}")
-    elif atmosphere is not None:
-        raise CsvOptionError(
-            "atmosphere= is only used with gauge pressures; pass gauge=True if the file "
-            "holds gauge readings"
-        )
     temp_unit: str | None = None
     temp_from: UnitSource | None = None
     if i_temp is not None:
