@@ -108,7 +108,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     unloads = merge_final(published)
     if args.json:
         out = {"source": str(args.path), "samples": int(t.size),
-               "settings": {k: v for k, v in vars(settings).items()},
+               "settings": dict(vars(settings)),
                "unloads": [_unload_json(r) for r in unloads],
                "published": [_unload_json(r) for r in published]}
         print(json.dumps(out, indent=2, allow_nan=False, default=_json_default))

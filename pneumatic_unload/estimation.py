@@ -165,7 +165,6 @@ class UnloadResult:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (NaN mapped to None) with the CLI's key names."""
         d = asdict(self)
-        d["critical_ratio"] = self.critical_ratio
         out: dict[str, Any] = {}
         for k, v in d.items():
             if isinstance(v, float) and not math.isfinite(v):
@@ -748,15 +747,13 @@ class StreamingEstimator:
 
     def _stalled(self, i: int) -> bool:
         """True when the pressure has stopped falling well above p* (valve closed)."""
-        if not self._refined:
-            ref_slope = None
-        else:
-            ref_slope = self._slope0
+        if not self._refined or self._slope0 <= 0:
+            return False
+        ref_slope = self._slope0
         tv, pv = self._arrays(i + 1)
-        i0 = self._i0 if self._refined else self._trigger
-        span = i - i0
+        span = i - self._i0
         w = int(min(max(32, span // 4), 8192))
-        if span < 2 * w or ref_slope is None or ref_slope <= 0:
+        if span < 2 * w:
             return False
         a = pv[i - 2 * w + 1:i - w + 1]
         b = pv[i - w + 1:i + 1]

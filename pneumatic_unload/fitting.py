@@ -315,8 +315,7 @@ def refine_with_curve_fit(
         fit = fit_curve(t, p, settings, t_start=res.t_start, p10=res.p10, p_atm=res.p_atm,
                         conductance=res.conductance_model)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
-        out = dataclasses.replace(res, final=True, extra={"curve_fit_error": str(exc)})
-        return out
+        return dataclasses.replace(res, final=True, extra={"curve_fit_error": str(exc)})
     c_std = fit.conductance_std
     if settings.heat_model == "natural" and not math.isfinite(fit.heat_scale_std):
         c_std = math.hypot(c_std, res.conductance_model_std)
