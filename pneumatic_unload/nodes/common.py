@@ -1,0 +1,195 @@
+"""Shared plumbing of the ROS 2 nodes: QoS profiles, parameters from RigConfig, spinning.
+
+Nodes stay thin: they convert messages, hold parameters and call the ROS-free core.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import rclpy
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
+
+from pneumatic_unload.config import EFFECTS, ConfigError, RigConfig
+
+#: Pressure samples: reliable, deep history (the subscriber's callback is the bottleneck).
+PRESSURE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE)
+#: Sensor-data QoS of a subscriber: best effort (matches reliable and best-effort
+#: publishers), with a deep queue so that bursts are not dropped.
+SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                        reliability=ReliabilityPolicy.BEST_EFFORT,
+                        durability=DurabilityPolicy.VOLATILE)
+#: Latched results and configuration: a late subscriber gets the last ones.
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+STAMP_SCALE = 1_000_000_000
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds."""
+    return int(stamp.sec) * STAMP_SCALE + int(stamp.nanosec)
+
+
+def ns_to_stamp(ns: int, stamp: Any) -> Any:
+    """Write integer nanoseconds into a builtin_interfaces/Time (in place) and return it."""
+    stamp.sec, stamp.nanosec = divmod(int(ns), STAMP_SCALE)
+    return stamp
+
+
+def ns_to_seconds(ns: int) -> float:
+    """Integer nanoseconds -> float seconds, exactly as the offline analysis does [s]."""
+    return ns * 1e-9
+
+
+# --------------------------------------------------------------------------- parameters
+def rig_parameter_descriptors() -> dict[str, tuple[Any, ParameterDescriptor]]:
+    """ROS parameter (default, descriptor) of every RigConfig field.
+
+    Numbers get a FloatingPointRange/IntegerRange from the field's bounds; ``effects`` is a
+    comma-separated string of effect names; choice fields list their choices.
+    """
+    out: dict[str, tuple[Any, ParameterDescriptor]] = {}
+    for f in dataclasses.fields(RigConfig):
+        md = f.metadata
+        unit = f" [{md['unit']}]" if md.get("unit") else ""
+        if f.name == "effects":
+            out[f.name] = ("", ParameterDescriptor(
+                name=f.name, type=ParameterType.PARAMETER_STRING,
+                description=f"{md['doc']}: comma-separated, from {', '.join(EFFECTS)}"))
+        elif "choices" in md:
+            out[f.name] = (f.default, ParameterDescriptor(
+                name=f.name, type=ParameterType.PARAMETER_STRING,
+                description=f"{md['doc']} (one of {', '.join(md['choices'])})"))
+        elif f.name == "seed":
+            out[f.name] = (int(f.default), ParameterDescriptor(
+                name=f.name, type=ParameterType.PARAMETER_INTEGER, description=md["doc"],
+                integer_range=[IntegerRange(from_value=int(md["min"]), to_value=int(md["max"]),
+                                            step=1)]))
+        else:
+            out[f.name] = (float(f.default), ParameterDescriptor(
+                name=f.name, type=ParameterType.PARAMETER_DOUBLE,
+                description=f"{md['doc']}{unit}",
+                floating_point_range=[FloatingPointRange(
+                    from_value=float(md["min"]), to_value=float(md["max"]), step=0.0)]))
+    return out
+
+
+def double_param(description: str, lo: float, hi: float) -> ParameterDescriptor:
+    """Descriptor of a double parameter with a range."""
+    return ParameterDescriptor(
+        type=ParameterType.PARAMETER_DOUBLE, description=description,
+        floating_point_range=[FloatingPointRange(from_value=lo, to_value=hi, step=0.0)])
+
+
+def int_param(description: str, lo: int, hi: int) -> ParameterDescriptor:
+    """Descriptor of an integer parameter with a range."""
+    return ParameterDescriptor(
+        type=ParameterType.PARAMETER_INTEGER, description=description,
+        integer_range=[IntegerRange(from_value=lo, to_value=hi, step=1)])
+
+
+def str_param(description: str) -> ParameterDescriptor:
+    """Descriptor of a string parameter."""
+    return ParameterDescriptor(type=ParameterType.PARAMETER_STRING, description=description)
+
+
+def bool_param(description: str) -> ParameterDescriptor:
+    """Descriptor of a bool parameter."""
+    return ParameterDescriptor(type=ParameterType.PARAMETER_BOOL, description=description)
+
+
+def rig_config_from(values: dict[str, Any]) -> RigConfig:
+    """RigConfig from ROS parameter values (raises ConfigError with the reason)."""
+    names = {f.name for f in dataclasses.fields(RigConfig)}
+    return RigConfig.from_dict({k: v for k, v in values.items() if k in names})
+
+
+def validating_callback(check: Callable[[dict[str, Any]], str]
+                        ) -> Callable[[list[Any]], SetParametersResult]:
+    """An on-set-parameters callback that rejects a change when ``check`` says why.
+
+    ``check`` receives {name: new value} and returns '' to accept or the reason.
+    """
+    def callback(params: list[Any]) -> SetParametersResult:
+        try:
+            reason = check({p.name: p.value for p in params})
+        except ConfigError as exc:
+            reason = str(exc)
+        return SetParametersResult(successful=not reason, reason=reason)
+
+    return callback
+
+
+# --------------------------------------------------------------------------- spinning
+def make_executor(kind: str = "events") -> Any:
+    """'events' (rclpy.experimental.EventsExecutor: the one that holds 10 kHz) or 'single'."""
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    return rclpy.executors.SingleThreadedExecutor()
+
+
+def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
+        executor: str = "events") -> int:
+    """Init rclpy, build the node, spin until Ctrl-C/SIGTERM, clean up; exit code 0.
+
+    A node's ``close()`` (if it has one) runs before the node is destroyed, so that files
+    are completed on SIGINT and SIGTERM.
+    """
+    rclpy.init(args=list(args) if args is not None else sys.argv)
+    node: Node | None = None
+    code = 0
+    try:
+        node = node_factory()
+        ex = make_executor(executor)
+        ex.add_node(node)
+        # spin() of the EventsExecutor does not return on shutdown: poll the context
+        while rclpy.ok():
+            ex.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except StartupError as exc:
+        print(f"[{exc.node}] error: {exc}", file=sys.stderr)
+        code = 2
+    except (ParameterException, ConfigError) as exc:
+        print(f"error: invalid parameter: {exc}", file=sys.stderr)
+        code = 2
+    finally:
+        if node is not None:
+            close = getattr(node, "close", None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+class StartupError(RuntimeError):
+    """A node cannot start (bad parameters, missing file): one clear line, exit code 2."""
+
+    def __init__(self, node: str, message: str) -> None:
+        super().__init__(message)
+        self.node = node

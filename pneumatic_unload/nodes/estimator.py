@@ -1,0 +1,449 @@
+"""``estimator`` node: the streaming unloading-time estimator on a live pressure topic.
+
+Subscribes
+    /tank/pressure (sensor_msgs/FluidPressure; parameter ``pressure_topic``), sensor-data QoS
+        (best effort, deep queue) or reliable (``qos``); or blocks of samples
+        (pneumatic_unload_msgs/PressureBlock) when ``input`` is 'block'.
+    /tank/temperature (sensor_msgs/Temperature), when ``temperature_from_topic``: T10 is
+        the gas temperature last received before the unload starts.
+Publishes
+    ~/estimate (pneumatic_unload_msgs/UnloadEstimate; reliable, transient local): the
+        crossing estimate of each unload as soon as p* is crossed, then the final
+        (full-curve fit) estimate once the unload's tail is recorded.
+    ~/settings (std_msgs/String JSON, latched): the estimator settings in force, so that a
+        recording reproduces the live estimates offline (``pneumatic-unload analyze``).
+    /diagnostics (diagnostic_msgs/DiagnosticArray): state (waiting, unloading, done, error)
+        and why, input problems (NaN, stamps going backwards, gaps, wrong frame), latency.
+Action
+    ~/measure (pneumatic_unload_msgs/action/Measure): arm, optionally open the valve through a
+        std_srvs/Trigger service, report progress, return the estimate or fail clearly.
+
+The subscription callback only queues the sample; a worker thread runs the core's
+:class:`~pneumatic_unload.estimation.StreamingEstimator`, so a slow curve fit never blocks
+the reception of samples (none is dropped at 10 kHz with the EventsExecutor).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.node import Node
+from rclpy.task import Future
+from sensor_msgs.msg import FluidPressure, Temperature
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from pneumatic_unload.estimation import (
+    EstimationError,
+    EstimatorSettings,
+    StreamingEstimator,
+    UnloadResult,
+)
+from pneumatic_unload.nodes import common
+from pneumatic_unload.runs import estimate_fields
+
+#: Node states reported on /diagnostics and in the action's feedback.
+STATES = ("waiting", "unloading", "done", "error")
+
+_OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+
+def settings_to_json(s: EstimatorSettings) -> str:
+    """JSON of estimator settings (what ``analyze`` reads back from a bag)."""
+    return json.dumps(dataclasses.asdict(s), sort_keys=True)
+
+
+def fill_estimate(msg: Any, r: UnloadResult, frame_id: str) -> Any:
+    """Fill an UnloadEstimate message from a result (NaN where unknown)."""
+    f = estimate_fields(r, frame_id)
+    common.ns_to_stamp(f.pop("header_stamp_ns"), msg.header.stamp)
+    msg.header.frame_id = f.pop("frame_id")
+    common.ns_to_stamp(f.pop("unload_start_ns"), msg.unload_start)
+    for k, v in f.items():
+        setattr(msg, k, v)
+    return msg
+
+
+class EstimatorNode(Node):
+    """Live unloading-time estimator (see the module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("estimator", **kwargs)
+        from pneumatic_unload_msgs.action import Measure
+        from pneumatic_unload_msgs.msg import PressureBlock, UnloadEstimate
+
+        self._Measure = Measure
+        self._UnloadEstimate = UnloadEstimate
+        d, i, s, b = common.double_param, common.int_param, common.str_param, common.bool_param
+        params: dict[str, tuple[Any, Any]] = {
+            "volume": (5e-3, d("tank volume V [m^3]", 1e-7, 10.0)),
+            "initial_temperature": (293.15, d("initial gas temperature T10 [K]", 150.0, 600.0)),
+            "temperature_from_topic": (False, b(
+                "T10 from /tank/temperature (last value before the unload)")),
+            "atmosphere": (101325.0, d(
+                "atmospheric pressure [Pa absolute]; 0: from the final plateau", 0.0, 2e5)),
+            "length_diameter_ratio": (2.0, d("tank L/D [-]", 0.1, 50.0)),
+            "wall_temperature": (0.0, d("wall temperature [K]; 0: equal to T10", 0.0, 600.0)),
+            "heat_model": ("natural", s("model-based C: 'natural' or 'adiabatic'")),
+            "critical_ratio": (0.5, d("b assumed at the crossing inversion [-]", 0.0, 0.99)),
+            "signal_gain": (1.0, d("Pa per unit of input signal (1: input in Pa)", -1e12, 1e12)),
+            "signal_offset": (0.0, d("Pa at zero input signal", -1e9, 1e9)),
+            "trigger_sigma": (8.0, d("trigger drop in noise standard deviations", 1.0, 1000.0)),
+            "min_plateau": (32, i("pre-step plateau samples needed", 4, 1_000_000)),
+            "curve_fit": (True, b("full-curve fit (C, b) once the unload's tail is recorded")),
+            "pressure_topic": ("/tank/pressure", s("pressure topic")),
+            "input": ("sample", s("'sample': FluidPressure per sample; 'block': PressureBlock")),
+            "qos": ("sensor_data", s("'sensor_data' (best effort) or 'reliable'")),
+            "frame_id": ("", s("accept only this header frame_id ('' accepts any)")),
+            "valve_service": ("/simulator/start_unload",
+                              s("std_srvs/Trigger service that opens the valve (action)")),
+            "measure_timeout": (60.0, d("default timeout of ~/measure [s]", 0.1, 1e6)),
+            "diagnostics_period": (1.0, d("period of /diagnostics reports [s]", 0.05, 60.0)),
+        }
+        for name, (default, desc) in params.items():
+            self.declare_parameter(name, default, desc)
+        try:
+            self._settings = self._settings_from({})
+        except EstimationError as exc:
+            raise common.StartupError("estimator", f"invalid parameters: {exc}") from exc
+        for name, allowed in (("input", ("sample", "block")),
+                              ("qos", ("sensor_data", "reliable"))):
+            if self._p(name) not in allowed:
+                raise common.StartupError(
+                    "estimator", f"{name} must be one of {allowed}, got {self._p(name)!r}")
+        self.add_on_set_parameters_callback(common.validating_callback(self._check))
+        self._est = StreamingEstimator(self._settings)
+        self._lock = threading.Lock()
+        self._queue: deque[tuple[int, float, float]] = deque()
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._frame = self._p("frame_id")
+        self._temperature = math.nan
+        self._state = "waiting"
+        self._why = "no unload yet"
+        self._last: UnloadResult | None = None
+        self._last_pressure = math.nan
+        self._n_diag = 0
+        self._rejected = 0
+        self.latencies: deque[float] = deque(maxlen=100_000)
+        self.received = 0
+        self.results: list[UnloadResult] = []
+        qos = common.SENSOR_QOS if self._p("qos") == "sensor_data" else common.PRESSURE_QOS
+        if self._p("input") == "block":
+            self.create_subscription(PressureBlock, self._p("pressure_topic"),
+                                     self._on_block, qos)
+        else:
+            self.create_subscription(FluidPressure, self._p("pressure_topic"),
+                                     self._on_pressure, qos)
+        self.create_subscription(Temperature, "/tank/temperature", self._on_temperature, 10)
+        self._pub_est = self.create_publisher(UnloadEstimate, "~/estimate", common.LATCHED_QOS)
+        self._pub_settings = self.create_publisher(String, "~/settings", common.LATCHED_QOS)
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._pub_settings.publish(String(data=settings_to_json(self._settings)))
+        self._valve_client = None
+        self._goal_lock = threading.Lock()
+        self._active_goal = False
+        ActionServer(self, Measure, "~/measure", execute_callback=self._execute,
+                     goal_callback=self._on_goal, cancel_callback=lambda _g: CancelResponse.ACCEPT)
+        self.create_timer(self._p("diagnostics_period"), self._report)
+        self._worker = threading.Thread(target=self._work, name="estimator", daemon=True)
+        self._worker.start()
+        self.get_logger().info(
+            f"estimating on {self._p('pressure_topic')} ({self._p('input')}, {self._p('qos')}):"
+            f" V={self._settings.volume:g} m^3, T10={self._settings.initial_temperature:g} K,"
+            f" p_atm={'auto' if self._settings.atmosphere is None else self._settings.atmosphere}")
+
+    # ------------------------------------------------------------------ parameters
+    def _p(self, name: str) -> Any:
+        return self.get_parameter(name).value
+
+    def _settings_from(self, changes: dict[str, Any]) -> EstimatorSettings:
+        v = {n: self._p(n) for n in (
+            "volume", "initial_temperature", "atmosphere", "length_diameter_ratio",
+            "wall_temperature", "heat_model", "critical_ratio", "signal_gain", "signal_offset",
+            "trigger_sigma", "min_plateau", "curve_fit")}
+        v.update({k: val for k, val in changes.items() if k in v})
+        v["atmosphere"] = v["atmosphere"] if v["atmosphere"] > 0 else None
+        v["wall_temperature"] = v["wall_temperature"] if v["wall_temperature"] > 0 else None
+        return EstimatorSettings(**v)
+
+    def _check(self, changes: dict[str, Any]) -> str:
+        fixed = {"pressure_topic", "input", "qos", "frame_id", "diagnostics_period"}
+        if fixed & set(changes):
+            return f"{', '.join(sorted(fixed & set(changes)))} cannot change at run time"
+        try:
+            new = self._settings_from(changes)
+        except EstimationError as exc:
+            return str(exc)
+        if new != self._settings:
+            with self._lock:
+                if self._est.state != "waiting":
+                    return "an unload is being analysed; change settings when it is done"
+                self._settings = new
+                self._est.settings = new
+            self._pub_settings.publish(String(data=settings_to_json(new)))
+        return ""
+
+    # ------------------------------------------------------------------ input
+    def _frame_ok(self, frame: str) -> bool:
+        if self._frame and frame != self._frame:
+            self._rejected += 1
+            self._diagnose(_WARN, f"sample with frame_id {frame!r} ignored "
+                           f"(expected {self._frame!r})")
+            return False
+        return True
+
+    def _on_pressure(self, msg: FluidPressure) -> None:
+        if not self._frame_ok(msg.header.frame_id):
+            return
+        self._queue.append((common.stamp_to_ns(msg.header.stamp), msg.fluid_pressure,
+                            time.monotonic()))
+        self._wake.set()
+
+    def _on_block(self, msg: Any) -> None:
+        if not self._frame_ok(msg.header.frame_id):
+            return
+        now = time.monotonic()
+        ns0 = common.stamp_to_ns(msg.header.stamp)
+        period = msg.sample_period
+        if not (period > 0 and math.isfinite(period)):
+            self._rejected += 1
+            self._diagnose(_WARN, f"pressure block with sample_period {period!r} ignored")
+            return
+        for k, p in enumerate(msg.pressure):
+            self._queue.append((ns0 + round(k * period * 1e9), p, now))
+        self._wake.set()
+
+    def _on_temperature(self, msg: Temperature) -> None:
+        t = msg.temperature + 273.15
+        if not (math.isfinite(t) and t > 0):
+            self._diagnose(_WARN, f"temperature {msg.temperature!r} degC ignored")
+            return
+        self._temperature = t
+        if self._p("temperature_from_topic"):
+            with self._lock:
+                if self._est.state == "waiting" and abs(
+                        t - self._settings.initial_temperature) > 1e-6:
+                    self._settings = dataclasses.replace(self._settings, initial_temperature=t)
+                    self._est.settings = self._settings
+                    self._pub_settings.publish(String(data=settings_to_json(self._settings)))
+
+    # ------------------------------------------------------------------ worker
+    def _work(self) -> None:
+        try:
+            while not self._stop.is_set():
+                if not self._queue:
+                    self._wake.wait(0.1)
+                    self._wake.clear()
+                    continue
+                self._drain()
+        except Exception as exc:  # never silent: report and keep the node alive
+            self._diagnose(_ERROR, f"estimator worker stopped: {type(exc).__name__}: {exc}")
+            self._state, self._why = "error", f"internal error: {exc}"
+
+    def _drain(self) -> None:
+        q = self._queue
+        est = self._est
+        while q:
+            ns, p, arrived = q.popleft()
+            with self._lock:
+                prev = est.state
+                out = est.push(common.ns_to_seconds(ns), p)
+                state = est.state
+            self.received += 1
+            self._last_pressure = p
+            if out:
+                for r in out:
+                    self._publish_result(r, arrived)
+            elif state != prev:
+                self._on_state(state)
+            if len(est.diagnostics) > self._n_diag:
+                for dg in est.diagnostics[self._n_diag:]:
+                    level = {"ok": _OK, "warn": _WARN}.get(dg.level, _ERROR)
+                    if level != _OK:
+                        self._rejected += 1
+                    self._diagnose(level, dg.message)
+                self._n_diag = len(est.diagnostics)
+
+    def _on_state(self, core_state: str) -> None:
+        if core_state == "waiting":
+            return
+        self._state, self._why = "unloading", f"unload in progress ({core_state})"
+        self._report()
+
+    def _publish_result(self, r: UnloadResult, arrived: float) -> None:
+        msg = fill_estimate(self._UnloadEstimate(), r, self._frame or "tank")
+        try:
+            self._pub_est.publish(msg)
+        except Exception as exc:
+            self._diagnose(_ERROR, f"could not publish the estimate: {exc}")
+        self.latencies.append(time.monotonic() - arrived)
+        self.results.append(r)
+        self._last = r
+        if r.status in ("ok", "aborted_sse"):
+            self._state = "done" if self._est.state == "waiting" else "unloading"
+            self._why = (f"unload {r.index}: C={r.conductance:.4g} m^3/(s Pa) (eq 39), "
+                         f"model {r.conductance_model:.4g}, tau_exp={r.tau_exp:.5g} s"
+                         f"{' (final)' if r.final else ''}")
+        else:
+            self._state, self._why = "error", f"unload {r.index}: {r.status}: {r.status_text}"
+        self.get_logger().info(self._why)
+        self._report()
+
+    # ------------------------------------------------------------------ diagnostics
+    def _diagnose(self, level: bytes, message: str) -> None:
+        if level == _OK:
+            self.get_logger().info(message)
+        else:
+            self.get_logger().warn(message, throttle_duration_sec=1.0)
+        self._send(level, message)
+
+    def _report(self) -> None:
+        level = {"error": _ERROR}.get(self._state, _OK)
+        self._send(level, f"{self._state}: {self._why}")
+
+    def _send(self, level: bytes, message: str) -> None:
+        lat = np.asarray(self.latencies) * 1e3
+        values = {
+            "state": self._state, "core_state": self._est.state,
+            "samples": str(self.received), "queued": str(len(self._queue)),
+            "rejected": str(self._rejected),
+            "unloads": str(len({r.index for r in self.results})),
+            "latency_p50_ms": f"{np.percentile(lat, 50):.3f}" if lat.size else "",
+            "latency_p99_ms": f"{np.percentile(lat, 99):.3f}" if lat.size else "",
+        }
+        if self._last is not None:
+            values.update({"conductance": repr(float(self._last.conductance)),
+                           "conductance_model": repr(float(self._last.conductance_model)),
+                           "tau_exp": repr(float(self._last.tau_exp)),
+                           "status": self._last.status})
+        st = DiagnosticStatus(level=level, name="pneumatic_unload: estimator",
+                              message=message, hardware_id=self._frame or "tank",
+                              values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        arr = DiagnosticArray(status=[st])
+        arr.header.stamp = self.get_clock().now().to_msg()
+        try:
+            self._pub_diag.publish(arr)
+        except Exception:  # diagnostics must never take the node down
+            pass
+
+    # ------------------------------------------------------------------ action
+    def _on_goal(self, _goal: Any) -> GoalResponse:
+        with self._goal_lock:
+            if self._active_goal:
+                self.get_logger().warn("~/measure rejected: a measurement is running")
+                return GoalResponse.REJECT
+            self._active_goal = True
+        return GoalResponse.ACCEPT
+
+    async def _execute(self, goal_handle: Any) -> Any:
+        Measure = self._Measure
+        result = Measure.Result()
+        try:
+            return await self._measure(goal_handle, result)
+        finally:
+            with self._goal_lock:
+                self._active_goal = False
+
+    async def _sleep(self, seconds: float) -> None:
+        fut = Future()
+        timer = None
+
+        def done() -> None:
+            if not fut.done():
+                fut.set_result(True)
+
+        timer = self.create_timer(seconds, done)
+        try:
+            await fut
+        finally:
+            self.destroy_timer(timer)
+
+    async def _measure(self, goal_handle: Any, result: Any) -> Any:
+        goal = goal_handle.request
+        timeout = goal.timeout if goal.timeout > 0 else self._p("measure_timeout")
+        n_before = len(self.results)
+        unloads_before = {r.index for r in self.results}
+        t0 = time.monotonic()
+        fb = self._Measure.Feedback()
+        if self._est.state not in ("waiting",):
+            pass  # an unload already under way is not ours: we wait for the next one
+        if goal.trigger_valve:
+            service = goal.valve_service or self._p("valve_service")
+            client = self.create_client(Trigger, service)
+            try:
+                while not client.service_is_ready():
+                    if time.monotonic() - t0 > min(timeout, 5.0):
+                        goal_handle.abort()
+                        result.success, result.message = False, (
+                            f"valve service {service} not available")
+                        return result
+                    await self._sleep(0.05)
+                resp = await client.call_async(Trigger.Request())
+            finally:
+                self.destroy_client(client)
+            if not resp.success:
+                goal_handle.abort()
+                result.success = False
+                result.message = f"valve service {service} refused: {resp.message}"
+                return result
+        while True:
+            elapsed = time.monotonic() - t0
+            new = [r for r in self.results[n_before:] if r.index not in unloads_before]
+            if new:
+                r = new[0]
+                fill_estimate(result.estimate, r, self._frame or "tank")
+                if r.status == "ok":
+                    goal_handle.succeed()
+                    result.success, result.message = True, "ok"
+                else:
+                    goal_handle.abort()
+                    result.success = False
+                    result.message = f"{r.status}: {r.status_text}"
+                return result
+            if goal_handle.is_cancel_requested:
+                goal_handle.canceled()
+                result.success, result.message = False, "canceled"
+                return result
+            if elapsed > timeout:
+                goal_handle.abort()
+                result.success = False
+                result.message = (f"timeout after {timeout:g} s in state {self._state} "
+                                  f"({self._why})")
+                return result
+            fb.state = "armed" if self._state in ("waiting", "done") else self._state
+            fb.pressure = float(self._last_pressure) * self._settings.signal_gain \
+                + self._settings.signal_offset
+            fb.elapsed = elapsed
+            goal_handle.publish_feedback(fb)
+            await self._sleep(0.1)
+
+    # ------------------------------------------------------------------ shutdown
+    def close(self) -> None:
+        """Analyse what is queued, then stop the worker."""
+        deadline = time.monotonic() + 2.0
+        while self._queue and time.monotonic() < deadline:
+            time.sleep(0.01)
+        self._stop.set()
+        self._wake.set()
+        self._worker.join(timeout=2.0)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of ``ros2 run pneumatic_unload estimator``."""
+    return common.run(EstimatorNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

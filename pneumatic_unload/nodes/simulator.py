@@ -1,0 +1,278 @@
+"""``simulator`` node: a simulated tank-discharge rig publishing at rig rates.
+
+Publishes
+    /tank/pressure (sensor_msgs/FluidPressure, Pa absolute, header stamp = sample instant)
+        at ``rate`` from a paced loop on the monotonic clock (an rclpy timer cannot hold
+        1 kHz); optionally also blocks of samples on /tank/pressure_block
+        (pneumatic_unload_msgs/PressureBlock) when ``block_size`` > 0.
+    /tank/temperature (sensor_msgs/Temperature, degrees C) at ``temperature_rate``.
+    /tank/valve (pneumatic_unload_msgs/ValveState) on every change (latched).
+    /rig/config (std_msgs/String, JSON of the RigConfig; latched) so a recorder stores it.
+Services
+    ~/start_unload (std_srvs/Trigger): open the valve (the tank must be charged).
+    ~/charge (std_srvs/Trigger): recharge to p10 after an unload.
+Parameters
+    Every RigConfig field (tank, component, effects, sensor; see ``RigConfig.describe()``),
+    with ranges; plus ``mode`` ('service' or 'cycle'), ``start_delay`` [s] (open once by
+    itself after this delay; < 0: never), ``settle_time`` [s], ``vent_time`` [s],
+    ``charge_time`` [s], ``cycles`` (0: forever), ``auto_charge``, ``temperature_rate`` [Hz],
+    ``block_size``, ``frame_id``. Load them from ``share/pneumatic_unload/config/simulator.yaml``
+    with ``--ros-args --params-file``. Rig changes at run time apply from the next unload;
+    out-of-range values are rejected with the reason.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from rclpy.node import Node
+from sensor_msgs.msg import FluidPressure, Temperature
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from pneumatic_unload.config import ConfigError, RigConfig
+from pneumatic_unload.nodes import common
+from pneumatic_unload.rig import RigStream
+
+MODES = ("service", "cycle")
+
+
+class SimulatorNode(Node):
+    """Simulated rig (see the module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("simulator", **kwargs)
+        from pneumatic_unload_msgs.msg import PressureBlock, ValveState
+
+        self._ValveState = ValveState
+        self._PressureBlock = PressureBlock
+        for name, (default, desc) in common.rig_parameter_descriptors().items():
+            self.declare_parameter(name, default, desc)
+        own = {
+            "mode": ("service", common.str_param(
+                "'service': unload on ~/start_unload; 'cycle': charge, settle, unload, repeat")),
+            "start_delay": (-1.0, common.double_param(
+                "open the valve once by itself after this delay [s] (< 0: never)", -1.0, 1e6)),
+            "settle_time": (2.0, common.double_param(
+                "cycle mode: plateau before each unload [s]", 0.05, 1e5)),
+            "vent_time": (1.0, common.double_param(
+                "time vented at atmosphere after an unload before recharging [s]", 0.0, 1e5)),
+            "charge_time": (1.0, common.double_param("recharge duration [s]", 0.01, 1e5)),
+            "cycles": (0, common.int_param("cycle mode: number of unloads (0: forever)",
+                                           0, 1_000_000)),
+            "auto_charge": (True, common.bool_param(
+                "service mode: recharge by itself vent_time after an unload")),
+            "temperature_rate": (10.0, common.double_param(
+                "rate of /tank/temperature [Hz] (0: off)", 0.0, 1000.0)),
+            "block_size": (0, common.int_param(
+                "samples per /tank/pressure_block message (0: no blocks)", 0, 100_000)),
+            "per_sample": (True, common.bool_param(
+                "publish every sample as a FluidPressure on /tank/pressure")),
+            "frame_id": ("tank", common.str_param("frame_id of the published headers")),
+        }
+        for name, (default, desc) in own.items():
+            self.declare_parameter(name, default, desc)
+        try:
+            self._cfg = self._config_from_params({})
+        except ConfigError as exc:
+            raise common.StartupError("simulator", f"invalid rig parameters: {exc}") from exc
+        self._mode = self._p("mode")
+        if self._mode not in MODES:
+            raise common.StartupError(
+                "simulator", f"mode must be one of {MODES}, got {self._mode!r}")
+        self.add_on_set_parameters_callback(common.validating_callback(self._check))
+        self._lock = threading.Lock()
+        self._stream = RigStream(self._cfg, charge_time=self._p("charge_time"))
+        self._frame = self._p("frame_id")
+        self._pub_p = self.create_publisher(FluidPressure, "/tank/pressure", common.PRESSURE_QOS)
+        self._pub_block = self.create_publisher(PressureBlock, "/tank/pressure_block",
+                                                common.PRESSURE_QOS)
+        self._pub_t = self.create_publisher(Temperature, "/tank/temperature", 10)
+        self._pub_valve = self.create_publisher(ValveState, "/tank/valve", common.LATCHED_QOS)
+        self._pub_cfg = self.create_publisher(String, "/rig/config", common.LATCHED_QOS)
+        self.create_service(Trigger, "~/start_unload", self._on_start)
+        self.create_service(Trigger, "~/charge", self._on_charge)
+        self._publish_config()
+        self._valve_open = False
+        self._publish_valve(time.time_ns(), 0.0)
+        self._stop = threading.Event()
+        self.published = 0
+        self._thread = threading.Thread(target=self._loop, name="rig-loop", daemon=True)
+        self._thread.start()
+        self.get_logger().info(
+            f"rig at {self._cfg.rate:g} Hz, V={self._cfg.volume:g} m^3, "
+            f"C={self._cfg.conductance:.4g} m^3/(s Pa), b={self._cfg.critical_ratio:g}, "
+            f"p10={self._cfg.initial_pressure:.0f} Pa, effects={list(self._cfg.effects)}, "
+            f"mode={self._mode}")
+
+    # ------------------------------------------------------------------ parameters
+    def _p(self, name: str) -> Any:
+        return self.get_parameter(name).value
+
+    def _config_from_params(self, changes: dict[str, Any]) -> RigConfig:
+        values = {name: self._p(name) for name in common.rig_parameter_descriptors()}
+        values.update({k: v for k, v in changes.items() if k in values})
+        return common.rig_config_from(values)
+
+    def _check(self, changes: dict[str, Any]) -> str:
+        if "rate" in changes and changes["rate"] != self._cfg.rate:
+            return "rate cannot change while the simulator runs (restart the node)"
+        if "mode" in changes and changes["mode"] not in MODES:
+            return f"mode must be one of {MODES}"
+        if "frame_id" in changes:
+            return "frame_id cannot change while the simulator runs"
+        cfg = self._config_from_params(changes)  # ConfigError -> rejected with its reason
+        if any(k in common.rig_parameter_descriptors() for k in changes):
+            self._cfg = cfg
+            with self._lock:
+                self._stream.reconfigure(cfg)
+            self._publish_config()
+        if "charge_time" in changes:
+            with self._lock:
+                self._stream.charge_time = float(changes["charge_time"])
+        if "mode" in changes:
+            self._mode = changes["mode"]
+        return ""
+
+    def _publish_config(self) -> None:
+        self._pub_cfg.publish(String(data=self._cfg.to_json()))
+
+    # ------------------------------------------------------------------ services
+    def _on_start(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        with self._lock:
+            why = self._stream.open_valve()
+        resp.success = not why
+        resp.message = why or "valve opened"
+        return resp
+
+    def _on_charge(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        with self._lock:
+            why = self._stream.charge()
+        resp.success = not why
+        resp.message = why or "charging"
+        return resp
+
+    # ------------------------------------------------------------------ paced loop
+    def _loop(self) -> None:
+        """Publish every sample when its instant has come (monotonic clock)."""
+        try:
+            self._run_loop()
+        except Exception as exc:  # a dead loop must be visible, not silent
+            self.get_logger().error(f"rig loop stopped: {type(exc).__name__}: {exc}")
+
+    def _run_loop(self) -> None:
+        rate = self._cfg.rate
+        wall0 = time.time_ns()
+        mono0 = time.monotonic()
+        t_step = max(1, round(rate / self._p("temperature_rate"))) \
+            if self._p("temperature_rate") > 0 else 0
+        block_size = int(self._p("block_size"))
+        per_sample = bool(self._p("per_sample"))
+        pending: list[tuple[int, float]] = []
+        start_delay = float(self._p("start_delay"))
+        phase_since = 0.0
+        last_phase = self._stream.phase
+        unloads_done = 0
+        max_burst = max(1, int(rate * 0.05))
+        msg = FluidPressure()
+        msg.header.frame_id = self._frame
+        msg.variance = self._cfg.noise_std ** 2
+        while not self._stop.is_set() and self.context.ok():
+            now = time.monotonic() - mono0
+            due = math.floor(now * rate) + 1
+            k0 = self._stream.next_index
+            if due > k0:
+                with self._lock:
+                    block = self._stream.next_block(min(due - k0, max_burst))
+                    phase = self._stream.phase
+                for k, y in zip(block.index.tolist(), block.measured.tolist(), strict=True):
+                    ns = wall0 + round(k * 1e9 / rate)
+                    if per_sample:
+                        common.ns_to_stamp(ns, msg.header.stamp)
+                        msg.fluid_pressure = y
+                        self._publish(self._pub_p, msg)
+                    if block_size:
+                        pending.append((ns, y))
+                        if len(pending) >= block_size:
+                            self._publish_block(pending, rate)
+                            pending = []
+                    if t_step and k % t_step == 0:
+                        tm = Temperature()
+                        tm.header.frame_id = self._frame
+                        common.ns_to_stamp(ns, tm.header.stamp)
+                        tm.temperature = float(block.temperature[k - k0]) - 273.15
+                        self._publish(self._pub_t, tm)
+                self.published += block.index.size
+                opening = float(block.opening[-1])
+                if (opening > 0) != self._valve_open:
+                    self._valve_open = opening > 0
+                    self._publish_valve(wall0 + round(int(block.index[-1]) * 1e9 / rate),
+                                        opening)
+                t_now = float(block.t[-1])
+                if phase != last_phase:
+                    if phase == "vented":
+                        unloads_done += 1
+                    last_phase, phase_since = phase, t_now
+                self._schedule(phase, t_now - phase_since, t_now, start_delay, unloads_done)
+                if start_delay >= 0 and t_now >= start_delay:
+                    start_delay = -1.0
+                continue
+            time.sleep(max(0.0, (k0 / rate) - (time.monotonic() - mono0)))
+
+    def _schedule(self, phase: str, in_phase: float, t_now: float, start_delay: float,
+                  unloads_done: int) -> None:
+        """Automatic valve and charge actions of the modes."""
+        cycles = int(self._p("cycles"))
+        with self._lock:
+            if phase == "charged":
+                if self._mode == "cycle" and in_phase >= self._p("settle_time") and (
+                        cycles == 0 or unloads_done < cycles):
+                    self._stream.open_valve()
+                elif 0 <= start_delay <= t_now:
+                    self._stream.open_valve()
+            elif phase == "vented" and in_phase >= self._p("vent_time") and (
+                    self._mode == "cycle" or self._p("auto_charge")):
+                if self._mode == "cycle" and cycles and unloads_done >= cycles:
+                    return
+                self._stream.charge()
+
+    def _publish(self, pub: Any, msg: Any) -> None:
+        try:
+            pub.publish(msg)
+        except Exception as exc:  # RCLError when a reliable reader is too slow: keep going
+            self.get_logger().warn(f"publish failed: {exc}", throttle_duration_sec=1.0)
+
+    def _publish_block(self, pending: list[tuple[int, float]], rate: float) -> None:
+        m = self._PressureBlock()
+        m.header.frame_id = self._frame
+        common.ns_to_stamp(pending[0][0], m.header.stamp)
+        m.sample_period = 1.0 / rate
+        m.pressure = [y for _, y in pending]
+        self._publish(self._pub_block, m)
+
+    def _publish_valve(self, ns: int, opening: float) -> None:
+        m = self._ValveState()
+        m.header.frame_id = self._frame
+        common.ns_to_stamp(ns, m.header.stamp)
+        m.open = opening > 0
+        m.opening = opening
+        self._publish(self._pub_valve, m)
+
+    def close(self) -> None:
+        """Stop the paced loop."""
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of ``ros2 run pneumatic_unload simulator``."""
+    return common.run(SimulatorNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
