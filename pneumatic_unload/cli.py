@@ -12,6 +12,7 @@ Errors on unreadable input exit with status 2 and one line on stderr.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -56,20 +57,55 @@ def load_trace(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, dict[s
         meta: dict[str, Any] = {}
         if tr.temperature is not None and tr.temperature.size:
             meta["measured_initial_temperature"] = float(tr.temperature[0])
+            meta["temperature_trace"] = (np.asarray(tr.t, float),
+                                         np.asarray(tr.temperature, float))
         return np.asarray(tr.t, float), np.asarray(tr.p, float), meta
-    from pneumatic_unload.io.bag import BagError, read_config, read_pressure
+    from pneumatic_unload.io.bag import (
+        TOPIC_SETTINGS,
+        BagError,
+        read_config,
+        read_json_topic,
+        read_pressure,
+    )
 
     try:
         series = read_pressure(path, topic=args.topic)
         cfg = read_config(path) or {}
+        live = read_json_topic(path, TOPIC_SETTINGS)
     except BagError as exc:
         raise CliError(str(exc)) from exc
+    if live is not None:
+        cfg = {**cfg, "estimator_settings": live}
     t_ns, p = series[0], series[1]
     return np.asarray(t_ns, dtype=np.int64) * 1e-9, np.asarray(p, float), cfg
 
 
 def settings_from(args: argparse.Namespace, cfg: dict[str, Any]) -> EstimatorSettings:
-    """Estimator settings: command-line values first, then the bag's rig configuration."""
+    """Estimator settings: command-line values first, then the live estimator's settings
+    recorded in the bag (so that the analysis reproduces what it published), then the bag's
+    rig configuration, then defaults."""
+    live = cfg.get("estimator_settings")
+    if live is not None:
+        try:
+            base = EstimatorSettings(**live)
+        except (TypeError, EstimationError) as exc:
+            raise CliError(f"the estimator settings stored in the bag are invalid: {exc}"
+                           ) from exc
+        given = {
+            "volume": args.volume, "initial_temperature": args.initial_temperature,
+            "atmosphere": args.atmosphere,
+            "length_diameter_ratio": args.length_diameter_ratio,
+            "wall_temperature": args.wall_temperature, "heat_model": args.heat_model,
+            "critical_ratio": args.critical_ratio}
+        changes = {k: v for k, v in given.items() if v is not None}
+        if args.atmosphere_auto:
+            changes["atmosphere"] = None
+        if args.no_curve_fit:
+            changes["curve_fit"] = False
+        try:
+            return dataclasses.replace(base, **changes)
+        except EstimationError as exc:
+            raise CliError(str(exc)) from exc
     volume = args.volume if args.volume is not None else cfg.get("volume")
     if volume is None:
         raise CliError("--volume M3 is required (the input carries no rig configuration)")
@@ -85,7 +121,8 @@ def settings_from(args: argparse.Namespace, cfg: dict[str, Any]) -> EstimatorSet
             length_diameter_ratio=float(args.length_diameter_ratio
                                         or cfg.get("length_diameter_ratio", 2.0)),
             wall_temperature=args.wall_temperature or cfg.get("wall_temperature"),
-            heat_model=args.heat_model, critical_ratio=args.critical_ratio,
+            heat_model=args.heat_model or "natural",
+            critical_ratio=0.5 if args.critical_ratio is None else args.critical_ratio,
             curve_fit=not args.no_curve_fit)
     except EstimationError as exc:
         raise CliError(str(exc)) from exc
@@ -106,6 +143,16 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     except EstimationError as exc:
         raise CliError(f"{args.path}: {exc}") from exc
     unloads = merge_final(published)
+    temp = cfg.get("temperature_trace")
+    if (temp is not None and args.initial_temperature is None and unloads
+            and math.isfinite(unloads[0].t_start)):
+        # T10 from the temperature column: the gas temperature at the start of the unload
+        # (the first row may be logged long before, during the charge)
+        t10 = float(np.interp(unloads[0].t_start, temp[0], temp[1]))
+        if abs(t10 - settings.initial_temperature) > 1e-3:
+            settings = dataclasses.replace(settings, initial_temperature=t10)
+            published = analyze(t, p, settings)
+            unloads = merge_final(published)
     if args.json:
         out = {"source": str(args.path), "samples": int(t.size),
                "settings": dict(vars(settings)),
@@ -228,9 +275,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="take p_atm from the final plateau")
     an.add_argument("--length-diameter-ratio", type=float, help="tank L/D [-]")
     an.add_argument("--wall-temperature", type=float, help="wall temperature [K]")
-    an.add_argument("--heat-model", choices=("natural", "adiabatic"), default="natural",
+    an.add_argument("--heat-model", choices=("natural", "adiabatic"), default=None,
                     help="wall heat transfer assumed by the model-based C")
-    an.add_argument("--critical-ratio", type=float, default=0.5,
+    an.add_argument("--critical-ratio", type=float, default=None,
                     help="b assumed before the curve fit [-]")
     an.add_argument("--no-curve-fit", action="store_true", help="skip the full-curve fit")
     an.add_argument("--topic", default="/tank/pressure", help="pressure topic of a bag")

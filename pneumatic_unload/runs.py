@@ -9,6 +9,8 @@ SI units; bag stamps in integer nanoseconds.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +31,12 @@ def settings_for(cfg: RigConfig) -> EstimatorSettings:
         atmosphere=cfg.atmosphere, length_diameter_ratio=cfg.length_diameter_ratio,
         wall_temperature=cfg.wall_temperature, gas_constant=cfg.gas_constant,
         gamma=cfg.gamma)
+
+
+def settings_json(s: EstimatorSettings) -> str:
+    """JSON of estimator settings, as the live estimator publishes them on
+    ``/estimator/settings`` and ``pneumatic-unload analyze`` reads them back from a bag."""
+    return json.dumps(dataclasses.asdict(s), sort_keys=True)
 
 
 def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
@@ -78,9 +86,12 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
     t_abs = sim.t + t_offset
     t_ns = np.round(t_abs * 1e9).astype(np.int64)
     results: list[UnloadResult] = []
+    settings = settings_for(cfg)
     if analyze_live:
-        est = StreamingEstimator(settings_for(cfg))
-        results = est.push_block(t_abs, sim.measured) + est.finish()
+        est = StreamingEstimator(settings)
+        # the stamps as a subscriber or the bag reader sees them: integer ns -> s
+        t_seen = t_ns * 1e-9
+        results = est.push_block(t_seen, sim.measured) + est.finish()
     out.parent.mkdir(parents=True, exist_ok=True)
     with BagRecorder(out, config=cfg.to_dict()) as rec:
         rec.write_pressures(t_ns, sim.measured)
@@ -90,6 +101,13 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
         k_open = int(np.searchsorted(sim.t, sim.t_open))
         if k_open < t_ns.size:
             rec.write_valve(int(t_ns[k_open]), True, 1.0)
+        if analyze_live:
+            from pneumatic_unload.io.bag import MSGTYPE_CONFIG, TOPIC_SETTINGS, make_typestore
+
+            store = make_typestore()
+            text = store.types[MSGTYPE_CONFIG](data=settings_json(settings))
+            rec.write_raw(TOPIC_SETTINGS, MSGTYPE_CONFIG, int(t_ns[0]),
+                          store.serialize_cdr(text, MSGTYPE_CONFIG))
         for r in results:
             rec.write_estimate(int(round(r.t_complete * 1e9)), estimate_fields(r))
     return {"path": str(out), "samples": int(sim.t.size),

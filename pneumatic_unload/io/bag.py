@@ -37,7 +37,7 @@ import threading
 import time
 import zlib
 from collections import defaultdict
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from io import BytesIO
@@ -53,7 +53,7 @@ from mcap.records import Chunk as McapChunk
 from mcap.records import Message as McapMessage
 from mcap.records import Schema as McapSchema
 from mcap.stream_reader import StreamReader, breakup_chunk
-from rosbags.interfaces import Connection, MessageDefinitionFormat
+from rosbags.interfaces import Connection, MessageDefinitionFormat, Nodetype
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer, WriterError
 from rosbags.rosbag2.metadata import parse_qos
 from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
@@ -83,6 +83,7 @@ __all__ = [
     "BagSummary",
     "BagWriteError",
     "PressureSeries",
+    "RawMessage",
     "RecoverReport",
     "TemperatureSeries",
     "TopicNotFoundError",
@@ -91,11 +92,14 @@ __all__ = [
     "ValveSeries",
     "WrongMessageTypeError",
     "bag_summary",
+    "cdr_header_stamp_ns",
+    "find_msg_definition",
     "find_msg_dir",
     "make_typestore",
     "read_config",
     "read_estimates",
     "read_pressure",
+    "read_raw_messages",
     "read_temperature",
     "read_valve",
     "recover",
@@ -108,6 +112,8 @@ TOPIC_TEMPERATURE: Final = "/tank/temperature"
 TOPIC_VALVE: Final = "/tank/valve"
 TOPIC_ESTIMATE: Final = "/estimator/estimate"
 TOPIC_CONFIG: Final = "/rig/config"
+#: The live estimator's settings (std_msgs/String JSON, latched): analysis reuses them.
+TOPIC_SETTINGS: Final = "/estimator/settings"
 
 MSG_PACKAGE: Final = "pneumatic_unload_msgs"
 MSGTYPE_PRESSURE: Final = "sensor_msgs/msg/FluidPressure"
@@ -250,6 +256,60 @@ def make_typestore() -> Typestore:
     return store
 
 
+def find_msg_definition(msgtype: str) -> str | None:
+    """The ``.msg`` text of ``msgtype`` ('pkg/msg/Name') from an installed interface package.
+
+    Looks for ``share/<pkg>/msg/<Name>.msg`` under ``sys.prefix`` and each entry of
+    ``AMENT_PREFIX_PATH`` (and the source tree for ``pneumatic_unload_msgs``).
+
+    Returns:
+        The definition text, or None if no installed package provides it.
+    """
+    parts = msgtype.split("/")
+    if len(parts) == 2:  # 'pkg/Name' (ROS 1 style, used inside .msg files)
+        parts = [parts[0], "msg", parts[1]]
+    if len(parts) != 3 or parts[1] != "msg" or not all(parts):
+        return None
+    pkg, _, name = parts
+    prefixes = [sys.prefix, sys.base_prefix]
+    prefixes += [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    candidates = [Path(p) / "share" / pkg / "msg" / f"{name}.msg" for p in prefixes]
+    if pkg == MSG_PACKAGE:
+        with contextlib.suppress(BagError):
+            candidates.insert(0, find_msg_dir() / f"{name}.msg")
+    for cand in candidates:
+        if cand.is_file():
+            return cand.read_text(encoding="utf-8")
+    return None
+
+
+def _referenced_types(spec: Any) -> Iterator[str]:
+    """Message type names referenced by one rosbags field type spec (recursively)."""
+    kind, detail = spec
+    if kind == Nodetype.NAME:
+        yield detail
+    elif kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+        yield from _referenced_types(detail[0])
+
+
+def _missing_types(store: Typestore, msgtype: str) -> list[str]:
+    """Types that ``msgtype`` needs (itself included) and ``store`` does not define."""
+    missing: list[str] = []
+    seen: set[str] = set()
+    todo = [msgtype]
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        if name not in store.fielddefs:
+            missing.append(name)
+            continue
+        for _, spec in store.fielddefs[name][1]:
+            todo.extend(_referenced_types(spec))
+    return missing
+
+
 def _field_names(store: Typestore, msgtype: str) -> list[str]:
     """Field names of ``msgtype`` in definition order (constants excluded)."""
     return [name for name, _ in store.fielddefs[msgtype][1]]
@@ -353,6 +413,23 @@ def _encode_stamped_pair(t_ns: int, a: float, b: float, *, frame_id: str) -> byt
         return layout.pack(b"\x00\x01\x00\x00", sec, nsec, len(frame) + 1, frame, a, b)
     except struct.error as err:
         raise BagWriteError(f"cannot encode stamp {t_ns} ns / values {a}, {b}: {err}") from err
+
+
+def cdr_header_stamp_ns(data: bytes | bytearray | memoryview) -> int | None:
+    """Header stamp [ns] of a serialised message whose first field is ``std_msgs/Header``.
+
+    Reads ``builtin_interfaces/Time`` (int32 sec, uint32 nanosec) right after the 4-byte CDR
+    encapsulation header, in the payload's byte order. No other validation: call it only for
+    types that start with a header.
+
+    Returns:
+        The stamp [ns] (may be negative for a negative ``sec``), or None if the payload is
+        too short or not plain CDR.
+    """
+    if len(data) < 12 or data[0] != 0 or data[1] not in (0, 1):
+        return None
+    sec, nsec = struct.unpack_from("<iI" if data[1] == 1 else ">iI", data, 4)
+    return sec * _NS_PER_S + nsec
 
 
 class _NotFastDecodable(Exception):
@@ -780,6 +857,82 @@ class BagRecorder:
                 self._typestore.register(get_types_from_msg(msgdef_text, msgtype))
             except Exception as err:
                 raise BagWriteError(f"cannot register {msgtype!r}: {err}") from err
+
+    def has_type(self, msgtype: str) -> bool:
+        """True when ``msgtype`` and every type it uses are known (writable)."""
+        with self._lock:
+            return not _missing_types(self._typestore, msgtype)
+
+    def ensure_type(self, msgtype: str) -> None:
+        """Make ``msgtype`` writable, loading its (and its dependencies') ``.msg`` definitions
+        from installed interface packages (see :func:`find_msg_definition`) when needed.
+
+        Raises:
+            UnknownMessageTypeError: a needed definition is not installed.
+            BagWriteError: a definition cannot be parsed.
+        """
+        with self._lock:
+            for _ in range(1000):  # bound: each pass registers at least one type
+                missing = _missing_types(self._typestore, msgtype)
+                if not missing:
+                    return
+                name = missing[0]
+                text = find_msg_definition(name)
+                if text is None:
+                    raise UnknownMessageTypeError(name)
+                self.register_type(name, text)
+            raise BagWriteError(f"cannot resolve the definition of {msgtype!r}")
+
+    @property
+    def config_text(self) -> str | None:
+        """The rig configuration (JSON text) of this bag, or None if it has none yet."""
+        return self._config_text
+
+    def set_config(
+        self, config: Mapping[str, Any] | str, *, config_stamp_ns: int | None = None
+    ) -> None:
+        """Store the rig configuration after opening (e.g. when it arrives on ``/rig/config``).
+
+        Writes a ``/rig/config`` message and sets the metadata ``custom_data`` entry (the
+        latest configuration wins there; :func:`read_config` returns the first message).
+
+        Args:
+            config: JSON-serialisable mapping, or JSON text of an object.
+            config_stamp_ns: log time of the message [ns]; default: the latest log time
+                written so far, or, in an empty bag, that of the next message written.
+
+        Raises:
+            BagWriteError: closed recorder, or ``config`` is not a JSON object.
+        """
+        if isinstance(config, str):
+            try:
+                parsed = json.loads(config)
+            except ValueError as err:
+                raise BagWriteError(f"config is not valid JSON: {err}") from err
+            if not isinstance(parsed, dict):
+                raise BagWriteError("config must be a JSON object")
+            text = config
+        else:
+            try:
+                text = json.dumps(dict(config), default=_json_default)
+            except (TypeError, ValueError) as err:
+                raise BagWriteError(f"config is not JSON serialisable: {err}") from err
+        stamp = (
+            None if config_stamp_ns is None else _check_t_ns(config_stamp_ns, "config_stamp_ns")
+        )
+        with self._lock:
+            self._check_open()
+            self._config_text = text
+            self._writer.set_custom_data(CONFIG_METADATA_KEY, text)
+            empty = self._writer.min_timestamp == 2**63 - 1
+            last = self._writer.max_timestamp
+            if stamp is None and empty:  # stamp it like the next message written
+                self._config_stamp_ns = None
+                self._config_pending = True
+                return
+            self._config_pending = False
+            self._write_config(last if stamp is None else stamp)
+            self._after_write()
 
     def write_raw(
         self,
@@ -1459,6 +1612,50 @@ def bag_summary(path: str | os.PathLike[str]) -> BagSummary:
     return BagSummary(src.path, topics, count, start, end, duration, dict(src.custom_data))
 
 
+class RawMessage(NamedTuple):
+    """One serialised message of a bag, as :func:`read_raw_messages` yields it."""
+
+    topic: str
+    msgtype: str  #: e.g. 'sensor_msgs/msg/FluidPressure'
+    log_time_ns: int  #: bag log time [ns]
+    data: bytes  #: the CDR payload with its 4-byte encapsulation header
+
+
+def _raw_messages(src: _Source, topics: frozenset[str] | None) -> Iterator[RawMessage]:
+    with _open_reader(src) as reader:
+        conns = [c for c in reader.connections if topics is None or c.topic in topics]
+        if not conns:
+            return
+        for conn, log_time, data in reader.messages(connections=conns):
+            yield RawMessage(conn.topic, conn.msgtype, int(log_time), bytes(data))
+
+
+def read_raw_messages(
+    path: str | os.PathLike[str], *, topics: Collection[str] | None = None
+) -> Iterator[RawMessage]:
+    """Serialised messages of a bag in log-time order (no deserialisation), e.g. for replay.
+
+    Args:
+        path: bag directory or single ``.mcap`` file.
+        topics: only these topics (all when None).
+
+    Returns:
+        An iterator of :class:`RawMessage` (topic, type, log time [ns], CDR bytes).
+
+    Raises:
+        BagNotFoundError, BagFormatError: checked before the iterator is returned.
+        TopicNotFoundError: a requested topic is not in the bag.
+    """
+    src = _resolve(path)
+    wanted = None if topics is None else frozenset(topics)
+    with _open_reader(src) as reader:
+        have = sorted({c.topic for c in reader.connections})
+    for topic in sorted(wanted or ()):
+        if topic not in have:
+            raise TopicNotFoundError(topic, have, src.path)
+    return _raw_messages(src, wanted)
+
+
 # ---------------------------------------------------------------------------- recovery
 
 
@@ -1730,3 +1927,26 @@ def recover(path: str | os.PathLike[str], *, keep_original: bool = True) -> Reco
     if counts is None:  # pragma: no cover - would be a bug in the writer above
         raise BagFormatError(f"recovered bag {bag} does not open")
     return RecoverReport(bag, counts, False, dropped, skipped, tuple(kept))
+
+
+def read_json_topic(path: str | os.PathLike[str], topic: str) -> dict[str, Any] | None:
+    """The last JSON object published on a std_msgs/String topic of a bag (None if absent).
+
+    Used for ``/estimator/settings``: the settings in force when the last message was sent.
+
+    Raises:
+        BagFormatError: the message is not a JSON object.
+        WrongMessageTypeError: the topic is not std_msgs/String.
+    """
+    text: str | None = None
+    for _, msg, _ in _deserialized(path, topic, MSGTYPE_CONFIG, required=False):
+        text = msg.data
+    if text is None:
+        return None
+    try:
+        value = json.loads(text)
+    except ValueError as err:
+        raise BagFormatError(f"{topic} in {path} is not valid JSON: {err}") from err
+    if not isinstance(value, dict):
+        raise BagFormatError(f"{topic} in {path} is not a JSON object")
+    return value

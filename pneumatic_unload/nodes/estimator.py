@@ -26,7 +26,6 @@ the reception of samples (none is dropped at 10 kHz with the EventsExecutor).
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import sys
 import threading
@@ -51,17 +50,12 @@ from pneumatic_unload.estimation import (
     UnloadResult,
 )
 from pneumatic_unload.nodes import common
-from pneumatic_unload.runs import estimate_fields
+from pneumatic_unload.runs import estimate_fields, settings_json
 
 #: Node states reported on /diagnostics and in the action's feedback.
 STATES = ("waiting", "unloading", "done", "error")
 
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
-
-
-def settings_to_json(s: EstimatorSettings) -> str:
-    """JSON of estimator settings (what ``analyze`` reads back from a bag)."""
-    return json.dumps(dataclasses.asdict(s), sort_keys=True)
 
 
 def fill_estimate(msg: Any, r: UnloadResult, frame_id: str) -> Any:
@@ -150,7 +144,7 @@ class EstimatorNode(Node):
         self._pub_est = self.create_publisher(UnloadEstimate, "~/estimate", common.LATCHED_QOS)
         self._pub_settings = self.create_publisher(String, "~/settings", common.LATCHED_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self._pub_settings.publish(String(data=settings_to_json(self._settings)))
+        self._pub_settings.publish(String(data=settings_json(self._settings)))
         self._valve_client = None
         self._goal_lock = threading.Lock()
         self._active_goal = False
@@ -192,7 +186,7 @@ class EstimatorNode(Node):
                     return "an unload is being analysed; change settings when it is done"
                 self._settings = new
                 self._est.settings = new
-            self._pub_settings.publish(String(data=settings_to_json(new)))
+            self._pub_settings.publish(String(data=settings_json(new)))
         return ""
 
     # ------------------------------------------------------------------ input
@@ -237,7 +231,7 @@ class EstimatorNode(Node):
                         t - self._settings.initial_temperature) > 1e-6:
                     self._settings = dataclasses.replace(self._settings, initial_temperature=t)
                     self._est.settings = self._settings
-                    self._pub_settings.publish(String(data=settings_to_json(self._settings)))
+                    self._pub_settings.publish(String(data=settings_json(self._settings)))
 
     # ------------------------------------------------------------------ worker
     def _work(self) -> None:

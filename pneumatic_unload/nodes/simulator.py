@@ -74,6 +74,8 @@ class SimulatorNode(Node):
             "per_sample": (True, common.bool_param(
                 "publish every sample as a FluidPressure on /tank/pressure")),
             "frame_id": ("tank", common.str_param("frame_id of the published headers")),
+            "wait_for_subscribers": (0, common.int_param(
+                "start streaming only when this many /tank/pressure subscribers match", 0, 100)),
         }
         for name, (default, desc) in own.items():
             self.declare_parameter(name, default, desc)
@@ -167,6 +169,12 @@ class SimulatorNode(Node):
 
     def _run_loop(self) -> None:
         rate = self._cfg.rate
+        need = int(self._p("wait_for_subscribers"))
+        if need:
+            self.get_logger().info(f"waiting for {need} subscriber(s) of /tank/pressure")
+            while self._pub_p.get_subscription_count() < need and not self._stop.is_set():
+                time.sleep(0.01)
+            time.sleep(0.2)  # let the matched readers finish discovery of each other too
         wall0 = time.time_ns()
         mono0 = time.monotonic()
         t_step = max(1, round(rate / self._p("temperature_rate"))) \
@@ -264,9 +272,10 @@ class SimulatorNode(Node):
         self._publish(self._pub_valve, m)
 
     def close(self) -> None:
-        """Stop the paced loop."""
+        """Stop the paced loop and report how many samples were published."""
         self._stop.set()
         self._thread.join(timeout=2.0)
+        self.get_logger().info(f"published {self.published} pressure samples")
 
 
 def main(args: Sequence[str] | None = None) -> int:
