@@ -7,41 +7,17 @@ keep the ROS_DOMAIN_ID of the environment. Keep this file small and generic.
 """
 
 import os
-import random
-import socket
 import sys
 from pathlib import Path
 
 import pytest
 
+from pneumatic_unload.launch import free_domain_id
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
-# Domain ids 1..101: 0 is everybody's default, and the RTPS well-known ports
-# (7400 + 250 * id, +10 for the first participant's unicast port) stay far below 65535.
-_DOMAIN_MIN, _DOMAIN_MAX = 1, 101
-
-
-def _domain_looks_free(domain_id: int) -> bool:
-    """True when no DDS participant on this host holds the domain's discovery ports."""
-    base = 7400 + 250 * domain_id
-    for port in (base, base + 10):
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-            try:
-                sock.bind(("", port))  # no SO_REUSEADDR: fails while a participant holds it
-            except OSError:
-                return False
-    return True
-
-
-def _pick_domain_id() -> int:
-    span = _DOMAIN_MAX - _DOMAIN_MIN + 1
-    start = (os.getpid() + random.SystemRandom().randrange(span)) % span
-    candidates = [_DOMAIN_MIN + (start + k) % span for k in range(span)]
-    return next((d for d in candidates if _domain_looks_free(d)), candidates[0])
-
-
 if not os.environ.get("PNEUMATIC_UNLOAD_KEEP_DOMAIN"):
-    os.environ["ROS_DOMAIN_ID"] = str(_pick_domain_id())
+    os.environ["ROS_DOMAIN_ID"] = str(free_domain_id())
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 
 
