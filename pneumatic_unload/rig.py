@@ -261,3 +261,51 @@ class RigStream:
         y, _ = lfilter([b0, b1], [1.0, -a], u, zi=zi)
         self._lag_y, self._lag_u = float(y[-1]), float(u[-1])
         return y
+
+
+def run_cycles(cfg: RigConfig, unloads: int, *, settle_time: float = 2.0,
+               vent_time: float = 1.0, charge_time: float = 1.0) -> Block:
+    """A recorded run of several unloads, as the simulator node's cycle mode produces it.
+
+    ``cfg.pre_time`` of charged plateau, then per unload: the unload (``cfg.duration``, or
+    6 tau when 0), ``vent_time`` vented, and (except after the last one) a recharge of
+    ``charge_time`` and ``settle_time`` of plateau before the next unload.
+
+    Parameters
+    ----------
+    cfg : RigConfig
+        Rig, effects and sensor.
+    unloads : int
+        Number of unloads [-] (>= 1).
+    settle_time, vent_time, charge_time : float
+        Phase durations [s].
+
+    Returns
+    -------
+    Block
+        All samples of the run (t from 0 [s]).
+    """
+    if unloads < 1:
+        raise ValueError(f"unloads must be >= 1, got {unloads}")
+    rs = RigStream(cfg, charge_time=charge_time)
+    rate = cfg.rate
+    blocks: list[Block] = []
+
+    def take(seconds: float) -> None:
+        n = round(seconds * rate)
+        if n > 0:
+            blocks.append(rs.next_block(n))
+
+    take(cfg.pre_time)
+    for k in range(unloads):
+        rs.open_valve()
+        take(cfg.duration if cfg.duration > 0 else default_duration(cfg))
+        while rs.phase == "unloading":
+            take(0.1)
+        take(vent_time)
+        if k + 1 < unloads:
+            rs.charge()
+            take(charge_time)
+            take(settle_time)
+    return Block(*(np.concatenate([getattr(b, f) for b in blocks])
+                   for f in ("index", "t", "measured", "pressure", "temperature", "opening")))

@@ -59,7 +59,8 @@ def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
 
 
 def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
-                        t_offset: float = 1_700_000_000.0) -> dict[str, Any]:
+                        t_offset: float = 1_700_000_000.0, unloads: int = 1,
+                        settle_time: float = 2.0) -> dict[str, Any]:
     """Simulate ``cfg`` and write the run as a rosbag2/MCAP bag directory ``out``.
 
     Parameters
@@ -72,6 +73,11 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
         Also run the streaming estimator and record its results.
     t_offset : float
         Wall-clock time of the first sample [s since the epoch].
+    unloads : int
+        Number of unloads in the run [-]; more than one runs the simulator node's cycle
+        (:func:`pneumatic_unload.rig.run_cycles`: unload, vent 1 s, recharge 1 s, settle).
+    settle_time : float
+        Plateau before each further unload [s].
 
     Returns
     -------
@@ -82,8 +88,15 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
 
     if out.exists():
         raise FileExistsError(f"{out} exists already; choose a new --out")
-    sim = simulate(cfg)
-    t_abs = sim.t + t_offset
+    if unloads == 1:
+        sim = simulate(cfg)
+        t, measured, temperature, opening = sim.t, sim.measured, sim.temperature, sim.opening
+    else:
+        from pneumatic_unload.rig import run_cycles
+
+        run = run_cycles(cfg, unloads, settle_time=settle_time)
+        t, measured, temperature, opening = run.t, run.measured, run.temperature, run.opening
+    t_abs = t + t_offset
     t_ns = np.round(t_abs * 1e9).astype(np.int64)
     results: list[UnloadResult] = []
     settings = settings_for(cfg)
@@ -91,16 +104,16 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
         est = StreamingEstimator(settings)
         # the stamps as a subscriber or the bag reader sees them: integer ns -> s
         t_seen = t_ns * 1e-9
-        results = est.push_block(t_seen, sim.measured) + est.finish()
+        results = est.push_block(t_seen, measured) + est.finish()
     out.parent.mkdir(parents=True, exist_ok=True)
     with BagRecorder(out, config=cfg.to_dict()) as rec:
-        rec.write_pressures(t_ns, sim.measured)
+        rec.write_pressures(t_ns, measured)
         step = max(1, int(round(cfg.rate / TEMPERATURE_RATE)))
-        rec.write_temperatures(t_ns[::step], sim.temperature[::step])
+        rec.write_temperatures(t_ns[::step], temperature[::step])
         rec.write_valve(int(t_ns[0]), False, 0.0)
-        k_open = int(np.searchsorted(sim.t, sim.t_open))
-        if k_open < t_ns.size:
-            rec.write_valve(int(t_ns[k_open]), True, 1.0)
+        is_open = opening > 0
+        for k in np.flatnonzero(is_open[1:] != is_open[:-1]) + 1:
+            rec.write_valve(int(t_ns[k]), bool(is_open[k]), float(opening[k]))
         if analyze_live:
             from pneumatic_unload.io.bag import MSGTYPE_CONFIG, TOPIC_SETTINGS, make_typestore
 
@@ -110,6 +123,5 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
                           store.serialize_cdr(text, MSGTYPE_CONFIG))
         for r in results:
             rec.write_estimate(int(round(r.t_complete * 1e9)), estimate_fields(r))
-    return {"path": str(out), "samples": int(sim.t.size),
-            "duration": float(sim.t[-1] - sim.t[0]),
+    return {"path": str(out), "samples": int(t.size), "duration": float(t[-1] - t[0]),
             "results": [r.to_dict() for r in results]}

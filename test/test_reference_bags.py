@@ -1,0 +1,80 @@
+"""The committed reference bags of bags/: readable everywhere, analysable, reproducible."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pneumatic_unload.config import RigConfig
+from pneumatic_unload.io.bag import bag_summary, read_config, read_estimates, read_pressure
+
+REPO = Path(__file__).resolve().parents[1]
+BAGS = {"clean_unload": 1, "heat_transfer": 1, "two_unloads": 2}
+
+
+def _analyze(bag: Path) -> dict:
+    out = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(bag),
+                          "--json"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+@pytest.mark.parametrize("name", sorted(BAGS))
+def test_reference_bag_is_analysed_like_the_live_estimator(name: str) -> None:
+    """analyze reproduces the recorded estimates (1e-9) and finds the true C within 2 %."""
+    bag = REPO / "bags" / name
+    cfg = RigConfig.from_dict(read_config(bag))
+    recorded = read_estimates(bag)
+    result = _analyze(bag)
+    assert len(result["published"]) == len(recorded)
+    for live, off in zip(recorded, result["published"], strict=True):
+        for key in ("conductance", "conductance_model", "tau_exp", "p10", "p_star", "p_atm"):
+            assert off[key] == pytest.approx(live[key], rel=1e-9), key
+    assert len(result["unloads"]) == BAGS[name]
+    for u in result["unloads"]:
+        assert u["status"] == "ok" and u["final"]
+        assert u["conductance_model"] == pytest.approx(cfg.conductance, rel=0.02)
+        assert u["critical_ratio"] == pytest.approx(cfg.critical_ratio, abs=0.03)
+
+
+@pytest.mark.parametrize("name", sorted(BAGS))
+def test_reference_bag_opens_in_rosbags_and_mcap(name: str) -> None:
+    """rosbags and the mcap reader (mcap-ros2-support) decode every message of the bag."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.highlevel import AnyReader
+
+    bag = REPO / "bags" / name
+    summary = bag_summary(bag)
+    with AnyReader([bag]) as reader:
+        n_rosbags = sum(1 for c, _t, raw in reader.messages()
+                        if reader.deserialize(raw, c.msgtype) is not None)
+    (mcap_file,) = bag.glob("*.mcap")
+    with mcap_file.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        n_mcap = sum(1 for _s, _c, _m, decoded in reader.iter_decoded_messages()
+                     if decoded is not None)
+    assert n_rosbags == n_mcap == summary.message_count
+
+
+def test_regeneration_is_deterministic(tmp_path: Path) -> None:
+    """bags/regenerate.py reproduces the committed samples exactly (fixed seeds)."""
+    out = subprocess.run([sys.executable, str(REPO / "bags" / "regenerate.py"), "--out",
+                          str(tmp_path)], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    for name in BAGS:
+        t0, p0 = read_pressure(REPO / "bags" / name)[:2]
+        t1, p1 = read_pressure(tmp_path / name)[:2]
+        assert np.array_equal(t0, t1) and np.array_equal(p0, p1)
+    assert (tmp_path / "README.md").read_text() == (REPO / "bags" / "README.md").read_text()
+
+
+def test_reference_bags_are_small() -> None:
+    """Well under 5 MB in all."""
+    size = sum(f.stat().st_size for f in (REPO / "bags").rglob("*") if f.is_file())
+    assert size < 4e6
