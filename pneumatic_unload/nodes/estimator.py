@@ -26,6 +26,7 @@ the reception of samples (none is dropped at 10 kHz with the EventsExecutor).
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import sys
 import threading
@@ -69,6 +70,20 @@ def fill_estimate(msg: Any, r: UnloadResult, frame_id: str) -> Any:
     return msg
 
 
+def _warm_up(settings: EstimatorSettings) -> None:
+    """Run the estimator once on a short synthetic unload, so that the first live estimate
+    does not pay for lazy imports and first-call set-up (tens of ms)."""
+    from pneumatic_unload.config import RigConfig
+    from pneumatic_unload.estimation import analyze
+    from pneumatic_unload.model import simulate
+
+    sim = simulate(RigConfig(volume=1e-3, conductance=2e-8, pre_time=0.3, duration=1.0,
+                             noise_std=500.0, seed=0))
+    analyze(sim.t, sim.measured, dataclasses.replace(
+        settings, volume=1e-3, signal_gain=1.0, signal_offset=0.0, atmosphere=101325.0,
+        initial_temperature=293.15, curve_fit=False))
+
+
 class EstimatorNode(Node):
     """Live unloading-time estimator (see the module docstring)."""
 
@@ -96,7 +111,8 @@ class EstimatorNode(Node):
             "trigger_sigma": (8.0, d("trigger drop in noise standard deviations", 1.0, 1000.0)),
             "min_plateau": (32, i("pre-step plateau samples needed", 4, 1_000_000)),
             "curve_fit": (True, b("full-curve fit (C, b) once the unload's tail is recorded")),
-            "pressure_topic": ("/tank/pressure", s("pressure topic")),
+            "pressure_topic": ("/tank/pressure", s("pressure topic (FluidPressure)")),
+            "block_topic": ("/tank/pressure_block", s("pressure block topic (PressureBlock)")),
             "input": ("sample", s("'sample': FluidPressure per sample; 'block': PressureBlock")),
             "qos": ("sensor_data", s("'sensor_data' (best effort) or 'reliable'")),
             "frame_id": ("", s("accept only this header frame_id ('' accepts any)")),
@@ -117,6 +133,7 @@ class EstimatorNode(Node):
                 raise common.StartupError(
                     "estimator", f"{name} must be one of {allowed}, got {self._p(name)!r}")
         self.add_on_set_parameters_callback(common.validating_callback(self._check))
+        _warm_up(self._settings)
         self._est = StreamingEstimator(self._settings)
         self._lock = threading.Lock()
         self._queue: deque[tuple[int, float, float]] = deque()
@@ -130,12 +147,15 @@ class EstimatorNode(Node):
         self._last_pressure = math.nan
         self._n_diag = 0
         self._rejected = 0
+        # [s] from the arrival of the completing sample to the publication: crossing
+        # estimates, and final (curve-fit) estimates
         self.latencies: deque[float] = deque(maxlen=100_000)
+        self.final_latencies: deque[float] = deque(maxlen=100_000)
         self.received = 0
         self.results: list[UnloadResult] = []
         qos = common.SENSOR_QOS if self._p("qos") == "sensor_data" else common.PRESSURE_QOS
         if self._p("input") == "block":
-            self.create_subscription(PressureBlock, self._p("pressure_topic"),
+            self.create_subscription(PressureBlock, self._p("block_topic"),
                                      self._on_block, qos)
         else:
             self.create_subscription(FluidPressure, self._p("pressure_topic"),
@@ -153,8 +173,10 @@ class EstimatorNode(Node):
         self.create_timer(self._p("diagnostics_period"), self._report)
         self._worker = threading.Thread(target=self._work, name="estimator", daemon=True)
         self._worker.start()
+        topic = self._p("block_topic" if self._p("input") == "block" else "pressure_topic")
         self.get_logger().info(
-            f"estimating on {self._p('pressure_topic')} ({self._p('input')}, {self._p('qos')}):"
+            f"estimating on {topic}"
+            f" ({self._p('input')}, {self._p('qos')}):"
             f" V={self._settings.volume:g} m^3, T10={self._settings.initial_temperature:g} K,"
             f" p_atm={'auto' if self._settings.atmosphere is None else self._settings.atmosphere}")
 
@@ -173,7 +195,7 @@ class EstimatorNode(Node):
         return EstimatorSettings(**v)
 
     def _check(self, changes: dict[str, Any]) -> str:
-        fixed = {"pressure_topic", "input", "qos", "frame_id", "diagnostics_period"}
+        fixed = {"pressure_topic", "block_topic", "input", "qos", "frame_id", "diagnostics_period"}
         if fixed & set(changes):
             return f"{', '.join(sorted(fixed & set(changes)))} cannot change at run time"
         try:
@@ -282,7 +304,8 @@ class EstimatorNode(Node):
             self._pub_est.publish(msg)
         except Exception as exc:
             self._diagnose(_ERROR, f"could not publish the estimate: {exc}")
-        self.latencies.append(time.monotonic() - arrived)
+        (self.final_latencies if r.final else self.latencies).append(
+            time.monotonic() - arrived)
         self.results.append(r)
         self._last = r
         if r.status in ("ok", "aborted_sse"):
@@ -432,6 +455,11 @@ class EstimatorNode(Node):
         self._stop.set()
         self._wake.set()
         self._worker.join(timeout=2.0)
+        stats = {"received": self.received, "rejected": self._rejected,
+                 "results": len(self.results),
+                 "latencies_ms": [round(x * 1e3, 4) for x in self.latencies],
+                 "final_latencies_ms": [round(x * 1e3, 4) for x in self.final_latencies]}
+        self.get_logger().info(f"stats {json.dumps(stats)}")
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -30,6 +30,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import FluidPressure, Temperature
 from std_msgs.msg import String
@@ -75,7 +76,8 @@ class SimulatorNode(Node):
                 "publish every sample as a FluidPressure on /tank/pressure")),
             "frame_id": ("tank", common.str_param("frame_id of the published headers")),
             "wait_for_subscribers": (0, common.int_param(
-                "start streaming only when this many /tank/pressure subscribers match", 0, 100)),
+                "start streaming only when this many pressure subscribers match (of\n"
+                "/tank/pressure, or of /tank/pressure_block when per_sample is false)", 0, 100)),
         }
         for name, (default, desc) in own.items():
             self.declare_parameter(name, default, desc)
@@ -171,10 +173,12 @@ class SimulatorNode(Node):
         rate = self._cfg.rate
         need = int(self._p("wait_for_subscribers"))
         if need:
-            self.get_logger().info(f"waiting for {need} subscriber(s) of /tank/pressure")
-            while self._pub_p.get_subscription_count() < need and not self._stop.is_set():
+            pub = self._pub_p if self._p("per_sample") else self._pub_block
+            self.get_logger().info(f"waiting for {need} subscriber(s) of {pub.topic_name}")
+            while pub.get_subscription_count() < need and not self._stop.is_set():
                 time.sleep(0.01)
             time.sleep(0.2)  # let the matched readers finish discovery of each other too
+        self.get_logger().info(f"streaming at {rate:g} Hz")
         wall0 = time.time_ns()
         mono0 = time.monotonic()
         t_step = max(1, round(rate / self._p("temperature_rate"))) \
@@ -203,11 +207,12 @@ class SimulatorNode(Node):
                     if per_sample:
                         common.ns_to_stamp(ns, msg.header.stamp)
                         msg.fluid_pressure = y
-                        self._publish(self._pub_p, msg)
+                        self.published += self._publish(self._pub_p, msg)
                     if block_size:
                         pending.append((ns, y))
                         if len(pending) >= block_size:
-                            self._publish_block(pending, rate)
+                            sent = self._publish_block(pending, rate)
+                            self.published += 0 if per_sample else sent
                             pending = []
                     if t_step and k % t_step == 0:
                         tm = Temperature()
@@ -215,12 +220,12 @@ class SimulatorNode(Node):
                         common.ns_to_stamp(ns, tm.header.stamp)
                         tm.temperature = float(block.temperature[k - k0]) - 273.15
                         self._publish(self._pub_t, tm)
-                self.published += block.index.size
-                opening = float(block.opening[-1])
-                if (opening > 0) != self._valve_open:
-                    self._valve_open = opening > 0
-                    self._publish_valve(wall0 + round(int(block.index[-1]) * 1e9 / rate),
-                                        opening)
+                is_open = block.opening > 0
+                for j in np.flatnonzero(is_open != np.concatenate(
+                        ([self._valve_open], is_open[:-1]))):
+                    self._valve_open = bool(is_open[j])
+                    self._publish_valve(wall0 + round(int(block.index[j]) * 1e9 / rate),
+                                        float(block.opening[j]))
                 t_now = float(block.t[-1])
                 if phase != last_phase:
                     if phase == "vented":
@@ -249,19 +254,24 @@ class SimulatorNode(Node):
                     return
                 self._stream.charge()
 
-    def _publish(self, pub: Any, msg: Any) -> None:
+    def _publish(self, pub: Any, msg: Any) -> bool:
         try:
             pub.publish(msg)
         except Exception as exc:  # RCLError when a reliable reader is too slow: keep going
-            self.get_logger().warn(f"publish failed: {exc}", throttle_duration_sec=1.0)
+            if self.context.ok():
+                self.get_logger().warn(f"publish failed: {exc}", throttle_duration_sec=1.0)
+            return False
+        return True
 
-    def _publish_block(self, pending: list[tuple[int, float]], rate: float) -> None:
+    def _publish_block(self, pending: list[tuple[int, float]], rate: float) -> int:
+        """Publish a PressureBlock; return the number of samples sent (0 on failure)."""
         m = self._PressureBlock()
         m.header.frame_id = self._frame
         common.ns_to_stamp(pending[0][0], m.header.stamp)
         m.sample_period = 1.0 / rate
         m.pressure = [y for _, y in pending]
-        self._publish(self._pub_block, m)
+        ok = self._publish(self._pub_block, m)
+        return len(pending) if ok else 0
 
     def _publish_valve(self, ns: int, opening: float) -> None:
         m = self._ValveState()
