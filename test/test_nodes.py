@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-
 from nodeproc import NodeProcess, spin_until
+
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.physics import orifice_conductance
 
@@ -265,6 +265,38 @@ def test_estimator_survives_bad_messages(tmp_path: Path, ros_node: Any) -> None:
     assert "non-finite pressure" in text
     assert "backwards" in text
     assert "frame_id 'elsewhere' ignored" in text
+
+
+def test_replay_of_reference_bag_into_live_estimator(tmp_path: Path, ros_node: Any,
+                                                     repo_root: Path) -> None:
+    """Replaying bags/two_unloads into a live estimator reproduces analyze's estimates."""
+    from pneumatic_unload.io.bag import read_config
+
+    node, ex = ros_node
+    got = _estimates(node)
+    bag = repo_root / "bags" / "two_unloads"
+    cfg = read_config(bag)
+    out = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(bag),
+                          "--json"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    recorded = json.loads(out.stdout)["published"]
+    est = NodeProcess("estimator", {"volume": cfg["volume"], "qos": "reliable"}, tmp_path)
+    est.wait_output("estimating on", 20.0)
+    rep = NodeProcess("replay", {"bag": str(bag), "rate": 0.0, "topics": ["/tank/pressure"]},
+                      tmp_path)
+    try:
+        assert spin_until(node, ex, lambda: len(got) >= len(recorded), 60.0), (
+            f"{len(got)} of {len(recorded)} estimates; estimator:\n{est.output()[-2000:]}"
+            f"\nreplay:\n{rep.output()[-2000:]}")
+        assert rep.proc.wait(timeout=30) == 0
+    finally:
+        codes = [p.stop() for p in (rep, est)]
+    assert codes == [0, 0]
+    assert len(got) == len(recorded) == 4
+    for live, ref in zip(got, recorded, strict=True):
+        assert live.unload_index == ref["index"] and live.method == ref["method"]
+        for key in ("conductance", "conductance_model", "tau_exp", "p10", "p_star"):
+            assert getattr(live, key) == pytest.approx(ref[key], rel=1e-9), key
 
 
 def test_sigterm_and_sigint_exit_zero(tmp_path: Path) -> None:

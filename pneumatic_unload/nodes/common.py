@@ -34,6 +34,11 @@ from pneumatic_unload.config import EFFECTS, ConfigError, RigConfig
 PRESSURE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                           reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.VOLATILE)
+#: Lossless input: reliable and KEEP_ALL, so that a burst (a replay at full speed) waits
+#: in the reader's cache until the callback takes it instead of being overwritten.
+LOSSLESS_INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
+                                reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.VOLATILE)
 #: Sensor-data QoS of a subscriber: best effort (matches reliable and best-effort
 #: publishers), with a deep queue so that bursts are not dropped.
 SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,

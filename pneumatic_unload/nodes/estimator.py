@@ -114,7 +114,8 @@ class EstimatorNode(Node):
             "pressure_topic": ("/tank/pressure", s("pressure topic (FluidPressure)")),
             "block_topic": ("/tank/pressure_block", s("pressure block topic (PressureBlock)")),
             "input": ("sample", s("'sample': FluidPressure per sample; 'block': PressureBlock")),
-            "qos": ("sensor_data", s("'sensor_data' (best effort) or 'reliable'")),
+            "qos": ("sensor_data", s(
+                "'sensor_data' (best effort) or 'reliable' (KEEP_ALL: lossless, e.g. replays)")),
             "frame_id": ("", s("accept only this header frame_id ('' accepts any)")),
             "valve_service": ("/simulator/start_unload",
                               s("std_srvs/Trigger service that opens the valve (action)")),
@@ -153,7 +154,8 @@ class EstimatorNode(Node):
         self.final_latencies: deque[float] = deque(maxlen=100_000)
         self.received = 0
         self.results: list[UnloadResult] = []
-        qos = common.SENSOR_QOS if self._p("qos") == "sensor_data" else common.PRESSURE_QOS
+        qos = common.SENSOR_QOS if self._p("qos") == "sensor_data" \
+            else common.LOSSLESS_INPUT_QOS
         if self._p("input") == "block":
             self.create_subscription(PressureBlock, self._p("block_topic"),
                                      self._on_block, qos)
