@@ -8,6 +8,7 @@
    inside the estimator node, reported on /diagnostics), and samples lost at 10 kHz
    (estimator's received count vs simulator's published count), for per-sample
    FluidPressure and for PressureBlock input.
+3. ``pneumatic-unload simulate`` (no ROS): a 60 s run written as a bag, times real time.
 
 Run: ``.venv/bin/python bench/bench_nodes.py`` (about 2-3 minutes). Prints markdown tables.
 """
@@ -143,6 +144,26 @@ def bench_estimator(rate: float, seconds: float, block: int, tmp: Path) -> dict[
     }
 
 
+def bench_simulate_cli(tmp: Path) -> dict[str, object]:
+    """``pneumatic-unload simulate``: a 60 s run at 1 kHz with heat transfer into a bag."""
+    from pneumatic_unload.config import RigConfig
+    from pneumatic_unload.runs import write_simulated_bag
+
+    cfg = RigConfig(volume=5e-3, effects=("heat_transfer",), pre_time=1.0, duration=59.0,
+                    noise_std=1000.0, seed=2)
+    t0 = time.perf_counter()
+    info = write_simulated_bag(cfg, tmp / "sim60", analyze_live=False)
+    wall = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    write_simulated_bag(cfg, tmp / "sim60b", analyze_live=True)
+    wall_est = time.perf_counter() - t1
+    return {"run": "60 s at 1 kHz, heat transfer", "samples": info["samples"],
+            "simulate + write bag [s]": f"{wall:.3f}",
+            "x real time": f"{info['duration'] / wall:.0f}",
+            "with live estimator too [s]": f"{wall_est:.3f}",
+            "x real time (with estimator)": f"{info['duration'] / wall_est:.0f}"}
+
+
 def _pct(x: np.ndarray) -> str:
     if not x.size:
         return "-"
@@ -179,6 +200,8 @@ def main() -> int:
                 bench_estimator(10000.0, 2 * args.seconds, 100, tmp)]
         print("\n## Simulator (cycle mode) -> estimator\n")
         print(_table(rows))
+        print("\n## Offline `pneumatic-unload simulate` (no ROS)\n")
+        print(_table([bench_simulate_cli(tmp)]))
     return 0
 
 

@@ -71,6 +71,7 @@ def test_simulator_estimator_recorder_end_to_end(tmp_path: Path, ros_node: Any,
     """Three processes: the estimate matches C, the bag holds every sample, analyze agrees."""
     node, ex = ros_node
     got = _estimates(node)
+    diags = _diagnostics(node)
     bag = tmp_path / "run"
     rec = NodeProcess("recorder", {"output": str(bag)}, tmp_path,
                       extra=["-p", "topics:=['/estimator/settings']"])
@@ -86,6 +87,11 @@ def test_simulator_estimator_recorder_end_to_end(tmp_path: Path, ros_node: Any,
     finally:
         codes = {p.name: p.stop() for p in (sim, est, rec)}
     assert codes == {"simulator": 0, "estimator": 0, "recorder": 0}, codes
+    states = [st.message.split(":")[0] for d in diags for st in d.status
+              if st.name.endswith("estimator")]
+    for state in ("waiting", "unloading", "done"):  # reported on /diagnostics, in order
+        assert state in states, states
+    assert states.index("waiting") < states.index("unloading") < states.index("done")
     first, final = got[0], [m for m in got if "curve-fit" in m.method][-1]
     assert first.status == 0 and final.status == 0
     # accuracy of the core issue: model-based C within 2 %, b within 0.03
