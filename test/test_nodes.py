@@ -305,6 +305,27 @@ def test_replay_of_reference_bag_into_live_estimator(tmp_path: Path, ros_node: A
             assert getattr(live, key) == pytest.approx(ref[key], rel=1e-9), key
 
 
+def test_uncalibrated_volts_input(tmp_path: Path, ros_node: Any) -> None:
+    """A rig publishing transducer volts is measured through signal_gain/signal_offset."""
+    node, ex = ros_node
+    got = _estimates(node)
+    zero, sens = 0.5, 1e-5  # V, V/Pa
+    est = NodeProcess("estimator", {"volume": RIG["volume"], "signal_gain": 1.0 / sens,
+                                    "signal_offset": -zero / sens, "curve_fit": False},
+                      tmp_path)
+    sim = NodeProcess("simulator", {**RIG, "output_volts": True, "transducer_zero": zero,
+                                    "transducer_sensitivity": sens, "start_delay": 1.5,
+                                    "wait_for_subscribers": 1, "duration": 3.0}, tmp_path)
+    try:
+        assert spin_until(node, ex, lambda: len(got) >= 1, 40.0), est.output()[-2000:]
+    finally:
+        codes = [p.stop() for p in (sim, est)]
+    assert codes == [0, 0]
+    assert got[0].status == 0
+    assert got[0].p10 == pytest.approx(7e5, rel=0.005)  # absolute Pa from volts
+    assert got[0].conductance_model == pytest.approx(C_TRUE, rel=0.05)
+
+
 def test_sigterm_and_sigint_exit_zero(tmp_path: Path) -> None:
     """Ctrl-C (SIGINT) and SIGTERM end each node with exit code 0."""
     for sig in (signal.SIGINT, signal.SIGTERM):

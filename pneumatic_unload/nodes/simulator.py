@@ -16,7 +16,9 @@ Parameters
     with ranges; plus ``mode`` ('service' or 'cycle'), ``start_delay`` [s] (open once by
     itself after this delay; < 0: never), ``settle_time`` [s], ``vent_time`` [s],
     ``charge_time`` [s], ``cycles`` (0: forever), ``auto_charge``, ``temperature_rate`` [Hz],
-    ``block_size``, ``frame_id``. Load them from ``share/pneumatic_unload/config/simulator.yaml``
+    ``block_size``, ``frame_id``, ``output_volts`` (publish the transducer's volts instead of
+    Pa, as an uncalibrated rig does; the estimator converts with signal_gain/offset).
+    Load them from ``share/pneumatic_unload/config/simulator.yaml``
     with ``--ros-args --params-file``. Rig changes at run time apply from the next unload;
     out-of-range values are rejected with the reason.
 """
@@ -75,6 +77,9 @@ class SimulatorNode(Node):
             "per_sample": (True, common.bool_param(
                 "publish every sample as a FluidPressure on /tank/pressure")),
             "frame_id": ("tank", common.str_param("frame_id of the published headers")),
+            "output_volts": (False, common.bool_param(
+                "publish the transducer's output in volts (transducer_zero + "
+                "transducer_sensitivity * p) instead of Pa: an uncalibrated rig")),
             "wait_for_subscribers": (0, common.int_param(
                 "start streaming only when this many pressure subscribers match (of\n"
                 "/tank/pressure, or of /tank/pressure_block when per_sample is false)", 0, 100)),
@@ -128,8 +133,8 @@ class SimulatorNode(Node):
             return "rate cannot change while the simulator runs (restart the node)"
         if "mode" in changes and changes["mode"] not in MODES:
             return f"mode must be one of {MODES}"
-        if "frame_id" in changes:
-            return "frame_id cannot change while the simulator runs"
+        if "frame_id" in changes or "output_volts" in changes:
+            return "frame_id and output_volts cannot change while the simulator runs"
         cfg = self._config_from_params(changes)  # ConfigError -> rejected with its reason
         if any(k in common.rig_parameter_descriptors() for k in changes):
             self._cfg = cfg
@@ -185,6 +190,7 @@ class SimulatorNode(Node):
             if self._p("temperature_rate") > 0 else 0
         block_size = int(self._p("block_size"))
         per_sample = bool(self._p("per_sample"))
+        volts = bool(self._p("output_volts"))
         pending: list[tuple[int, float]] = []
         start_delay = float(self._p("start_delay"))
         phase_since = 0.0
@@ -193,7 +199,8 @@ class SimulatorNode(Node):
         max_burst = max(1, int(rate * 0.05))
         msg = FluidPressure()
         msg.header.frame_id = self._frame
-        msg.variance = self._cfg.noise_std ** 2
+        msg.variance = (self._cfg.noise_std
+                        * (self._cfg.transducer_sensitivity if volts else 1.0)) ** 2
         while not self._stop.is_set() and self.context.ok():
             now = time.monotonic() - mono0
             due = math.floor(now * rate) + 1
@@ -202,7 +209,10 @@ class SimulatorNode(Node):
                 with self._lock:
                     block = self._stream.next_block(min(due - k0, max_burst))
                     phase = self._stream.phase
-                for k, y in zip(block.index.tolist(), block.measured.tolist(), strict=True):
+                values = block.measured
+                if volts:
+                    values = self._cfg.transducer_zero + self._cfg.transducer_sensitivity * values
+                for k, y in zip(block.index.tolist(), values.tolist(), strict=True):
                     ns = wall0 + round(k * 1e9 / rate)
                     if per_sample:
                         common.ns_to_stamp(ns, msg.header.stamp)
