@@ -1,7 +1,8 @@
 """``recorder`` node: the rig's topics into rosbag2 bags (MCAP storage), crash-safe.
 
-Records ``/tank/pressure``, ``/tank/temperature``, ``/tank/valve``, ``/estimator/estimate``,
-``/diagnostics`` and ``/rig/config`` (the package's topics) plus any extra topics named in the
+Records ``/tank/pressure``, ``/tank/pressure_block``, ``/tank/temperature``, ``/tank/valve``,
+``/estimator/estimate``, ``/estimator/settings``, ``/diagnostics`` and ``/rig/config`` (the
+package's topics; see :data:`PACKAGE_TOPICS` for their QoS) plus any extra topics named in the
 ``topics`` parameter (their types are discovered from the ROS graph; the recorder waits for
 them to appear). Messages are received serialised (``raw=True``) and written to the bag as
 they came, through :class:`pneumatic_unload.io.bag.BagRecorder`: no per-message
@@ -15,8 +16,13 @@ Parameters:
         in ``<output>/unload-000``, ``unload-001``, ...: after an estimate arrives on
         ``/estimator/estimate`` the next bag starts with the first message received while
         the valve is closed (usually the ``/tank/valve`` close message; right away if the
-        valve was already closed or never reported). Each bag thus holds the pre-unload
-        plateau, the discharge and its estimate. In both modes a *different* rig
+        valve was already closed or never reported). The previous bag stays open until the
+        valve opens again (or an estimate of another unload arrives), and receives the later
+        estimates with the same ``unload_index`` (the estimator's final, curve-fit
+        estimate follows its crossing estimate). Each bag thus holds the pre-unload
+        plateau, the discharge and its estimates; the rig configuration and the last
+        ``/estimator/settings`` are repeated at the start of every bag. In both modes a
+        *different* rig
         configuration on ``/rig/config`` starts a new bag (``run``: ``<output>-001``, ...).
     flush_interval (double, s): maximal age of data not yet handed to the operating system
         (default 0.5, range (0, 10]). After ``kill -9`` at most about this much is lost;
@@ -61,8 +67,10 @@ from pneumatic_unload.io.bag import (
     TOPIC_CONFIG,
     TOPIC_ESTIMATE,
     TOPIC_PRESSURE,
+    TOPIC_SETTINGS,
     TOPIC_TEMPERATURE,
     TOPIC_VALVE,
+    BagError,
     BagRecorder,
     cdr_header_stamp_ns,
     make_typestore,
@@ -70,16 +78,26 @@ from pneumatic_unload.io.bag import (
 
 TOPIC_DIAGNOSTICS = "/diagnostics"
 MSGTYPE_DIAGNOSTICS = "diagnostic_msgs/msg/DiagnosticArray"
+TOPIC_PRESSURE_BLOCK = "/tank/pressure_block"
+MSGTYPE_PRESSURE_BLOCK = "pneumatic_unload_msgs/msg/PressureBlock"
 
-#: The package's topics: name -> (message type, QoS durability, QoS depth).
+#: The package's topics: name -> (message type, QoS durability, QoS depth). All reliable.
+#: Latched (transient local) where the publishers are latched: a transient-local reader
+#: gets the last messages published before the recorder started (and does not match a
+#: volatile writer, so publishers of these topics must be latched).
 PACKAGE_TOPICS: dict[str, tuple[str, str, int]] = {
     TOPIC_PRESSURE: (MSGTYPE_PRESSURE, "volatile", 1000),
+    TOPIC_PRESSURE_BLOCK: (MSGTYPE_PRESSURE_BLOCK, "volatile", 1000),
     TOPIC_TEMPERATURE: (MSGTYPE_TEMPERATURE, "volatile", 1000),
-    TOPIC_VALVE: (MSGTYPE_VALVE, "volatile", 1000),
+    TOPIC_VALVE: (MSGTYPE_VALVE, "transient_local", 10),
     TOPIC_ESTIMATE: (MSGTYPE_ESTIMATE, "transient_local", 10),
+    TOPIC_SETTINGS: (MSGTYPE_CONFIG, "transient_local", 10),
     TOPIC_DIAGNOSTICS: (MSGTYPE_DIAGNOSTICS, "volatile", 1000),
-    TOPIC_CONFIG: (MSGTYPE_CONFIG, "transient_local", 1),
+    TOPIC_CONFIG: (MSGTYPE_CONFIG, "transient_local", 10),
 }
+#: Topics whose last message is state that every bag needs: repeated at the start of each
+#: new bag (the rig configuration is handled separately, see RecordingSession).
+CARRIED_TOPICS = frozenset({TOPIC_SETTINGS})
 SPLIT_MODES = ("run", "unload")
 LOG_TIME_MODES = ("receive", "header")
 #: Range of ``flush_interval`` [s].
@@ -157,23 +175,32 @@ class RecordingSession:
         self.bags: list[Path] = []
         self.counts: Counter[str] = Counter()
         self.errors = 0
-        self._runs = 0  # bags started because of a new configuration (run mode)
+        self._runs = 0  # number of the last bag started after the first one
         self._extra_types: set[str] = set()
         self._config_text: str | None = None
         self._valve_open: bool | None = None
-        self._armed = False  # an estimate is in the current bag (split=unload)
+        self._armed: int | None = None  # unload_index of the estimate in the current bag
+        # split=unload: the previous bag stays open for late estimates of its unload
+        self._prev: BagRecorder | None = None
+        self._prev_index: int | None = None
+        self._carried: dict[str, tuple[str, bytes]] = {}  # topic -> (type, last message)
         self._closed = False
         self._rec = self._open_bag()
 
     # ------------------------------------------------------------------ bag handling
 
     def _next_path(self) -> Path:
-        if self.split == "unload":
-            return self.output / f"unload-{len(self.bags):03d}"
+        """The next bag directory (skipping names that exist: never overwrite)."""
         if not self.bags:
-            return self.output
-        self._runs += 1
-        return self.output.with_name(f"{self.output.name}-{self._runs:03d}")
+            return self.output / "unload-000" if self.split == "unload" else self.output
+        while True:
+            self._runs += 1
+            if self.split == "unload":
+                path = self.output / f"unload-{self._runs:03d}"
+            else:
+                path = self.output.with_name(f"{self.output.name}-{self._runs:03d}")
+            if not path.exists():
+                return path
 
     def _open_bag(self) -> BagRecorder:
         path = self._next_path()
@@ -190,10 +217,27 @@ class RecordingSession:
         self.bags.append(path)
         return rec
 
-    def _rotate(self) -> None:
-        self._rec.close()
-        self._armed = False
-        self._rec = self._open_bag()
+    def _close_prev(self) -> None:
+        prev, self._prev, self._prev_index = self._prev, None, None
+        if prev is not None:
+            prev.close()
+
+    def _rotate(self, log_ns: int, *, linger: bool = False) -> None:
+        """Start a new bag; with ``linger`` the old one stays open for late estimates.
+
+        The new bag is opened first: if that fails, recording goes on in the old one.
+        """
+        new = self._open_bag()
+        old, self._rec = self._rec, new
+        self._close_prev()
+        if linger:
+            self._prev, self._prev_index = old, self._armed
+        else:
+            old.close()
+        self._armed = None
+        for topic, (msgtype, data) in self._carried.items():
+            self._rec.write_raw(topic, msgtype, log_ns, data)
+            self.counts[topic] += 1
 
     @property
     def current_bag(self) -> Path:
@@ -242,18 +286,35 @@ class RecordingSession:
         if topic == TOPIC_CONFIG and msgtype == MSGTYPE_CONFIG:
             self._on_config(data, log_ns)
             return
+        index: int | None = None
         if self.split == "unload":
             if topic == TOPIC_VALVE and msgtype == MSGTYPE_VALVE:
                 try:
                     self._valve_open = bool(self._store.deserialize_cdr(data, msgtype).open)
                 except Exception as err:  # still recorded below
                     self._report(f"recorder: cannot decode a {msgtype} message: {err}")
-            if self._armed and self._valve_open is not True:
-                self._rotate()
+                if self._valve_open:
+                    self._close_prev()  # the next unload starts
+            elif topic == TOPIC_ESTIMATE and msgtype == MSGTYPE_ESTIMATE:
+                try:
+                    index = int(self._store.deserialize_cdr(data, msgtype).unload_index)
+                except Exception as err:  # still recorded below
+                    self._report(f"recorder: cannot decode a {msgtype} message: {err}")
+                    index = -1
+                if self._prev is not None:
+                    if index == self._prev_index:  # e.g. the final (curve-fit) estimate
+                        self._prev.write_raw(topic, msgtype, log_ns, data)
+                        self.counts[topic] += 1
+                        return
+                    self._close_prev()
+            if self._armed is not None and self._valve_open is not True:
+                self._rotate(log_ns, linger=True)
         self._rec.write_raw(topic, msgtype, log_ns, data)
         self.counts[topic] += 1
-        if self.split == "unload" and topic == TOPIC_ESTIMATE and msgtype == MSGTYPE_ESTIMATE:
-            self._armed = True
+        if topic in CARRIED_TOPICS:
+            self._carried[topic] = (msgtype, data)
+        if index is not None:
+            self._armed = index
 
     def _on_config(self, data: bytes, log_ns: int) -> None:
         text = self._store.deserialize_cdr(data, MSGTYPE_CONFIG).data
@@ -273,7 +334,7 @@ class RecordingSession:
             self._report(f"recorder: new rig configuration: starting a new bag after "
                          f"{self.current_bag}")
             self._config_text = text
-            self._rotate()
+            self._rotate(log_ns)
         self.counts[TOPIC_CONFIG] += 1
 
     # ------------------------------------------------------------------- lifecycle
@@ -282,17 +343,23 @@ class RecordingSession:
         """Hand pending data to the operating system (call at least every flush_interval)."""
         if self._closed:
             return
-        try:
-            self._rec.flush()
-        except Exception as err:
-            self.errors += 1
-            self._report(f"recorder: flush failed: {err}")
+        for rec in (self._rec, self._prev):
+            if rec is None:
+                continue
+            try:
+                rec.flush()
+            except Exception as err:
+                self.errors += 1
+                self._report(f"recorder: flush failed: {err}")
 
     def close(self) -> None:
-        """Complete the current bag (summary, ``metadata.yaml``). Idempotent."""
+        """Complete the open bag(s) (summary, ``metadata.yaml``). Idempotent."""
         if not self._closed:
             self._closed = True
-            self._rec.close()
+            try:
+                self._close_prev()
+            finally:
+                self._rec.close()
 
 
 # ============================================================================ ROS node
@@ -327,19 +394,17 @@ def _make_node() -> Any:
             desc = ParameterDescriptor
             self.declare_parameter("output", "", desc(
                 description="bag directory (split=run) or parent of the bags (split=unload); "
-                "default runs/rec-<UTC time>", read_only=True))
+                "default runs/rec-<UTC time>"))
             self.declare_parameter("split", "run", desc(
-                description="'run': one bag; 'unload': one bag per unload", read_only=True))
+                description="'run': one bag; 'unload': one bag per unload"))
             self.declare_parameter("flush_interval", 0.5, desc(
-                description="maximal age of data not yet on disk [s]", dynamic_typing=True,
-                read_only=True))
+                description="maximal age of data not yet on disk [s]", dynamic_typing=True))
             self.declare_parameter("log_time", "receive", desc(
-                description="bag log time: 'receive' or 'header' (header stamp)",
-                read_only=True))
+                description="bag log time: 'receive' or 'header' (header stamp)"))
             self.declare_parameter("topics", Parameter.Type.STRING_ARRAY, desc(
-                description="extra topics to record (types from the graph)", read_only=True))
+                description="extra topics to record (types from the graph)"))
             self.declare_parameter("fsync", False, desc(
-                description="fsync at each flush", read_only=True))
+                description="fsync at each flush"))
             self.add_on_set_parameters_callback(self._reject_changes)
 
             flush = self.get_parameter("flush_interval").value
@@ -454,6 +519,9 @@ def main(argv: list[str] | None = None) -> int:
             node = _make_node()()
         except (RecorderParameterError, ParameterException) as err:
             print(f"recorder: invalid parameter: {err}", file=sys.stderr, flush=True)
+            return 2
+        except (BagError, OSError) as err:
+            print(f"recorder: cannot create the bag: {err}", file=sys.stderr, flush=True)
             return 2
         session = node.session
         # The EventsExecutor keeps up with 10 kHz; its spin() ignores SIGINT and its timers
