@@ -230,6 +230,128 @@ def cmd_recover(args: argparse.Namespace) -> int:
     return 0
 
 
+# --------------------------------------------------------------------------- discrepancy
+def _load_temperature(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray] | None:
+    """Measured gas temperature of the input (t [s], T [K]), or None when absent."""
+    path = Path(args.path)
+    try:
+        if path.suffix.lower() in (".csv", ".txt"):
+            from pneumatic_unload.io.csvlog import read_csv_trace
+
+            tr = read_csv_trace(
+                path, time_column=args.time_column, pressure_column=args.pressure_column,
+                pressure_unit=args.pressure_unit, gauge=args.gauge or None,
+                atmosphere=args.atmosphere)
+            if tr.temperature is None or tr.temperature.size < 3:
+                return None
+            return np.asarray(tr.t, float), np.asarray(tr.temperature, float)
+        from pneumatic_unload.io.bag import read_temperature
+
+        t_ns, temp = read_temperature(path)
+        if len(temp) < 3:
+            return None
+        return np.asarray(t_ns, dtype=np.int64) * 1e-9, np.asarray(temp, float)
+    except Exception:  # the temperature is optional evidence: never fail the run on it
+        return None
+
+
+def cmd_discrepancy(args: argparse.Namespace) -> int:
+    """Name the effect the discharge model misses, with evidence (one or several runs)."""
+    from pneumatic_unload.discrepancy import DiscrepancyError, DiscrepancySettings
+    from pneumatic_unload.discrepancy.multirun import fit_geometry_law
+    from pneumatic_unload.discrepancy.report import write_law_report, write_report
+    from pneumatic_unload.discrepancy.workflow import find_discrepancy
+
+    lds = args.length_diameter_ratio or [None]
+    if len(lds) not in (1, len(args.paths)):
+        raise CliError("give one --length-diameter-ratio for all runs or one per PATH")
+    results, names, settings = [], [], []
+    for i, path in enumerate(args.paths):
+        ns = argparse.Namespace(**vars(args))
+        ns.path = path
+        ns.length_diameter_ratio = lds[i] if len(lds) > 1 else lds[0]
+        ns.heat_model, ns.critical_ratio, ns.no_curve_fit = "adiabatic", 0.5, True
+        t, p, cfg = load_trace(ns)
+        try:
+            ds = DiscrepancySettings.from_estimator(
+                settings_from(ns, cfg), fit_wall_temperature=args.fit_wall_temperature,
+                max_effects=args.max_effects, profile=not args.no_profile)
+            res = find_discrepancy(t, p, ds, temperature=_load_temperature(ns))
+        except DiscrepancyError as exc:
+            raise CliError(f"{path}: {exc}") from exc
+        results.append(res)
+        names.append(Path(path).name)
+        settings.append(ds)
+    law = None
+    if len(results) > 1:
+        try:
+            law = fit_geometry_law([s.length_diameter_ratio for s in settings],
+                                   [r.conductance for r in results],
+                                   [r.conductance_std() for r in results])
+        except DiscrepancyError as exc:
+            raise CliError(str(exc)) from exc
+    if args.report:
+        out = Path(args.report)
+        for name, res in zip(names, results, strict=True):
+            write_report(res, out if len(results) == 1 else out / Path(name).stem,
+                         title=name)
+        if law is not None:
+            write_law_report(law, out, names)
+    if args.json:
+        docs = [dict(res.to_dict(), source=str(p)) for res, p in
+                zip(results, args.paths, strict=True)]
+        out_json: dict[str, Any] = docs[0] if len(docs) == 1 else {
+            "runs": docs, "geometry_law": law.to_dict() if law else None}
+        print(json.dumps(out_json, indent=2, allow_nan=False, default=_json_default))
+    else:
+        for name, res in zip(names, results, strict=True):
+            print(f"{name}: {res.verdict}")
+            for k, v in res.parameters.items():
+                print(f"  {k} = {v.value:.5g} {v.unit}  95 % [{v.low:.4g}, {v.high:.4g}] "
+                      f"({v.method}{'' if v.identifiable else ', NOT identifiable'})")
+            print(f"  noise sigma = {res.noise.sigma:.4g} Pa, rho = {res.noise.rho:.3f}")
+        if law is not None:
+            print(f"geometry law: {law.reason}")
+        if args.report:
+            print(f"report written to {args.report}")
+    return 0
+
+
+def add_discrepancy_parser(sub: Any) -> None:
+    """The ``discrepancy`` sub-command (input options as ``analyze``)."""
+    dc = sub.add_parser("discrepancy",
+                        help="name the effect the discharge model misses, with evidence")
+    dc.add_argument("paths", nargs="+", metavar="PATH",
+                    help="rosbag2 directory, .mcap file or .csv log (several: one shared "
+                         "geometry law of C)")
+    dc.add_argument("--volume", type=float, help="tank volume [m^3] (default: from the bag)")
+    dc.add_argument("--initial-temperature", type=float, help="T10 [K]")
+    dc.add_argument("--atmosphere", type=float,
+                    help="atmospheric pressure [Pa absolute] (default 101325 or the bag's)")
+    dc.add_argument("--atmosphere-auto", action="store_true",
+                    help="fit p_atm (offset and gain then become hard to identify)")
+    dc.add_argument("--length-diameter-ratio", type=float, nargs="+",
+                    help="tank L/D [-], one for all runs or one per PATH")
+    dc.add_argument("--wall-temperature", type=float, help="wall temperature [K]")
+    dc.add_argument("--fit-wall-temperature", action="store_true",
+                    help="fit the wall temperature with the heat-transfer effect")
+    dc.add_argument("--max-effects", type=int, default=3, choices=(1, 2, 3),
+                    help="add at most this many effects (greedy)")
+    dc.add_argument("--no-profile", action="store_true",
+                    help="linear intervals only (faster)")
+    dc.add_argument("--topic", default="/tank/pressure", help="pressure topic of a bag")
+    dc.add_argument("--time-column", help="CSV time column [s]")
+    dc.add_argument("--pressure-column", help="CSV pressure column")
+    dc.add_argument("--pressure-unit", choices=tuple(PRESSURE_UNITS), default=None,
+                    help="CSV pressure unit (default: from the header, else Pa)")
+    dc.add_argument("--gauge", action="store_true",
+                    help="CSV pressures are gauge: add --atmosphere to every reading")
+    dc.add_argument("--json", action="store_true", help="print a JSON object")
+    dc.add_argument("--report", metavar="DIR",
+                    help="write report.md with PNG plots into DIR")
+    dc.set_defaults(func=cmd_discrepancy)
+
+
 # --------------------------------------------------------------------------- parser
 def add_config_options(parser: argparse.ArgumentParser) -> None:
     """One option per :class:`RigConfig` field (name with dashes), with unit and range."""
@@ -302,6 +424,8 @@ def build_parser() -> argparse.ArgumentParser:
     rc = sub.add_parser("recover", help="repair a bag whose writer was killed")
     rc.add_argument("bag", help="bag directory")
     rc.set_defaults(func=cmd_recover)
+
+    add_discrepancy_parser(sub)
     return ap
 
 

@@ -1,18 +1,22 @@
 """The unloading-time method as a streaming estimator (live node and offline analysis).
 
 :class:`StreamingEstimator` is fed pressure samples one at a time (:meth:`push`) or in
-blocks (:meth:`push_block`); both paths take exactly the same decisions, because every
-decision is taken at a sample index from the samples up to that index only, and the block
-path merely finds the next decision index with numpy. :func:`analyze` is the batch
-function over arrays.
+blocks (:meth:`push_block`); both paths give bit-identical results, because every
+decision is taken at a sample index from the samples up to that index only, with O(1)
+statistics from running prefix sums (of p and of squared first differences), and the block
+path evaluates the periodic checks that decide nothing for many indices at once with the
+same formulas, calling the per-sample decision code only where something happens.
+:func:`analyze` is the batch function over arrays (the block path on the whole trace).
 
 Per unload it: detects the start of the step (trigger, confirmation, then a sub-sample
 hinge fit of the valve-opening instant); takes p10 from the pre-step plateau and p_atm from
 a parameter or the final plateau; computes p* (eq 40); finds the p* crossing by a local
 quadratic regression (noise-robust, sub-sample); returns tau_exp and C by eq 39, plus the
 model-based C that removes eq 39's known bias (exact inversion of the discharge model at
-the crossing); reports an aborted unload (valve closed before p*) and, when the recovery
-plateau is recorded, the SSE value (eq 23); then re-arms for the next unload.
+the crossing, then a full-curve fit once the unload has ended); reports an aborted unload
+(valve closed before p*) and, when the re-heating after the closing is recorded (fitted
+and, if unfinished, extrapolated with its uncertainty), the SSE value (eq 23); ends the
+unload's tail when the tank is charged again and re-arms for the next unload.
 
 Only relative values matter for tau_exp: the input may be any linear signal (volts) when
 ``signal_gain``/``signal_offset`` convert it, or when only tau_exp is wanted; p10, p_atm and
@@ -36,6 +40,11 @@ FloatArray = NDArray[np.float64]
 
 #: Statuses of an :class:`UnloadResult` (same order as the message's STATUS_* constants).
 STATUSES = ("ok", "aborted_sse", "aborted", "not_choked", "bad_data")
+
+
+#: Relative 1-sigma of eq 23 itself [-]: it assumes an isentropic unload (wall heat flow
+#: during the unload shifts it by up to ~0.5 %) and writes p_N for rho_N R T_N (0.28 %).
+SSE_MODEL_REL_STD = 0.01
 
 
 class EstimationError(ValueError):
@@ -156,6 +165,11 @@ class UnloadResult:
     t_complete: float = math.nan
     t_end: float = math.nan
     extra: dict[str, Any] = field(default_factory=dict)
+    #: Start instant of the fitted discharge model [s] (final results; NaN otherwise).
+    t_start_model: float = math.nan
+    #: tau_exp of the fitted model, its p* crossing from its start [s]: uses the whole curve,
+    #: so it is less noisy than ``tau_exp`` (the paper's measurement, which it never replaces).
+    tau_exp_model: float = math.nan
 
     @property
     def bias(self) -> float:
@@ -212,6 +226,20 @@ def _rms_sigma(x: FloatArray) -> float:
     return float(np.std(np.diff(x))) / math.sqrt(2.0)
 
 
+def _solve3(m: tuple[tuple[float, float, float], ...], r: tuple[float, float, float]
+            ) -> tuple[float, float, float] | None:
+    """Solve a 3x3 linear system by Cramer's rule (None when singular) [-]."""
+    (a, b, c), (d, e, f), (g, h, k) = m
+    c1, c2, c3 = e * k - f * h, f * g - d * k, d * h - e * g
+    det = a * c1 + b * c2 + c * c3
+    if det == 0.0 or not math.isfinite(det):
+        return None
+    x = (r[0] * c1 + b * (f * r[2] - r[1] * k) + c * (r[1] * h - e * r[2])) / det
+    y = (a * (r[1] * k - f * r[2]) + r[0] * c2 + c * (d * r[2] - r[1] * g)) / det
+    z = (a * (e * r[2] - r[1] * h) + b * (r[1] * g - d * r[2]) + r[0] * c3) / det
+    return x, y, z
+
+
 def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
               ) -> tuple[float, float, float, float, float]:
     """Fit p = p10 (t < t0), p10 - s u + c u^2 (u = t - t0 >= 0) with t0 in [t_lo, t_hi].
@@ -233,13 +261,28 @@ def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
     """
     tc = t - t[0]
     scale_t = max(tc[-1], 1e-12)
+    p_ref = float(np.mean(p))
+    q = p - p_ref
+    n_all = float(q.size)
+    sq_all, s_all = float(q @ q), float(np.sum(q))
 
     def solve(t0: float) -> tuple[float, FloatArray]:
-        u = np.clip(tc - (t0 - t[0]), 0.0, None) / scale_t
-        a = np.column_stack((np.ones_like(u), -u, u * u))
-        coef, *_ = np.linalg.lstsq(a, p, rcond=None)
-        r = p - a @ coef
-        return float(r @ r), coef
+        # normal equations of [1, -u, u^2] from sums over the post-t0 samples (u > 0)
+        k = int(np.searchsorted(tc, t0 - t[0], side="right"))
+        u = (tc[k:] - (t0 - t[0])) / scale_t
+        qk = q[k:]
+        u2 = u * u
+        su, su2, su3, su4 = float(u.sum()), float(u2.sum()), float(u2.dot(u)), \
+            float(u2.dot(u2))
+        squ, squ2 = float(qk.dot(u)), float(qk.dot(u2))
+        m = ((n_all, -su, su2), (-su, su2, -su3), (su2, -su3, su4))
+        rhs = (s_all, -squ, squ2)
+        coef = _solve3(m, rhs)
+        if coef is None:
+            sol = np.linalg.lstsq(np.array(m), np.array(rhs), rcond=None)[0]
+            coef = (float(sol[0]), float(sol[1]), float(sol[2]))
+        sse = max(sq_all - (coef[0] * rhs[0] + coef[1] * rhs[1] + coef[2] * rhs[2]), 0.0)
+        return sse, np.array((coef[0] + p_ref, coef[1], coef[2]))
 
     cand = t[(t >= t_lo) & (t <= t_hi)]
     if cand.size == 0:
@@ -254,7 +297,7 @@ def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
     x1, x2 = b_ - gr * (b_ - a_), a_ + gr * (b_ - a_)
     f1, f2 = solve(x1)[0], solve(x2)[0]
     for _ in range(48):
-        if b_ - a_ < 1e-6 * max(step, 1e-12):
+        if b_ - a_ < 1e-3 * max(step, 1e-12):
             break
         if f1 <= f2:
             b_, x2, f2 = x2, x1, f1
@@ -317,6 +360,65 @@ def crossing_fit(t: FloatArray, p: FloatArray, level: float
     return tm + xr, std, slope
 
 
+def corner_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
+               ) -> tuple[float, float, float]:
+    """Sub-sample instant of a slope change: p = c0 + quadratic in u- and in u+.
+
+    u- = min(t - tc, 0) and u+ = max(t - tc, 0); tc in [t_lo, t_hi] minimises the profiled
+    sum of squares (grid on the sample instants, then golden section). Used for the
+    closing instant of an aborted unload.
+
+    Parameters
+    ----------
+    t, p : ndarray
+        Window of samples [s], [Pa].
+    t_lo, t_hi : float
+        Search interval [s].
+
+    Returns
+    -------
+    tuple
+        (tc [s], p(tc) [Pa], residual rms [Pa]).
+    """
+    tm = t - t[0]
+    sc = max(float(tm[-1]), 1e-12)
+
+    def solve(tc: float) -> tuple[float, FloatArray]:
+        u = (tm - (tc - t[0])) / sc
+        um, up = np.minimum(u, 0.0), np.maximum(u, 0.0)
+        a = np.column_stack((np.ones_like(u), um, um * um, up, up * up))
+        coef, *_ = np.linalg.lstsq(a, p, rcond=None)
+        r = p - a @ coef
+        return float(r @ r), coef
+
+    cand = t[(t >= t_lo) & (t <= t_hi)]
+    if cand.size == 0:
+        cand = np.array([0.5 * (t_lo + t_hi)])
+    if cand.size > 96:
+        cand = cand[np.linspace(0, cand.size - 1, 96).astype(int)]
+    sse = [solve(float(c))[0] for c in cand]
+    k = int(np.argmin(sse))
+    step = float(cand[1] - cand[0]) if cand.size > 1 else t_hi - t_lo
+    a_, b_ = max(t_lo, float(cand[k]) - step), min(t_hi, float(cand[k]) + step)
+    gr = (math.sqrt(5.0) - 1.0) / 2.0
+    x1, x2 = b_ - gr * (b_ - a_), a_ + gr * (b_ - a_)
+    f1, f2 = solve(x1)[0], solve(x2)[0]
+    for _ in range(48):
+        if b_ - a_ < 1e-6 * max(step, 1e-12):
+            break
+        if f1 <= f2:
+            b_, x2, f2 = x2, x1, f1
+            x1 = b_ - gr * (b_ - a_)
+            f1 = solve(x1)[0]
+        else:
+            a_, x1, f1 = x1, x2, f2
+            x2 = a_ + gr * (b_ - a_)
+            f2 = solve(x2)[0]
+    tc = 0.5 * (a_ + b_)
+    sse0, coef = solve(tc)
+    return tc, float(coef[0]), math.sqrt(sse0 / max(p.size - 6, 1))
+
+
 # --------------------------------------------------------------------------- estimator
 _WAITING, _CONFIRM, _UNLOADING, _TAIL, _RECOVERY = (
     "waiting", "confirming", "unloading", "tail", "recovery")
@@ -347,17 +449,27 @@ class StreamingEstimator:
     CONFIRM = 64
     #: Samples between the end of the reference plateau window and now [-].
     LAG = 256
+    #: Most pre-step plateau samples used by the start (hinge) fit [-]: the start's
+    #: precision on slow discharges is limited by how well p10 is known (see
+    #: bench/bench_accuracy.py start), and the plateau costs the fit O(1) per candidate.
+    HINGE_PLATEAU = 16384
 
     def __init__(self, settings: EstimatorSettings | None = None) -> None:
         self.settings = settings or EstimatorSettings()
         self._t = array("d")
         self._p = array("d")
+        # prefix sums (index k holds the sum over samples 0..k-1): of p, and of the squared
+        # first differences (cq[k+1] - cq[k] = (p[k] - p[k-1])^2, 0 for k = 0), so that
+        # every periodic decision is O(1) and the block path can evaluate many at once
+        self._cs = array("d", [0.0])
+        self._cq = array("d", [0.0])
         self.diagnostics: list[Diagnostic] = []
         self.results: list[UnloadResult] = []
         self._n_unloads = 0
         self._last_t = -math.inf
         self._dt_nominal = math.nan
         self._shift = 0  # samples trimmed from the buffer's start
+        self._stuck_reported = False
         self._to_waiting(0)
 
     # ------------------------------------------------------------------ public API
@@ -395,6 +507,12 @@ class StreamingEstimator:
         if t - self._last_t > self._gap_limit:
             self._on_gap(t)
         self._last_t = t
+        if self._p:
+            d = p - self._p[-1]
+            self._cq.append(self._cq[-1] + d * d)
+        else:
+            self._cq.append(self._cq[-1])
+        self._cs.append(self._cs[-1] + p)
         self._t.append(t)
         self._p.append(p)
         i = len(self._p) - 1
@@ -432,35 +550,228 @@ class StreamingEstimator:
         ok_t = (t > prev_max) & np.isfinite(t)
         if not (ok_t.all() and fin_p.all()):
             return self._push_slow(t, p)
-        dts = np.diff(np.concatenate(([self._last_t], t)))
-        if np.any(dts > self._gap_limit) and len(self._p) > 0:
-            return self._push_slow(t, p)
+        out: list[UnloadResult] = []
+        k, size = 0, t.size
+        while k < size:
+            if math.isnan(self._dt_nominal):
+                # sample by sample until the nominal period (and so the gap limit) is known
+                out += self.push(float(t[k]), float(p[k]))
+                k += 1
+                continue
+            prev = np.concatenate(([self._last_t], t[k:size - 1]))
+            gaps = np.flatnonzero(t[k:] - prev > self._gap_limit)
+            if gaps.size and gaps[0] == 0:
+                out += self.push(float(t[k]), float(p[k]))  # diagnoses the gap
+                k += 1
+                continue
+            g = k + int(gaps[0]) if gaps.size else size
+            out += self._push_fast(t[k:g], p[k:g])
+            k = g
+        return out
+
+    def _push_fast(self, t: FloatArray, p: FloatArray) -> list[UnloadResult]:
+        """Block of finite, increasing samples without gaps: jump between decisions.
+
+        The periodic checks that change nothing but the running statistics are evaluated
+        for many check indices at once (:meth:`_scan`), with the same prefix-sum formulas
+        and in the same floating-point order as :meth:`_step` evaluates them one by one;
+        :meth:`_step` runs only where something may happen.
+        """
         out: list[UnloadResult] = []
         start = len(self._p)
-        self._t.extend(t)
-        self._p.extend(p)
+        prev = self._p[-1] if start else float(p[0])
+        d = np.diff(np.concatenate(([prev], p)))
+        # frombytes: a memcpy (array.extend would iterate element by element)
+        self._cq.frombytes(np.cumsum(np.concatenate(([self._cq[-1]], d * d)))[1:].tobytes())
+        self._cs.frombytes(np.cumsum(np.concatenate(([self._cs[-1]], p)))[1:].tobytes())
+        self._t.frombytes(np.ascontiguousarray(t, dtype=np.float64).tobytes())
+        self._p.frombytes(np.ascontiguousarray(p, dtype=np.float64).tobytes())
         self._last_t = float(t[-1])
         end = len(self._p)
-        pv = np.frombuffer(self._p, dtype=float)
         i = start
         while i < end:
-            # next decision index: periodic check or level condition
-            hi = min(end, self._next_check + 1) if self._next_check >= i else end
-            seg = pv[i:hi]
-            hit = np.flatnonzero(seg < self._level if self._below else seg > self._level)
-            j = i + int(hit[0]) if hit.size else hi
-            if j == hi and self._next_check < hi and self._next_check >= i:
-                j = self._next_check
+            j = self._scan(i, min(end, i + self.SCAN_HORIZON))
             if j >= end:
                 break
+            if j >= i + self.SCAN_HORIZON:  # horizon reached without a decision
+                i = j
+                continue
             shift = self._shift
-            del pv, seg, hit  # no buffer views may be alive while a step trims the buffer
             out += self._step(j)
             trimmed = self._shift - shift
             i, end = j + 1 - trimmed, end - trimmed
-            pv = np.frombuffer(self._p, dtype=float)
         self.results += out
         return out
+
+    #: Samples looked ahead per vectorised scan [-].
+    SCAN_HORIZON = 16384
+
+    def _scan(self, i: int, end: int) -> int:
+        """Next index in [i, end) where :meth:`_step` must run (end: none).
+
+        Checks before that index that decide nothing have their effect (running
+        statistics, next check index) applied here, exactly as :meth:`_step` would.
+        """
+        state = self._state
+        if self._next_check < i:
+            self._next_check = i  # cannot happen; keeps the scan safe
+        if state == _WAITING and not math.isnan(self._dt_nominal):
+            return self._scan_waiting(i, end)
+        if state == _UNLOADING and (not self._refined
+                                    or math.isfinite(self._pstar_signal)):
+            return self._scan_unloading(i, end)
+        if state == _TAIL:
+            return self._scan_tail(i, end)
+        if state == _RECOVERY:
+            return self._scan_recovery(i, end)
+        return self._scan_generic(i, end)
+
+    def _level_hit(self, i: int, hi: int) -> int:
+        """First index in [i, hi) meeting the level condition, or hi."""
+        if hi <= i or self._level == -math.inf:
+            return hi
+        pv = np.frombuffer(self._p, dtype=float)[i:hi]
+        hit = np.flatnonzero(pv < self._level if self._below else pv > self._level)
+        return i + int(hit[0]) if hit.size else hi
+
+    def _scan_generic(self, i: int, end: int) -> int:
+        nc = self._next_check
+        j = self._level_hit(i, min(end, nc))
+        if j < min(end, nc):
+            return j
+        return nc if nc < end else end
+
+    def _checks(self, i: int, end: int) -> NDArray[np.int64]:
+        """Periodic check indices in [i, end)."""
+        return np.arange(self._next_check, end, self.PERIOD, dtype=np.int64)
+
+    def _scan_waiting(self, i: int, end: int) -> int:
+        nc = self._next_check
+        j = self._level_hit(i, min(end, nc))
+        if j < min(end, nc):
+            return j
+        ks = self._checks(i, end)
+        if ks.size == 0:
+            return end
+        s = self.settings
+        per, arm = self.PERIOD, self._arm_index
+        cs = np.frombuffer(self._cs, dtype=float)
+        cq = np.frombuffer(self._cq, dtype=float)
+        pv = np.frombuffer(self._p, dtype=float)
+        n = ks + 1
+        lag = np.minimum(self.LAG, np.maximum(n - arm - s.min_plateau, 0))
+        hi = n - lag
+        lo = np.maximum(arm, hi - self.PLATEAU)
+        plat = (cs[hi] - cs[lo]) / (hi - lo)
+        sig = np.sqrt(np.maximum(cq[hi] - cq[lo + 1], 0.0) / (hi - lo - 1) / 2.0)
+        sig_eff = np.maximum(sig, 1e-4 * np.abs(plat) + 1e-12)
+        level = plat - s.trigger_sigma * sig_eff
+        blo = np.maximum(arm, n - per)
+        bmean = (cs[n] - cs[blo]) / (n - blo)
+        bthr = 6.0 * sig_eff / math.sqrt(per)
+        event = (lag >= s.min_plateau) & (n - blo == per) & (bmean > plat + 2.0 * bthr)
+        event |= (lag >= per) & (bmean < plat - bthr)
+        event |= pv[ks] < level
+        if self._stuck_reported:
+            event |= sig > 0.0
+        else:
+            event |= (sig == 0.0) & (hi - lo >= 2 * s.min_plateau)
+        event |= np.minimum(n - 4 * self.PLATEAU, arm) > 65536  # buffer trim
+        # samples between checks against the level of the check before them
+        seg = pv[ks[0]:end]
+        below = seg < np.repeat(level, per)[:seg.size]
+        below[::per] = False
+        below[::per] = event[:(seg.size + per - 1) // per]
+        hits = np.flatnonzero(below)
+        if hits.size == 0:
+            k, j = ks.size, end
+        else:
+            j = int(ks[0]) + int(hits[0])
+            k = (j - int(ks[0])) // per  # the check at or before j
+            if not event[k] or j != ks[k]:
+                k += 1  # between-check hit: check k ran without a decision
+        if k > 0:  # state after the last check that decided nothing
+            self._plateau_level = float(plat[k - 1])
+            self._sigma = float(sig[k - 1])
+            self._level = float(level[k - 1])
+            self._next_check = int(ks[k - 1]) + per
+        return j
+
+    def _scan_unloading(self, i: int, end: int) -> int:
+        nc = self._next_check
+        j = self._level_hit(i, end)
+        ks = self._checks(i, min(j, end))
+        if ks.size == 0:
+            return j
+        if self._refined and self._slope0 > 0:
+            stalled = self._stalled_many(ks)
+            hit = np.flatnonzero(stalled)
+            if hit.size:
+                k = int(hit[0])
+                self._next_check = int(ks[k]) if k > 0 else nc
+                return int(ks[k])
+        self._next_check = int(ks[-1]) + self.PERIOD
+        return j
+
+    def _stalled_many(self, ks: NDArray[np.int64]) -> NDArray[np.bool_]:
+        """:meth:`_stalled` at many check indices (same formulas)."""
+        cs = np.frombuffer(self._cs, dtype=float)
+        tv = np.frombuffer(self._t, dtype=float)
+        span = ks - self._i0
+        w = np.minimum(np.maximum(32, span // 4), 8192)
+        ok = span >= 2 * w
+        a = (cs[np.maximum(ks - w + 1, 0)] - cs[np.maximum(ks - 2 * w + 1, 0)]) / w
+        b = (cs[ks + 1] - cs[np.maximum(ks - w + 1, 0)]) / w
+        dt = tv[ks] - tv[np.maximum(ks - w, 0)]
+        drop = a - b
+        se = self._sigma * np.sqrt(2.0 / w)
+        return ok & (drop < 0.05 * self._slope0 * dt) & (drop < 4.0 * se)
+
+    def _scan_tail(self, i: int, end: int) -> int:
+        ks = self._checks(i, end)
+        if ks.size == 0:
+            return end
+        per = self.PERIOD
+        cs = np.frombuffer(self._cs, dtype=float)
+        m = (cs[ks + 1] - cs[ks - per + 1]) / per
+        low_prev = np.minimum.accumulate(np.concatenate(([self._tail_low], m)))[:-1]
+        dp = abs(self._p10_signal - self._atm_signal)
+        thr = max(10.0 * self._sigma / math.sqrt(per), 0.02 * dp)
+        event = (m >= low_prev) & (m - low_prev > thr)
+        res = self._pending
+        if res is not None:
+            event |= self._flat_many(ks, res.tau_exp)
+        hit = np.flatnonzero(event)
+        k = int(hit[0]) if hit.size else ks.size
+        if k > 0:
+            self._tail_low = float(min(low_prev[k - 1], m[k - 1]))
+            self._next_check = int(ks[k - 1]) + per
+        return int(ks[k]) if k < ks.size else end
+
+    def _flat_many(self, ks: NDArray[np.int64], tau: float) -> NDArray[np.bool_]:
+        """:meth:`_flat` at many check indices (same formulas)."""
+        dt = self._dt_nominal if math.isfinite(self._dt_nominal) else 1e-3
+        w = self._flat_window(tau)
+        ok = ks - self._i0 >= 2 * w + int(tau / dt)
+        ka = np.maximum(ks - 2 * w + 1, 0)
+        cs = np.frombuffer(self._cs, dtype=float)
+        a = (cs[np.maximum(ks - w + 1, 0)] - cs[ka]) / w
+        b = (cs[ks + 1] - cs[np.maximum(ks - w + 1, 0)]) / w
+        dp_total = np.abs(self._p10_signal - b)
+        change = np.abs(a - b)
+        se = self._sigma * math.sqrt(2.0 / w)
+        return ok & (change < np.maximum(4.0 * se, 0.002 * dp_total))
+
+    def _scan_recovery(self, i: int, end: int) -> int:
+        ks = self._checks(i, end)
+        if ks.size == 0:
+            return end
+        span = ks - self._i_close
+        hit = np.flatnonzero((span >= self.RECOVERY_MIN) & (span >= 1.25 * self._rec_span))
+        k = int(hit[0]) if hit.size else ks.size
+        if k > 0:
+            self._next_check = int(ks[k - 1]) + self.PERIOD
+        return int(ks[k]) if k < ks.size else end
 
     def finish(self) -> list[UnloadResult]:
         """End of stream: report an unload still pending (aborted, or crossing not reached).
@@ -474,11 +785,17 @@ class StreamingEstimator:
         out: list[UnloadResult] = []
         if self._state == _RECOVERY:
             out.append(self._abort_result(n - 1, recovered=False))
+        elif self._state == _UNLOADING and self._end_plateau_auto(n - 1):
+            # p_atm from the final samples (short record, e.g. 1 Hz): crossing, then tail
+            out += self._check_final_plateau_auto(n - 1, at_end=True)
+            if self._state == _TAIL and self._pending is not None:
+                out += self._finish_tail(n - 1, ended=True)
         elif self._state == _UNLOADING:
-            self._diag("warn", "stream ended before the p* crossing", self._last_t)
-            res = self._abort_result(n - 1, recovered=False,
-                                     text="stream ended before the p* crossing")
-            out.append(res)
+            auto = getattr(self, "_refined", False) and not math.isfinite(self._pstar_signal)
+            text = ("stream ended before the final plateau: p_atm unknown (give the "
+                    "atmospheric pressure)" if auto else "stream ended before the p* crossing")
+            self._diag("warn", text, self._last_t)
+            out.append(self._abort_result(n - 1, recovered=False, text=text))
         elif self._state == _TAIL and self._pending is not None:
             out += self._finish_tail(n - 1, ended=True)
         self._to_waiting(n)
@@ -540,6 +857,8 @@ class StreamingEstimator:
             # new arrays (not in-place deletion): views held by callers stay valid
             self._t = array("d", self._t[keep:])
             self._p = array("d", self._p[keep:])
+            self._cs = array("d", self._cs[keep:])
+            self._cq = array("d", self._cq[keep:])
             self._next_check -= keep
             self._arm_index -= keep
             self._shift += keep
@@ -576,19 +895,32 @@ class StreamingEstimator:
             lag = min(self.LAG, max(avail - self.settings.min_plateau, 0))
             hi = n - lag
             lo = max(self._arm_index, hi - self.PLATEAU)
-            win = pv[lo:hi]
-            self._plateau_level = float(np.median(win))
-            sig = _robust_sigma(win)
-            if sig == 0.0:
-                sig = _rms_sigma(win)
+            # plateau: mean of the window; noise: rms of its first differences / sqrt 2
+            self._plateau_level = self._mean(lo, hi)
+            sig = self._diff_sigma(lo, hi)
+            if sig == 0.0 and hi - lo >= 2 * self.settings.min_plateau:
+                if not self._stuck_reported:
+                    self._stuck_reported = True
+                    self._diag("warn", f"sensor stuck? {hi - lo} identical samples "
+                               f"({float(pv[lo])!r}): no noise at all", float(tv[i]))
+            elif sig > 0.0:
+                self._stuck_reported = False
             self._sigma = sig
             sig_eff = max(sig, 1e-4 * abs(self._plateau_level) + 1e-12)
             self._level = self._plateau_level - self.settings.trigger_sigma * sig_eff
-            block = pv[max(self._arm_index, n - self.PERIOD):n]
+            blo = max(self._arm_index, n - self.PERIOD)
+            block_mean = self._mean(blo, n)
+            if (lag >= self.settings.min_plateau and n - blo == self.PERIOD
+                    and block_mean > self._plateau_level + 2.0 * self._block_threshold()):
+                # the signal rose (the tank is being charged): the plateau starts again
+                self._arm_index = n - self.PERIOD
+                self._level = -math.inf
+                del tv, pv
+                return []
             mean_low = (lag >= self.PERIOD and
-                        float(np.mean(block)) < self._plateau_level - self._block_threshold())
+                        block_mean < self._plateau_level - self._block_threshold())
             if pv[i] >= self._level and not mean_low:
-                del tv, pv, win, block  # release the buffer views before trimming
+                del tv, pv  # release the buffer views before trimming
                 self._trim(n)
                 return []
         elif self._level == -math.inf:
@@ -602,6 +934,17 @@ class StreamingEstimator:
         self._below, self._level = True, -math.inf
         return []
 
+    def _mean(self, lo: int, hi: int) -> float:
+        """Mean of samples [lo, hi) from the prefix sums [signal units]."""
+        cs = self._cs
+        return (cs[hi] - cs[lo]) / (hi - lo)
+
+    def _diff_sigma(self, lo: int, hi: int) -> float:
+        """Noise standard deviation of samples [lo, hi): rms of the first differences
+        / sqrt(2), from the prefix sums (drift-insensitive) [signal units]."""
+        cq = self._cq
+        return math.sqrt(max(cq[hi] - cq[lo + 1], 0.0) / (hi - lo - 1) / 2.0)
+
     def _block_threshold(self) -> float:
         """Drop of a PERIOD-sample mean that counts as a step [signal units]."""
         sig_eff = max(self._sigma, 1e-4 * abs(self._plateau_level) + 1e-12)
@@ -609,9 +952,7 @@ class StreamingEstimator:
 
     def _step_confirm(self, i: int) -> list[UnloadResult]:
         n = i + 1
-        _tv, pv = self._arrays(n)
-        seg = pv[self._trigger + 1:n]
-        if float(np.mean(seg)) < self._plateau_level - self._block_threshold():
+        if self._mean(self._trigger + 1, n) < self._plateau_level - self._block_threshold():
             self._state = _UNLOADING
             self._diag("ok", "unload step detected", float(self._t[self._trigger]))
             return self._start_unloading(i)
@@ -686,10 +1027,32 @@ class StreamingEstimator:
                 return self._on_abort(i)
         return []
 
-    def _check_final_plateau_auto(self, i: int) -> list[UnloadResult]:
-        """p_atm auto: once the final plateau is reached, set p* and find the crossing."""
+    def _end_plateau_auto(self, i: int) -> bool:
+        """p_atm auto at the end of the stream: True when the last eighth of the unload
+        (at least 8 samples) is level to 0.5 % of the drop, with the drop > 50 %."""
+        if not getattr(self, "_refined", False) or math.isfinite(self._pstar_signal):
+            return False
+        w = (i - self._i0) // 8
+        if w < 8:
+            return False
+        a = self._mean(i - 2 * w + 1, i - w + 1)
+        b = self._mean(i - w + 1, i + 1)
+        drop = self._p10_signal - b
+        return bool(abs(drop) > 0.5 * self._dp_guess and abs(a - b) < 0.005 * abs(drop))
+
+    def _check_final_plateau_auto(self, i: int, at_end: bool = False) -> list[UnloadResult]:
+        """p_atm auto: once the final plateau is reached, set p* and find the crossing
+        (``at_end``: the stream ended on a plateau judged by :meth:`_end_plateau_auto`)."""
         tv, pv = self._arrays(i + 1)
         tau_guess = (float(tv[i]) - self._t0) / 4.0
+        if at_end:
+            w = max((i - self._i0) // 8, 8)
+            level = self._mean(i - w + 1, i + 1)
+            self._set_pstar(level)
+            below = np.flatnonzero(pv[self._i0:i + 1] < self._pstar_signal - self._half)
+            if below.size == 0:
+                return []
+            return self._complete_crossing(self._i0 + int(below[0]))
         if not self._flat(i, tau_guess):
             return []
         w = self._flat_window(tau_guess)
@@ -708,7 +1071,7 @@ class StreamingEstimator:
         tv, pv = self._arrays(n)
         trig = self._trigger
         back = i - trig + 4 * self.CONFIRM
-        lo = max(self._arm_index, trig - back - self.PLATEAU)
+        lo = max(self._arm_index, trig - back - self.HINGE_PLATEAU)
         t_lo = float(tv[max(self._arm_index, trig - back)])
         t0, p10, slope, _curv, rms = hinge_fit(tv[lo:n], pv[lo:n], t_lo, float(tv[trig]))
         pre = pv[lo:int(np.searchsorted(tv, t0))]
@@ -749,18 +1112,17 @@ class StreamingEstimator:
         """True when the pressure has stopped falling well above p* (valve closed)."""
         if not self._refined or self._slope0 <= 0:
             return False
-        ref_slope = self._slope0
-        tv, pv = self._arrays(i + 1)
         span = i - self._i0
         w = int(min(max(32, span // 4), 8192))
         if span < 2 * w:
             return False
-        a = pv[i - 2 * w + 1:i - w + 1]
-        b = pv[i - w + 1:i + 1]
-        dt = float(tv[i] - tv[i - w])
-        drop = float(np.mean(a) - np.mean(b))
+        cs = self._cs
+        a = (cs[i - w + 1] - cs[i - 2 * w + 1]) / w
+        b = (cs[i + 1] - cs[i - w + 1]) / w
+        dt = self._t[i] - self._t[i - w]
+        drop = a - b
         se = self._sigma * math.sqrt(2.0 / w)
-        return drop < 0.05 * ref_slope * dt and drop < 4.0 * se
+        return drop < 0.05 * self._slope0 * dt and drop < 4.0 * se
 
     def _complete_crossing(self, i: int, settle_index: int | None = None
                            ) -> list[UnloadResult]:
@@ -787,6 +1149,7 @@ class StreamingEstimator:
         res = self._make_result(k, t_cross, t_std, gap)
         self._pending = res
         self._state = _TAIL
+        self._tail_low = math.inf
         self._below, self._level = True, -math.inf
         self._next_check = k + self.PERIOD
         if settle_index is not None:
@@ -855,9 +1218,35 @@ class StreamingEstimator:
             return []
         self._next_check = i + self.PERIOD
         res = self._pending
+        k = self._tail_rise(i)
+        if k >= 0:
+            # the tank is being charged again: the tail ended before the rise; re-arm now
+            self._diag("ok", "pressure rising again after the unload: tail ended, re-armed",
+                       float(self._t[i]))
+            out = self._finish_tail(k, ended=False, decided=i)
+            self._next_check = i + self.PERIOD
+            return out
         if res is not None and self._flat(i, res.tau_exp):
             return self._finish_tail(i, ended=False)
         return []
+
+    def _tail_rise(self, i: int) -> int:
+        """Index where the tail ends because the signal rises again (a new charge), or -1.
+
+        The mean of the last PERIOD samples is compared with the lowest such mean seen in
+        the tail; a rise of more than max(10 sigma/sqrt(PERIOD), 2 % of p10 - p_atm) ends
+        the tail two periods back (before the rise began).
+        """
+        cs = self._cs
+        m = (cs[i + 1] - cs[i - self.PERIOD + 1]) / self.PERIOD
+        if m < self._tail_low:
+            self._tail_low = m
+            return -1
+        dp = abs(self._p10_signal - self._atm_signal)
+        thr = max(10.0 * self._sigma / math.sqrt(self.PERIOD), 0.02 * dp)
+        if m - self._tail_low > thr:
+            return max(i - 2 * self.PERIOD, self._i0 + 1)
+        return -1
 
     def _flat_window(self, tau: float) -> int:
         dt = self._dt_nominal if math.isfinite(self._dt_nominal) else 1e-3
@@ -865,19 +1254,23 @@ class StreamingEstimator:
 
     def _flat(self, i: int, tau: float) -> bool:
         """True when the signal has settled on its final plateau (tau: time scale [s])."""
-        _tv, pv = self._arrays(i + 1)
         dt = self._dt_nominal if math.isfinite(self._dt_nominal) else 1e-3
         w = self._flat_window(tau)
         if i - self._i0 < 2 * w + int(tau / dt):
             return False
-        a = pv[i - 2 * w + 1:i - w + 1]
-        b = pv[i - w + 1:i + 1]
-        dp_total = abs(self._p10_signal - float(np.mean(b)))
-        change = abs(float(np.mean(a) - np.mean(b)))
+        cs = self._cs
+        a = (cs[max(i - w + 1, 0)] - cs[max(i - 2 * w + 1, 0)]) / w
+        b = (cs[i + 1] - cs[max(i - w + 1, 0)]) / w
+        dp_total = abs(self._p10_signal - b)
+        change = abs(a - b)
         se = self._sigma * math.sqrt(2.0 / w)
         return change < max(4.0 * se, 0.002 * dp_total)
 
-    def _finish_tail(self, i: int, ended: bool) -> list[UnloadResult]:
+    def _finish_tail(self, i: int, ended: bool, decided: int | None = None
+                     ) -> list[UnloadResult]:
+        """Close the unload at index i (last sample of its tail); ``decided``: the index
+        at which that was decided (default i)."""
+        dec = i if decided is None else decided
         res = self._pending
         self._pending = None
         out: list[UnloadResult] = []
@@ -892,7 +1285,7 @@ class StreamingEstimator:
                     res, tv[lo:i + 1], self._to_pa_array(pv[lo:i + 1]), self.settings,
                     noise_std=abs(self._sigma * self.settings.signal_gain))
                 if fin is not None:
-                    fin.i_complete, fin.t_complete = i + self._shift, float(self._t[i])
+                    fin.i_complete, fin.t_complete = dec + self._shift, float(self._t[dec])
                     out.append(fin)
         self._to_waiting(i + 1)
         return out
@@ -904,41 +1297,111 @@ class StreamingEstimator:
     # aborted unload and SSE
     def _on_abort(self, i: int) -> list[UnloadResult]:
         tv, pv = self._arrays(i + 1)
+        tail = pv[max(self._i0, i - 2 * self.PERIOD + 1):i + 1]
+        if tail.size >= 2 * self.PERIOD and float(np.ptp(tail)) == 0.0:
+            return self._bad(i, f"sensor stuck at {float(tail[0])!r} during the unload "
+                                f"({tail.size} identical samples, no noise): no estimate")
         self._diag("warn", "unload stopped before p*: valve closed (aborted unload)",
                    float(tv[i]))
-        # closing instant: the minimum of a smoothed signal since the start
-        seg = pv[self._i0:i + 1]
-        k = max(1, min(seg.size // 20, 256))
-        sm = np.convolve(seg, np.ones(k) / k, mode="valid")
-        j = int(np.argmin(sm)) + k // 2
-        self._i_close = self._i0 + j
-        self._t_close = float(tv[self._i_close])
+        # closing instant: a corner fit (quadratic before and after the closing instant)
+        # on a wide window, then again on a window local to the first estimate
+        span = i - self._i0
+        w = int(min(max(32, span // 4), 8192))
+        lo = max(self._i0 + 1, i - 6 * w)
+        t_c, p_c, _rms = corner_fit(tv[lo:i + 1], pv[lo:i + 1], float(tv[lo + 8]),
+                                    float(tv[i - 8]))
+        j = int(np.searchsorted(tv, t_c))
+        half = max(64, (j - self._i0) // 5)
+        lo2, hi2 = max(self._i0 + 1, j - half), min(i + 1, j + half)
+        if hi2 - lo2 >= 24:
+            t_c, p_c, _rms = corner_fit(tv[lo2:hi2], pv[lo2:hi2], float(tv[lo2 + 4]),
+                                        float(tv[hi2 - 5]))
+        self._t_close, self._p_close_signal = t_c, p_c
+        self._i_close = min(int(np.searchsorted(tv, self._t_close)), i)
+        self._rec_span = 0
+        self._rec_fit: Any = None
         self._state = _RECOVERY
         self._below, self._level = True, -math.inf
         self._next_check = i + self.PERIOD
         return []
 
+    #: Recovery samples needed before the first recovery fit [-].
+    RECOVERY_MIN = 256
+
+    def _fit_recovery(self, i: int) -> Any:
+        """Fit the recovery from the closing instant to index i (None when it fails)."""
+        from pneumatic_unload.fitting import fit_recovery
+
+        tv, pv = self._arrays(i + 1)
+        j = self._i_close
+        try:
+            fit = fit_recovery(tv[j:i + 1], pv[j:i + 1], self._t_close)
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+            return None
+        self._rec_fit, self._rec_span = fit, i - j
+        return fit
+
+    def _expected_recovery_time(self) -> float:
+        """Initial thermal time constant m c_v / (h A) of the closed tank [s], with h from
+        the natural-convection correlation at the closing state (the recovery is not
+        declared over before three of these, however flat it looks: a slow re-heating
+        is indistinguishable from a plateau over a short record)."""
+        s = self.settings
+        gas = s.gas
+        p10 = self._to_pa(self._p10_signal)
+        p_c = self._to_pa(self._p_close_signal)
+        t10 = s.initial_temperature
+        t_w = s.wall_temperature or t10
+        ratio = max(p_c / p10, 1e-3) if p10 > 0 else 1.0
+        t_gas = t10 * ratio ** ((gas.gamma - 1.0) / gas.gamma)
+        length, _d, area = physics.tank_geometry(s.volume, s.length_diameter_ratio)
+        h = physics.natural_convection_h(p_c, t_gas, t_w if abs(t_w - t_gas) > 0.1
+                                         else t_gas + 0.1, length, gas)
+        mass = p_c * s.volume / (gas.gas_constant * t_gas)
+        return mass * gas.cv / (h * area)
+
+    def _recovery_significant(self, fit: Any) -> bool:
+        """True when the fitted re-heating rise is clearly above the noise."""
+        if fit is None or not fit.success or not math.isfinite(fit.p_inf_std):
+            return False
+        seen = fit.rise - fit.remaining  # rise observed so far [signal units]
+        return bool(abs(seen) > 8.0 * self._sigma / math.sqrt(max(fit.n / 4, 1)))
+
     def _step_recovery(self, i: int) -> list[UnloadResult]:
+        """Periodic recovery check: refit as the record grows (each 25 % longer); the
+        recovery is over when the fitted remaining rise is below 5 % of the total (the
+        fit extrapolates the rest), p1_inf is known to 2 % of the rise, and the record
+        covers 3 expected and 4 fitted thermal time constants."""
         if i != self._next_check:
             return []
         self._next_check = i + self.PERIOD
-        _tv, pv = self._arrays(i + 1)
         span = i - self._i_close
-        w = int(min(max(128, span // 4), 16384))
-        if span < 2 * w:
+        if span < self.RECOVERY_MIN or span < 1.25 * self._rec_span:
             return []
-        a = pv[i - 2 * w + 1:i - w + 1]
-        b = pv[i - w + 1:i + 1]
-        change = abs(float(np.mean(b) - np.mean(a)))
-        rise = float(np.mean(b)) - float(pv[self._i_close])
-        se = self._sigma * math.sqrt(2.0 / w)
-        if change < max(4.0 * se, 0.01 * abs(rise)):
+        fit = self._fit_recovery(i)
+        if fit is None:
+            return []
+        dt = self._dt_nominal if math.isfinite(self._dt_nominal) else 1e-3
+        if (self._recovery_significant(fit) and fit.remaining <= 0.05 * fit.rise
+                and fit.p_inf_std < 0.02 * fit.rise
+                and span * dt >= 3.0 * self._expected_recovery_time()
+                and span * dt >= 4.0 * fit.tau):
             res = self._abort_result(i, recovered=True)
+            self._to_waiting(i + 1)
+            return [res]
+        t_star = self._t_close - self._t0
+        if not self._recovery_significant(fit) and span * dt > max(20.0 * t_star, 2.0) \
+                and span >= 4 * self.PLATEAU:
+            res = self._abort_result(i, recovered=False, text=(
+                "valve closed before p*; no pressure recovery after closing (no re-heating "
+                "seen), so no SSE value"))
             self._to_waiting(i + 1)
             return [res]
         return []
 
     def _abort_result(self, i: int, recovered: bool, text: str = "") -> UnloadResult:
+        """Result of an aborted unload; with ``recovered`` (or a recovery fit good enough
+        to extrapolate at the end of the stream), the SSE value of eq 23."""
         s = self.settings
         res = self._empty_result("aborted", text or "valve closed before p*; no recovery "
                                  "plateau recorded (SSE needs it)", i)
@@ -947,22 +1410,48 @@ class StreamingEstimator:
         p10 = self._to_pa(self._p10_signal)
         res.p10, res.t_start = p10, self._t0
         res.i_start = self._i0 + self._shift
-        if recovered:
-            _tv, pv = self._arrays(i + 1)
-            w = int(min(max(128, (i - self._i_close) // 4), 16384))
-            p_inf = self._to_pa(float(np.mean(pv[i - w + 1:i + 1])))
-            t_star = self._t_close - self._t0
-            c = physics.conductance_sse(t_star, p10, p_inf, s.volume, s.initial_temperature,
-                                        s.gas)
-            res.status = "aborted_sse"
-            res.status_text = (f"valve closed after {t_star:.4f} s before p*; SSE (eq 23) "
-                               f"from the recovery plateau {p_inf:.0f} Pa")
-            res.conductance = c
-            res.conductance_model = c
-            res.conductance_model_std = c * 0.02
-            res.quality = 0.7
-            res.method = "sse-eq23"
-            res.extra = {"t_star": t_star, "p1_inf": p_inf}
+        if self._state != _RECOVERY:
+            return res
+        fit = self._rec_fit
+        if not recovered and i - self._i_close >= 16 and i - self._i_close != self._rec_span:
+            fit = self._fit_recovery(i)
+        if not self._recovery_significant(fit):
+            return res
+        gain = abs(s.signal_gain)
+        p_inf = self._to_pa(fit.p_inf)
+        p_inf_std = gain * fit.p_inf_std
+        p_close = self._to_pa(self._p_close_signal)
+        t_star = self._t_close - self._t0
+        t_star_std = self._t0_std()
+        gas, t10, vol = s.gas, s.initial_temperature, s.volume
+        c = physics.conductance_sse(t_star, p10, p_inf, vol, t10, gas)
+        dc_dp = (physics.conductance_sse(t_star, p10, p_inf + p_inf_std, vol, t10, gas) - c)
+        c_std = math.hypot(dc_dp, c * t_star_std / t_star, c * SSE_MODEL_REL_STD)
+        if not (math.isfinite(c) and c > 0 and c_std < 0.25 * c):
+            res.status_text += (f"; recovery fit too uncertain for SSE (p_inf = {p_inf:.0f} "
+                                f"+- {p_inf_std:.0f} Pa)")
+            return res
+        done = 1.0 - fit.remaining / fit.rise
+        how = ("recovery plateau" if recovered else
+               f"recovery extrapolated from {100 * done:.0f} % of the re-heating")
+        res.status = "aborted_sse"
+        res.status_text = (f"valve closed after {t_star:.4f} s before p*; SSE (eq 23) from "
+                           f"the {how}, p1_inf = {p_inf:.0f} +- {p_inf_std:.0f} Pa")
+        res.conductance = c
+        # model-based: the discharge model inverted at the closing instant and pressure
+        c_isen = physics.conductance_isentropic_inversion(t_star, p_close, p10, vol, t10, gas)
+        atm = s.atmosphere if s.atmosphere is not None else 101325.0
+        c_model, c_model_std, method = self._model_inversion(
+            t_star, t_star_std, p10, atm, p_close, c_isen)
+        res.conductance_model = c_model
+        res.conductance_model_std = c_model_std
+        res.conductance_isentropic = c_isen
+        res.quality = 0.7 if recovered else 0.5
+        res.method = "sse-eq23;" + method.replace("eq39+", "") + "-at-closing"
+        res.extra = {"t_star": t_star, "t_close": self._t_close, "p1_inf": p_inf,
+                     "p1_inf_std": p_inf_std, "p_close": p_close, "sse_std": c_std,
+                     "recovered_fraction": done, "recovery_tau": fit.tau,
+                     "recovery_exponent": fit.exponent}
         return res
 
 

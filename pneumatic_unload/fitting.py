@@ -26,6 +26,7 @@ from scipy.optimize import least_squares
 
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.model import discharge, sensor_response
+from pneumatic_unload.physics import P_STAR_FRACTION
 
 if TYPE_CHECKING:
     from pneumatic_unload.estimation import EstimatorSettings, UnloadResult
@@ -167,6 +168,9 @@ class CurveFit:
         Samples fitted [-].
     success : bool
         Optimiser convergence.
+    inflation : float
+        Variance inflation applied for serially correlated residuals [-]
+        (:func:`residual_inflation`).
     """
 
     conductance: float
@@ -181,6 +185,67 @@ class CurveFit:
     rms: float
     n: int
     success: bool
+    inflation: float = 1.0
+
+
+def covariance(jac: FloatArray, s2: float) -> FloatArray:
+    """Parameter covariance s2 (J^T J)^-1 computed on column-normalised J [param units^2].
+
+    Normalising the columns first keeps parameters of very different scales (Pa next to
+    log-values) from being cut off as "singular" directions, which would report a
+    far too small variance; a genuinely unidentifiable direction gets an infinite one.
+    """
+    jac = np.asarray(jac, dtype=float)
+    norm = np.sqrt(np.sum(jac * jac, axis=0))
+    npar = jac.shape[1]
+    if not np.all(np.isfinite(jac)):
+        return np.full((npar, npar), math.nan)
+    good = norm > 0
+    cov = np.full((npar, npar), math.inf)
+    if not np.any(good):
+        return cov
+    jn = jac[:, good] / norm[good]
+    _u, sv, vt = np.linalg.svd(jn, full_matrices=False)
+    if sv[0] <= 0 or sv[-1] < 1e-10 * sv[0]:
+        inv_sv2 = np.where(sv > 1e-10 * sv[0], 1.0 / np.maximum(sv, 1e-300) ** 2, math.inf)
+    else:
+        inv_sv2 = 1.0 / sv**2
+    with np.errstate(invalid="ignore"):
+        c = (vt.T * inv_sv2) @ vt
+    c = np.where(np.isnan(c), math.inf, c)
+    sub = c / np.outer(norm[good], norm[good]) * s2
+    idx = np.flatnonzero(good)
+    cov[np.ix_(idx, idx)] = sub
+    return cov
+
+
+def residual_inflation(r: FloatArray) -> float:
+    """Variance inflation for serially correlated residuals [-] (>= 1).
+
+    White residuals (the model fits and the noise is white) give a lag-1 autocorrelation
+    rho near 0 within 2/sqrt(n); a model discrepancy (unmodelled rig effect, wrong heat
+    law) or coloured noise leaves runs of same-sign residuals and rho > 0, so the samples
+    carry fewer independent pieces of information: the covariance is multiplied by the
+    AR(1) effective-sample-size factor (1 + rho)/(1 - rho). rho below 2/sqrt(n) is
+    treated as white (no inflation).
+
+    Parameters
+    ----------
+    r : ndarray
+        Residuals in time order [any unit], already weighted to equal variance.
+    """
+    r = np.asarray(r, dtype=float)
+    if r.size < 8:
+        return 1.0
+    r = r - float(np.mean(r))
+    den = float(r @ r)
+    if den <= 0:
+        return 1.0
+    rho = float(r[1:] @ r[:-1]) / den
+    if rho <= 2.0 / math.sqrt(r.size):
+        return 1.0
+    rho = min(rho, 0.99)
+    return (1.0 + rho) / (1.0 - rho)
 
 
 def _bins(n: int, max_points: int) -> FloatArray:
@@ -192,7 +257,7 @@ def _bins(n: int, max_points: int) -> FloatArray:
 def fit_curve(
     t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_start: float,
     p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
-    max_points: int = 3000,
+    max_points: int = 3000, profile_heat: bool = True,
 ) -> CurveFit:
     """Least-squares fit of the discharge model to a recorded unload.
 
@@ -208,6 +273,10 @@ def fit_curve(
         Fit the heat-transfer scale; default: only when the natural model is on.
     max_points : int
         The model and the data are averaged in the same bins down to this many points.
+    profile_heat : bool
+        Standard deviations also from a profile of the fit over the heat-transfer scale
+        (two more fits), not from the Gauss-Newton covariance alone, which can under-state
+        them for this non-linear, strongly correlated parameter.
 
     Returns
     -------
@@ -239,7 +308,7 @@ def fit_curve(
     if fit_heat:
         x0.append(0.0)
         lo.append(math.log(1e-3))
-        hi.append(math.log(1e3))
+        hi.append(math.log(1e2))  # RigConfig.heat_transfer_scale allows [0, 100]
     scale = np.array([0.05, 0.05, max((t[1] - t[0]), 1e-6) * 10, 1e-3 * p10]
                      + ([1e-3 * p_atm] if fit_atm else []) + ([0.1] if fit_heat else []))
 
@@ -268,12 +337,55 @@ def fit_curve(
     rw = sol.fun * w
     dof = max(rw.size - len(names), 1)
     s2 = float(rw @ rw) / dof
-    try:
-        cov = np.linalg.pinv(jw.T @ jw) * s2
-        std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    except np.linalg.LinAlgError:
-        std = np.full(len(names), np.nan)
+    inflation = residual_inflation(rw)
+    cov = covariance(jw, s2 * inflation)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     sd = dict(zip(names, std, strict=True))
+    # The heat scale enters non-linearly and is strongly correlated with C (|rho| ~ 0.95):
+    # where the likelihood is not quadratic along it, the Gauss-Newton covariance
+    # under-states the spread. Profile the fit over log h at +-1.5 sigma: the rise of
+    # chi^2 gives its effective sigma, the shift of the other parameters their slope along
+    # the valley; the larger of the two standard deviations is kept for every parameter.
+    # (On simulated natural-convection trials the profile is close to quadratic and adds
+    # a few per cent; see bench/bench_accuracy.py coverage.)
+    chi0 = float(rw @ rw) / s2
+    for pname, limit in (("logh", 0.5),):
+        if not profile_heat or pname not in names:
+            continue
+        ip = names.index(pname)
+        sdp = float(sd[pname])
+        if not (math.isfinite(sdp) and 0 < sdp < limit and np.all(np.isfinite(cov))
+                and lo[ip] + 2.0 * sdp < sol.x[ip] < hi[ip] - 2.0 * sdp):
+            continue
+        free = [k for k in range(len(names)) if k != ip]
+        lo_f, hi_f = np.array(lo)[free], np.array(hi)[free]
+        delta = 1.5 * sdp
+        shifts, rises = [], []
+        for sign in (1.0, -1.0):
+            xp = float(sol.x[ip]) + sign * delta
+
+            def res_fixed(xf: FloatArray, xp: float = xp, ip: int = ip,
+                          free: list[int] = free) -> FloatArray:
+                x = np.array(sol.x, dtype=float)
+                x[free] = xf
+                x[ip] = xp
+                return residual(x)
+
+            sub = least_squares(res_fixed, np.clip(sol.x[free], lo_f + 1e-12, hi_f - 1e-12),
+                                bounds=(lo_f, hi_f), x_scale=scale[free], method="trf",
+                                diff_step=1e-4, max_nfev=60)
+            rises.append(max(float((sub.fun * w) @ (sub.fun * w)) / s2 - chi0, 1e-12))
+            shifts.append(sub.x - sol.x[free])
+        sd_p = delta / math.sqrt(0.5 * (rises[0] + rises[1]))
+        slope = (shifts[0] - shifts[1]) / (2.0 * delta)
+        # conditional covariance of the others at fixed p, plus the valley direction
+        cf = cov[np.ix_(free, free)] - np.outer(cov[free, ip], cov[ip, free]) / cov[ip, ip]
+        cov_p = cf + np.outer(slope, slope) * sd_p**2
+        std_p = np.sqrt(np.clip(np.diag(cov_p), 0.0, None))
+        for j, k in enumerate(free):
+            if names[k] == "logC":  # b keeps its own (Gauss-Newton) standard deviation
+                sd[names[k]] = max(float(sd[names[k]]), float(std_p[j]))
+        sd[pname] = max(sdp, sd_p)
     c = math.exp(d["logC"])
     b_std = float(sd["b"])
     b = d["b"]
@@ -284,7 +396,47 @@ def fit_curve(
     return CurveFit(
         conductance=c, conductance_std=c_std, critical_ratio=b, critical_ratio_std=b_std,
         t_start=d["t0"] + t_ref, p10=d["p10"], p_atm=d["p_atm"], heat_scale=math.exp(d["logh"]),
-        heat_scale_std=h_std, rms=math.sqrt(s2), n=int(t.size), success=bool(sol.success))
+        heat_scale_std=h_std, rms=math.sqrt(s2), n=int(t.size), success=bool(sol.success),
+        inflation=inflation)
+
+
+def fitted_tau_exp(fit: CurveFit, settings: EstimatorSettings, t_guess: float) -> float:
+    """tau_exp of the fitted model: its p* crossing (eq 40 with the fitted p10) [s].
+
+    Uses the whole recorded curve rather than the samples near p* and the start, so it is
+    less noisy than the measured tau_exp (reported beside it, never instead of it).
+
+    Parameters
+    ----------
+    fit : CurveFit
+        Result of :func:`fit_curve`.
+    settings : EstimatorSettings
+        Settings of the fit.
+    t_guess : float
+        Expected crossing time [s] (e.g. the measured tau_exp).
+    """
+    if not (math.isfinite(t_guess) and t_guess > 0):
+        return math.nan
+    b = fit.critical_ratio if math.isfinite(fit.critical_ratio) else None
+    try:
+        cfg = rig_from_settings(settings, conductance=fit.conductance, p10=fit.p10,
+                                p_atm=fit.p_atm, critical_ratio=b,
+                                heat_scale=fit.heat_scale)
+        ps = fit.p_atm + P_STAR_FRACTION * (fit.p10 - fit.p_atm)
+        tc = model_crossing_time(cfg, ps, t_guess)
+        if not math.isfinite(tc):
+            return math.nan
+        # refine on a fine grid around the first estimate (cubic interpolation error of
+        # the coarse grid is ~1e-5 relative)
+        tt = np.concatenate(([0.0], np.linspace(0.98 * tc, 1.02 * tc, 801)))
+        pp, _ = discharge(cfg, tt, 0.0, rtol=1e-10)
+        k = np.flatnonzero(pp[1:] < ps)
+        if k.size == 0 or k[0] == 0:
+            return tc
+        j = int(k[0]) + 1
+        return float(tt[j - 1] + (pp[j - 1] - ps) / (pp[j - 1] - pp[j]) * (tt[j] - tt[j - 1]))
+    except ValueError:
+        return math.nan
 
 
 def refine_with_curve_fit(
@@ -323,6 +475,143 @@ def refine_with_curve_fit(
              "conductance_crossing_inversion": res.conductance_model}
     return dataclasses.replace(
         res, final=True, conductance_model=fit.conductance, conductance_model_std=c_std,
+        t_start_model=fit.t_start, tau_exp_model=fitted_tau_exp(fit, settings, res.tau_exp),
         critical_ratio=fit.critical_ratio, critical_ratio_std=fit.critical_ratio_std,
         method=res.method + "+curve-fit", extra=extra,
         quality=res.quality if fit.success else min(res.quality, 0.5))
+
+
+@dataclass(frozen=True)
+class RecoveryFit:
+    """Pressure recovery after the valve closed (aborted unload), see :func:`fit_recovery`.
+
+    Attributes
+    ----------
+    p_inf, p_inf_std : float
+        Asymptotic (re-equilibrated) pressure and its 1-sigma [Pa, or signal units].
+    p_close : float
+        Pressure at the closing instant, p_inf - D0 [same unit].
+    rise : float
+        Total rise D0 = p_inf - p_close [same unit].
+    tau : float
+        Initial relaxation time D0 / (dp/dt at closing) [s].
+    exponent : float
+        Relaxation exponent n of dD/dt = -(D0/tau) (D/D0)^n [-] (1: constant h A,
+        1.25: laminar natural convection).
+    remaining : float
+        Fitted rise still to come at the last sample, D(t_end) [same unit].
+    rms : float
+        Residual rms of the samples [same unit].
+    n : int
+        Samples fitted [-].
+    success : bool
+        Optimiser convergence.
+    """
+
+    p_inf: float
+    p_inf_std: float
+    p_close: float
+    rise: float
+    tau: float
+    exponent: float
+    remaining: float
+    rms: float
+    n: int
+    success: bool
+
+
+def _relaxation(u: FloatArray, d0: float, tau: float, n: float) -> FloatArray:
+    """D(u) solving dD/du = -(D0/tau) (D/D0)^n, D(0) = D0 [unit of d0]."""
+    x = u / tau
+    if abs(n - 1.0) < 1e-9:
+        return d0 * np.exp(-x)
+    # n < 1 reaches D = 0 in finite time: clip there
+    return d0 * np.exp(-np.log1p(np.maximum((n - 1.0) * x, -1.0 + 1e-12)) / (n - 1.0))
+
+
+#: Relaxation exponent of the recovery: prior mean and 1-sigma [-]. 1.25 is laminar
+#: natural convection (h ~ dT^0.25); the 1-sigma of 0.12 admits a constant h A (n = 1)
+#: and turbulent convection (n = 4/3) at about 2 sigma. The data override it when the
+#: recovery is recorded long enough to show its shape.
+RECOVERY_EXPONENT_PRIOR = (1.25, 0.12)
+#: Bounds of the fitted relaxation exponent [-].
+RECOVERY_EXPONENTS = (0.9, 1.7)
+
+
+def fit_recovery(t: FloatArray, p: FloatArray, t_close: float, *, max_points: int = 2000
+                 ) -> RecoveryFit:
+    """Fit the isochoric re-heating after an aborted unload: p = p_inf - D(t - t_close).
+
+    At constant gas mass the pressure is proportional to the mean gas temperature, and the
+    wall heat flow h A (T_w - T) makes the deficit D = p_inf - p relax as
+    dD/dt = -(D0/tau) (D/D0)^n: n = 1 for a constant h A, n = 1.25 for laminar natural
+    convection (h proportional to dT^0.25), n = 4/3 turbulent. p_inf and D0 enter linearly:
+    a grid over (tau, n) with the linear pair solved exactly finds the basin, a
+    least-squares fit of all four refines it, and the 1-sigma of p_inf comes from the
+    Jacobian with n free, so that an unfinished recovery is extrapolated with an honest
+    uncertainty.
+
+    Parameters
+    ----------
+    t, p : ndarray
+        Samples from the closing instant on [s], [Pa] (or any linear signal unit).
+    t_close : float
+        Closing instant [s].
+    max_points : int
+        Samples are averaged in bins down to this many points.
+
+    Returns
+    -------
+    RecoveryFit
+        p_inf with its 1-sigma from the Jacobian scaled by the residual.
+    """
+    u = np.asarray(t, dtype=float) - t_close
+    p = np.asarray(p, dtype=float)
+    if u.size < 8:
+        raise ValueError(f"too few recovery samples ({u.size}) to fit")
+    edges = _bins(u.size, max_points)
+    counts = np.diff(edges)
+    ub = np.add.reduceat(u, edges[:-1]) / counts
+    pb = np.add.reduceat(p, edges[:-1]) / counts
+    w = np.sqrt(counts)
+    span = max(float(u[-1]), 1e-9)
+    best = (math.inf, 0.0, 0.0, span, 1.0)
+    for n in (RECOVERY_EXPONENT_PRIOR[0],):
+        for tau in span * np.logspace(-1.5, 2.5, 41):
+            g = _relaxation(ub, 1.0, float(tau), n)
+            a = np.column_stack((w, -g * w))
+            coef, *_ = np.linalg.lstsq(a, pb * w, rcond=None)
+            r = pb * w - a @ coef
+            sse = float(r @ r)
+            if sse < best[0] and coef[1] >= 0.0:
+                best = (sse, float(coef[0]), float(coef[1]), float(tau), n)
+    _sse, p_inf0, d00, tau0_, n0 = best
+    if not math.isfinite(_sse):  # no rise at all: start from a flat line
+        p_inf0, d00 = float(np.mean(pb)), 0.0
+        _sse = float(np.sum(counts * (pb - p_inf0) ** 2))
+    s2_0 = max(_sse / max(pb.size - 3, 1), 1e-300)
+    prior_w = math.sqrt(s2_0) / RECOVERY_EXPONENT_PRIOR[1]
+
+    def residual(x: FloatArray) -> FloatArray:
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = (x[0] - _relaxation(ub, x[1], math.exp(x[2]), x[3]) - pb) * w
+        r = np.nan_to_num(r, nan=1e100, posinf=1e100, neginf=-1e100)
+        return np.append(r, prior_w * (x[3] - RECOVERY_EXPONENT_PRIOR[0]))
+
+    scale = max(abs(d00), float(np.std(np.diff(p))), 1e-12)
+    big = 1e4 * scale + float(np.max(np.abs(pb)))
+    lo = [float(np.min(pb)) - big, 0.0, math.log(1e-3 * span), RECOVERY_EXPONENTS[0]]
+    hi = [float(np.max(pb)) + big, 2.0 * big, math.log(1e5 * span), RECOVERY_EXPONENTS[1]]
+    x0 = np.clip([p_inf0, d00, math.log(tau0_), n0], np.array(lo) + 1e-9,
+                 np.array(hi) - 1e-9)
+    sol = least_squares(residual, x0, bounds=(lo, hi), method="trf", max_nfev=400,
+                        x_scale=np.array([scale, scale, 0.1, 0.05]))
+    dof = max(pb.size - 3, 1)
+    s2 = float(sol.fun[:-1] @ sol.fun[:-1]) / dof  # per-sample variance (bins by size)
+    cov = covariance(sol.jac, s2 * residual_inflation(sol.fun[:-1]))
+    p_inf_std = math.sqrt(max(float(cov[0, 0]), 0.0))
+    p_inf, d0, tau, n = float(sol.x[0]), float(sol.x[1]), math.exp(sol.x[2]), float(sol.x[3])
+    remaining = float(_relaxation(np.array([span]), d0, tau, n)[0])
+    return RecoveryFit(p_inf=p_inf, p_inf_std=p_inf_std, p_close=p_inf - d0, rise=d0,
+                       tau=tau, exponent=n, remaining=remaining, rms=math.sqrt(s2),
+                       n=int(u.size), success=bool(sol.success))

@@ -1,13 +1,14 @@
 """Plots for engineers: the trace, p10, p*, the crossing, tau_exp and the fitted model.
 
 Uses matplotlib's non-interactive Agg backend; no display needed. SI units on the axes
-(pressure shown in bar absolute for readability).
+(pressure shown in bar absolute for readability, residuals in kPa).
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,10 +16,41 @@ from numpy.typing import NDArray
 from pneumatic_unload.estimation import EstimatorSettings, UnloadResult
 
 
+def _model_curve(t: NDArray[np.float64], r: UnloadResult, settings: EstimatorSettings
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Model pressure [Pa] over the unload of r (fitted values when the curve fit ran)."""
+    from pneumatic_unload.fitting import rig_from_settings
+    from pneumatic_unload.model import discharge
+
+    if not math.isfinite(r.conductance_model) or r.conductance_model <= 0:
+        return None
+    fit: dict[str, Any] = r.extra.get("curve_fit", {}) if r.extra else {}
+    t0 = float(fit.get("t_start", r.t_start))
+    p10 = float(fit.get("p10", r.p10))
+    p_atm = float(fit.get("p_atm", r.p_atm))
+    if not (math.isfinite(t0) and math.isfinite(p10) and math.isfinite(p_atm)):
+        return None
+    b = r.critical_ratio if math.isfinite(r.critical_ratio) else None
+    scale = float(fit.get("heat_scale", 1.0))
+    cfg = rig_from_settings(settings, conductance=r.conductance_model, p10=p10, p_atm=p_atm,
+                            critical_ratio=b, heat_scale=scale if math.isfinite(scale) else 1.0)
+    t_end = r.t_end if math.isfinite(r.t_end) else float(t[-1])
+    lo = max(float(t[0]), t0 - 0.05 * (t_end - t0))
+    sel = (t >= lo) & (t <= t_end)
+    if np.count_nonzero(sel) < 3:
+        return None
+    pm, _ = discharge(cfg, t[sel], t0)
+    return sel, pm
+
+
 def plot_analysis(t: NDArray[np.float64], p: NDArray[np.float64],
                   results: list[UnloadResult], settings: EstimatorSettings,
                   path: str | Path) -> None:
     """Write a PNG of a trace with each unload's analysis.
+
+    Top: the measured trace, p10 and p* (dashed), the start of the unload (green), the p*
+    crossing (red dot) with the tau_exp arrow, and the fitted discharge model (purple);
+    each unload's eq 39 and model-based C in a box. Bottom: measured minus model [kPa].
 
     Parameters
     ----------
@@ -36,41 +68,57 @@ def plot_analysis(t: NDArray[np.float64], p: NDArray[np.float64],
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from pneumatic_unload.fitting import rig_from_settings
-    from pneumatic_unload.model import discharge
-
-    fig, ax = plt.subplots(figsize=(10, 5.5), dpi=100)
+    t = np.asarray(t, dtype=float)
+    p = np.asarray(p, dtype=float)
+    fig, (ax, axr) = plt.subplots(2, 1, figsize=(11, 7), dpi=100, sharex=True,
+                                  gridspec_kw={"height_ratios": [3, 1]})
     t0 = float(t[0])
-    ax.plot(t - t0, p / 1e5, lw=0.8, color="0.3", label="measured")
-    for r in results:
-        if not math.isfinite(r.tau_exp):
-            continue
-        ax.axhline(r.p10 / 1e5, color="tab:blue", lw=0.8, ls="--")
-        ax.axhline(r.p_star / 1e5, color="tab:orange", lw=0.8, ls="--")
-        ax.axvline(r.t_start - t0, color="tab:green", lw=0.8)
-        ax.plot([r.t_cross - t0], [r.p_star / 1e5], "o", color="tab:red")
-        ax.annotate("", xy=(r.t_cross - t0, r.p_star / 1e5),
-                    xytext=(r.t_start - t0, r.p_star / 1e5),
-                    arrowprops={"arrowstyle": "<->", "color": "tab:red"})
-        ax.text(0.5 * (r.t_start + r.t_cross) - t0, r.p_star / 1e5,
-                f" tau_exp = {r.tau_exp:.4g} s", va="bottom", ha="center", color="tab:red")
-        if math.isfinite(r.conductance_model):
-            b = r.critical_ratio if math.isfinite(r.critical_ratio) else None
-            cfg = rig_from_settings(settings, conductance=r.conductance_model, p10=r.p10,
-                                    p_atm=r.p_atm, critical_ratio=b)
-            sel = (t >= r.t_start) & (t <= (r.t_end if math.isfinite(r.t_end) else t[-1]))
-            if np.count_nonzero(sel) > 2:
-                pm, _ = discharge(cfg, t[sel], r.t_start)
-                ax.plot(t[sel] - t0, pm / 1e5, color="tab:purple", lw=1.2,
-                        label=f"model, C = {r.conductance_model / 1e-8:.4g} dm^3/(s bar)")
-        ax.text(0.99, 0.97 - 0.06 * r.index,
-                f"unload {r.index}: C eq39 = {r.conductance / 1e-8:.4g}, model = "
-                f"{r.conductance_model / 1e-8:.4g} dm^3/(s bar) [{r.status}]",
-                transform=ax.transAxes, ha="right", va="top", fontsize=9)
-    ax.set_xlabel(f"time since {t0:.3f} s [s]")
+    ax.plot(t - t0, p / 1e5, lw=0.7, color="0.45", label="measured")
+    lines = []
+    for k, r in enumerate(results):
+        first = k == 0
+        if math.isfinite(r.p10):
+            ax.axhline(r.p10 / 1e5, color="tab:blue", lw=0.9, ls="--",
+                       label="p10" if first else None)
+        if math.isfinite(r.t_start):
+            ax.axvline(r.t_start - t0, color="tab:green", lw=0.9,
+                       label="start of unload" if first else None)
+        if math.isfinite(r.tau_exp):
+            ax.axhline(r.p_star / 1e5, color="tab:orange", lw=0.9, ls="--",
+                       label="p* (eq 40)" if first else None)
+            ax.plot([r.t_cross - t0], [r.p_star / 1e5], "o", color="tab:red", ms=6,
+                    label="p* crossing" if first else None)
+            ax.annotate("", xy=(r.t_cross - t0, r.p_star / 1e5),
+                        xytext=(r.t_start - t0, r.p_star / 1e5),
+                        arrowprops={"arrowstyle": "<->", "color": "tab:red", "lw": 1.2})
+            ax.text(0.5 * (r.t_start + r.t_cross) - t0, r.p_star / 1e5,
+                    f"tau_exp = {r.tau_exp:.4g} s\n", va="bottom", ha="center",
+                    color="tab:red", fontsize=9)
+        curve = _model_curve(t, r, settings)
+        if curve is not None:
+            sel, pm = curve
+            ax.plot(t[sel] - t0, pm / 1e5, color="tab:purple", lw=1.3, ls="-",
+                    label="fitted model" if first else None)
+            axr.plot(t[sel] - t0, (p[sel] - pm) / 1e3, lw=0.6, color="tab:purple")
+        c39 = f"{r.conductance / 1e-8:.4g}" if math.isfinite(r.conductance) else "n/a"
+        cm = (f"{r.conductance_model / 1e-8:.4g} +- {r.conductance_model_std / 1e-8:.2g}"
+              if math.isfinite(r.conductance_model) else "n/a")
+        b = (f", b = {r.critical_ratio:.3f}" if math.isfinite(r.critical_ratio) else "")
+        diff = (f" ({100 * r.bias:+.1f} %)" if math.isfinite(r.conductance)
+                and math.isfinite(r.conductance_model) else "")
+        lines.append(f"unload {r.index} [{r.status}]: C eq39 = {c39}{diff}, "
+                     f"model = {cm} dm^3/(s bar){b}")
+    if lines:
+        ax.text(0.99, 0.80, "\n".join(lines), transform=ax.transAxes, ha="right", va="top",
+                fontsize=9, bbox={"boxstyle": "round", "fc": "white", "ec": "0.7",
+                                  "alpha": 0.9})
     ax.set_ylabel("pressure [bar absolute]")
     ax.grid(alpha=0.3)
-    ax.legend(loc="center right", fontsize=9)
+    ax.legend(loc="upper right", fontsize=8, ncol=3)
+    axr.axhline(0.0, color="0.3", lw=0.6)
+    axr.set_ylabel("measured - model\n[kPa]")
+    axr.set_xlabel(f"time since {t0:.3f} s [s]")
+    axr.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

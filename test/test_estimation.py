@@ -124,6 +124,66 @@ def test_streaming_per_sample_equals_blocks_and_batch():
         assert len(key) >= 1
 
 
+def _parity_traces():
+    """Diverse traces: random rigs, heat transfer, aborted with recovery, two unloads, a
+    gap, a NaN, automatic p_atm, a volts signal."""
+    for cfg, t, p in _traces():
+        yield dataclasses.replace(settings_for(cfg), curve_fit=False), t, p
+    cfg = RigConfig(volume=2e-3, conductance=orifice_conductance(1.5e-3), noise_std=FS_NOISE,
+                    seed=31, duration=20.0, valve_close_time=0.8, effects=("heat_transfer",))
+    sim = simulate(cfg)
+    yield dataclasses.replace(settings_for(cfg), curve_fit=False), sim.t, sim.measured
+    cfg, _a, t, p, _ = _two_unloads(0.3)
+    yield dataclasses.replace(settings_for(cfg), curve_fit=False), t, p
+    cfg = RigConfig(volume=1e-3, conductance=orifice_conductance(2.5e-3), noise_std=FS_NOISE,
+                    seed=32, duration=2.0)
+    sim = simulate(cfg)
+    keep = np.ones(sim.t.size, bool)
+    keep[400:430] = False
+    p = sim.measured.copy()
+    p[700] = np.nan
+    st = dataclasses.replace(settings_for(cfg), curve_fit=False, heat_model="adiabatic")
+    yield st, sim.t[keep], p[keep]
+    yield dataclasses.replace(st, atmosphere=None), sim.t, sim.measured
+    yield (dataclasses.replace(st, signal_gain=2.5e5, signal_offset=0.0), sim.t,
+           sim.measured / 2.5e5)
+
+
+def _same(a, b):
+    da, db = a.to_dict(), b.to_dict()
+    return da == db
+
+
+def test_parity_per_sample_blocks_batch_identical_on_many_traces():
+    """The batch path (vectorised checks between decisions) gives bit-identical results to
+    the per-sample path and to random block sizes, on every kind of trace."""
+    rng = np.random.default_rng(1)
+    n_results = 0
+    for st, t, p in _parity_traces():
+        batch = analyze(t, p, st)
+        per_est = StreamingEstimator(st)
+        per = []
+        for a, b in zip(t.tolist(), p.tolist(), strict=True):
+            per += per_est.push(a, b)
+        per += per_est.finish()
+        blk_est = StreamingEstimator(st)
+        blk, i = [], 0
+        while i < t.size:
+            k = int(rng.integers(1, 3000))
+            blk += blk_est.push_block(t[i:i + k], p[i:i + k])
+            i += k
+        blk += blk_est.finish()
+        assert len(batch) == len(per) == len(blk) >= 1
+        for x, y, z in zip(batch, per, blk, strict=True):
+            assert _same(x, y) and _same(x, z), (x, y, z)
+        # the running prefix sums are bit-identical too
+        assert per_est._cs == blk_est._cs and per_est._cq == blk_est._cq
+        assert [d.message for d in per_est.diagnostics] == \
+            [d.message for d in blk_est.diagnostics]
+        n_results += len(batch)
+    assert n_results >= 12
+
+
 def test_uncalibrated_volts_signal_gives_same_tau():
     cfg = RigConfig(volume=2e-3, conductance=orifice_conductance(2e-3), noise_std=FS_NOISE,
                     seed=4, transducer_zero=0.5, transducer_sensitivity=4.0 / 1e6)
@@ -137,20 +197,52 @@ def test_uncalibrated_volts_signal_gives_same_tau():
     assert r_v.conductance == pytest.approx(r_pa.conductance, rel=1e-6)
 
 
-@pytest.mark.xfail(strict=True, reason="open defect: re-arming after the first unload's "
-                   "tail does not yet detect a second unload appended this way (issue 3)")
-def test_two_unloads_in_one_trace_rearm():
+def _two_unloads(charge_time=0.0):
+    """Two unloads in one stream; the second charge is a step or a ramp of charge_time [s]."""
     cfg = RigConfig(volume=1e-3, conductance=orifice_conductance(2e-3), noise_std=FS_NOISE,
                     seed=6, duration=4.0)
     a = simulate(cfg)
     b = simulate(cfg.replace(seed=7, initial_pressure=6e5))
     t = np.concatenate([a.t, a.t[-1] + 1e-3 + b.t])
     p = np.concatenate([a.measured, b.measured])
-    res = merge_final(analyze(t, p, dataclasses.replace(settings_for(cfg),
-                                                        heat_model="adiabatic")))
+    t_open_b = a.t[-1] + 1e-3 + b.t_open
+    if charge_time > 0:
+        n_ramp = int(charge_time * cfg.rate)
+        i0 = a.t.size
+        ramp = np.linspace(a.pressure[-1], 6e5, n_ramp + 2)[1:-1]
+        t = np.concatenate([a.t, a.t[-1] + 1e-3 * np.arange(1, n_ramp + 1),
+                            a.t[-1] + 1e-3 * (n_ramp + 1) + b.t])
+        noise = np.random.default_rng(1).normal(0.0, FS_NOISE, n_ramp)
+        p = np.concatenate([a.measured, ramp + noise, b.measured])
+        t_open_b = t[i0 + n_ramp] + b.t_open
+    return cfg, a, t, p, t_open_b
+
+
+@pytest.mark.parametrize("charge_time", [0.0, 0.5])
+def test_two_unloads_in_one_trace_rearm(charge_time):
+    cfg, a, t, p, t_open_b = _two_unloads(charge_time)
+    st = dataclasses.replace(settings_for(cfg), heat_model="adiabatic")
+    res = merge_final(analyze(t, p, st))
     assert [r.index for r in res] == [0, 1]
-    assert all(r.status == "ok" for r in res)
+    assert all(r.status == "ok" and r.final for r in res)
+    assert res[0].p10 == pytest.approx(7e5, rel=0.01)
     assert res[1].p10 == pytest.approx(6e5, rel=0.01)
+    assert abs(res[0].t_start - a.t_open) < 1e-3
+    assert abs(res[1].t_start - t_open_b) < 1e-3
+    # the first unload's curve fit stops before the second charge
+    assert res[0].t_end < t_open_b - 0.2
+    for r in res:
+        assert r.conductance_model == pytest.approx(cfg.conductance, rel=0.01)
+    # per-sample and block paths take the same decisions
+    est = StreamingEstimator(dataclasses.replace(st, curve_fit=False))
+    per = []
+    for a_, b_ in zip(t.tolist(), p.tolist(), strict=True):
+        per += est.push(a_, b_)
+    per += est.finish()
+    blk = analyze(t, p, dataclasses.replace(st, curve_fit=False))
+    assert [(r.index, r.t_start, r.t_cross, r.i_complete) for r in per] == \
+        [(r.index, r.t_start, r.t_cross, r.i_complete) for r in blk]
+    assert len(per) == 2
 
 
 # ------------------------------------------------------------------- bad input
@@ -198,16 +290,54 @@ def test_aborted_unload_is_reported():
     assert not math.isfinite(res[0].tau_exp)
 
 
-@pytest.mark.xfail(strict=True, reason="open defect: the recovery plateau is declared "
-                   "before the re-heating ends, so the SSE value is ~30 % high (issue 3)")
-def test_aborted_unload_with_recovery_gives_sse():
+def test_aborted_unload_with_slow_recovery_extrapolates_sse():
+    """Recovery time constant ~200 s, 40 s recorded (14 % of the re-heating): p1_inf is
+    extrapolated by the relaxation fit; measured: SSE 6.8 % low with a stated 4.2 %."""
     cfg = RigConfig(volume=2e-3, conductance=orifice_conductance(1.5e-3), noise_std=200.0,
                     seed=10, duration=40.0, valve_close_time=0.8, effects=("heat_transfer",),
                     heat_transfer_mode="fixed", heat_transfer_coefficient=0.05)
     sim = simulate(cfg)
     res = analyze(sim.t, sim.measured, settings_for(cfg))
     assert res and res[0].status == "aborted_sse", res
-    assert res[0].conductance == pytest.approx(cfg.conductance, rel=0.1)
+    r = res[0]
+    assert r.conductance == pytest.approx(cfg.conductance, rel=0.1)
+    assert abs(r.conductance - cfg.conductance) < 3.0 * r.extra["sse_std"]
+    assert r.extra["t_star"] == pytest.approx(0.8, abs=2e-3)
+    # the model inversion at the closing instant does not need the recovery
+    assert r.conductance_model == pytest.approx(cfg.conductance, rel=0.02)
+
+
+@pytest.mark.parametrize(("volume", "diameter", "close"), [(2e-3, 1.5e-3, 0.8),
+                                                          (1e-3, 1e-3, 1.0)])
+def test_aborted_unload_recovery_plateau_sse_within_1_5_percent(volume, diameter, close):
+    """Natural convection, the re-heating recorded to its plateau: eq 23 (printed exponent,
+    recovered pressure) within 1.5 % of the true C (measured 1.0 % and 0.1 %), published
+    while streaming (before the end of the record), not only at finish()."""
+    cfg = RigConfig(volume=volume, conductance=orifice_conductance(diameter),
+                    noise_std=FS_NOISE, seed=12, duration=60.0, valve_close_time=close,
+                    effects=("heat_transfer",))
+    sim = simulate(cfg)
+    est = StreamingEstimator(settings_for(cfg))
+    res = est.push_block(sim.t, sim.measured)
+    assert len(res) == 1 and res[0].status == "aborted_sse", res
+    r = res[0]
+    assert r.conductance == pytest.approx(cfg.conductance, rel=0.015)
+    assert r.conductance_model == pytest.approx(cfg.conductance, rel=0.01)
+    assert r.extra["recovered_fraction"] > 0.9
+    assert est.state == "waiting"
+
+
+def test_aborted_unload_too_slow_recovery_gives_no_sse():
+    """10 L tank, recovery time constant ~20 min, 40 s recorded: p1_inf cannot be
+    extrapolated, so no SSE number (status aborted), but the model value at closing."""
+    cfg = RigConfig(volume=10e-3, conductance=orifice_conductance(2e-3), noise_std=FS_NOISE,
+                    seed=11, duration=40.0, valve_close_time=2.0, effects=("heat_transfer",),
+                    heat_transfer_mode="fixed", heat_transfer_coefficient=0.05)
+    sim = simulate(cfg)
+    res = analyze(sim.t, sim.measured, settings_for(cfg))
+    assert len(res) == 1 and res[0].status == "aborted"
+    assert "too uncertain" in res[0].status_text
+    assert not math.isfinite(res[0].conductance)
 
 
 def test_saturated_plateau_is_bad_data():
@@ -226,3 +356,24 @@ def test_too_few_samples_and_mismatched_arrays():
         analyze(np.arange(50.0), np.ones(40))
     with pytest.raises(EstimationError, match="volume"):
         EstimatorSettings(volume=0.0)
+
+
+@pytest.mark.parametrize(("duration_factor", "ok"), [(1.0, True), (0.5, False)])
+def test_auto_atmosphere_on_a_short_low_rate_record(duration_factor, ok):
+    """2 Hz log, p_atm from the final plateau: the plateau windows of the live path are too
+    long for ~300 post-start samples, so finish() takes p_atm from the end of the record
+    when that is level; a record that ends before the plateau says so (no number)."""
+    cfg = RigConfig(volume=20e-3, conductance=orifice_conductance(1.5e-3), noise_std=300.0,
+                    seed=5, rate=2.0, pre_time=40.0)
+    cfg = cfg.replace(duration=duration_factor * default_duration(cfg))
+    sim = simulate(cfg)
+    st = dataclasses.replace(settings_for(cfg), atmosphere=None, heat_model="adiabatic",
+                             curve_fit=False, min_plateau=16)
+    r = analyze(sim.t, sim.measured, st)[0]
+    if ok:
+        assert r.status == "ok"
+        assert r.p_atm == pytest.approx(cfg.atmosphere, abs=300.0)
+        assert r.conductance_model == pytest.approx(cfg.conductance, rel=0.01)
+    else:
+        assert r.status == "aborted" and "p_atm unknown" in r.status_text
+        assert not math.isfinite(r.conductance)
