@@ -68,7 +68,8 @@ def rig_from_settings(settings: EstimatorSettings, *, conductance: float, p10: f
         pre_time=0.0, noise_std=0.0)
 
 
-def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float) -> float:
+def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float, *,
+                        rtol: float = 1e-7) -> float:
     """Time for the model's tank pressure to fall from p10 to p_star [s].
 
     Parameters
@@ -78,12 +79,15 @@ def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float) -> float:
     p_star : float
         Threshold [Pa absolute].
     t_guess : float
-        Expected crossing time [s] (sets the output grid).
+        Expected crossing time [s] (sets the output grid: the integration stops at
+        1.25 t_guess unless the crossing lies beyond).
+    rtol : float
+        Integrator relative tolerance [-].
     """
-    horizon = 2.0 * t_guess
-    for _ in range(6):
-        t = np.linspace(0.0, horizon, 257)
-        p, _ = discharge(cfg, t, 0.0, rtol=1e-7)
+    horizon = 1.25 * t_guess
+    for _ in range(8):
+        t = np.linspace(0.0, horizon, 129)
+        p, _ = discharge(cfg, t, 0.0, rtol=rtol)
         k = np.flatnonzero(p < p_star)
         if k.size:
             j = int(k[0])
@@ -98,8 +102,14 @@ def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float) -> float:
             else:
                 x = (p_star - c0) / c1
             return float(tt[1] + x)
-        horizon *= 3.0
+        horizon *= 2.0
     return math.inf
+
+
+#: Relative tolerance on C of :func:`invert_crossing` (far below any stated uncertainty).
+INVERSION_RTOL = 1e-6
+#: Integrator tolerance of the inversion: crossing times to about 1e-6 relative [-].
+INVERSION_ODE_RTOL = 1e-6
 
 
 def invert_crossing(
@@ -108,10 +118,12 @@ def invert_crossing(
 ) -> tuple[float, float]:
     """C for which the discharge model crosses p_star at tau_exp, and its 1-sigma [m^3/(s Pa)].
 
-    The crossing time of the model is nearly proportional to 1/C, so the fixed-point
-    iteration C <- C t_model(C)/tau_exp converges in a few steps. The standard deviation
-    combines the timing uncertainty and, for the natural-convection model, the uncertainty
-    of the heat-transfer correlation (:data:`HEAT_CORRELATION_REL_STD`).
+    The model's crossing time is nearly proportional to 1/C (exactly so without heat
+    transfer), so a secant iteration on log t(C) - log tau_exp converges in two or three
+    integrations (this runs inside the live estimator, at the sample that completes the
+    estimate). The standard deviation combines the timing uncertainty and, for the
+    natural-convection model, the uncertainty of the heat-transfer correlation
+    (:data:`HEAT_CORRELATION_REL_STD`).
 
     Parameters
     ----------
@@ -126,22 +138,34 @@ def invert_crossing(
     """
     if not (math.isfinite(tau_exp) and tau_exp > 0 and math.isfinite(c_start) and c_start > 0):
         return math.nan, math.nan
-    c = c_start
+
+    def g(log_c: float) -> float:
+        """log(model crossing time / tau_exp) at C = exp(log_c)."""
+        cfg = rig_from_settings(settings, conductance=math.exp(log_c), p10=p10, p_atm=p_atm)
+        tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
+        return math.log(tm / tau_exp) if math.isfinite(tm) and tm > 0 else math.nan
+
+    x0 = math.log(c_start)
+    f0 = g(x0)
+    if not math.isfinite(f0):
+        return math.nan, math.nan
+    x1 = x0 + f0  # exact for t proportional to 1/C
     for _ in range(8):
-        cfg = rig_from_settings(settings, conductance=c, p10=p10, p_atm=p_atm)
-        tm = model_crossing_time(cfg, p_star, tau_exp)
-        if not math.isfinite(tm):
+        f1 = g(x1)
+        if not math.isfinite(f1):
             return math.nan, math.nan
-        c_new = c * tm / tau_exp
-        done = abs(c_new / c - 1.0) < 1e-6
-        c = c_new
-        if done:
+        if abs(f1) < INVERSION_RTOL:
             break
+        slope = (f1 - f0) / (x1 - x0) if x1 != x0 else -1.0
+        if not slope < -0.2:  # t(C) falls with C; guard against a flat or noisy secant
+            slope = -1.0
+        x0, f0, x1 = x1, f1, x1 - f1 / slope
+    c = math.exp(x1)
     var = (c * tau_std / tau_exp) ** 2
     if settings.heat_model == "natural":
         cfg = rig_from_settings(settings, conductance=c, p10=p10, p_atm=p_atm,
                                 heat_scale=1.0 + HEAT_CORRELATION_REL_STD)
-        tm = model_crossing_time(cfg, p_star, tau_exp)
+        tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
         var += (c * (tm / tau_exp - 1.0)) ** 2
     return c, math.sqrt(var)
 
