@@ -1,0 +1,186 @@
+"""Acceptance harness of the discrepancy workflow (issue #5): randomised hidden effects.
+
+Run: ``.venv/bin/python bench/bench_discrepancy.py [--per-effect N] [--null N] [--ar N]
+[--workers 2]``. Prints a markdown table with every acceptance line, measured vs target.
+Data: :func:`pneumatic_unload.discrepancy.synthetic.draw_case` (fixed seeds), the workflow is
+not told which effect is on. "Noise-free misfit" is the chi^2 of the baseline fitted to the
+noise-free trace with the true noise model (sigma = 1 kPa); detection is scored on trials
+with a misfit >= 50. Intervals are linear here (``profile=False``) to keep the run short;
+the speed line runs the full workflow with profiles.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from multiprocessing import Pool
+
+import numpy as np
+
+from pneumatic_unload.config import EFFECTS, RigConfig
+from pneumatic_unload.discrepancy import DiscrepancySettings, find_discrepancy
+from pneumatic_unload.discrepancy.noise import BinnedLikelihood, NoiseModel
+from pneumatic_unload.discrepancy.synthetic import NOISE_STD, draw_case
+from pneumatic_unload.discrepancy.workflow import Problem
+from pneumatic_unload.model import simulate
+
+ONE_PARAM = {"heat_transfer": "tau_heat", "valve_opening": "t_ramp",
+             "sensor_lag": "tau_sensor", "leak": "leak_fraction", "sensor_offset": "offset",
+             "sensor_gain": "gain"}
+
+
+def noise_free_misfit(case, settings) -> float:
+    """chi^2 of the baseline fitted to the noise-free trace (true noise model)."""
+    sim = case.simulate()
+    clean = case.noise_free()
+    prob = Problem(sim.t, sim.measured, settings)
+    n = prob.t.size
+    rho = case.config.noise_ar_rho if case.config.noise_ar_std > 0 else 0.0
+    prob.y = clean.measured[:n]
+    prob.lik = BinnedLikelihood(prob.t, prob.y, NoiseModel(NOISE_STD, rho, n, "true"),
+                                prob.lik.edges)
+    spec = prob.spec(())
+    fit = prob.fit(spec, [spec.to_x(prob.neutral_theta(0.3)),
+                          spec.to_x(prob.neutral_theta(0.5))])
+    return fit.chi2
+
+
+def trial(job: tuple[str, int, float]) -> dict:
+    effect, seed, rho = job
+    case = draw_case(effect, seed, rho=rho)
+    cfg = case.config
+    sim = case.simulate()
+    s = DiscrepancySettings(volume=cfg.volume, initial_temperature=cfg.initial_temperature,
+                            atmosphere=cfg.atmosphere, profile=False)
+    t0 = time.perf_counter()
+    try:
+        res = find_discrepancy(sim.t, sim.measured, s)
+    except Exception as exc:  # a crash is a failed trial, never a dead harness
+        return {"effect": effect, "seed": seed, "rho": rho, "error": repr(exc)}
+    el = time.perf_counter() - t0
+    out = {"effect": effect, "seed": seed, "rho": rho, "claimed": res.effect,
+           "amb": list(res.ambiguous_with), "delta": res.delta_bic, "n": sim.t.size,
+           "nrms_after": res.after.nrms, "white_after": res.after.white,
+           "nrms_before": res.before.nrms, "elapsed": el, "error": None}
+    if effect != "none":
+        out["misfit"] = noise_free_misfit(case, s)
+        par = ONE_PARAM.get(effect)
+        if par and res.effect == effect and par in res.parameters:
+            tv = case.truth[par]
+            out["param_err"] = abs(res.parameters[par].value / tv - 1.0)
+    return out
+
+
+def speed() -> tuple[float, int]:
+    """Full workflow (all candidates, profiles) on one 10 s trace at 1 kHz [s]."""
+    cfg = RigConfig(volume=2e-3, conductance=7.5e-9, critical_ratio=0.4,
+                    initial_pressure=7e5, rate=1000.0, pre_time=0.2, duration=9.8,
+                    noise_std=NOISE_STD, effects=("heat_transfer",),
+                    heat_transfer_mode="fixed", heat_transfer_coefficient=3.0, seed=1)
+    sim = simulate(cfg)
+    t0 = time.perf_counter()
+    find_discrepancy(sim.t, sim.measured, DiscrepancySettings(volume=cfg.volume))
+    return time.perf_counter() - t0, sim.t.size
+
+
+def pct(k: int, n: int) -> str:
+    return f"{100.0 * k / n:.1f} % ({k}/{n})" if n else "n/a (0 trials)"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--per-effect", type=int, default=25)
+    ap.add_argument("--null", type=int, default=40)
+    ap.add_argument("--ar", type=int, default=20, help="null trials per AR(1) rho")
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args(argv)
+    jobs = [(e, 1000 + k, 0.0) for e in EFFECTS for k in range(args.per_effect)]
+    jobs += [("none", 5000 + k, 0.0) for k in range(args.null)]
+    jobs += [("none", 6000 + k, r) for r in (0.5, 0.9) for k in range(args.ar)]
+    t0 = time.perf_counter()
+    with Pool(args.workers) as pool:
+        rows = []
+        for i, r in enumerate(pool.imap_unordered(trial, jobs, chunksize=1)):
+            rows.append(r)
+            if (i + 1) % 20 == 0:
+                print(f"  {i + 1}/{len(jobs)} trials, {time.perf_counter() - t0:.0f} s",
+                      file=sys.stderr, flush=True)
+    wall = time.perf_counter() - t0
+    errors = [r for r in rows if r["error"]]
+    ok = [r for r in rows if not r["error"]]
+    eff = [r for r in ok if r["effect"] != "none"]
+    big = [r for r in eff if r["misfit"] >= 50.0]
+    lines = ["| acceptance line | measured | target | met |", "| --- | --- | --- | --- |"]
+
+    def line(name: str, k: int, n: int, target: float, geq: bool = True) -> None:
+        v = k / n if n else math.nan
+        met = (v >= target if geq else v <= target) if n else False
+        lines.append(f"| {name} | {pct(k, n)} | {'>=' if geq else '<='} "
+                     f"{100 * target:.0f} % | {'yes' if met else 'NO'} |")
+
+    line("detection (misfit >= 50): effect claimed", sum(r["claimed"] != "none" for r in big),
+         len(big), 0.95)
+    for e, target in (("heat_transfer", 0.9), ("leak", 0.9), ("sensor_offset", 0.9),
+                      ("pipe_volume", 0.8)):
+        sel = [r for r in big if r["effect"] == e]
+        line(f"named exactly right (alone): {e}", sum(
+            r["claimed"] == e and not r["amb"] for r in sel), len(sel), target)
+    for e in ("valve_opening", "sensor_lag", "sensor_offset", "sensor_gain"):
+        sel = [r for r in big if r["effect"] == e]
+        line(f"truth inside reported set: {e}", sum(
+            e in [r["claimed"], *r["amb"]] for r in sel), len(sel), 0.95)
+    conf_wrong = 0
+    for r in eff:
+        if r["claimed"] not in ("none", r["effect"]):
+            if r["delta"][r["claimed"]] - r["delta"][r["effect"]] > 10.0:
+                conf_wrong += 1
+    line("confident wrong name (winner > 10 ahead of truth), all effect trials",
+         conf_wrong, len(eff), 0.02, geq=False)
+    errs = [r["param_err"] for r in eff if "param_err" in r]
+    if errs:
+        med, p90 = float(np.median(errs)), float(np.percentile(errs, 90))
+        lines.append(f"| parameter error, one-parameter effects named right (n = {len(errs)})"
+                     f" | median {100 * med:.2f} %, p90 {100 * p90:.2f} % | <= 5 %, <= 20 % | "
+                     f"{'yes' if med <= 0.05 and p90 <= 0.2 else 'NO'} |")
+        for e, par in ONE_PARAM.items():
+            ee = [r["param_err"] for r in eff if "param_err" in r and r["effect"] == e]
+            if ee:
+                lines.append(f"| - {par} ({e}, n = {len(ee)}) | median "
+                             f"{100 * float(np.median(ee)):.2f} %, p90 "
+                             f"{100 * float(np.percentile(ee, 90)):.2f} % | | |")
+    claimed_ok = [r for r in big if r["claimed"] != "none"]
+    line("after the effect: nrms <= 1.02 and white (claimed trials)", sum(
+        r["nrms_after"] <= 1.02 and r["white_after"] for r in claimed_ok), len(claimed_ok),
+        0.95)
+    for rho, target, label in ((0.0, 0.02, "white"), (0.5, 0.05, "AR(1) rho 0.5"),
+                               (0.9, 0.05, "AR(1) rho 0.9")):
+        sel = [r for r in ok if r["effect"] == "none" and r["rho"] == rho]
+        line(f"effect claimed on effect-free data, {label}",
+             sum(r["claimed"] != "none" for r in sel), len(sel), target, geq=False)
+    sel = [r for r in ok if r["effect"] == "none"]
+    line("effect-free: nrms <= 1.02 and white", sum(
+        r["nrms_after"] <= 1.02 and r["white_after"] for r in sel), len(sel), 0.95)
+    sp, n = speed()
+    lines.append(f"| speed: one 10 s trace ({n} samples) through all candidates, profiles on "
+                 f"| {sp:.1f} s | <= 30 s | {'yes' if sp <= 30 else 'NO'} |")
+    print(f"\n{len(rows)} trials ({len(errors)} crashed), {len(big)} effect trials with "
+          f"misfit >= 50 of {len(eff)}; wall time {wall:.0f} s with {args.workers} workers; "
+          f"mean workflow time per trial "
+          f"{np.mean([r['elapsed'] for r in ok]):.1f} s\n")
+    print("\n".join(lines))
+    print("\nper effect (all trials): claimed / in set / misfit >= 50")
+    for e in EFFECTS:
+        sel = [r for r in eff if r["effect"] == e]
+        print(f"- {e}: claimed {sum(r['claimed'] != 'none' for r in sel)}/{len(sel)}, truth in "
+              f"set {sum(e in [r['claimed'], *r['amb']] for r in sel)}, detectable "
+              f"{sum(r['misfit'] >= 50 for r in sel)}; wrong names: "
+              f"{sorted({r['claimed'] for r in sel} - {e, 'none'})}")
+    for r in errors:
+        print(f"- crashed: {r['effect']} seed {r['seed']} rho {r['rho']}: {r['error']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,260 @@
+"""Discrepancy workflow (issue #5): fast CI subset of the acceptance harness.
+
+The full randomised harness is ``bench/bench_discrepancy.py``. Here: the building blocks
+(fast integrator parity, noise model, prewhitened likelihood, Ljung-Box), null data with
+white and AR(1) noise, clear single effects named right, the L/D factor, the multi-run law,
+the CLI (JSON fields, report files, exit codes) and the real AeroLab data end to end.
+"""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pneumatic_unload.cli import main
+from pneumatic_unload.config import RigConfig
+from pneumatic_unload.discrepancy import (
+    DiscrepancyError,
+    DiscrepancySettings,
+    estimate_noise,
+    find_discrepancy,
+    find_discrepancy_runs,
+    ljung_box,
+)
+from pneumatic_unload.discrepancy.candidates import fast_discharge
+from pneumatic_unload.discrepancy.multirun import fit_geometry_law
+from pneumatic_unload.discrepancy.noise import BinnedLikelihood, NoiseModel, make_bins
+from pneumatic_unload.discrepancy.synthetic import draw_case
+from pneumatic_unload.model import discharge, simulate
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real-data" / "aerolab"
+V = 2e-3
+C = 2e-8  # tau_exp about 0.6 s: short traces (about 4000 samples) keep the tests fast
+T10 = 293.15
+
+
+def _rig(**kw):
+    base = {"volume": V, "conductance": C, "critical_ratio": 0.4, "initial_pressure": 7e5,
+            "initial_temperature": T10, "wall_temperature": T10, "rate": 1000.0,
+            "pre_time": 0.2, "noise_std": 1000.0, "seed": 11}
+    base.update(kw)
+    return RigConfig(**base)
+
+
+def _run(cfg, **kw):
+    sim = simulate(cfg)
+    s = DiscrepancySettings(volume=cfg.volume, initial_temperature=cfg.initial_temperature,
+                            atmosphere=cfg.atmosphere, **kw)
+    return find_discrepancy(sim.t, sim.measured, s)
+
+
+# ----------------------------------------------------------------------- building blocks
+@pytest.mark.parametrize("effects,extra", [
+    (("valve_opening",), {"valve_opening_time": 0.03}),
+    (("pipe_volume", "leak"), {"pipe_volume": 4e-4, "pipe_conductance": 6e-8}),
+    (("heat_transfer",), {"heat_transfer_mode": "fixed", "heat_transfer_coefficient": 2.0}),
+])
+def test_fast_discharge_matches_the_model(effects, extra):
+    cfg = _rig(effects=effects, **extra)
+    t = np.arange(0.0, 3.0, 1e-3)
+    p_ref, temp_ref = discharge(cfg, t, 0.2)
+    p, temp = fast_discharge(cfg, t, 0.2)
+    assert np.max(np.abs(p - p_ref)) < 1e-5 * cfg.initial_pressure
+    assert np.max(np.abs(temp - temp_ref)) < 1e-5 * T10
+
+
+def test_noise_model_recovers_sigma_and_rho_from_plateaus():
+    cfg = _rig(noise_std=0.0, noise_ar_std=800.0, noise_ar_rho=0.7, seed=5)
+    sim = simulate(cfg)
+    nm = estimate_noise(sim.t, sim.measured, 0.2, 0.6)
+    assert nm.source == "plateaus"
+    assert nm.sigma == pytest.approx(800.0, rel=0.15)
+    assert nm.rho == pytest.approx(0.7, abs=0.08)
+
+
+def test_prewhitened_likelihood_is_chi2_under_ar1_noise_and_naive_one_is_not():
+    rng = np.random.default_rng(3)
+    n, rho, sigma = 20000, 0.9, 1000.0
+    e = np.empty(n)
+    e[0] = rng.normal(0, sigma)
+    u = rng.normal(0, sigma * math.sqrt(1 - rho * rho), n)
+    for k in range(1, n):
+        e[k] = rho * e[k - 1] + u[k]
+    t = np.arange(n) * 1e-3
+    edges = make_bins(t, 1.0)
+    ok = BinnedLikelihood(t, e, NoiseModel(sigma, rho, n, "test"), edges)
+    naive = BinnedLikelihood(t, e, NoiseModel(sigma, 0.0, n, "test"), edges)
+    z_ok, z_naive = ok.residuals(np.zeros(n)), naive.residuals(np.zeros(n))
+    assert float(z_ok @ z_ok) / z_ok.size == pytest.approx(1.0, abs=0.15)
+    assert float(z_naive @ z_naive) / z_naive.size > 3.0
+
+
+def test_ljung_box_separates_white_from_structured():
+    rng = np.random.default_rng(0)
+    white = rng.normal(size=2000)
+    assert ljung_box(white)[1] > 0.01
+    assert ljung_box(white + np.sin(np.arange(2000) / 50.0))[1] < 1e-6
+
+
+# ----------------------------------------------------------------------------- decisions
+def test_null_dataset_claims_no_effect():
+    res = _run(_rig(seed=21))
+    assert res.effect == "none" and res.effects == []
+    assert res.ambiguous_with == []
+    assert max(res.delta_bic.values()) < 10.0
+    assert res.after.nrms < 1.05
+    assert "no discrepancy" in res.verdict
+
+
+def test_ar1_null_dataset_claims_no_effect():
+    res = _run(_rig(noise_std=0.0, noise_ar_std=1000.0, noise_ar_rho=0.9, seed=4))
+    assert res.noise.rho == pytest.approx(0.9, abs=0.05)
+    assert res.effect == "none", res.delta_bic
+
+
+@pytest.mark.parametrize("effect,extra,param,truth", [
+    ("heat_transfer", {"heat_transfer_mode": "fixed",
+                       "heat_transfer_coefficient": 7e5 * V / (0.4 * T10 * 2.0)},
+     "tau_heat", 2.0),
+    ("leak", {"leak_coefficient": 0.1 * C * 1.185 * 7e5 / (7e5 - 101325.0)},
+     "leak_fraction", 0.1),
+    ("sensor_offset", {"sensor_offset": 4000.0}, "offset", 4000.0),
+])
+def test_clear_effect_is_named_alone_with_its_size(effect, extra, param, truth):
+    res = _run(_rig(effects=(effect,), seed=7, **extra))
+    assert res.effect == effect, res.delta_bic
+    assert res.ambiguous_with == []
+    iv = res.parameters[param]
+    assert iv.value == pytest.approx(truth, rel=0.1)
+    assert iv.low <= truth <= iv.high or abs(iv.value / truth - 1) < 0.03
+    assert iv.identifiable
+    assert res.rms_after < res.rms_before
+    assert res.after.nrms <= 1.05 and res.after.white
+    assert res.delta_bic[effect] > 10.0
+
+
+def test_valve_opening_is_inside_the_reported_set():
+    res = _run(_rig(effects=("valve_opening",), valve_opening_time=0.06, seed=8))
+    assert "valve_opening" in [res.effect, *res.ambiguous_with]
+    if res.ambiguous_with:
+        assert res.extra_data  # says which measurement would separate them
+
+
+def test_geometry_factor_is_not_identifiable_from_one_trace():
+    res = _run(_rig(seed=9), candidates=())
+    g = res.geometry_factor
+    assert g["identifiable"] is False
+    assert g["sensitivity_correlation_with_C"] == pytest.approx(1.0, abs=1e-6)
+    # and the law refuses one geometry
+    law = fit_geometry_law([2.0, 2.0], [1e-8, 1.01e-8], [1e-10, 1e-10])
+    assert not law.identifiable and "two different" in law.reason
+
+
+def test_several_runs_identify_one_shared_geometry_law():
+    c_inf, a = 2.0e-8, 0.25
+    lds = [0.6, 1.2, 2.4]
+    traces, settings = [], []
+    for k, ld in enumerate(lds):
+        cfg = _rig(conductance=c_inf * (1 - a / ld), length_diameter_ratio=ld, seed=30 + k)
+        sim = simulate(cfg)
+        traces.append((sim.t, sim.measured))
+        settings.append(DiscrepancySettings(volume=V, length_diameter_ratio=ld,
+                                            candidates=()))
+    results, law = find_discrepancy_runs(traces, settings)
+    assert len(results) == 3 and law.identifiable
+    assert law.c_inf == pytest.approx(c_inf, rel=0.01)
+    assert law.a == pytest.approx(a, abs=0.02)
+    assert abs(law.a - a) < 4 * law.a_std + 1e-3
+
+
+def test_bad_input_gives_clear_errors():
+    s = DiscrepancySettings(volume=V)
+    t = np.arange(0.0, 2.0, 1e-3)
+    with pytest.raises(DiscrepancyError, match="no complete unload"):
+        find_discrepancy(t, np.full(t.size, 7e5) + np.random.default_rng(0).normal(
+            0, 100, t.size), s)
+    p = np.full(t.size, 7e5)
+    p[100] = np.nan
+    with pytest.raises(DiscrepancyError, match="non-finite"):
+        find_discrepancy(t, p, s)
+    with pytest.raises(DiscrepancyError, match="too few"):
+        find_discrepancy(t[:5], p[:5], s)
+    with pytest.raises(DiscrepancyError, match="unknown candidate"):
+        DiscrepancySettings(volume=V, candidates=("magic",))
+
+
+def test_harness_draws_are_reproducible_and_in_range():
+    a, b = draw_case("leak", 3), draw_case("leak", 3)
+    assert a.config == b.config and a.truth == b.truth
+    assert 0.02 <= a.truth["leak_fraction"] <= 0.2
+    cfg = draw_case("none", 5, rho=0.5).config
+    assert cfg.noise_ar_rho == 0.5 and cfg.noise_std == 0.0 and cfg.effects == ()
+
+
+# ---------------------------------------------------------------------------------- CLI
+def _write_csv(path, cfg):
+    sim = simulate(cfg)
+    rows = "\n".join(f"{t:.4f},{p / 1e3:.4f}" for t, p in zip(sim.t, sim.measured,
+                                                              strict=True))
+    path.write_text("Time [s],Pressure [kPa]\n" + rows + "\n")
+
+
+def test_cli_json_fields_and_report_files(tmp_path, capsys):
+    csv = tmp_path / "run.csv"
+    _write_csv(csv, _rig(effects=("sensor_offset",), sensor_offset=5000.0, seed=12))
+    rep = tmp_path / "report"
+    code = main(["discrepancy", str(csv), "--volume", str(V), "--json", "--report", str(rep),
+                 "--max-effects", "1"])
+    out = capsys.readouterr().out
+    assert code == 0
+    d = json.loads(out)
+    for key in ("effect", "ambiguous_with", "parameters", "rms_before", "rms_after",
+                "delta_bic", "noise"):
+        assert key in d
+    assert d["effect"] == "sensor_offset"
+    assert set(d["delta_bic"]) == {"heat_transfer", "valve_opening", "sensor_lag", "leak",
+                                   "pipe_volume", "sensor_offset", "sensor_gain"}
+    assert d["noise"]["sigma"] == pytest.approx(1000.0, rel=0.1) and "rho" in d["noise"]
+    off = d["parameters"]["offset"]
+    assert off["ci_low"] <= 5000.0 <= off["ci_high"] or abs(off["value"] - 5000) < 150
+    assert d["rms_after"] < d["rms_before"]
+    md = (rep / "report.md").read_text()
+    assert "sensor_offset" in md and "![residuals](residuals.png)" in md
+    for png in ("models.png", "residuals.png", "ranking.png", "residual_vs_state.png"):
+        assert (rep / png).stat().st_size > 5000
+
+
+def test_cli_exit_codes(tmp_path, capsys):
+    assert main(["discrepancy", str(tmp_path / "missing.csv"), "--volume", "0.001"]) == 2
+    flat = tmp_path / "flat.csv"
+    flat.write_text("Time [s],Pressure [kPa]\n" + "\n".join(
+        f"{k * 1e-3:.3f},{700 + 0.1 * math.sin(k):.4f}" for k in range(500)) + "\n")
+    assert main(["discrepancy", str(flat), "--volume", "0.001"]) == 2
+    err = capsys.readouterr().err
+    assert "no complete unload" in err and len(err.strip().splitlines()) == 2
+    with pytest.raises(SystemExit) as exc:
+        main(["discrepancy", str(flat), "--max-effects", "7"])
+    assert exc.value.code == 2
+
+
+# ---------------------------------------------------------------------------- real data
+def test_real_aerolab_runs_end_to_end(tmp_path, capsys):
+    path = REAL / "orifice_0.125in.csv"
+    if not path.exists():
+        pytest.skip(f"real data not present at {path}")
+    rep = tmp_path / "aerolab"
+    code = main(["discrepancy", str(path), "--volume", "0.125", "--gauge", "--atmosphere",
+                 "101500", "--pressure-unit", "kPa", "--fit-wall-temperature", "--json",
+                 "--report", str(rep), "--no-profile", "--max-effects", "2"])
+    assert code == 0
+    d = json.loads(capsys.readouterr().out)
+    # the hot gas cooling on the wall is the dominant missing effect of this rig
+    assert d["effect"] == "heat_transfer"
+    assert d["rms_after"] < 0.5 * d["rms_before"]
+    tc = d["temperature_check"]
+    assert tc["available"] and tc["heat_transfer_fitted"]
+    assert tc["final"]["rms"] < tc["baseline"]["rms"]
+    assert (rep / "temperature.png").exists() and (rep / "report.md").exists()
+    assert 0.5e-8 < d["conductance"] < 3e-8
