@@ -173,6 +173,10 @@ class EstimatorNode(Node):
         ActionServer(self, Measure, "~/measure", execute_callback=self._execute,
                      goal_callback=self._on_goal, cancel_callback=lambda _g: CancelResponse.ACCEPT)
         self.create_timer(self._p("diagnostics_period"), self._report)
+        # The receiving thread and the worker share the GIL: with the default 5 ms switch
+        # interval the worker could wait that long for it at the sample that completes an
+        # estimate; 0.5 ms keeps the publication latency low at 10 kHz.
+        sys.setswitchinterval(5e-4)
         self._worker = threading.Thread(target=self._work, name="estimator", daemon=True)
         self._worker.start()
         topic = self._p("block_topic" if self._p("input") == "block" else "pressure_topic")
