@@ -785,6 +785,7 @@ class StreamingEstimator:
         out: list[UnloadResult] = []
         if self._state == _RECOVERY:
             out.append(self._abort_result(n - 1, recovered=False))
+            out[-1].final = True
         elif self._state == _UNLOADING and self._end_plateau_auto(n - 1):
             # p_atm from the final samples (short record, e.g. 1 Hz): crossing, then tail
             out += self._check_final_plateau_auto(n - 1, at_end=True)
@@ -994,7 +995,8 @@ class StreamingEstimator:
         self._to_waiting(i + 1)
         return [res]
 
-    def _empty_result(self, status: str, text: str, i: int) -> UnloadResult:
+    def _empty_result(self, status: str, text: str, i: int, *, count: bool = True
+                      ) -> UnloadResult:
         s = self.settings
         nan = math.nan
         res = UnloadResult(
@@ -1003,7 +1005,8 @@ class StreamingEstimator:
             initial_temperature=s.initial_temperature, volume=s.volume, conductance=nan,
             conductance_model=nan, conductance_model_std=nan, quality=0.0,
             method="unloading-time", i_complete=i + self._shift, t_complete=float(self._t[i]))
-        self._n_unloads += 1
+        if count:
+            self._n_unloads += 1
         return res
 
     def _step_unloading(self, i: int) -> list[UnloadResult]:
@@ -1323,7 +1326,16 @@ class StreamingEstimator:
         self._state = _RECOVERY
         self._below, self._level = True, -math.inf
         self._next_check = i + self.PERIOD
-        return []
+        # report the abort at once (a live node must not stay silent through a recovery
+        # that may take minutes); the SSE result follows under the same index, final=True
+        t_star = self._t_close - self._t0
+        res = self._empty_result(
+            "aborted", f"valve closed {t_star:.4f} s after the start, before p*: aborted "
+            "unload; waiting for the pressure recovery (SSE, eq 23)", i, count=False)
+        if getattr(self, "_refined", False):
+            res.p10, res.t_start = self._to_pa(self._p10_signal), self._t0
+            res.i_start = self._i0 + self._shift
+        return [res]
 
     #: Recovery samples needed before the first recovery fit [-].
     RECOVERY_MIN = 256
@@ -1387,6 +1399,7 @@ class StreamingEstimator:
                 and span * dt >= 3.0 * self._expected_recovery_time()
                 and span * dt >= 4.0 * fit.tau):
             res = self._abort_result(i, recovered=True)
+            res.final = True
             self._to_waiting(i + 1)
             return [res]
         t_star = self._t_close - self._t0
@@ -1395,6 +1408,7 @@ class StreamingEstimator:
             res = self._abort_result(i, recovered=False, text=(
                 "valve closed before p*; no pressure recovery after closing (no re-heating "
                 "seen), so no SSE value"))
+            res.final = True
             self._to_waiting(i + 1)
             return [res]
         return []

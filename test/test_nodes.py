@@ -154,9 +154,35 @@ def test_measure_action(tmp_path: Path, ros_node: Any) -> None:
         result, _ = run_goal(Measure.Goal(timeout=0.5, trigger_valve=True,
                                           valve_service="/no/such/valve"), 15.0)
         assert not result.success and "/no/such/valve not available" in result.message
+        # a late subscriber still gets the last estimate (reliable, transient local)
+        late = _estimates(node)
+        assert spin_until(node, ex, lambda: len(late) >= 1, 10.0)
+        assert late[-1].conductance_model == pytest.approx(C_TRUE, rel=0.05)
+        # an aborted unload (valve closed before p*) fails the goal at once, clearly
+        (r,) = _set_params(node, ex, "simulator", valve_close_time=0.15)
+        assert r.successful, r.reason
+        assert _wait_charged(node, ex, 20.0)
+        time.sleep(1.5)  # plateau before the next unload
+        result, _ = run_goal(Measure.Goal(timeout=20.0, trigger_valve=True), 25.0)
+        assert not result.success and result.message.startswith("aborted: valve closed")
+        assert result.estimate.status == 2  # STATUS_ABORTED
     finally:
         codes = [p.stop() for p in (sim, est)]
     assert codes == [0, 0]
+
+
+def _wait_charged(node: Any, ex: Any, timeout: float) -> bool:
+    """Poll the simulator's ~/charge service until it says the tank is already charged."""
+    from std_srvs.srv import Trigger
+
+    cli = node.create_client(Trigger, "/simulator/charge")
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        fut = cli.call_async(Trigger.Request())
+        if spin_until(node, ex, fut.done, 5.0) and "already charged" in fut.result().message:
+            return True
+        spin_until(node, ex, lambda: False, 0.3)
+    return False
 
 
 def _set_params(node: Any, ex: Any, target: str, **values: Any) -> Any:
