@@ -240,6 +240,37 @@ def _solve3(m: tuple[tuple[float, float, float], ...], r: tuple[float, float, fl
     return x, y, z
 
 
+def _grid_then_golden(f: Any, t: FloatArray, t_lo: float, t_hi: float, *, n_grid: int,
+                      rel_tol: float) -> float:
+    """Minimise f(x) over [t_lo, t_hi] [s]: at most ``n_grid`` sample instants of ``t`` in
+    the interval, then a golden-section search around the best one, down to ``rel_tol``
+    times the grid step."""
+    cand = t[(t >= t_lo) & (t <= t_hi)]
+    if cand.size == 0:
+        cand = np.array([0.5 * (t_lo + t_hi)])
+    if cand.size > n_grid:
+        cand = cand[np.linspace(0, cand.size - 1, n_grid).astype(int)]
+    vals = [f(float(c)) for c in cand]
+    k = int(np.argmin(vals))
+    step = float(cand[1] - cand[0]) if cand.size > 1 else t_hi - t_lo
+    a_, b_ = max(t_lo, float(cand[k]) - step), min(t_hi, float(cand[k]) + step)
+    gr = (math.sqrt(5.0) - 1.0) / 2.0
+    x1, x2 = b_ - gr * (b_ - a_), a_ + gr * (b_ - a_)
+    f1, f2 = f(x1), f(x2)
+    for _ in range(48):
+        if b_ - a_ < rel_tol * max(step, 1e-12):
+            break
+        if f1 <= f2:
+            b_, x2, f2 = x2, x1, f1
+            x1 = b_ - gr * (b_ - a_)
+            f1 = f(x1)
+        else:
+            a_, x1, f1 = x1, x2, f2
+            x2 = a_ + gr * (b_ - a_)
+            f2 = f(x2)
+    return 0.5 * (a_ + b_)
+
+
 def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
               ) -> tuple[float, float, float, float, float]:
     """Fit p = p10 (t < t0), p10 - s u + c u^2 (u = t - t0 >= 0) with t0 in [t_lo, t_hi].
@@ -284,30 +315,7 @@ def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
         sse = max(sq_all - (coef[0] * rhs[0] + coef[1] * rhs[1] + coef[2] * rhs[2]), 0.0)
         return sse, np.array((coef[0] + p_ref, coef[1], coef[2]))
 
-    cand = t[(t >= t_lo) & (t <= t_hi)]
-    if cand.size == 0:
-        cand = np.array([0.5 * (t_lo + t_hi)])
-    if cand.size > 64:
-        cand = cand[np.linspace(0, cand.size - 1, 64).astype(int)]
-    sse = [solve(float(c))[0] for c in cand]
-    k = int(np.argmin(sse))
-    step = (cand[1] - cand[0]) if cand.size > 1 else (t_hi - t_lo)
-    a_, b_ = max(t_lo, float(cand[k]) - step), min(t_hi, float(cand[k]) + step)
-    gr = (math.sqrt(5.0) - 1.0) / 2.0
-    x1, x2 = b_ - gr * (b_ - a_), a_ + gr * (b_ - a_)
-    f1, f2 = solve(x1)[0], solve(x2)[0]
-    for _ in range(48):
-        if b_ - a_ < 1e-3 * max(step, 1e-12):
-            break
-        if f1 <= f2:
-            b_, x2, f2 = x2, x1, f1
-            x1 = b_ - gr * (b_ - a_)
-            f1 = solve(x1)[0]
-        else:
-            a_, x1, f1 = x1, x2, f2
-            x2 = a_ + gr * (b_ - a_)
-            f2 = solve(x2)[0]
-    t0 = 0.5 * (a_ + b_)
+    t0 = _grid_then_golden(lambda x: solve(x)[0], t, t_lo, t_hi, n_grid=64, rel_tol=1e-3)
     sse0, coef = solve(t0)
     rms = math.sqrt(sse0 / max(p.size - 4, 1))
     return t0, float(coef[0]), float(coef[1]) / scale_t, float(coef[2]) / scale_t**2, rms
@@ -391,30 +399,7 @@ def corner_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
         r = p - a @ coef
         return float(r @ r), coef
 
-    cand = t[(t >= t_lo) & (t <= t_hi)]
-    if cand.size == 0:
-        cand = np.array([0.5 * (t_lo + t_hi)])
-    if cand.size > 96:
-        cand = cand[np.linspace(0, cand.size - 1, 96).astype(int)]
-    sse = [solve(float(c))[0] for c in cand]
-    k = int(np.argmin(sse))
-    step = float(cand[1] - cand[0]) if cand.size > 1 else t_hi - t_lo
-    a_, b_ = max(t_lo, float(cand[k]) - step), min(t_hi, float(cand[k]) + step)
-    gr = (math.sqrt(5.0) - 1.0) / 2.0
-    x1, x2 = b_ - gr * (b_ - a_), a_ + gr * (b_ - a_)
-    f1, f2 = solve(x1)[0], solve(x2)[0]
-    for _ in range(48):
-        if b_ - a_ < 1e-6 * max(step, 1e-12):
-            break
-        if f1 <= f2:
-            b_, x2, f2 = x2, x1, f1
-            x1 = b_ - gr * (b_ - a_)
-            f1 = solve(x1)[0]
-        else:
-            a_, x1, f1 = x1, x2, f2
-            x2 = a_ + gr * (b_ - a_)
-            f2 = solve(x2)[0]
-    tc = 0.5 * (a_ + b_)
+    tc = _grid_then_golden(lambda x: solve(x)[0], t, t_lo, t_hi, n_grid=96, rel_tol=1e-6)
     sse0, coef = solve(tc)
     return tc, float(coef[0]), math.sqrt(sse0 / max(p.size - 6, 1))
 
