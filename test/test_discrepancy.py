@@ -25,8 +25,15 @@ from pneumatic_unload.discrepancy import (
 )
 from pneumatic_unload.discrepancy.candidates import fast_discharge
 from pneumatic_unload.discrepancy.multirun import fit_geometry_law
-from pneumatic_unload.discrepancy.noise import BinnedLikelihood, NoiseModel, make_bins
+from pneumatic_unload.discrepancy.noise import (
+    BinnedLikelihood,
+    NoiseModel,
+    combine_sigma2,
+    highpass_noise,
+    make_bins,
+)
 from pneumatic_unload.discrepancy.synthetic import draw_case
+from pneumatic_unload.discrepancy.workflow import Problem
 from pneumatic_unload.model import discharge, simulate
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real-data" / "aerolab"
@@ -72,6 +79,65 @@ def test_noise_model_recovers_sigma_and_rho_from_plateaus():
     assert nm.source == "plateaus"
     assert nm.sigma == pytest.approx(800.0, rel=0.15)
     assert nm.rho == pytest.approx(0.7, abs=0.08)
+
+
+def _ar1(n, rho, sigma, seed):
+    rng = np.random.default_rng(seed)
+    e = np.empty(n)
+    e[0] = rng.normal(0, sigma)
+    u = rng.normal(0, sigma * math.sqrt(1 - rho * rho), n)
+    for k in range(1, n):
+        e[k] = rho * e[k - 1] + u[k]
+    return e
+
+
+def test_sigma_tracks_the_realised_noise_on_a_short_trace():
+    # harness case with 2092 samples: the plateaus (908 samples) alone gave sigma 944 Pa
+    # while the noise realised on the trace is 981 Pa rms, so even a perfect model read a
+    # normalised RMS of 1.039 (> 1.02); the whole-trace high-pass estimate fixes that
+    case = draw_case("pipe_volume", 1010)
+    sim, clean = case.simulate(), case.noise_free()
+    s = DiscrepancySettings(volume=case.config.volume)
+    prob = Problem(sim.t, sim.measured, s)
+    n = prob.t.size
+    realised = float(np.sqrt(np.mean((sim.measured - clean.measured)[:n] ** 2)))
+    nm = prob.noise
+    assert nm.source == "plateaus"
+    assert abs(nm.sigma_plateau / realised - 1.0) > 0.03  # the failure mode stays visible
+    assert nm.highpass_weight > 0.8
+    assert nm.sigma == pytest.approx(realised, rel=0.01)
+    assert nm.sigma_highpass == pytest.approx(realised, rel=0.02)
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.5, 0.9])
+def test_highpass_noise_is_unbiased_under_ar1_and_ignores_kinks_and_spikes(rho):
+    n, sigma = 40000, 1000.0
+    e = _ar1(n, rho, sigma, seed=7)
+    k = np.arange(n)
+    signal = 7e5 * np.exp(-np.clip(k - 5000, 0, None) / 3000.0)  # kink at k = 5000
+    y = signal + e
+    y[20000] += 50 * sigma  # a spike: its window is an outlier
+    hp = highpass_noise(y, rho, 5000)
+    assert hp is not None
+    assert math.sqrt(hp.variance) == pytest.approx(float(np.std(e)), rel=0.03)
+    # the estimate leans on rho the more, the more correlated the noise
+    assert abs(hp.dlog_drho) < 0.3 if rho == 0.0 else abs(hp.dlog_drho) > 0.4
+
+
+def test_plateau_estimate_takes_over_with_strongly_correlated_noise():
+    n = 5000
+    n_plateau = 2000  # about 40 % of a short trace lies on the plateaus
+    weights = {}
+    for rho in (0.0, 0.9):
+        hp = highpass_noise(_ar1(n, rho, 1000.0, seed=3), rho, 0)
+        assert hp is not None
+        weights[rho] = combine_sigma2(1e6, n_plateau, rho, hp)[1]
+    assert weights[0.0] > 0.8  # white: the whole trace, which holds the plateaus, wins
+    assert weights[0.9] < 0.6  # rho 0.9: the high-pass estimate hinges on rho
+    hp = highpass_noise(_ar1(n, 0.0, 1000.0, seed=3), 0.0, 0)
+    assert hp is not None
+    s2, w = combine_sigma2(4e6, n_plateau, 0.0, hp)
+    assert s2 == pytest.approx(w * hp.variance + (1 - w) * 4e6)
 
 
 def test_prewhitened_likelihood_is_chi2_under_ar1_noise_and_naive_one_is_not():

@@ -156,6 +156,15 @@ def _fmt(v: float | None, unit: str = "") -> str:
     return f"{v:.4g}{(' ' + unit) if unit and unit != '-' else ''}"
 
 
+def _sigma_sources(nz: dict[str, Any]) -> str:
+    """How sigma [Pa] was made from the plateau and whole-trace (high-pass) estimates."""
+    sp, sh, w = nz.get("sigma_plateau"), nz.get("sigma_highpass"), nz.get("highpass_weight")
+    if sp is None or sh is None or w is None:
+        return ""
+    return (f"; sigma weights the plateau estimate {sp:.4g} Pa and the whole-trace "
+            f"high-pass estimate {sh:.4g} Pa (weight {w:.2f})")
+
+
 def markdown(res: DiscrepancyResult, files: dict[str, str], title: str = "") -> str:
     """The report's Markdown text (plots referenced by relative file names)."""
     d: dict[str, Any] = res.to_dict()
@@ -218,7 +227,8 @@ def markdown(res: DiscrepancyResult, files: dict[str, str], title: str = "") -> 
     nz = d["noise"]
     lines += ["## Noise model", "",
               f"sigma = {nz['sigma']:.4g} Pa, AR(1) rho = {nz['rho']:.3f} "
-              f"(from {nz['source']}, {nz['n']} samples). Correlated noise carries less "
+              f"(from {nz['source']}, {nz['n']} samples)" + _sigma_sources(nz) + ". "
+              "Correlated noise carries less "
               "information than its sample count: the likelihood prewhitens the residual, "
               "so a slow wiggle of the noise is not mistaken for an effect.", ""]
     g = res.geometry_factor
@@ -235,8 +245,9 @@ def markdown(res: DiscrepancyResult, files: dict[str, str], title: str = "") -> 
     if res.notes:
         lines += ["## Notes", ""] + [f"- {n}" for n in res.notes] + [""]
     lines += ["## Method", "",
-              "1. Noise sigma and correlation from the plateaus before the valve opens and "
-              "after the tank has emptied. 2. Baseline (paper's adiabatic discharge: C, b, "
+              "1. Noise correlation from the plateaus before the valve opens and after the "
+              "tank has emptied; sigma from those plateaus weighted with the residual of a "
+              "local cubic over the whole trace. 2. Baseline (paper's adiabatic discharge: C, b, "
               "opening instant, p10) fitted by least squares from several starts. 3. Each "
               "candidate effect added and the whole model refitted from several starts "
               "(including the neutral values of the baseline). 4. Decision by BIC. 5. "

@@ -2,7 +2,9 @@
 
 Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
 
-0. **Noise model.** sigma and the AR(1) coefficient rho from the pre-step and end plateaus
+0. **Noise model.** The AR(1) coefficient rho from the pre-step and end plateaus, sigma
+   from the plateaus combined with a high-pass (local cubic residual) estimate over the
+   whole trace, so that short traces are normalised by the noise they actually carry
    (:func:`~pneumatic_unload.discrepancy.noise.estimate_noise`); the likelihood prewhitens
    the residual so that correlated noise does not count as information.
 1. **Baseline.** Multi-start least-squares fit of the adiabatic discharge (C, b, t_open,
