@@ -17,7 +17,12 @@ from typing import Any
 import numpy as np
 
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.estimation import EstimatorSettings, StreamingEstimator, UnloadResult
+from pneumatic_unload.estimation import (
+    STATUSES,
+    EstimatorSettings,
+    StreamingEstimator,
+    UnloadResult,
+)
 from pneumatic_unload.model import simulate
 
 #: Rate of the temperature topic [Hz].
@@ -41,8 +46,6 @@ def settings_json(s: EstimatorSettings) -> str:
 
 def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
     """UnloadEstimate message fields of a result (stamps in ns, NaN kept)."""
-    from pneumatic_unload.estimation import STATUSES
-
     return {
         "header_stamp_ns": int(round(r.t_cross * 1e9)) if np.isfinite(r.t_cross)
         else int(round(r.t_complete * 1e9)),

@@ -400,8 +400,7 @@ class EstimatorNode(Node):
         unloads_before = {r.index for r in self.results}
         t0 = time.monotonic()
         fb = self._Measure.Feedback()
-        if self._est.state not in ("waiting",):
-            pass  # an unload already under way is not ours: we wait for the next one
+        # an unload already under way is not ours: only a new unload index answers the goal
         if goal.trigger_valve:
             service = goal.valve_service or self._p("valve_service")
             client = self.create_client(Trigger, service)
