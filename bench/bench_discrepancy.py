@@ -21,9 +21,10 @@ import numpy as np
 
 from pneumatic_unload.config import EFFECTS, RigConfig
 from pneumatic_unload.discrepancy import DiscrepancySettings, find_discrepancy
-from pneumatic_unload.discrepancy.noise import BinnedLikelihood, NoiseModel
+from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.synthetic import NOISE_STD, draw_case
-from pneumatic_unload.discrepancy.workflow import Problem
+from pneumatic_unload.fit.noise import NoiseModel
+from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.model import simulate
 
 ONE_PARAM = {"heat_transfer": "tau_heat", "valve_opening": "t_ramp",
@@ -39,11 +40,10 @@ def noise_free_misfit(case, settings) -> float:
     n = prob.t.size
     rho = case.config.noise_ar_rho if case.config.noise_ar_std > 0 else 0.0
     prob.y = clean.measured[:n]
-    prob.lik = BinnedLikelihood(prob.t, prob.y, NoiseModel(NOISE_STD, rho, n, "true"),
-                                prob.lik.edges)
-    spec = prob.spec(())
-    fit = prob.fit(spec, [spec.to_x(prob.neutral_theta(0.3)),
-                          spec.to_x(prob.neutral_theta(0.5))])
+    prob.trace = Trace(prob.t, prob.y, NoiseModel(NOISE_STD, rho, n, "true"), 0.0,
+                       edges=prob.lik.edges)
+    prob.lik = prob.trace.lik
+    fit = prob.fit(prob.model(()), [prob.neutral_theta(0.3), prob.neutral_theta(0.5)])
     return fit.chi2
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.model import default_duration, discharge
+from pneumatic_unload.model import SensorChain, default_duration, discharge
 
 FloatArray = NDArray[np.float64]
 
@@ -74,7 +74,7 @@ class RigStream:
             raise ValueError(f"charge_time must be > 0 s, got {charge_time!r}")
         self.cfg = cfg
         self.charge_time = float(charge_time)
-        self._rng = np.random.default_rng(cfg.seed)
+        self._chain = SensorChain(cfg.seed)
         self._k = 0  # next sample number
         self._phase = "charged"
         self._phase_k0 = 0
@@ -84,10 +84,6 @@ class RigStream:
         self._unload_p: FloatArray = np.empty(0)
         self._unload_temp: FloatArray = np.empty(0)
         self._close_after = math.inf
-        # sensor-chain state
-        self._lag_y = math.nan
-        self._lag_u = math.nan
-        self._ar = math.nan
         self.unloads = 0
 
     # ------------------------------------------------------------------ state
@@ -214,53 +210,8 @@ class RigStream:
         return j + stop
 
     def _sensor(self, t: FloatArray, p: FloatArray) -> FloatArray:
-        """Sensor chain with state carried across blocks [Pa as indicated]."""
-        cfg = self.cfg
-        y = p.copy()
-        if cfg.has("sensor_lag") and cfg.sensor_lag > 0:
-            y = self._lag(y, cfg.sensor_lag)
-        if cfg.has("sensor_gain"):
-            y = y * (1.0 + cfg.sensor_gain)
-        if cfg.has("sensor_offset"):
-            y = y + cfg.sensor_offset
-        n = y.size
-        if cfg.noise_std > 0:
-            y = y + self._rng.normal(0.0, cfg.noise_std, n)
-        if cfg.noise_ar_std > 0:
-            rho = cfg.noise_ar_rho
-            w = self._rng.normal(0.0, cfg.noise_ar_std * math.sqrt(1.0 - rho * rho), n)
-            if math.isnan(self._ar):
-                self._ar = float(self._rng.normal(0.0, cfg.noise_ar_std))
-                w[0] = self._ar
-                zi = np.zeros(1)
-            else:
-                zi = np.array([rho * self._ar])
-            from scipy.signal import lfilter
-
-            e, _ = lfilter([1.0], [1.0, -rho], w, zi=zi)
-            self._ar = float(e[-1])
-            y = y + e
-        if cfg.quantization > 0:
-            y = np.round(y / cfg.quantization) * cfg.quantization
-        if cfg.full_scale > 0:
-            y = np.clip(y, 0.0, cfg.full_scale)
-        return y
-
-    def _lag(self, u: FloatArray, tau: float) -> FloatArray:
-        """Exact first-order lag of a piecewise-linear input, state kept [unit of u]."""
-        from scipy.signal import lfilter
-
-        h = self.period
-        a = math.exp(-h / tau)
-        kk = tau / h * (1.0 - a)
-        b0, b1 = 1.0 - kk, kk - a
-        if math.isnan(self._lag_y):  # start in steady state
-            self._lag_y = self._lag_u = float(u[0])
-        # y[i] = a y[i-1] + b0 u[i] + b1 u[i-1], with y[-1], u[-1] from the last block
-        zi = np.array([a * self._lag_y + b1 * self._lag_u])
-        y, _ = lfilter([b0, b1], [1.0, -a], u, zi=zi)
-        self._lag_y, self._lag_u = float(y[-1]), float(u[-1])
-        return y
+        """Sensor chain with its state carried across blocks [Pa as indicated]."""
+        return self._chain.apply(t, p, self.cfg)
 
 
 def run_cycles(cfg: RigConfig, unloads: int, *, settle_time: float = 2.0,

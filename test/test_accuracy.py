@@ -93,7 +93,7 @@ def test_curve_fit_reaches_the_least_squares_minimum():
     (C off by ~0.4 sigma from the least-squares solution). After the fit, a Gauss-Newton
     step with a fresh Jacobian must predict essentially no further chi^2 drop, and the
     estimate must agree with the ideal linearised estimator (true Jacobian, same bins)."""
-    from pneumatic_unload.fitting import _bins, fit_curve, rig_from_settings
+    from pneumatic_unload.fitting import curve_fit_bins, fit_curve, rig_from_settings
 
     cfg = RigConfig(volume=12e-3, conductance=orifice_conductance(1.5e-3),
                     initial_pressure=7.5e5, critical_ratio=0.31, noise_std=NOISE,
@@ -115,7 +115,7 @@ def test_curve_fit_reaches_the_least_squares_minimum():
                     profile_heat=False)
     x = np.array([math.log(fit.conductance), fit.critical_ratio, fit.t_start, fit.p10,
                   math.log(fit.heat_scale)])
-    edges = _bins(t.size, 3000)
+    edges = curve_fit_bins(t, cfg.pre_time + 0.003)
     counts = np.diff(edges)
 
     def binned(v):
@@ -137,7 +137,8 @@ def test_curve_fit_reaches_the_least_squares_minimum():
     drop = float(counts @ (r * r) - counts @ ((r + j @ step) ** 2)) / NOISE**2
     assert drop < 0.01, drop  # chi^2 units; the trust-region search alone left ~0.15
     jt = jac(x_true)
-    dx = np.linalg.lstsq(jt, binned(y - model(x_true)), rcond=None)[0]
+    sw = np.sqrt(counts)[:, None]  # bins of unequal size: weighted least squares
+    dx = np.linalg.lstsq(jt * sw, binned(y - model(x_true)) * sw[:, 0], rcond=None)[0]
     sd = np.sqrt(np.diag(np.linalg.inv((jt * counts[:, None]).T @ jt))) * NOISE
     assert abs((x[0] - x_true[0]) - dx[0]) < 0.1 * sd[0], ((x - x_true - dx) / sd)
     assert abs(fit.conductance_std / fit.conductance / sd[0] - 1.0) < 0.05

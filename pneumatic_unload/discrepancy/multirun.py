@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
-from pneumatic_unload.discrepancy.workflow import DiscrepancyError
+from pneumatic_unload.discrepancy.types import DiscrepancyError
 
 
 @dataclass(frozen=True)

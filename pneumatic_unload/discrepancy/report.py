@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.discrepancy.multirun import GeometryLaw
-from pneumatic_unload.discrepancy.workflow import BIC_HELP, DiscrepancyResult
+from pneumatic_unload.discrepancy.types import BIC_HELP, DiscrepancyResult
 
 FloatArray = NDArray[np.float64]
 
@@ -137,7 +137,7 @@ def write_plots(res: DiscrepancyResult, out: Path) -> dict[str, str]:
                     label="measured gas temperature (not used in the fit)")
             for f, label, col in ((res.baseline, "baseline (adiabatic)", "tab:red"),
                                   (res.final, after_label, "tab:blue")):
-                ax.plot(tt[sel], f.spec.temperature(f.theta, tt[sel]) - 273.15, "-",
+                ax.plot(tt[sel], f.model.temperature(f.theta, tt[sel]) - 273.15, "-",
                         color=col, label=label)
             ax.set_xlabel("time [s]")
             ax.set_ylabel("gas temperature [degC]")

@@ -1,0 +1,135 @@
+"""A recorded trace prepared for the discrepancy workflow: start values, noise, likelihood.
+
+The unloading-time estimate (:func:`pneumatic_unload.estimation.analyze`, adiabatic, no
+curve fit) gives the neutral start of the baseline; the AR(1) noise model comes from the
+plateaus and the whole trace (:func:`pneumatic_unload.fit.noise.estimate_noise`); the fits
+run on the engine's :class:`~pneumatic_unload.fit.trace.Trace`. SI units.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySettings, Fit
+from pneumatic_unload.estimation import EstimationError, EstimatorSettings, analyze
+from pneumatic_unload.fit.noise import estimate_noise
+from pneumatic_unload.fit.trace import Trace
+from pneumatic_unload.model.effects import ParametricModel, Start, Tank
+from pneumatic_unload.physics import Gas
+
+FloatArray = NDArray[np.float64]
+Values = dict[str, float]
+
+
+class Problem:
+    """A trace prepared for fitting: relative times, noise model, likelihood, neutral start.
+
+    Parameters
+    ----------
+    t, y : ndarray
+        Sample instants [s] and measured pressure [Pa absolute].
+    settings : DiscrepancySettings
+        Rig data and workflow options.
+    """
+
+    def __init__(self, t: FloatArray, y: FloatArray, settings: DiscrepancySettings) -> None:
+        t = np.asarray(t, dtype=float)
+        y = np.asarray(y, dtype=float)
+        if t.ndim != 1 or t.shape != y.shape:
+            raise DiscrepancyError(f"t and p must be 1-D arrays of equal length, got "
+                                   f"{t.shape} and {y.shape}")
+        if t.size < 20:
+            raise DiscrepancyError(f"too few samples ({t.size}); need at least 20")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(y))):
+            k = int(np.flatnonzero(~(np.isfinite(t) & np.isfinite(y)))[0])
+            raise DiscrepancyError(f"non-finite sample at index {k}; remove or interpolate "
+                                   "it before the analysis")
+        if np.any(np.diff(t) <= 0):
+            raise DiscrepancyError("time stamps must increase strictly")
+        self.settings = settings
+        self.t_ref = float(t[0])
+        t = t - self.t_ref
+        est = EstimatorSettings(
+            volume=settings.volume, initial_temperature=settings.initial_temperature,
+            atmosphere=settings.atmosphere, length_diameter_ratio=settings.length_diameter_ratio,
+            heat_model="adiabatic", curve_fit=False, gas_constant=settings.gas_constant,
+            gamma=settings.gamma)
+        try:
+            results = [r for r in analyze(t, y, est) if r.status in ("ok", "not_choked")]
+        except EstimationError as exc:
+            raise DiscrepancyError(str(exc)) from exc
+        if not results:
+            raise DiscrepancyError("no complete unload found in the trace (the pressure "
+                                   "must fall from a plateau through p*)")
+        r = results[0]
+        # keep one unload: cut before the next one starts
+        later = [q.t_start for q in results[1:] if q.t_start > r.t_cross]
+        if later:
+            keep = t < later[0] - 0.1 * (later[0] - r.t_cross)
+            t, y = t[keep], y[keep]
+        dt = float(np.median(np.diff(t)))
+        c0 = r.conductance_isentropic if math.isfinite(r.conductance_isentropic) \
+            else r.conductance
+        self.start = Start(conductance=float(c0), critical_ratio=0.4, t_open=float(r.t_start),
+                           p10=float(r.p10), p_atm=float(r.p_atm), tau=float(r.tau_exp),
+                           dt=dt, t_first=float(t[0]), t_last=float(t[-1]))
+        try:
+            self.noise = estimate_noise(t, y, r.t_start, r.tau_exp)
+        except ValueError as exc:
+            raise DiscrepancyError(str(exc)) from exc
+        self.t, self.y = t, y
+        self.trace = Trace(t, y, self.noise, r.t_start, resolution=settings.resolution)
+        self.lik = self.trace.lik
+        wall = settings.wall_temperature or settings.initial_temperature
+        self.tank = Tank(volume=settings.volume, initial_temperature=settings.initial_temperature,
+                         wall_temperature=wall,
+                         length_diameter_ratio=settings.length_diameter_ratio,
+                         atmosphere=settings.atmosphere,
+                         gas=Gas(gas_constant=settings.gas_constant, gamma=settings.gamma),
+                         fit_wall_temperature=settings.fit_wall_temperature)
+
+    def model(self, effects: tuple[str, ...], heat_law: str = "natural") -> ParametricModel:
+        """The parametric model with these effects."""
+        return ParametricModel(effects, self.tank, self.start, heat_law=heat_law)
+
+    def fit(self, model: ParametricModel, starts: list[Values], *, screen_nfev: int = 12,
+            max_nfev: int = 200) -> Fit:
+        """Multi-start fit through the engine: screen every start, fit and polish the best.
+
+        Parameters
+        ----------
+        model : ParametricModel
+            Model.
+        starts : list of dict
+            Starting values [SI units] (missing names: the model's neutral values).
+        screen_nfev, max_nfev : int
+            Evaluations for screening each start and for the full fit [-].
+        """
+        first, *rest = starts
+        res = self.trace.fit(model, start=first, starts=rest, screen_nfev=screen_nfev,
+                             max_nfev=max_nfev)
+        return Fit(model=model, result=res)
+
+    def residuals(self, model: ParametricModel, values: Values) -> FloatArray:
+        """Normalised prewhitened binned residuals at parameter values [-]."""
+        return self.trace.residual(model)(values)
+
+    # starting points ----------------------------------------------------------------
+    def neutral_theta(self, b: float = 0.4) -> Values:
+        """Baseline parameters from the unloading-time estimate [SI units]."""
+        s = self.start
+        th = {"C": s.conductance, "b": b, "t_open": s.t_open, "p10": s.p10}
+        if self.tank.atmosphere is None:
+            th["p_atm"] = s.p_atm
+        return th
+
+    def starts_for(self, model: ParametricModel, bases: list[Values],
+                   new_effects: tuple[str, ...]) -> list[Values]:
+        """Starting values: each base combined with each start of the new effects."""
+        combos: list[Values] = [{}]
+        for e in new_effects:
+            combos = [{**c, **d} for c in combos for d in model.effect_starts(e)]
+        return [{**base, **c} for base in bases for c in combos]

@@ -1,0 +1,347 @@
+"""Types of the discrepancy workflow: settings, fits, diagnostics, rounds and the result.
+
+SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pneumatic_unload.config import EFFECTS
+from pneumatic_unload.estimation import EstimatorSettings
+from pneumatic_unload.fit.lsq import FitResult
+from pneumatic_unload.fit.noise import NoiseModel
+from pneumatic_unload.fit.profile import Interval
+from pneumatic_unload.model.effects import ParametricModel
+from pneumatic_unload.physics import AIR, T_N
+
+FloatArray = NDArray[np.float64]
+
+#: Ljung-Box p-value below which a residual is called structured [-].
+WHITE_P = 0.01
+#: Normalised RMS above which a residual is called structured [-].
+NRMS_LIMIT = 1.02
+#: How to read a delta-BIC (for reports).
+BIC_HELP = ("delta-BIC = BIC(current model) - BIC(current model + candidate), BIC = chi^2 + "
+            "k ln(n): positive means the candidate explains the trace better after paying "
+            "for its extra parameters. An effect is claimed above 10 and named alone when "
+            "the runner-up is more than 10 behind.")
+
+
+class DiscrepancyError(ValueError):
+    """Input the workflow cannot analyse: no unload, non-finite samples, too short..."""
+
+
+@dataclass(frozen=True)
+class DiscrepancySettings:
+    """Settings of :func:`find_discrepancy`.
+
+    Attributes
+    ----------
+    volume : float
+        Tank volume V [m^3].
+    initial_temperature : float
+        Initial gas temperature T10 [K].
+    atmosphere : float or None
+        Atmospheric pressure [Pa absolute]; None: fitted (offset and gain then become
+        hard to tell from p_atm and p10).
+    length_diameter_ratio : float
+        Tank L/D [-].
+    wall_temperature : float or None
+        Wall temperature [K]; None: equal to T10.
+    fit_wall_temperature : bool
+        Fit the wall temperature together with the heat-transfer time constant (when the
+        gas starts warmer or colder than the wall, e.g. just after charging).
+    candidates : tuple of str
+        Effects tried (default all of :data:`pneumatic_unload.config.EFFECTS`).
+    max_effects : int
+        At most this many effects are added (greedy) [-].
+    bic_threshold : float
+        Delta-BIC needed to claim an effect and to name it alone [-].
+    profile : bool
+        Check the linear intervals with the profile likelihood.
+    resolution : float
+        Relative bin width of the likelihood [-] (smaller: slower, a little more power).
+    gas_constant, gamma : float
+        Gas [J/(kg K)], [-].
+    """
+
+    volume: float
+    initial_temperature: float = T_N
+    atmosphere: float | None = 101325.0
+    length_diameter_ratio: float = 2.0
+    wall_temperature: float | None = None
+    fit_wall_temperature: bool = False
+    candidates: tuple[str, ...] = EFFECTS
+    max_effects: int = 3
+    bic_threshold: float = 10.0
+    profile: bool = True
+    resolution: float = 0.03
+    gas_constant: float = AIR.gas_constant
+    gamma: float = AIR.gamma
+
+    def __post_init__(self) -> None:
+        """Validate (raises :class:`DiscrepancyError`)."""
+        if not (self.volume > 0 and math.isfinite(self.volume)):
+            raise DiscrepancyError("volume must be a positive number of m^3")
+        if not self.initial_temperature > 0:
+            raise DiscrepancyError("initial_temperature must be > 0 K")
+        if self.atmosphere is not None and not self.atmosphere > 0:
+            raise DiscrepancyError("atmosphere must be > 0 Pa")
+        bad = [c for c in self.candidates if c not in EFFECTS]
+        if bad:
+            raise DiscrepancyError(f"unknown candidate effect(s) {bad}; known: {EFFECTS}")
+        if not 1 <= self.max_effects <= 3:
+            raise DiscrepancyError("max_effects must be 1, 2 or 3")
+
+    @classmethod
+    def from_estimator(cls, s: EstimatorSettings, **kw: Any) -> DiscrepancySettings:
+        """Settings matching an :class:`EstimatorSettings` (the ``analyze`` options)."""
+        return cls(volume=s.volume, initial_temperature=s.initial_temperature,
+                   atmosphere=s.atmosphere, length_diameter_ratio=s.length_diameter_ratio,
+                   wall_temperature=s.wall_temperature, gas_constant=s.gas_constant,
+                   gamma=s.gamma, **kw)
+
+
+@dataclass
+class Fit:
+    """A fitted model: the parametric model and the engine's result.
+
+    Attributes
+    ----------
+    model : ParametricModel
+        Model (effects, heat law, parameters).
+    result : FitResult
+        The engine's fit (values, chi^2, Jacobian).
+    """
+
+    model: ParametricModel
+    result: FitResult
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """Effects of the model."""
+        return self.model.effects
+
+    @property
+    def heat_law(self) -> str | None:
+        """Heat-transfer law fitted ('natural', 'fixed'), None without heat transfer."""
+        return self.model.heat_law if "heat_transfer" in self.model.effects else None
+
+    @property
+    def theta(self) -> dict[str, float]:
+        """Parameter values [SI units]."""
+        return self.result.values
+
+    @property
+    def chi2(self) -> float:
+        """-2 log-likelihood up to a constant [-]."""
+        return self.result.chi2
+
+    @property
+    def bic(self) -> float:
+        """chi2 + k ln(n) [-]."""
+        return self.result.bic
+
+    @property
+    def k(self) -> int:
+        """Free parameters [-]."""
+        return self.result.k
+
+    def covariance(self) -> FloatArray:
+        """Covariance of the scaled coordinates (inflated by chi2/dof when above 1)."""
+        return self.result.covariance(max(1.0, self.result.chi2 / self.result.dof))
+
+    def std(self, name: str) -> float:
+        """1-sigma of a free parameter [unit] from :meth:`covariance`."""
+        cov = self.covariance()
+        i = self.result.params.free.index(name)
+        v = float(cov[i, i])
+        return self.result.params.value_std(name, self.theta[name],
+                                            math.sqrt(v) if v >= 0 else math.nan)
+
+
+def interval_dict(iv: Interval) -> dict[str, Any]:
+    """JSON-ready dict of an interval (infinite ends as None)."""
+    def f(v: float) -> float | None:
+        return v if math.isfinite(v) else None
+    return {"value": iv.value, "ci_low": f(iv.low), "ci_high": f(iv.high), "unit": iv.unit,
+            "method": iv.method, "identifiable": iv.identifiable, "doc": iv.doc}
+
+
+@dataclass
+class Diagnostics:
+    """How well a model explains the trace.
+
+    Attributes
+    ----------
+    rms : float
+        Root mean square of the residual y - model [Pa].
+    nrms : float
+        rms / sigma [-] (1 when the gap is within noise).
+    ljung_box_p : float
+        Ljung-Box p-value of the normalised binned residual [-].
+    white : bool
+        ljung_box_p >= WHITE_P.
+    phases : dict
+        Per phase ('pre-step', 'choked', 'subsonic', 'plateau'): samples, mean [Pa],
+        rms [Pa], nrms [-].
+    corr_pressure, corr_rate : float
+        Correlation of the binned residual with the pressure and with its rate [-].
+    """
+
+    rms: float
+    nrms: float
+    ljung_box_p: float
+    white: bool
+    phases: dict[str, dict[str, float]]
+    corr_pressure: float
+    corr_rate: float
+
+    @property
+    def structured(self) -> bool:
+        """True when the residual is more than noise (not white or nrms above the limit)."""
+        return (not self.white) or self.nrms > NRMS_LIMIT
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict."""
+        return {"rms": self.rms, "nrms": self.nrms, "ljung_box_p": self.ljung_box_p,
+                "white": self.white, "structured": self.structured, "phases": self.phases,
+                "corr_pressure": self.corr_pressure, "corr_rate": self.corr_rate}
+
+
+@dataclass
+class Round:
+    """One greedy round: every remaining candidate added to the current model.
+
+    Attributes
+    ----------
+    base_effects : tuple of str
+        Effects of the model the candidates were added to.
+    base_bic : float
+        BIC of that model [-].
+    fits : dict
+        Candidate name -> fit.
+    delta_bic : dict
+        Candidate name -> BIC(base) - BIC(candidate) [-] (positive: candidate better).
+    winner : str
+        Best candidate ('none' when none beats the base by the threshold).
+    ambiguous_with : list of str
+        Candidates within the threshold of the winner.
+    """
+
+    base_effects: tuple[str, ...]
+    base_bic: float
+    fits: dict[str, Fit]
+    delta_bic: dict[str, float]
+    winner: str
+    ambiguous_with: list[str]
+
+
+@dataclass
+class DiscrepancyResult:
+    """Outcome of the workflow on one trace (SI units).
+
+    ``effect`` is the first effect claimed ('none' when the baseline explains the trace
+    within noise), ``ambiguous_with`` the effects the data cannot tell from it, and
+    ``effects`` all effects added greedily. ``before``/``after`` are the diagnostics of
+    the baseline and of the final model.
+    """
+
+    effect: str
+    ambiguous_with: list[str]
+    effects: list[str]
+    verdict: str
+    parameters: dict[str, Interval]
+    noise: NoiseModel
+    baseline: Fit
+    final: Fit
+    rounds: list[Round]
+    before: Diagnostics
+    after: Diagnostics
+    extra_data: list[str]
+    geometry_factor: dict[str, Any]
+    t: FloatArray
+    y: FloatArray
+    model_before: FloatArray
+    model_after: FloatArray
+    t_ref: float
+    n_samples: int
+    n_bins: int
+    elapsed: float
+    temperature_check: dict[str, Any] | None = None
+    t_temperature: FloatArray | None = None
+    temperature: FloatArray | None = None
+    settings: DiscrepancySettings | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def rms_before(self) -> float:
+        """RMS of the baseline residual [Pa]."""
+        return self.before.rms
+
+    @property
+    def rms_after(self) -> float:
+        """RMS of the final model's residual [Pa]."""
+        return self.after.rms
+
+    @property
+    def delta_bic(self) -> dict[str, float]:
+        """First round: candidate -> BIC(baseline) - BIC(baseline + candidate) [-]."""
+        return dict(self.rounds[0].delta_bic) if self.rounds else {}
+
+    @property
+    def conductance(self) -> float:
+        """C of the final model [m^3/(s Pa)]."""
+        return self.final.theta["C"]
+
+    def conductance_std(self) -> float:
+        """1-sigma of C of the final model from the Jacobian [m^3/(s Pa)]."""
+        return self.final.std("C")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (the ``--json`` output)."""
+        def theta(f: Fit) -> dict[str, Any]:
+            return {"effects": list(f.effects), "heat_law": f.heat_law,
+                    "parameters": dict(f.theta), "chi2": f.chi2, "bic": f.bic, "k": f.k}
+
+        return finite_json({
+            "effect": self.effect, "ambiguous_with": list(self.ambiguous_with),
+            "effects": list(self.effects), "verdict": self.verdict,
+            "parameters": {k: interval_dict(v) for k, v in self.parameters.items()},
+            "rms_before": self.rms_before, "rms_after": self.rms_after,
+            "nrms_before": self.before.nrms, "nrms_after": self.after.nrms,
+            "white_before": self.before.white, "white_after": self.after.white,
+            "delta_bic": self.delta_bic,
+            "rounds": [{"base_effects": list(r.base_effects), "delta_bic": r.delta_bic,
+                        "winner": r.winner, "ambiguous_with": r.ambiguous_with}
+                       for r in self.rounds],
+            "noise": self.noise.to_dict(),
+            "baseline": theta(self.baseline), "final_model": theta(self.final),
+            "conductance": self.conductance, "conductance_std": self.conductance_std(),
+            "diagnostics_before": self.before.to_dict(),
+            "diagnostics_after": self.after.to_dict(),
+            "extra_data": self.extra_data, "geometry_factor": self.geometry_factor,
+            "temperature_check": self.temperature_check,
+            "samples": self.n_samples, "bins": self.n_bins, "elapsed_s": self.elapsed,
+            "notes": self.notes,
+        })
+
+
+def finite_json(o: Any) -> Any:
+    """Replace non-finite floats by None, recursively (strict JSON)."""
+    if isinstance(o, dict):
+        return {k: finite_json(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [finite_json(v) for v in o]
+    if isinstance(o, (float, np.floating)):
+        v = float(o)
+        return v if math.isfinite(v) else None
+    if isinstance(o, (np.integer, np.bool_)):
+        return o.item()
+    return o

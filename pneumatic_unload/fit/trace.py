@@ -1,0 +1,105 @@
+"""A recorded trace prepared for fitting a parametric model with the binned likelihood.
+
+:class:`Trace` holds relative times, the noise model and the
+:class:`~pneumatic_unload.fit.likelihood.BinnedLikelihood`; :meth:`Trace.fit` fits any
+model that has ``parameters`` (:class:`~pneumatic_unload.fit.params.Parameters`),
+``signal(values, t)`` and ``events(values)`` through :func:`~pneumatic_unload.fit.lsq.minimize`,
+evaluating the model only at the likelihood's quadrature nodes. SI units: s, Pa.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pneumatic_unload.fit.likelihood import BinnedLikelihood, make_bins
+from pneumatic_unload.fit.lsq import FitResult, minimize
+from pneumatic_unload.fit.noise import NoiseModel
+from pneumatic_unload.fit.params import Parameters
+
+FloatArray = NDArray[np.float64]
+Values = dict[str, float]
+
+
+class FittableModel(Protocol):
+    """What :class:`Trace` needs of a model (units of the trace)."""
+
+    parameters: Parameters
+
+    def signal(self, v: Values, t: FloatArray) -> FloatArray:
+        """Noise-free signal at instants t [Pa]."""
+        ...
+
+    def events(self, v: Values) -> list[float]:
+        """Instants where the signal is not smooth [s]."""
+        ...
+
+
+class Trace:
+    """A trace ready for fitting.
+
+    Parameters
+    ----------
+    t, y : ndarray
+        Sample instants [s] (relative to any origin, increasing) and signal [Pa].
+    noise : NoiseModel
+        AR(1) noise model (sigma 1: unnormalised residuals, variance estimated after).
+    t_open : float
+        Expected valve opening [s] (where the bins are finest).
+    resolution : float
+        Relative bin width [-].
+    edges : ndarray, optional
+        Bin edges to use instead of :func:`make_bins`.
+    """
+
+    def __init__(self, t: FloatArray, y: FloatArray, noise: NoiseModel, t_open: float, *,
+                 resolution: float = 0.03, edges: NDArray[np.int64] | None = None) -> None:
+        self.t = np.asarray(t, dtype=float)
+        self.y = np.asarray(y, dtype=float)
+        self.noise = noise
+        if edges is None:
+            edges = make_bins(self.t, t_open, resolution=resolution)
+        self.lik = BinnedLikelihood(self.t, self.y, noise, edges)
+
+    @property
+    def n(self) -> int:
+        """Samples [-]."""
+        return self.lik.n
+
+    def residual(self, model: FittableModel) -> Callable[[Values], FloatArray]:
+        """The normalised binned residual of ``model`` as a function of its values [-]."""
+        lik = self.lik
+
+        def fun(v: Values) -> FloatArray:
+            return lik.residuals_at(lambda tt: model.signal(v, tt), model.events(v))
+
+        return fun
+
+    def fit(self, model: FittableModel, *, starts: list[Values] | None = None,
+            fixed: Values | None = None, start: Values | None = None,
+            screen_nfev: int = 12, max_nfev: int = 200) -> FitResult:
+        """Fit ``model`` to the trace.
+
+        Parameters
+        ----------
+        model : FittableModel
+            Model with its parameters (starting values and bounds).
+        starts : list of dict, optional
+            Further starting values, screened (see :func:`minimize`) [units].
+        fixed : dict, optional
+            Parameters held at the values given [units].
+        start : dict, optional
+            Replaces the parameters' starting values [units].
+        screen_nfev, max_nfev : int
+            Evaluation budgets [-].
+        """
+        names = set(model.parameters.names)
+        params = model.parameters.replace(fixed=fixed or {},
+                                          **{k: v for k, v in (start or {}).items()
+                                             if k in names and k not in (fixed or {})})
+        starts = [{k: v for k, v in s.items() if k in names} for s in (starts or [])]
+        return minimize(self.residual(model), params, starts=starts,
+                        screen_nfev=screen_nfev, max_nfev=max_nfev, n_data=self.n)

@@ -1,0 +1,420 @@
+"""The registry of real-rig effects and the parametric discharge model built from it.
+
+One :class:`Effect` record per effect says where it sits in the rig, which parameters it
+adds (SI unit, bounds, fitted in log or not, the scale of its fitted coordinate, its centre,
+a value that switches it off, starting values), how they map onto
+:class:`~pneumatic_unload.config.RigConfig`, and which extra data separate it from its
+look-alikes. :class:`ParametricModel` (the baseline: C, b, t_open, p10 [, p_atm], plus any
+effects) turns named parameter values into a configuration and the model's signal; the
+estimator's curve fit, its model inversion and the discrepancy workflow all fit it.
+
+Heat transfer has two laws (:mod:`pneumatic_unload.model.heat`): ``natural`` fits the
+multiplier ``heat_scale`` [-] on the natural-convection correlation; ``fixed`` fits the
+thermal time constant ``tau_heat`` = m0 c_v/(hA) [s] of a constant hA,
+m0 = p10 V/(R T10).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pneumatic_unload.config import EFFECTS, RigConfig
+from pneumatic_unload.fit.params import Parameter, Parameters
+from pneumatic_unload.model.ode import integrate, valve_events
+from pneumatic_unload.model.sensor import sensor_response
+from pneumatic_unload.physics import AIR, RHO_N, T_N, Gas
+
+FloatArray = NDArray[np.float64]
+
+#: Integrator tolerance of every fit of the parametric model [-]: the model error (~1e-8
+#: p10, well under a Pa) stays far below the noise and below the finite-difference steps of
+#: the engine (:data:`pneumatic_unload.fit.lsq.DIFF_STEP`, ~1e-4 relative).
+FIT_RTOL = 1e-8
+
+
+@dataclass(frozen=True)
+class Tank:
+    """What is known about the tank and the gas (not fitted).
+
+    Attributes
+    ----------
+    volume : float
+        Tank volume V [m^3].
+    initial_temperature : float
+        T10 [K].
+    wall_temperature : float
+        Wall temperature [K] (the start when it is fitted).
+    length_diameter_ratio : float
+        Tank L/D [-].
+    atmosphere : float or None
+        p_atm [Pa absolute]; None: fitted.
+    gas : Gas
+        Gas properties.
+    fit_wall_temperature : bool
+        Fit the wall temperature with the heat-transfer effect.
+    """
+
+    volume: float
+    initial_temperature: float = T_N
+    wall_temperature: float = T_N
+    length_diameter_ratio: float = 2.0
+    atmosphere: float | None = 101325.0
+    gas: Gas = AIR
+    fit_wall_temperature: bool = False
+
+
+@dataclass(frozen=True)
+class Start:
+    """Neutral values of the baseline (from the unloading-time estimate).
+
+    Attributes
+    ----------
+    conductance : float
+        C [m^3/(s Pa)].
+    critical_ratio : float
+        b [-].
+    t_open : float
+        Valve opening instant [s].
+    p10, p_atm : float
+        Initial and atmospheric pressure [Pa absolute].
+    tau : float
+        Unloading time tau_exp [s].
+    dt : float
+        Sample period [s].
+    t_first, t_last : float
+        First and last instants of the record [s].
+    """
+
+    conductance: float
+    critical_ratio: float
+    t_open: float
+    p10: float
+    p_atm: float
+    tau: float
+    dt: float
+    t_first: float
+    t_last: float
+
+
+Values = dict[str, float]
+
+
+@dataclass(frozen=True)
+class EffectParam:
+    """A parameter an effect adds.
+
+    Attributes
+    ----------
+    name, unit, doc : str
+        Key, SI unit, meaning.
+    log : bool
+        Fitted as log(value).
+    lo, hi : float
+        Bounds [unit].
+    centre : callable
+        Value [unit] at the centre of the fitted coordinate, from the :class:`Start`.
+    scale : float
+        One unit of the fitted coordinate [unit, or log units].
+    """
+
+    name: str
+    unit: str
+    log: bool
+    lo: float
+    hi: float
+    centre: Callable[[Start], float]
+    scale: float
+    doc: str
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One real-rig effect: where it sits, its parameters and how they enter the model.
+
+    Attributes
+    ----------
+    name : str
+        Key (one of :data:`pneumatic_unload.config.EFFECTS`).
+    where : str
+        Where in the rig it sits and what it does.
+    params : tuple of EffectParam
+        Parameters it adds.
+    off : callable
+        Parameter values that make it negligible (the nested baseline) [SI].
+    starts : callable
+        Starting values, small and large [SI].
+    apply : callable
+        ``apply(values, tank)`` -> RigConfig keyword changes.
+    """
+
+    name: str
+    where: str
+    params: tuple[EffectParam, ...]
+    off: Callable[[Start], Values]
+    starts: Callable[[Start], list[Values]]
+    apply: Callable[[Values, Tank], dict[str, object]]
+
+
+def _fast(s: Start) -> list[float]:
+    return [max(3.0 * s.dt, 0.01 * s.tau), max(10.0 * s.dt, 0.1 * s.tau)]
+
+
+def _small(s: Start) -> float:
+    return max(s.tau * 0.01, 3 * s.dt)
+
+
+def _heat_fixed(v: Values, tank: Tank) -> dict[str, object]:
+    g = tank.gas
+    h_a = v["p10"] * tank.volume / ((g.gamma - 1.0) * tank.initial_temperature * v["tau_heat"])
+    return {"heat_transfer_mode": "fixed",
+            "heat_transfer_coefficient": float(np.clip(h_a, 0.0, 1e4))}
+
+
+def _leak(v: Values, tank: Tank) -> dict[str, object]:
+    p_atm = v.get("p_atm", tank.atmosphere or 101325.0)
+    g0 = v["C"] * RHO_N * v["p10"] * math.sqrt(T_N / tank.initial_temperature)
+    k = v["leak_fraction"] * g0 / max(v["p10"] - p_atm, 1.0)
+    return {"leak_coefficient": float(np.clip(k, 0.0, 1e-5))}
+
+
+HEAT_NATURAL = Effect(
+    "heat_transfer",
+    "the tank wall: heat flows from the wall into the cooling gas by natural convection; "
+    "heat_scale multiplies the published correlation",
+    (EffectParam("heat_scale", "-", True, 1e-4, 100.0, lambda s: 1.0, 0.3,
+                 "multiplier on the natural-convection correlation"),),
+    lambda s: {"heat_scale": 1e-4},
+    lambda s: [{"heat_scale": 0.3}, {"heat_scale": 3.0}],
+    lambda v, tank: {"heat_transfer_mode": "natural",
+                     "heat_transfer_scale": float(min(v["heat_scale"], 100.0))},
+)
+HEAT_FIXED = Effect(
+    "heat_transfer",
+    "the tank wall: heat flows from the wall into the gas through a constant hA (Newton "
+    "cooling); tau_heat = m0 c_v/(hA) is the gas's thermal time constant",
+    (EffectParam("tau_heat", "s", True, 1e-3, 1e5, lambda s: s.tau, 1.0,
+                 "thermal time constant m0 c_v/(h A) of the gas-wall exchange"),),
+    lambda s: {"tau_heat": 1e3 * s.tau},
+    lambda s: [{"tau_heat": 0.7 * s.tau}, {"tau_heat": 7.0 * s.tau}],
+    _heat_fixed,
+)
+
+#: Every effect by name (heat transfer with its default law, natural convection).
+REGISTRY: dict[str, Effect] = {e.name: e for e in (
+    HEAT_NATURAL,
+    Effect("valve_opening",
+           "the shut-off valve: its effective area opens along a linear ramp of t_ramp",
+           (EffectParam("t_ramp", "s", True, 1e-5, 10.0, _small, 1.0,
+                        "valve opening time (linear ramp of the effective area)"),),
+           lambda s: {"t_ramp": 0.3 * s.dt},
+           lambda s: [{"t_ramp": v} for v in _fast(s)],
+           lambda v, tank: {"valve_opening_time": float(min(v["t_ramp"], 10.0))}),
+    Effect("sensor_lag",
+           "the pressure transducer and its tubing: a first-order lag of tau_sensor",
+           (EffectParam("tau_sensor", "s", True, 1e-6, 10.0, _small, 1.0,
+                        "first-order time constant of the pressure sensor"),),
+           lambda s: {"tau_sensor": 0.1 * s.dt},
+           lambda s: [{"tau_sensor": v} for v in _fast(s)],
+           lambda v, tank: {"sensor_lag": float(min(v["tau_sensor"], 10.0))}),
+    Effect("leak",
+           "the tank and its fittings: a laminar leak to atmosphere, active whenever the "
+           "tank is above p_atm (the plateau decays)",
+           (EffectParam("leak_fraction", "-", True, 1e-5, 10.0, lambda s: 0.05, 1.0,
+                        "leak flow at p10 relative to the choked flow at p10"),),
+           lambda s: {"leak_fraction": 1e-4},
+           lambda s: [{"leak_fraction": 0.03}, {"leak_fraction": 0.2}],
+           _leak),
+    Effect("pipe_volume",
+           "between the tank and the component: a pipe volume and the series conductance "
+           "of the fittings (a system C is measured)",
+           (EffectParam("pipe_volume_ratio", "-", True, 1e-4, 20.0, lambda s: 0.1, 1.0,
+                        "volume between tank and component, relative to V"),
+            EffectParam("pipe_conductance_ratio", "-", True, 1e-2, 1e4, lambda s: 5.0, 1.0,
+                        "sonic conductance of the pipe relative to C")),
+           lambda s: {"pipe_volume_ratio": 2e-4, "pipe_conductance_ratio": 5e3},
+           lambda s: [{"pipe_volume_ratio": 0.1, "pipe_conductance_ratio": 5.0},
+                      {"pipe_volume_ratio": 0.3, "pipe_conductance_ratio": 1.5}],
+           lambda v, tank: {
+               "pipe_volume": float(min(v["pipe_volume_ratio"] * tank.volume, 10.0)),
+               "pipe_conductance": float(np.clip(v["pipe_conductance_ratio"] * v["C"],
+                                                 1e-13, 1e-5))}),
+    Effect("sensor_offset",
+           "the pressure transducer: a zero offset added to every reading",
+           (EffectParam("offset", "Pa", False, -1e6, 1e6, lambda s: 0.0, 1000.0,
+                        "transducer zero offset"),),
+           lambda s: {"offset": 0.0},
+           lambda s: [{"offset": 0.0}],
+           lambda v, tank: {"sensor_offset": v["offset"]}),
+    Effect("sensor_gain",
+           "the pressure transducer: a relative gain error on every reading",
+           (EffectParam("gain", "-", False, -0.5, 0.5, lambda s: 0.0, 0.01,
+                        "transducer relative gain error"),),
+           lambda s: {"gain": 0.0},
+           lambda s: [{"gain": 0.0}],
+           lambda v, tank: {"sensor_gain": float(np.clip(v["gain"], -0.5, 0.5))}),
+)}
+#: The heat-transfer laws a fit can choose from.
+HEAT_VARIANTS: dict[str, Effect] = {"natural": HEAT_NATURAL, "fixed": HEAT_FIXED}
+
+WALL_TEMPERATURE = EffectParam("t_wall", "K", False, 150.0, 600.0, lambda s: math.nan, 5.0,
+                               "wall temperature")
+
+#: Which extra measurement separates two confusable effects.
+SEPARATING_DATA: dict[frozenset[str], str] = {
+    frozenset({"valve_opening", "sensor_lag"}):
+        "a valve position signal (or a faster discharge: a bigger component or a smaller "
+        "tank makes the valve ramp and the sensor lag distort different parts of the curve)",
+    frozenset({"sensor_offset", "sensor_gain"}):
+        "a zero reading at atmosphere and a reference reading at a known pressure (a "
+        "calibrated manometer at p10)",
+    frozenset({"heat_transfer", "pipe_volume"}):
+        "a gas temperature measurement, or a run with the pipe shortened",
+    frozenset({"heat_transfer", "leak"}):
+        "a leak test: hold the charged tank closed and watch the pressure",
+    frozenset({"leak", "pipe_volume"}):
+        "a leak test (closed tank held at p10) or a run with the pipe shortened",
+    frozenset({"sensor_offset", "leak"}):
+        "a zero reading at atmosphere, or a leak test (closed tank held at p10)",
+    frozenset({"sensor_gain", "leak"}):
+        "a leak test (closed tank held at p10) and a calibration of the transducer",
+}
+assert set(REGISTRY) == set(EFFECTS), "every effect of the configuration needs a record"
+
+
+def separating_data(names: list[str]) -> list[str]:
+    """Advice: which extra data would separate each pair of confusable effects."""
+    out: list[str] = []
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            hint = SEPARATING_DATA.get(frozenset({a, b}))
+            out.append(f"{a} vs {b}: " + (hint or "a second run with a different tank "
+                                           "volume or initial pressure"))
+    return out
+
+
+class ParametricModel:
+    """The baseline discharge plus effects, as a function of named parameter values.
+
+    Parameters
+    ----------
+    effects : tuple of str
+        Effects switched on (names of :data:`REGISTRY`).
+    tank : Tank
+        Known tank and gas data.
+    start : Start
+        Neutral values (centres of the fitted coordinates, bounds of t_open).
+    heat_law : str
+        Law of the heat-transfer effect: 'natural' or 'fixed' (:data:`HEAT_VARIANTS`).
+    """
+
+    def __init__(self, effects: tuple[str, ...], tank: Tank, start: Start, *,
+                 heat_law: str = "natural") -> None:
+        bad = [e for e in effects if e not in REGISTRY]
+        if bad:
+            raise ValueError(f"unknown effect(s) {bad}; known: {', '.join(REGISTRY)}")
+        if heat_law not in HEAT_VARIANTS:
+            raise ValueError(f"unknown heat law {heat_law!r}; known: {list(HEAT_VARIANTS)}")
+        self.effects = tuple(effects)
+        self.tank = tank
+        self.start = start
+        self.heat_law = heat_law
+        self.records = tuple(HEAT_VARIANTS[heat_law] if e == "heat_transfer" else REGISTRY[e]
+                             for e in self.effects)
+        self.parameters = self._parameters()
+
+    def _parameters(self) -> Parameters:
+        s = self.start
+        p = s.p10
+        ps = [
+            Parameter("C", s.conductance, 1e-13, 1e-5, "m^3/(s Pa)", log=True, scale=0.1,
+                      doc="sonic conductance"),
+            Parameter("b", float(np.clip(s.critical_ratio, 0.02, 0.94)), 0.01, 0.95, "-",
+                      scale=0.1, doc="critical pressure ratio"),
+            Parameter("t_open", s.t_open, s.t_first,
+                      max(min(s.t_last, s.t_open + 0.5 * s.tau), s.t_open + s.dt), "s",
+                      scale=max(10.0 * s.dt, 1e-3 * s.tau), doc="valve opening instant"),
+            Parameter("p10", p, 0.3 * p, 3.0 * p, "Pa", scale=1e-3 * p,
+                      doc="initial pressure (absolute)"),
+        ]
+        if self.tank.atmosphere is None:
+            ps.append(Parameter("p_atm", s.p_atm, 0.3 * s.p_atm, 3.0 * s.p_atm, "Pa",
+                                scale=1e-3 * s.p_atm, doc="atmospheric pressure (absolute)"))
+        for rec in self.records:
+            for q in rec.params:
+                c = q.centre(s)
+                ps.append(Parameter(q.name, c, q.lo, q.hi, q.unit, log=q.log, scale=q.scale,
+                                    doc=q.doc))
+            if rec.name == "heat_transfer" and self.tank.fit_wall_temperature:
+                q = WALL_TEMPERATURE
+                ps.append(Parameter(q.name, self.tank.wall_temperature, q.lo, q.hi, q.unit,
+                                    scale=q.scale, doc=q.doc))
+        return Parameters(ps)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Parameter names, in order."""
+        return self.parameters.names
+
+    def off_values(self, effect: str) -> Values:
+        """Values that switch ``effect`` (almost) off [SI]."""
+        rec = self._record(effect)
+        out = dict(rec.off(self.start))
+        if effect == "heat_transfer" and self.tank.fit_wall_temperature:
+            out["t_wall"] = self.tank.wall_temperature
+        return out
+
+    def effect_starts(self, effect: str) -> list[Values]:
+        """Starting values of an effect's parameters (small and large) [SI]."""
+        rec = self._record(effect)
+        out = rec.starts(self.start)
+        if effect == "heat_transfer" and self.tank.fit_wall_temperature:
+            out = [{**d, "t_wall": self.tank.wall_temperature} for d in out]
+        return out
+
+    def _record(self, effect: str) -> Effect:
+        return HEAT_VARIANTS[self.heat_law] if effect == "heat_transfer" else REGISTRY[effect]
+
+    def config(self, v: Values) -> RigConfig:
+        """The :class:`RigConfig` of parameter values (valve opens at ``v['t_open']``)."""
+        tank = self.tank
+        gas = tank.gas
+        c = float(np.clip(v["C"], 1e-13, 1e-5))
+        vv = {**v, "C": c}
+        p_atm = v.get("p_atm", tank.atmosphere if tank.atmosphere is not None else 101325.0)
+        kw: dict[str, object] = {}
+        for rec in self.records:
+            kw.update(rec.apply(vv, tank))
+        return RigConfig(
+            volume=tank.volume, length_diameter_ratio=tank.length_diameter_ratio,
+            conductance=c, critical_ratio=float(np.clip(v["b"], 0.0, 0.99)),
+            initial_pressure=float(np.clip(v["p10"], 1e4, 5e7)),
+            initial_temperature=tank.initial_temperature,
+            atmosphere=float(np.clip(p_atm, 1e3, 2e5)),
+            wall_temperature=float(v.get("t_wall", tank.wall_temperature)),
+            gas_constant=gas.gas_constant, gamma=gas.gamma, effects=self.effects,
+            pre_time=0.0, noise_std=0.0, **kw)  # type: ignore[arg-type]
+
+    def events(self, v: Values) -> list[float]:
+        """Instants where the model's signal is not smooth [s]."""
+        return valve_events(self.config(v), v["t_open"])
+
+    def states(self, v: Values, t: FloatArray) -> FloatArray:
+        """ODE states at instants t (p [Pa], T [K], ...) for parameter values v."""
+        return integrate(self.config(v), np.asarray(t, dtype=float), v["t_open"],
+                         rtol=FIT_RTOL, quiet=True)
+
+    def signal(self, v: Values, t: FloatArray) -> FloatArray:
+        """Noise-free sensor output of the model at instants t [Pa]."""
+        cfg = self.config(v)
+        t = np.asarray(t, dtype=float)
+        p = integrate(cfg, t, v["t_open"], rtol=FIT_RTOL, quiet=True)[:, 0]
+        return sensor_response(t, p, cfg)
+
+    def temperature(self, v: Values, t: FloatArray) -> FloatArray:
+        """Mean gas temperature of the model at instants t [K]."""
+        return self.states(v, t)[:, 1]

@@ -1,0 +1,92 @@
+"""Wall heat transfer of the tank gas: the one place a heat law lives.
+
+The gas exchanges heat with the wall, Q = hA (T_wall - T) [W]. The wall conductance hA
+[W/K] follows one of the laws of :data:`HEAT_LAWS`:
+
+* ``natural`` - natural convection inside a closed cylinder, hA = A_w k/L Nu(Ra) with
+  Nu = 0.59 Ra^0.25 (laminar) or 0.10 Ra^(1/3) (turbulent, Ra >= 1e9), Nu >= 1, and
+  Ra = g |T_w - T|/T L^3 rho^2 c_p/(mu k); times a dimensionless ``heat_transfer_scale``
+  (1: the correlation as published). The scale is what the estimator and the discrepancy
+  workflow fit, and what the simulator sets.
+* ``fixed`` - a constant hA = ``heat_transfer_coefficient`` [W/K] (Newton cooling).
+
+The simulator, the estimator's model inversion and curve fit, and the discrepancy's
+heat-transfer candidate all build their heat flow here, from the same
+:class:`~pneumatic_unload.config.RigConfig` fields. SI units.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from pneumatic_unload.config import RigConfig
+from pneumatic_unload.physics import G_ACCEL, tank_geometry
+
+#: Heat laws (values of ``RigConfig.heat_transfer_mode``).
+HEAT_LAWS: tuple[str, ...] = ("natural", "fixed")
+
+
+def heat_flow_function(cfg: RigConfig) -> Callable[[float, float], float] | None:
+    """The wall heat flow Q(p, T) [W] of a configuration, or None when adiabatic.
+
+    Parameters
+    ----------
+    cfg : RigConfig
+        Tank (V, L/D), gas, wall temperature, ``heat_transfer_mode`` and its parameter;
+        adiabatic unless ``heat_transfer`` is among ``cfg.effects``.
+
+    Returns
+    -------
+    callable or None
+        ``q(p, t_gas)``: heat flow into the gas [W] at gas pressure p [Pa absolute] and
+        mean gas temperature t_gas [K].
+    """
+    if not cfg.has("heat_transfer"):
+        return None
+    t_wall = cfg.wall_temperature
+    if cfg.heat_transfer_mode == "fixed":
+        h_a = cfg.heat_transfer_coefficient
+
+        def q_fixed(p: float, t_gas: float) -> float:
+            return h_a * (t_wall - t_gas)
+
+        return q_fixed
+    gas = cfg.gas
+    length, _d, area = tank_geometry(cfg.volume, cfg.length_diameter_ratio)
+    # Ra = g |dT|/T L^3 rho^2 c_p / (mu k), rho = p/(R T)
+    ra_const = G_ACCEL * length**3 * gas.cp / (gas.viscosity * gas.conductivity
+                                                * gas.gas_constant**2)
+    hk = area * gas.conductivity / length * cfg.heat_transfer_scale
+
+    def q_natural(p: float, t_gas: float) -> float:
+        dt_w = t_wall - t_gas
+        ra = ra_const * abs(dt_w) / t_gas * (p / t_gas) ** 2
+        nu = 0.59 * ra**0.25 if ra < 1e9 else 0.10 * ra ** (1.0 / 3.0)
+        return hk * (nu if nu > 1.0 else 1.0) * dt_w
+
+    return q_natural
+
+
+def thermal_time_constant(cfg: RigConfig, p: float, t_gas: float) -> float:
+    """Gas-wall thermal time constant m c_v / hA at a state [s] (inf when adiabatic).
+
+    Parameters
+    ----------
+    cfg : RigConfig
+        Configuration (heat law as in :func:`heat_flow_function`).
+    p : float
+        Gas pressure [Pa absolute].
+    t_gas : float
+        Gas temperature [K]; hA of the natural law is taken at |T_w - T| = 10 K when the
+        two are equal.
+    """
+    q = heat_flow_function(cfg)
+    if q is None:
+        return math.inf
+    dt = cfg.wall_temperature - t_gas
+    probe = t_gas if abs(dt) > 1e-9 else cfg.wall_temperature - 10.0
+    h_a = q(p, probe) / (cfg.wall_temperature - probe)
+    gas = cfg.gas
+    m_cv = p * cfg.volume / (gas.gas_constant * t_gas) * gas.gas_constant / (gas.gamma - 1.0)
+    return m_cv / h_a if h_a > 0 else math.inf
