@@ -24,6 +24,7 @@ __all__ = [
     "cdr_header_stamp_ns",
     "check_t_ns",
     "decode_stamped_pairs",
+    "encode_pair_block",
     "encode_stamped_pair",
     "encode_stamped_pairs",
     "gather",
@@ -104,6 +105,45 @@ def encode_stamped_pairs(
     out["a"] = a
     out["b"] = b
     return out.view(np.uint8).reshape(stamps.size, dtype.itemsize)
+
+
+
+def encode_pair_block(
+    t_ns: npt.ArrayLike,
+    values: npt.ArrayLike,
+    variance: npt.ArrayLike,
+    *,
+    frame_id: str,
+    log_time_ns: npt.ArrayLike | None,
+) -> tuple[npt.NDArray[np.uint64], npt.NDArray[np.uint8]]:
+    """Checked log times and CDR payloads of N FluidPressure/Temperature messages.
+
+    Args:
+        t_ns: header stamps [ns], integer array of shape (N,).
+        values: first float64 field (fluid_pressure [Pa] or temperature [degC]), shape (N,).
+        variance: variance [Pa^2 or K^2], shape (N,) or scalar.
+        frame_id: header frame id (same for all N).
+        log_time_ns: bag log times [ns], integer array of shape (N,); None: ``t_ns``.
+
+    Returns:
+        (log times [ns] as uint64 of shape (N,), payloads as uint8 of shape (N, L)).
+
+    Raises:
+        BagWriteError: shapes or types do not match, or a log time is negative.
+    """
+    stamps = np.asarray(t_ns)
+    vals = np.asarray(values, np.float64)
+    if stamps.ndim != 1 or vals.shape != stamps.shape:
+        raise BagWriteError(
+            f"t_ns and values must be 1-D of equal length, got {stamps.shape} and {vals.shape}"
+        )
+    payloads = encode_stamped_pairs(stamps, vals, variance, frame_id=frame_id)
+    logs = stamps if log_time_ns is None else np.asarray(log_time_ns)
+    if logs.shape != stamps.shape or not np.issubdtype(logs.dtype, np.integer):
+        raise BagWriteError("log_time_ns must be an integer array shaped like t_ns")
+    if logs.size and logs.min() < 0:
+        raise BagWriteError("log times must be >= 0 ns")
+    return logs.astype(np.uint64), payloads
 
 
 @lru_cache(maxsize=64)

@@ -12,16 +12,12 @@ nanoseconds.
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import math
-import operator
 import os
-import struct
 import threading
 import time
 from collections.abc import Mapping
-from pathlib import Path, PurePath
+from pathlib import Path
 from types import TracebackType
 from typing import Any, Literal
 
@@ -31,48 +27,30 @@ from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin, WriterError
 from rosbags.typesys import get_types_from_msg
 
-from .cdr import check_t_ns, encode_stamped_pair, encode_stamped_pairs
+from .cdr import check_t_ns, encode_pair_block, encode_stamped_pair
 from .errors import BagWriteError, UnknownMessageTypeError
+from .messages import config_json, encode_estimate, make_header
 from .records import UINT64_MAX
 from .schema import (
     CONFIG_METADATA_KEY,
-    INT32_MAX,
-    INT32_MIN,
     MSGTYPE_CONFIG,
     MSGTYPE_ESTIMATE,
     MSGTYPE_PRESSURE,
     MSGTYPE_TEMPERATURE,
     MSGTYPE_VALVE,
-    NS_PER_S,
     TOPIC_CONFIG,
     TOPIC_ESTIMATE,
     TOPIC_PRESSURE,
     TOPIC_TEMPERATURE,
     TOPIC_VALVE,
     ZERO_CELSIUS,
-    field_names,
     find_msg_definition,
     make_typestore,
     missing_types,
 )
 from .writer import DEFAULT_CHUNK_SIZE, Rosbag2Writer
 
-__all__ = [
-    "BagRecorder",
-]
-
-
-def _json_default(obj: object) -> object:
-    """JSON fallback for numpy values, paths and dataclasses in a rig configuration."""
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, PurePath):
-        return str(obj)
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return dataclasses.asdict(obj)
-    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+__all__ = ["BagRecorder"]
 
 
 class BagRecorder:
@@ -129,10 +107,7 @@ class BagRecorder:
         self._connections: dict[tuple[str, str], Connection] = {}
         self._config_text: str | None = None
         if config is not None:
-            try:
-                self._config_text = json.dumps(dict(config), default=_json_default)
-            except (TypeError, ValueError) as err:
-                raise BagWriteError(f"config is not JSON serialisable: {err}") from err
+            self._config_text = config_json(config)
         self._config_stamp_ns = (
             None if config_stamp_ns is None else check_t_ns(config_stamp_ns, "config_stamp_ns")
         )
@@ -179,10 +154,7 @@ class BagRecorder:
     def message_counts(self) -> dict[str, int]:
         """Messages written so far per topic."""
         with self._lock:
-            counts: dict[str, int] = {}
-            for conn in self._writer.connections:
-                counts[conn.topic] = counts.get(conn.topic, 0) + self._writer.counts[conn.id]
-            return counts
+            return self._writer.topic_counts
 
     # ------------------------------------------------------------------------ internals
 
@@ -228,14 +200,6 @@ class BagRecorder:
 
     def _serialize(self, msgtype: str, msg: object) -> memoryview:
         return self._typestore.serialize_cdr(msg, msgtype)
-
-    def _header(self, stamp_ns: int, frame_id: str) -> object:
-        types = self._typestore.types
-        sec, nsec = divmod(stamp_ns, NS_PER_S)
-        if not INT32_MIN <= sec <= INT32_MAX:
-            raise BagWriteError(f"header stamp {stamp_ns} ns is out of the int32 seconds range")
-        stamp = types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
-        return types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id)
 
     # ------------------------------------------------------------------------ public API
 
@@ -309,10 +273,7 @@ class BagRecorder:
                 raise BagWriteError("config must be a JSON object")
             text = config
         else:
-            try:
-                text = json.dumps(dict(config), default=_json_default)
-            except (TypeError, ValueError) as err:
-                raise BagWriteError(f"config is not JSON serialisable: {err}") from err
+            text = config_json(config)
         stamp = (
             None if config_stamp_ns is None else check_t_ns(config_stamp_ns, "config_stamp_ns")
         )
@@ -320,8 +281,8 @@ class BagRecorder:
             self._check_open()
             self._config_text = text
             self._writer.set_custom_data(CONFIG_METADATA_KEY, text)
-            empty = self._writer.min_timestamp == 2**63 - 1
-            last = self._writer.max_timestamp
+            empty = self._writer.is_empty
+            last = self._writer.last_log_time
             if stamp is None and empty:  # stamp it like the next message written
                 self._config_stamp_ns = None
                 self._config_pending = True
@@ -449,23 +410,13 @@ class BagRecorder:
         frame_id: str,
         log_time_ns: npt.ArrayLike | None,
     ) -> None:
-        stamps = np.asarray(t_ns)
-        vals = np.asarray(values, np.float64)
-        if stamps.ndim != 1 or vals.shape != stamps.shape:
-            raise BagWriteError(
-                f"t_ns and values must be 1-D of equal length, got {stamps.shape} and {vals.shape}"
-            )
-        payloads = encode_stamped_pairs(stamps, vals, variance, frame_id=frame_id)
-        logs = stamps if log_time_ns is None else np.asarray(log_time_ns)
-        if logs.shape != stamps.shape or not np.issubdtype(logs.dtype, np.integer):
-            raise BagWriteError("log_time_ns must be an integer array shaped like t_ns")
-        if logs.size == 0:
+        logs_u, payloads = encode_pair_block(
+            t_ns, values, variance, frame_id=frame_id, log_time_ns=log_time_ns
+        )
+        if logs_u.size == 0:
             return
-        if logs.min() < 0:
-            raise BagWriteError("log times must be >= 0 ns")
-        logs_u = logs.astype(np.uint64)
         with self._lock:
-            self._before_write(int(logs.min()))
+            self._before_write(int(logs_u.min()))
             self._writer.write_block(self._connection(topic, msgtype), logs_u, payloads)
             self._after_write()
 
@@ -490,7 +441,9 @@ class BagRecorder:
         stamp = check_t_ns(t_ns)
         log_time = stamp if log_time_ns is None else check_t_ns(log_time_ns, "log_time_ns")
         msg = self._typestore.types[MSGTYPE_VALVE](
-            header=self._header(stamp, frame_id), open=bool(open), opening=float(opening)
+            header=make_header(self._typestore, stamp, frame_id),
+            open=bool(open),
+            opening=float(opening),
         )
         self._write(TOPIC_VALVE, MSGTYPE_VALVE, log_time, self._serialize(MSGTYPE_VALVE, msg))
 
@@ -517,42 +470,7 @@ class BagRecorder:
         """
         stamp = check_t_ns(t_ns)
         log_time = stamp if log_time_ns is None else check_t_ns(log_time_ns, "log_time_ns")
-        store = self._typestore
-        names = field_names(store, MSGTYPE_ESTIMATE)
-        allowed = {"header_stamp_ns", "frame_id", "unload_start_ns"}
-        allowed |= set(names) - {"header", "unload_start"}
-        if unknown := sorted(set(fields) - allowed):
-            raise BagWriteError(
-                f"unknown UnloadEstimate fields {unknown}; valid keys: {sorted(allowed)}"
-            )
-        values: dict[str, Any] = {}
-        try:
-            for name, (_, (_kind, spec)) in zip(
-                names, store.fielddefs[MSGTYPE_ESTIMATE][1], strict=True
-            ):
-                if name == "header":
-                    header_ns = check_t_ns(fields.get("header_stamp_ns", stamp), "header_stamp_ns")
-                    values[name] = self._header(header_ns, str(fields.get("frame_id", "")))
-                elif name == "unload_start":
-                    start_ns = check_t_ns(fields.get("unload_start_ns", 0), "unload_start_ns")
-                    sec, nsec = divmod(start_ns, NS_PER_S)
-                    values[name] = store.types["builtin_interfaces/msg/Time"](
-                        sec=sec, nanosec=nsec
-                    )
-                else:
-                    base = spec[0] if isinstance(spec, tuple) else spec
-                    if base in ("float64", "float32"):
-                        values[name] = float(fields.get(name, math.nan))
-                    elif base == "string":
-                        values[name] = str(fields.get(name, ""))
-                    elif base == "bool":
-                        values[name] = bool(fields.get(name, False))
-                    else:
-                        values[name] = operator.index(fields.get(name, 0))
-            msg = store.types[MSGTYPE_ESTIMATE](**values)
-            data = self._serialize(MSGTYPE_ESTIMATE, msg)
-        except (TypeError, ValueError, OverflowError, struct.error) as err:
-            raise BagWriteError(f"invalid UnloadEstimate value: {err}") from err
+        data = encode_estimate(self._typestore, stamp, fields)
         self._write(TOPIC_ESTIMATE, MSGTYPE_ESTIMATE, log_time, data)
 
     def flush(self) -> None:
@@ -572,11 +490,10 @@ class BagRecorder:
                 return
             try:
                 if self._config_pending:
-                    first = self._writer.min_timestamp
                     self._write_config(
                         self._config_stamp_ns
                         if self._config_stamp_ns is not None
-                        else (first if first < 2**63 - 1 else 0)
+                        else (0 if self._writer.is_empty else self._writer.first_log_time)
                     )
                 self._writer.close()
             except (WriterError, OSError) as err:

@@ -23,7 +23,6 @@ from mcap.records import Schema as McapSchema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin
-from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -31,7 +30,7 @@ from .errors import BagError, BagFormatError, BagNotFoundError
 from .records import MCAP_MAGIC, OP_CHUNK, OP_MESSAGE, RECORD_HEAD
 from .schema import CONFIG_METADATA_KEY, MSGTYPE_CONFIG, TOPIC_CONFIG, make_typestore
 from .summary import bag_summary
-from .writer import Rosbag2Writer
+from .writer import Rosbag2Writer, parse_offered_qos
 
 __all__ = [
     "RecoverReport",
@@ -256,7 +255,9 @@ def recover(path: str | os.PathLike[str], *, keep_original: bool = True) -> Reco
                         if conn is None:
                             qos: Any = ()
                             with contextlib.suppress(Exception):
-                                qos = parse_qos(rec.metadata.get("offered_qos_profiles", "[]"))
+                                qos = parse_offered_qos(
+                                    rec.metadata.get("offered_qos_profiles", "[]")
+                                )
                             conn = writer.add_connection(
                                 rec.topic,
                                 schema.name,

@@ -4,7 +4,9 @@ write for N equal-size messages.
 
 This is the only module of the package that subclasses rosbags classes or uses rosbags
 internals (``rosbags.rosbag2.storage_mcap.McapWriter`` and ``PendingChunk``,
-``Writer.STORAGE_PLUGINS``). The other modules use rosbags' public API only.
+``Writer.STORAGE_PLUGINS`` and the writer's message counters and time span,
+``rosbags.rosbag2.metadata.parse_qos``); the other modules reach them through
+:class:`Rosbag2Writer` and :func:`parse_offered_qos` and otherwise use rosbags' public API.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.metadata import parse_qos
 from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
 
 from .errors import BagWriteError
@@ -32,6 +35,7 @@ __all__ = [
     "DEFAULT_CHUNK_SIZE",
     "FlushingMcapWriter",
     "Rosbag2Writer",
+    "parse_offered_qos",
 ]
 
 
@@ -212,6 +216,29 @@ class Rosbag2Writer(Writer):
             raise BagWriteError(f"bag {self.path} is not open")
         return storage
 
+    @property
+    def topic_counts(self) -> dict[str, int]:
+        """Messages written so far per topic."""
+        counts: dict[str, int] = {}
+        for conn in self.connections:
+            counts[conn.topic] = counts.get(conn.topic, 0) + self.counts[conn.id]
+        return counts
+
+    @property
+    def is_empty(self) -> bool:
+        """True while no message has been written (rosbags' time span is still unset)."""
+        return self.min_timestamp == 2**63 - 1
+
+    @property
+    def first_log_time(self) -> int:
+        """Smallest log time written so far [ns] (2^63 - 1 while :attr:`is_empty`)."""
+        return self.min_timestamp
+
+    @property
+    def last_log_time(self) -> int:
+        """Largest log time written so far [ns] (0 while :attr:`is_empty`)."""
+        return self.max_timestamp
+
     def write_block(
         self,
         connection: Connection,
@@ -225,3 +252,13 @@ class Rosbag2Writer(Writer):
         self.counts[connection.id] += int(log_times.size)
         self.min_timestamp = min(self.min_timestamp, int(log_times.min()))
         self.max_timestamp = max(self.max_timestamp, int(log_times.max()))
+
+
+def parse_offered_qos(text: str) -> Any:
+    """rosbags' QoS profiles from an ``offered_qos_profiles`` text (rosbag2 YAML), e.g. of an
+    MCAP channel's metadata, for ``Writer.add_connection``.
+
+    Raises:
+        Exception: whatever rosbags raises for text it cannot parse.
+    """
+    return parse_qos(text)
