@@ -32,6 +32,7 @@ Modules, each importing only those above it:
 - :mod:`.reader`: ``read_pressure``, ``read_temperature``, ``read_valve``,
   ``read_estimates``, ``read_config``, ``read_json_topic``, ``read_raw_messages``.
 - :mod:`.summary`: :func:`bag_summary`.
+- :mod:`.messages`: rig configuration JSON, Header and UnloadEstimate built for writing.
 - :mod:`.recorder`: :class:`BagRecorder`.
 - :mod:`.recover`: :func:`recover`.
 """
