@@ -18,6 +18,7 @@ import pytest
 import yaml
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
+from rosbags.typesys import get_types_from_msg
 
 from pneumatic_unload.io import (
     CONFIG_METADATA_KEY,
@@ -47,7 +48,8 @@ from pneumatic_unload.io import (
     read_valve,
     recover,
 )
-from pneumatic_unload.io import bag as bagio
+from pneumatic_unload.io.bag.cdr import encode_stamped_pair, encode_stamped_pairs
+from pneumatic_unload.io.bag.reader import fast_raw_pairs, read_stamped_pairs
 
 with warnings.catch_warnings():  # mcap_ros2.reader warns about mcap_ros1 on import
     warnings.simplefilter("ignore", DeprecationWarning)
@@ -165,7 +167,7 @@ def test_fast_encoding_is_byte_identical_to_rosbags(frame_id, msgtype):
     t_ns = np.array([0, 1, 999_999_999, T0, T0 + 123_456_789, -1_500_000_000], np.int64)
     values = np.array([1e5, -0.0, np.nan, np.inf, 6.02e23, 1e-300])
     variance = np.array([0.0, 1.5, 2.25, 0.0, 1e-9, 7.0])
-    rows = bagio._encode_stamped_pairs(t_ns, values, variance, frame_id=frame_id)
+    rows = encode_stamped_pairs(t_ns, values, variance, frame_id=frame_id)
     field = "fluid_pressure" if msgtype == MSGTYPE_PRESSURE else "temperature"
     for row, t, v, var in zip(rows, t_ns, values, variance, strict=True):
         sec, nsec = divmod(int(t), 1_000_000_000)
@@ -175,7 +177,7 @@ def test_fast_encoding_is_byte_identical_to_rosbags(frame_id, msgtype):
         msg = types[msgtype](header=header, **{field: float(v)}, variance=float(var))
         expected = bytes(store.serialize_cdr(msg, msgtype))
         assert row.tobytes() == expected  # vectorised encoder
-        single = bagio._encode_stamped_pair(int(t), float(v), float(var), frame_id=frame_id)
+        single = encode_stamped_pair(int(t), float(v), float(var), frame_id=frame_id)
         assert single == expected  # per-message struct encoder
 
 
@@ -271,13 +273,13 @@ def test_read_pressure_matches_rosbags_deserialization(tmp_path):
     ref_t = np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs])
     ref_p = np.array([m.fluid_pressure for m in msgs])
     fast = read_pressure(path)
-    generic = bagio._read_stamped_pairs(path, TOPIC_PRESSURE, MSGTYPE_PRESSURE, fast=False)
+    generic = read_stamped_pairs(path, TOPIC_PRESSURE, MSGTYPE_PRESSURE, fast=False)
     single_file = read_pressure(path / "mixed.mcap")
     for t_ns, p in (fast, generic[:2], single_file):
         np.testing.assert_array_equal(t_ns, ref_t)
         np.testing.assert_array_equal(p, ref_p)
     # the fast path really was taken (no silent fallback)
-    _, stamps, _, _ = bagio._fast_raw_pairs(path / "mixed.mcap", TOPIC_PRESSURE, MSGTYPE_PRESSURE)
+    _, stamps, _, _ = fast_raw_pairs(path / "mixed.mcap", TOPIC_PRESSURE, MSGTYPE_PRESSURE)
     assert stamps.size == ref_t.size
 
 
@@ -289,7 +291,7 @@ def test_read_pressure_of_bags_from_other_writers(tmp_path):
 
     t_ns, p = _pressure_data(3000)
     store = make_typestore()
-    payloads = bagio._encode_stamped_pairs(t_ns, p, 0.0, frame_id="tank")
+    payloads = encode_stamped_pairs(t_ns, p, 0.0, frame_id="tank")
     writer = Writer(tmp_path / "plain", version=9, storage_plugin=StoragePlugin.MCAP)
     writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
     with writer:
@@ -309,7 +311,7 @@ def test_read_pressure_of_bags_from_other_writers(tmp_path):
         mw.finish()
     for path, mcap_file in ((tmp_path / "plain", tmp_path / "plain" / "plain.mcap"),
                             (single, single)):
-        _, stamps, values, _ = bagio._fast_raw_pairs(mcap_file, TOPIC_PRESSURE, MSGTYPE_PRESSURE)
+        _, stamps, values, _ = fast_raw_pairs(mcap_file, TOPIC_PRESSURE, MSGTYPE_PRESSURE)
         np.testing.assert_array_equal(values, p)
         np.testing.assert_array_equal(stamps, t_ns)  # the fast path handles them
         t_read, p_read = read_pressure(path)
@@ -361,7 +363,7 @@ def test_write_raw_and_register_type(tmp_path):
             rec.write_raw("/thing", "my_pkg/msg/Thing", 1, b"\x00\x01\x00\x00")
         rec.register_type("my_pkg/msg/Thing", thing_def)
         thing_store = make_typestore()
-        thing_store.register(bagio.get_types_from_msg(thing_def, "my_pkg/msg/Thing"))
+        thing_store.register(get_types_from_msg(thing_def, "my_pkg/msg/Thing"))
         thing = thing_store.types["my_pkg/msg/Thing"](x=1.5, label="hi", header=header)
         rec.write_raw("/thing", "my_pkg/msg/Thing", 6_000_000_000,
                       thing_store.serialize_cdr(thing, "my_pkg/msg/Thing"))
