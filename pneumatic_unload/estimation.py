@@ -1327,7 +1327,7 @@ class StreamingEstimator:
 
     def _fit_recovery(self, i: int) -> Any:
         """Fit the recovery from the closing instant to index i (None when it fails)."""
-        from pneumatic_unload.fitting import fit_recovery
+        from pneumatic_unload.recovery import fit_recovery
 
         tv, pv = self._arrays(i + 1)
         j = self._i_close

@@ -308,3 +308,151 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
     for yaml_name in ("simulator.yaml", "estimator.yaml"):  # --params-file targets
         assert (pkg_prefix / "share" / PKG / "config" / yaml_name).is_file()
     assert (msgs_prefix / "share" / MSGS_PKG / "msg" / "UnloadEstimate.msg").is_file()
+
+
+# ------------------------------------------------------------- layers, cycles and sizes
+#: Layer of each top-level part of the core (lower layers never import higher ones; a part
+#: may import its own layer). Read top to bottom as the architecture.
+LAYERS: dict[str, int] = {
+    "physics": 0,
+    "config": 1,
+    "io": 2,  # bags and CSV files: data, no physics
+    "launch": 2,  # starts node processes (ROS-free)
+    "fit": 2,  # the fitting engine: parameters, likelihood, least squares, uncertainty
+    "model": 3,  # the discharge model (ODE, heat law, sensor, effects)
+    "rig": 4,  # the simulator's sample stream
+    "fitting": 4,  # model-based C: crossing inversion, curve fit
+    "recovery": 4,  # SSE: the re-heating after an aborted unload
+    "estimation": 5,  # the streaming estimator and batch analysis
+    "discrepancy": 6,
+    "runs": 6,
+    "plotting": 6,
+    "cli": 7,
+    "demo": 7,
+    "nodes": 8,
+}
+#: Largest core module [lines] ("about 500").
+MAX_CORE_LINES = 520
+
+
+def _module_name(path: Path, pkg_dir: Path) -> str:
+    parts = list(path.relative_to(pkg_dir.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _runtime_imports(tree: ast.AST, package: list[str]) -> list[tuple[int, str, list[str]]]:
+    """(line, module, names) of every import outside ``if TYPE_CHECKING:`` blocks."""
+    skip: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            for sub in node.body:
+                skip.update(id(n) for n in ast.walk(sub))
+    out = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name, []) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - (node.level - 1)]
+                module = ".".join([*base, node.module] if node.module else base)
+            else:
+                module = node.module or ""
+            out.append((node.lineno, module, [a.name for a in node.names]))
+    return out
+
+
+def _import_graph(pkg_dir: Path) -> tuple[dict[str, set[str]], list[str]]:
+    """Module -> package modules it imports (runtime), and private-name imports found."""
+    files = {_module_name(p, pkg_dir): p for p in pkg_dir.rglob("*.py")}
+    graph: dict[str, set[str]] = {m: set() for m in files}
+    private = []
+    for mod, path in files.items():
+        package = mod.split(".") if path.name == "__init__.py" else mod.split(".")[:-1]
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for line, target, names in _runtime_imports(tree, package):
+            if not target.startswith(PKG):
+                continue
+            for name in names or [""]:
+                full = f"{target}.{name}" if name else target
+                dest = full if full in files else target
+                if dest in files and dest != mod:
+                    graph[mod].add(dest)
+                if name.startswith("_") and not name.startswith("__") and target != mod:
+                    private.append(f"{path.relative_to(pkg_dir.parent)}:{line}: "
+                                   f"from {target} import {name}")
+    return graph, private
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+    counter = [0]
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def _part(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def test_no_import_cycles(repo_root):
+    graph, _ = _import_graph(repo_root / PKG)
+    # a package's __init__ re-exporting its own modules is not a cycle of roles
+    graph = {m: {d for d in ds if not (m.startswith(d + ".") or d.startswith(m + "."))}
+             for m, ds in graph.items()}
+    assert _cycles(graph) == []
+
+
+def test_no_private_name_is_imported_across_modules(repo_root):
+    _, private = _import_graph(repo_root / PKG)
+    assert private == []
+
+
+def test_layers_only_point_down(repo_root):
+    graph, _ = _import_graph(repo_root / PKG)
+    parts = {_part(m) for m in graph} - {""}
+    assert parts <= set(LAYERS), f"give each new part a layer: {parts - set(LAYERS)}"
+    bad = [f"{m} -> {d}" for m, ds in graph.items() for d in ds
+           if _part(m) and _part(d) and LAYERS[_part(d)] > LAYERS[_part(m)]]
+    assert bad == []
+
+
+def test_core_modules_are_small(repo_root):
+    pkg_dir = repo_root / PKG
+    big = {str(p.relative_to(repo_root)): n for p in _core_files(pkg_dir)
+           if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_CORE_LINES}
+    assert big == {}
