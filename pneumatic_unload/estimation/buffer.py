@@ -9,7 +9,6 @@ the input's signal units (Pa when ``signal_gain`` is 1).
 
 from __future__ import annotations
 
-import math
 from array import array
 
 import numpy as np
@@ -79,12 +78,6 @@ class SampleBuffer:
         """Mean of samples [lo, hi) from the prefix sums [signal units]."""
         cs = self.cs
         return (cs[hi] - cs[lo]) / (hi - lo)
-
-    def diff_sigma(self, lo: int, hi: int) -> float:
-        """Noise standard deviation of samples [lo, hi): rms of the first differences
-        / sqrt(2), from the prefix sums (drift-insensitive) [signal units]."""
-        cq = self.cq
-        return math.sqrt(max(cq[hi] - cq[lo + 1], 0.0) / (hi - lo - 1) / 2.0)
 
     def trim(self, keep: int) -> None:
         """Drop the first ``keep`` samples [-] (new arrays, not in-place deletion: views

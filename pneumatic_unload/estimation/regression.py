@@ -12,15 +12,6 @@ import numpy as np
 from pneumatic_unload.estimation.types import FloatArray
 
 
-def robust_sigma(x: FloatArray) -> float:
-    """Noise standard deviation from first differences (MAD, drift-insensitive) [unit of x]."""
-    if x.size < 3:
-        return 0.0
-    d = np.diff(x)
-    mad = float(np.median(np.abs(d - np.median(d))))
-    return 1.4826 * mad / math.sqrt(2.0)
-
-
 def rms_sigma(x: FloatArray) -> float:
     """Noise standard deviation from first differences (RMS) [unit of x]."""
     if x.size < 3:
