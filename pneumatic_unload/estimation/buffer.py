@@ -43,15 +43,16 @@ class SampleBuffer:
 
     def append(self, t: float, p: float) -> int:
         """Store one sample (t [s], p [signal units]); returns its buffer index [-]."""
-        if self.p:
-            d = p - self.p[-1]
-            self.cq.append(self.cq[-1] + d * d)
+        pa, cq, cs = self.p, self.cq, self.cs
+        if pa:
+            d = p - pa[-1]
+            cq.append(cq[-1] + d * d)
         else:
-            self.cq.append(self.cq[-1])
-        self.cs.append(self.cs[-1] + p)
+            cq.append(cq[-1])
+        cs.append(cs[-1] + p)
         self.t.append(t)
-        self.p.append(p)
-        return len(self.p) - 1
+        pa.append(p)
+        return len(pa) - 1
 
     def extend(self, t: FloatArray, p: FloatArray) -> None:
         """Store a block of samples (t [s], p [signal units]) with the same sums as

@@ -38,7 +38,7 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
     n = i + 1
     buf, s = st.buf, st.settings
     if math.isnan(st.dt_nominal) and n >= 8:
-        st.dt_nominal = nominal_period(buf.views(n)[0], n)
+        st.set_period(nominal_period(buf.views(n)[0], n))
     if i == st.next_check:
         st.next_check = i + PERIOD
         c = plateau_check(buf.cs, buf.cq, buf.p, i, arm=st.arm_index,

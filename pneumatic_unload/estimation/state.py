@@ -102,6 +102,7 @@ class EstimatorState:
         self.n_unloads = 0
         self.last_t = -math.inf  # last accepted stamp [s]
         self.dt_nominal = math.nan  # nominal sample period [s]
+        self.gap_limit = math.inf  # stamp step that counts as a gap [s]
         self.stuck_reported = False
         self.unload = UnloadState(trigger=-1)
         self.to_waiting(0)
@@ -137,12 +138,12 @@ class EstimatorState:
             self.arm_index -= keep
 
     # -------------------------------------------------------------- helpers
-    @property
-    def gap_limit(self) -> float:
-        """Stamp step that counts as a gap [s] (inf while the period is unknown)."""
-        if math.isnan(self.dt_nominal):
-            return math.inf
-        return self.settings.max_gap_factor * self.dt_nominal
+    def set_period(self, dt_nominal: float) -> None:
+        """Set the nominal sample period [s], and so the gap limit ``max_gap_factor``
+        periods [s] (inf while the period is unknown)."""
+        self.dt_nominal = dt_nominal
+        self.gap_limit = (math.inf if math.isnan(dt_nominal)
+                          else self.settings.max_gap_factor * dt_nominal)
 
     @property
     def dt(self) -> float:

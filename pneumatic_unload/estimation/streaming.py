@@ -82,6 +82,7 @@ class StreamingEstimator:
         self._st = EstimatorState(self.settings)
         self.diagnostics = self._st.diagnostics
         self.results: list[UnloadResult] = []
+        self._append = self._st.buf.append  # hot path (trimming keeps the buffer object)
 
     # ------------------------------------------------------------------ public API
     @property
@@ -125,7 +126,7 @@ class StreamingEstimator:
         if t - st.last_t > st.gap_limit:
             self._on_gap(t)
         st.last_t = t
-        i = st.buf.append(t, p)
+        i = self._append(t, p)
         # a periodic check, or decisions.below(p, level) inlined (the hot path)
         if i == st.next_check or p < st.level:
             out = STEPS[st.mode](st, i)
