@@ -139,6 +139,20 @@ INVERSION_RTOL = 1e-6
 INVERSION_ODE_RTOL = 1e-6
 
 
+def may_turn_subsonic(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
+    """True when, for a b within 2 sigma of its prior, the flow turns subsonic before p*.
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Its ``critical_ratio`` is the prior mean of b [-].
+    p_atm, p_star : float
+        Atmospheric and crossing pressures [Pa absolute].
+    """
+    b_hi = min(settings.critical_ratio + 2.0 * CRITICAL_RATIO_PRIOR_STD, 0.99)
+    return p_star < p_atm / b_hi
+
+
 def invert_crossing(
     tau_exp: float, tau_std: float, *, p10: float, p_atm: float, p_star: float,
     settings: EstimatorSettings, c_start: float,
@@ -190,7 +204,7 @@ def invert_crossing(
     c = math.exp(x1)
     var = (c * tau_std / tau_exp) ** 2
     b0, b_sd = settings.critical_ratio, CRITICAL_RATIO_PRIOR_STD
-    if p_star < p_atm / min(b0 + 2.0 * b_sd, 0.99):
+    if may_turn_subsonic(settings, p_atm, p_star):
         # the flow may turn subsonic before p*, where b matters and is not yet measured:
         # the spread of the model's crossing time over b +- 1 sigma enters the variance
         worst = 0.0

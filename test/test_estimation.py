@@ -177,7 +177,7 @@ def test_parity_per_sample_blocks_batch_identical_on_many_traces():
         for x, y, z in zip(batch, per, blk, strict=True):
             assert _same(x, y) and _same(x, z), (x, y, z)
         # the running prefix sums are bit-identical too
-        assert per_est._cs == blk_est._cs and per_est._cq == blk_est._cq
+        assert per_est.buffer.cs == blk_est.buffer.cs and per_est.buffer.cq == blk_est.buffer.cq
         assert [d.message for d in per_est.diagnostics] == \
             [d.message for d in blk_est.diagnostics]
         n_results += len(batch)

@@ -455,5 +455,4 @@ def test_core_modules_are_small(repo_root):
     pkg_dir = repo_root / PKG
     big = {str(p.relative_to(repo_root)): n for p in _core_files(pkg_dir)
            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_CORE_LINES}
-    assert big == {"pneumatic_unload/estimation.py": big.get("pneumatic_unload/estimation.py")}
-    # (the estimator's split into a package is under way; this line goes with it)
+    assert big == {}

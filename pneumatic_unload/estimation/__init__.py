@@ -1,0 +1,63 @@
+"""The unloading-time method as a streaming estimator (live node and offline analysis).
+
+:class:`StreamingEstimator` is fed pressure samples one at a time (:meth:`push`) or in
+blocks (:meth:`push_block`); both paths give bit-identical results, because every
+decision is taken at a sample index from the samples up to that index only, with O(1)
+statistics from running prefix sums (of p and of squared first differences), and the block
+path evaluates the periodic checks that decide nothing for many indices at once with the
+same decision functions (:mod:`.decisions`), calling a phase's step only where something
+happens.
+:func:`analyze` is the batch function over arrays (the block path on the whole trace).
+
+Per unload it: detects the start of the step (trigger, confirmation, then a sub-sample
+hinge fit of the valve-opening instant); takes p10 from the pre-step plateau and p_atm from
+a parameter or the final plateau; computes p* (eq 40); finds the p* crossing by a local
+quadratic regression (noise-robust, sub-sample); returns tau_exp and C by eq 39, plus the
+model-based C that removes eq 39's known bias (exact inversion of the discharge model at
+the crossing, then a full-curve fit once the unload has ended); reports an aborted unload
+(valve closed before p*) and, when the re-heating after the closing is recorded (fitted
+and, if unfinished, extrapolated with its uncertainty), the SSE value (eq 23); ends the
+unload's tail when the tank is charged again and re-arms for the next unload.
+
+Only relative values matter for tau_exp: the input may be any linear signal (volts) when
+``signal_gain``/``signal_offset`` convert it, or when only tau_exp is wanted; p10, p_atm and
+T10 must be absolute for C. SI units: s, Pa absolute, K, m^3, m^3/(s Pa).
+
+Modules (each one role): :mod:`.types` (settings, results, statuses, errors),
+:mod:`.buffer` (samples and prefix sums), :mod:`.decisions` (each per-sample decision, once,
+vectorised over check indices), :mod:`.state` (detector and per-unload state),
+:mod:`.detector` (plateau, trigger, confirmation), :mod:`.unloading` (start fit, stall,
+crossing), :mod:`.tail` (final plateau, curve fit), :mod:`.sse` (aborted unload, recovery,
+eq 23), :mod:`.refine` (every call into :mod:`pneumatic_unload.fitting`),
+:mod:`.regression` (hinge, crossing and corner fits), :mod:`.streaming`
+(:class:`StreamingEstimator`) and :mod:`.batch` (:func:`analyze`, :func:`merge_final`).
+"""
+
+from pneumatic_unload.estimation.batch import analyze, merge_final
+from pneumatic_unload.estimation.regression import corner_fit, crossing_fit, hinge_fit
+from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
+from pneumatic_unload.estimation.streaming import StreamingEstimator
+from pneumatic_unload.estimation.types import (
+    STATUSES,
+    Diagnostic,
+    EstimationError,
+    EstimatorSettings,
+    FloatArray,
+    UnloadResult,
+)
+
+__all__ = [
+    "SSE_MODEL_REL_STD",
+    "STATUSES",
+    "Diagnostic",
+    "EstimationError",
+    "EstimatorSettings",
+    "FloatArray",
+    "StreamingEstimator",
+    "UnloadResult",
+    "analyze",
+    "corner_fit",
+    "crossing_fit",
+    "hinge_fit",
+    "merge_final",
+]

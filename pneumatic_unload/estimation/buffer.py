@@ -1,0 +1,90 @@
+"""Sample storage of the streaming estimator: stamps, values and running prefix sums.
+
+The prefix sums make every periodic statistic O(1): ``cs[k]`` is the sum of the samples
+0..k-1 and ``cq[k]`` the sum of their squared first differences (``cq[k+1] - cq[k] =
+(p[k] - p[k-1])^2``, 0 for k = 0). Both the per-sample and the block path append through
+this class, so the sums are bit-identical whichever path fed them. Stamps in s, values in
+the input's signal units (Pa when ``signal_gain`` is 1).
+"""
+
+from __future__ import annotations
+
+from array import array
+
+import numpy as np
+
+from pneumatic_unload.estimation.types import FloatArray
+
+
+class SampleBuffer:
+    """Growing buffer of samples with prefix sums, trimmed from the start when idle.
+
+    Attributes
+    ----------
+    t, p : array.array
+        Sample instants [s] and values [signal units] kept in memory.
+    cs, cq : array.array
+        Prefix sums of p [signal units] and of its squared first differences
+        [signal units^2], one element longer than ``p``.
+    shift : int
+        Samples trimmed from the start so far [-] (buffer index + shift = sample number).
+    """
+
+    def __init__(self) -> None:
+        self.t = array("d")
+        self.p = array("d")
+        self.cs = array("d", [0.0])
+        self.cq = array("d", [0.0])
+        self.shift = 0
+
+    def __len__(self) -> int:
+        """Samples held [-]."""
+        return len(self.p)
+
+    def append(self, t: float, p: float) -> int:
+        """Store one sample (t [s], p [signal units]); returns its buffer index [-]."""
+        pa, cq, cs = self.p, self.cq, self.cs
+        if pa:
+            d = p - pa[-1]
+            cq.append(cq[-1] + d * d)
+        else:
+            cq.append(cq[-1])
+        cs.append(cs[-1] + p)
+        self.t.append(t)
+        pa.append(p)
+        return len(pa) - 1
+
+    def extend(self, t: FloatArray, p: FloatArray) -> None:
+        """Store a block of samples (t [s], p [signal units]) with the same sums as
+        :meth:`append` one by one (cumulative sums in the same order)."""
+        prev = self.p[-1] if self.p else float(p[0])
+        d = np.diff(np.concatenate(([prev], p)))
+        # frombytes: a memcpy (array.extend would iterate element by element)
+        self.cq.frombytes(np.cumsum(np.concatenate(([self.cq[-1]], d * d)))[1:].tobytes())
+        self.cs.frombytes(np.cumsum(np.concatenate(([self.cs[-1]], p)))[1:].tobytes())
+        self.t.frombytes(np.ascontiguousarray(t, dtype=np.float64).tobytes())
+        self.p.frombytes(np.ascontiguousarray(p, dtype=np.float64).tobytes())
+
+    def views(self, n: int | None = None) -> tuple[FloatArray, FloatArray]:
+        """Views of the stamps [s] and values [signal units] up to (excluding) index n."""
+        tv = np.frombuffer(self.t, dtype=float)[:n]
+        pv = np.frombuffer(self.p, dtype=float)[:n]
+        return tv, pv
+
+    def sums(self) -> tuple[FloatArray, FloatArray]:
+        """Views of the prefix sums cs [signal units] and cq [signal units^2]."""
+        return np.frombuffer(self.cs, dtype=float), np.frombuffer(self.cq, dtype=float)
+
+    def mean(self, lo: int, hi: int) -> float:
+        """Mean of samples [lo, hi) from the prefix sums [signal units]."""
+        cs = self.cs
+        return (cs[hi] - cs[lo]) / (hi - lo)
+
+    def trim(self, keep: int) -> None:
+        """Drop the first ``keep`` samples [-] (new arrays, not in-place deletion: views
+        held by callers stay valid)."""
+        self.t = array("d", self.t[keep:])
+        self.p = array("d", self.p[keep:])
+        self.cs = array("d", self.cs[keep:])
+        self.cq = array("d", self.cq[keep:])
+        self.shift += keep

@@ -1,0 +1,256 @@
+"""The detector's per-sample decisions, each written once (vectorised over check indices).
+
+Every predicate takes the prefix sums (see :mod:`.buffer`) and a check index ``k``: a
+Python int (the per-sample path, one decision at a time) or an int64 array (the block path,
+many checks at once). The formulas are the same numpy expressions for both, so both paths
+take bit-identical decisions. Values are in the input's signal units (Pa when the gain is
+1), times in s, indices and window lengths in samples.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pneumatic_unload.estimation.types import FloatArray
+
+#: Index argument: one check index (int) or many (int64 array) [-].
+Index = Any
+#: Boolean result: a numpy bool or a bool array, matching the index argument.
+Flag = Any
+
+#: Samples between periodic checks [-].
+PERIOD = 64
+#: Samples used for the plateau level and noise [-].
+PLATEAU = 1024
+#: Samples that must confirm a trigger [-].
+CONFIRM = 64
+#: Samples between the end of the reference plateau window and now [-].
+LAG = 256
+#: Most pre-step plateau samples used by the start (hinge) fit [-]: the start's precision on
+#: slow discharges is limited by how well p10 is known (see bench/bench_accuracy.py start),
+#: and the plateau costs the fit O(1) per candidate.
+HINGE_PLATEAU = 16384
+#: Recovery samples needed before the first recovery fit [-].
+RECOVERY_MIN = 256
+#: Samples looked ahead per vectorised scan [-].
+SCAN_HORIZON = 16384
+#: Idle samples that may be dropped before the buffer is trimmed [-].
+TRIM_MIN = 65536
+#: Sample period assumed while the nominal one is unknown [s].
+DT_DEFAULT = 1e-3
+
+
+def check_indices(next_check: int, end: int) -> NDArray[np.int64]:
+    """Periodic check indices from ``next_check`` up to (excluding) ``end`` [-]."""
+    return np.arange(next_check, end, PERIOD, dtype=np.int64)
+
+
+def below(p: Any, level: Any) -> Flag:
+    """The level trigger: sample(s) p below ``level`` [signal units] call the decision step
+    between periodic checks (:meth:`StreamingEstimator.push` inlines this comparison)."""
+    return p < level
+
+
+def first_below(pv: FloatArray, i: int, hi: int, level: float) -> int:
+    """First index in [i, hi) whose sample is :func:`below` ``level``, or hi [-]."""
+    if hi <= i or level == -math.inf:
+        return hi
+    hit = np.flatnonzero(below(pv[i:hi], level))
+    return i + int(hit[0]) if hit.size else hi
+
+
+def nominal_period(tv: FloatArray, n: int) -> float:
+    """Nominal sample period: median stamp step of the last 256 of n samples [s]."""
+    return float(np.median(np.diff(tv[max(0, n - 256):n])))
+
+
+def block_threshold(sig_eff: Any) -> Any:
+    """Drop of a PERIOD-sample mean that counts as a step [signal units] (sig_eff: the
+    effective noise deviation [signal units])."""
+    return 6.0 * sig_eff / math.sqrt(PERIOD)
+
+
+def effective_sigma(sigma: Any, plateau: Any) -> Any:
+    """Noise deviation with a floor of 1e-4 of the plateau (quantised or stuck signals)
+    [signal units]."""
+    return np.maximum(sigma, 1e-4 * np.abs(plateau) + 1e-12)
+
+
+@dataclass(frozen=True)
+class PlateauCheck:
+    """Outcome of the waiting state's periodic check(s) (arrays or scalars alike).
+
+    Attributes
+    ----------
+    level, sigma, trigger_level : float or ndarray
+        Plateau mean, its noise deviation and the single-sample trigger level
+        [signal units].
+    lo, hi : int or ndarray
+        Plateau window [lo, hi) [-].
+    rise : bool or ndarray
+        The last PERIOD samples rose above the plateau (a charge): re-arm.
+    trigger : bool or ndarray
+        The check sample is below the trigger level, or the block mean dropped.
+    stuck : bool or ndarray
+        The plateau window has no noise at all (identical samples).
+    stuck_change : bool or ndarray
+        The stuck-sensor report changes state here.
+    trim : bool or ndarray
+        The buffer is due for trimming.
+    event : bool or ndarray
+        Anything but the running statistics changes at this check.
+    """
+
+    level: Any
+    sigma: Any
+    trigger_level: Any
+    lo: Any
+    hi: Any
+    rise: Flag
+    trigger: Flag
+    stuck: Flag
+    stuck_change: Flag
+    trim: Flag
+    event: Flag
+
+
+def trim_keep(n: Index, arm: int) -> Index:
+    """Samples that may be dropped from the buffer's start with n samples held [-]."""
+    return np.minimum(n - 4 * PLATEAU, arm)
+
+
+def plateau_check(cs: FloatArray, cq: FloatArray, pv: FloatArray, k: Index, *, arm: int,
+                  min_plateau: int, trigger_sigma: float, stuck_reported: bool
+                  ) -> PlateauCheck:
+    """Periodic plateau update with a block-mean test at check index k.
+
+    The reference level comes from a window that ends LAG samples ago, so a slow discharge
+    cannot drag it along; the mean of the last PERIOD samples is tested against it
+    (sensitive to slow drops), and the check sample against ``trigger_sigma`` noise
+    deviations. ``arm``: first sample of the current plateau [-].
+    """
+    n = k + 1
+    lag = np.minimum(LAG, np.maximum(n - arm - min_plateau, 0))
+    hi = n - lag
+    lo = np.maximum(arm, hi - PLATEAU)
+    # plateau: mean of the window; noise: rms of its first differences / sqrt 2
+    plat = (cs[hi] - cs[lo]) / (hi - lo)
+    sig = np.sqrt(np.maximum(cq[hi] - cq[lo + 1], 0.0) / (hi - lo - 1) / 2.0)
+    sig_eff = effective_sigma(sig, plat)
+    level = plat - trigger_sigma * sig_eff
+    blo = np.maximum(arm, n - PERIOD)
+    bmean = (cs[n] - cs[blo]) / (n - blo)
+    bthr = block_threshold(sig_eff)
+    rise = (lag >= min_plateau) & (n - blo == PERIOD) & (bmean > plat + 2.0 * bthr)
+    mean_low = (lag >= PERIOD) & (bmean < plat - bthr)
+    trigger = mean_low | below(pv[k], level)
+    stuck = (sig == 0.0) & (hi - lo >= 2 * min_plateau)
+    stuck_change = (sig > 0.0) if stuck_reported else stuck
+    trim = trim_keep(n, arm) > TRIM_MIN
+    event = rise | trigger | stuck_change | trim
+    return PlateauCheck(plat, sig, level, lo, hi, rise, trigger, stuck, stuck_change, trim,
+                        event)
+
+
+def confirmed(cs: FloatArray, trigger: int, k: Index, plateau: float, sigma: float) -> Flag:
+    """The mean since the trigger (up to index k) stays a block threshold below the
+    plateau: the step is real, not a spike."""
+    n = k + 1
+    mean = (cs[n] - cs[trigger + 1]) / (n - trigger - 1)
+    return mean < plateau - block_threshold(effective_sigma(sigma, plateau))
+
+
+def stall_window(span: Index) -> Index:
+    """Window of the stall test: a quarter of the unload's span, 32..8192 [-]."""
+    return np.minimum(np.maximum(32, span // 4), 8192)
+
+
+def stalled(cs: FloatArray, tv: FloatArray, k: Index, *, i0: int, sigma: float,
+            slope0: float) -> Flag:
+    """The pressure has stopped falling well above p* (valve closed) at index k.
+
+    Compares the means of the last two windows of w samples (w a quarter of the unload,
+    32..8192) with 5 % of the initial fall over that time and with 4 noise deviations.
+    ``i0``: start index [-], ``sigma``: noise [signal units], ``slope0``: initial fall rate
+    [signal units/s].
+    """
+    span = k - i0
+    w = stall_window(span)
+    ok = (slope0 > 0) & (span >= 2 * w)
+    a = (cs[np.maximum(k - w + 1, 0)] - cs[np.maximum(k - 2 * w + 1, 0)]) / w
+    b = (cs[k + 1] - cs[np.maximum(k - w + 1, 0)]) / w
+    dt = tv[k] - tv[np.maximum(k - w, 0)]
+    drop = a - b
+    se = sigma * np.sqrt(2.0 / w)
+    return ok & (drop < 0.05 * slope0 * dt) & (drop < 4.0 * se)
+
+
+def flat_window(tau: float, dt_nominal: float) -> int:
+    """Window of the final-plateau test: half the time scale tau [s], 128..16384 [-]."""
+    dt = dt_nominal if math.isfinite(dt_nominal) else DT_DEFAULT
+    return int(min(max(128, 0.5 * tau / dt), 16384))
+
+
+def flat(cs: FloatArray, k: Index, *, i0: int, tau: float, dt_nominal: float,
+         p10: float, sigma: float) -> Flag:
+    """The signal has settled on its final plateau at index k (tau: time scale [s]).
+
+    The means of the last two windows differ by less than 4 noise deviations or 0.2 % of
+    the drop from p10 [signal units]; the unload must be older than tau plus two windows.
+    """
+    dt = dt_nominal if math.isfinite(dt_nominal) else DT_DEFAULT
+    w = flat_window(tau, dt_nominal)
+    ok = k - i0 >= 2 * w + int(tau / dt)
+    a = (cs[np.maximum(k - w + 1, 0)] - cs[np.maximum(k - 2 * w + 1, 0)]) / w
+    b = (cs[k + 1] - cs[np.maximum(k - w + 1, 0)]) / w
+    dp_total = np.abs(p10 - b)
+    change = np.abs(a - b)
+    se = sigma * math.sqrt(2.0 / w)
+    return ok & (change < np.maximum(4.0 * se, 0.002 * dp_total))
+
+
+def settled_at_end(cs: FloatArray, i: int, *, i0: int, p10: float, dp_guess: float) -> bool:
+    """p_atm auto at the end of the stream: the last eighth of the unload (at least 8
+    samples, up to index i) is level to 0.5 % of the drop, with the drop > 50 % of the
+    expected one ``dp_guess`` [signal units]."""
+    w = (i - i0) // 8
+    if w < 8:
+        return False
+    a = (cs[i - w + 1] - cs[i - 2 * w + 1]) / w
+    b = (cs[i + 1] - cs[i - w + 1]) / w
+    drop = p10 - b
+    return bool(abs(drop) > 0.5 * dp_guess and abs(a - b) < 0.005 * abs(drop))
+
+
+def block_mean(cs: FloatArray, k: Index) -> Any:
+    """Mean of the PERIOD samples ending at index k [signal units]."""
+    return (cs[k + 1] - cs[k - PERIOD + 1]) / PERIOD
+
+
+def rise_threshold(sigma: float, p10: float, atm: float) -> float:
+    """Rise of the block mean over its lowest value that ends a tail: max(10 sigma /
+    sqrt(PERIOD), 2 % of p10 - p_atm) [signal units]."""
+    return max(10.0 * sigma / math.sqrt(PERIOD), 0.02 * abs(p10 - atm))
+
+
+def running_low(low: float, m: FloatArray) -> FloatArray:
+    """Lowest block mean before each of the means m, starting from ``low`` [signal units]."""
+    return np.minimum.accumulate(np.concatenate(([low], m)))[:-1]
+
+
+def rose(m: Any, low: Any, thr: float) -> Flag:
+    """The block mean m rose more than thr over the lowest earlier one (the tank is being
+    charged again) [signal units]."""
+    return (m >= low) & (m - low > thr)
+
+
+def recovery_due(k: Index, i_close: int, fitted_span: int) -> Flag:
+    """A recovery (re)fit is due at index k: RECOVERY_MIN samples since the closing and 25 %
+    more than the last fit covered (``fitted_span`` samples) [-]."""
+    span = k - i_close
+    return (span >= RECOVERY_MIN) & (span >= 1.25 * fitted_span)

@@ -1,0 +1,126 @@
+"""Waiting and confirming phases: the pre-step plateau, the trigger and its confirmation.
+
+:func:`step_waiting` takes the waiting phase's decision at one index, :func:`scan_waiting`
+finds the next index where a decision happens among many (applying what the checks before
+it do), both from the same :func:`~.decisions.plateau_check`. Values in signal units,
+times in s, indices in buffer samples.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pneumatic_unload.estimation.decisions import (
+    PERIOD,
+    below,
+    check_indices,
+    confirmed,
+    first_below,
+    nominal_period,
+    plateau_check,
+)
+from pneumatic_unload.estimation.state import (
+    CONFIRM,
+    UNLOADING,
+    WAITING,
+    EstimatorState,
+    UnloadState,
+)
+from pneumatic_unload.estimation.types import UnloadResult
+from pneumatic_unload.estimation.unloading import start_unloading
+
+
+def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """Periodic plateau update with a block-mean test at a check, or a single-sample
+    trigger between checks (see :func:`~.decisions.plateau_check`)."""
+    n = i + 1
+    buf, s = st.buf, st.settings
+    if math.isnan(st.dt_nominal) and n >= 8:
+        st.set_period(nominal_period(buf.views(n)[0], n))
+    if i == st.next_check:
+        st.next_check = i + PERIOD
+        c = plateau_check(buf.cs, buf.cq, buf.p, i, arm=st.arm_index,
+                          min_plateau=s.min_plateau, trigger_sigma=s.trigger_sigma,
+                          stuck_reported=st.stuck_reported)
+        st.plateau_level = float(c.level)
+        sig = float(c.sigma)
+        if c.stuck:
+            if not st.stuck_reported:
+                st.stuck_reported = True
+                st.diag("warn", f"sensor stuck? {c.hi - c.lo} identical samples "
+                        f"({float(buf.p[c.lo])!r}): no noise at all", float(buf.t[i]))
+        elif sig > 0.0:
+            st.stuck_reported = False
+        st.sigma = sig
+        st.level = float(c.trigger_level)
+        if c.rise:
+            # the signal rose (the tank is being charged): the plateau starts again
+            st.arm_index = n - PERIOD
+            st.level = -math.inf
+            return []
+        if not c.trigger:
+            st.trim(n)
+            return []
+    elif st.level == -math.inf:
+        return []
+    # trigger
+    if i - st.arm_index < s.min_plateau:
+        return []
+    st.unload = UnloadState(trigger=i)
+    st.mode = CONFIRM
+    st.next_check = i + PERIOD
+    st.level = -math.inf
+    return []
+
+
+def scan_waiting(st: EstimatorState, i: int, end: int) -> int:
+    """Next index in [i, end) where :func:`step_waiting` decides something (end: none);
+    the checks before it that decide nothing are applied here."""
+    s = st.settings
+    nc = st.next_check
+    pv = np.frombuffer(st.buf.p, dtype=float)
+    j = first_below(pv, i, min(end, nc), st.level)
+    if j < min(end, nc):
+        return j
+    ks = check_indices(nc, end)
+    if ks.size == 0:
+        return end
+    cs, cq = st.buf.sums()
+    c = plateau_check(cs, cq, pv, ks, arm=st.arm_index, min_plateau=s.min_plateau,
+                      trigger_sigma=s.trigger_sigma, stuck_reported=st.stuck_reported)
+    event = c.event
+    # samples between checks against the trigger level of the check before them
+    seg = pv[ks[0]:end]
+    hit = below(seg, np.repeat(c.trigger_level, PERIOD)[:seg.size])
+    hit[::PERIOD] = event[:(seg.size + PERIOD - 1) // PERIOD]
+    hits = np.flatnonzero(hit)
+    if hits.size == 0:
+        k, j = ks.size, end
+    else:
+        j = int(ks[0]) + int(hits[0])
+        k = (j - int(ks[0])) // PERIOD  # the check at or before j
+        if not event[k] or j != ks[k]:
+            k += 1  # between-check hit: check k ran without a decision
+    if k > 0:  # state after the last check that decided nothing
+        st.plateau_level = float(c.level[k - 1])
+        st.sigma = float(c.sigma[k - 1])
+        st.level = float(c.trigger_level[k - 1])
+        st.next_check = int(ks[k - 1]) + PERIOD
+    return j
+
+
+def step_confirm(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """Confirmation PERIOD samples after the trigger: start the unload, or wait again."""
+    u, t = st.unload, st.buf.t
+    if confirmed(st.buf.cs, u.trigger, i, st.plateau_level, st.sigma):
+        st.mode = UNLOADING
+        st.diag("ok", "unload step detected", float(t[u.trigger]))
+        return start_unloading(st, i)
+    st.diag("warn", "trigger not confirmed (spike or noise); still waiting",
+            float(t[u.trigger]))
+    st.mode = WAITING
+    st.level = -math.inf
+    st.next_check = i + 1
+    return []

@@ -1,0 +1,197 @@
+"""Small regressions of the detector: noise from first differences, the start (hinge) fit,
+the p* crossing fit and the closing-instant (corner) fit. Times in s, pressures in Pa (or
+the input's signal units: every fit is linear in p)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from pneumatic_unload.estimation.types import FloatArray
+
+
+def rms_sigma(x: FloatArray) -> float:
+    """Noise standard deviation from first differences (RMS) [unit of x]."""
+    if x.size < 3:
+        return 0.0
+    return float(np.std(np.diff(x))) / math.sqrt(2.0)
+
+
+def solve3(m: tuple[tuple[float, float, float], ...], r: tuple[float, float, float]
+            ) -> tuple[float, float, float] | None:
+    """Solve a 3x3 linear system by Cramer's rule (None when singular) [-]."""
+    (a, b, c), (d, e, f), (g, h, k) = m
+    c1, c2, c3 = e * k - f * h, f * g - d * k, d * h - e * g
+    det = a * c1 + b * c2 + c * c3
+    if det == 0.0 or not math.isfinite(det):
+        return None
+    x = (r[0] * c1 + b * (f * r[2] - r[1] * k) + c * (r[1] * h - e * r[2])) / det
+    y = (a * (r[1] * k - f * r[2]) + r[0] * c2 + c * (d * r[2] - r[1] * g)) / det
+    z = (a * (e * r[2] - r[1] * h) + b * (r[1] * g - d * r[2]) + r[0] * c3) / det
+    return x, y, z
+
+
+def grid_then_golden(f: Callable[[float], float], t: FloatArray, t_lo: float, t_hi: float,
+                     *, n_grid: int, rel_tol: float) -> float:
+    """Minimise f(x) over [t_lo, t_hi] [s]: at most ``n_grid`` sample instants of ``t`` in
+    the interval, then a golden-section search around the best one, down to ``rel_tol``
+    times the grid step."""
+    cand = t[(t >= t_lo) & (t <= t_hi)]
+    if cand.size == 0:
+        cand = np.array([0.5 * (t_lo + t_hi)])
+    if cand.size > n_grid:
+        cand = cand[np.linspace(0, cand.size - 1, n_grid).astype(int)]
+    vals = [f(float(c)) for c in cand]
+    k = int(np.argmin(vals))
+    step = float(cand[1] - cand[0]) if cand.size > 1 else t_hi - t_lo
+    a_, b_ = max(t_lo, float(cand[k]) - step), min(t_hi, float(cand[k]) + step)
+    gr = (math.sqrt(5.0) - 1.0) / 2.0
+    x1, x2 = b_ - gr * (b_ - a_), a_ + gr * (b_ - a_)
+    f1, f2 = f(x1), f(x2)
+    for _ in range(48):
+        if b_ - a_ < rel_tol * max(step, 1e-12):
+            break
+        if f1 <= f2:
+            b_, x2, f2 = x2, x1, f1
+            x1 = b_ - gr * (b_ - a_)
+            f1 = f(x1)
+        else:
+            a_, x1, f1 = x1, x2, f2
+            x2 = a_ + gr * (b_ - a_)
+            f2 = f(x2)
+    return 0.5 * (a_ + b_)
+
+
+def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
+              ) -> tuple[float, float, float, float, float]:
+    """Fit p = p10 (t < t0), p10 - s u + c u^2 (u = t - t0 >= 0) with t0 in [t_lo, t_hi].
+
+    Sub-sample t0 by minimising the profiled sum of squares (linear in p10, s, c for each
+    t0) with a bracketed golden-section search after a grid search on the sample instants.
+
+    Parameters
+    ----------
+    t, p : ndarray
+        Window of samples [s], [Pa].
+    t_lo, t_hi : float
+        Search interval for t0 [s].
+
+    Returns
+    -------
+    tuple
+        (t0 [s], p10 [Pa], s [Pa/s], c [Pa/s^2], residual rms [Pa]).
+    """
+    tc = t - t[0]
+    scale_t = max(tc[-1], 1e-12)
+    p_ref = float(np.mean(p))
+    q = p - p_ref
+    n_all = float(q.size)
+    sq_all, s_all = float(q @ q), float(np.sum(q))
+
+    def solve(t0: float) -> tuple[float, FloatArray]:
+        # normal equations of [1, -u, u^2] from sums over the post-t0 samples (u > 0)
+        k = int(np.searchsorted(tc, t0 - t[0], side="right"))
+        u = (tc[k:] - (t0 - t[0])) / scale_t
+        qk = q[k:]
+        u2 = u * u
+        su, su2, su3, su4 = float(u.sum()), float(u2.sum()), float(u2.dot(u)), \
+            float(u2.dot(u2))
+        squ, squ2 = float(qk.dot(u)), float(qk.dot(u2))
+        m = ((n_all, -su, su2), (-su, su2, -su3), (su2, -su3, su4))
+        rhs = (s_all, -squ, squ2)
+        coef = solve3(m, rhs)
+        if coef is None:
+            sol = np.linalg.lstsq(np.array(m), np.array(rhs), rcond=None)[0]
+            coef = (float(sol[0]), float(sol[1]), float(sol[2]))
+        sse = max(sq_all - (coef[0] * rhs[0] + coef[1] * rhs[1] + coef[2] * rhs[2]), 0.0)
+        return sse, np.array((coef[0] + p_ref, coef[1], coef[2]))
+
+    t0 = grid_then_golden(lambda x: solve(x)[0], t, t_lo, t_hi, n_grid=64, rel_tol=1e-3)
+    sse0, coef = solve(t0)
+    rms = math.sqrt(sse0 / max(p.size - 4, 1))
+    return t0, float(coef[0]), float(coef[1]) / scale_t, float(coef[2]) / scale_t**2, rms
+
+
+def crossing_fit(t: FloatArray, p: FloatArray, level: float
+                 ) -> tuple[float, float, float]:
+    """Sub-sample time at which a local quadratic regression of p(t) crosses ``level``.
+
+    Parameters
+    ----------
+    t, p : ndarray
+        Samples around the crossing [s], [Pa]; p decreasing overall.
+    level : float
+        Threshold [Pa].
+
+    Returns
+    -------
+    tuple
+        (crossing time [s], its standard deviation [s], slope at the crossing [Pa/s]).
+    """
+    tm = float(np.mean(t))
+    x = t - tm
+    a = np.column_stack((np.ones_like(x), x, x * x))
+    coef, *_ = np.linalg.lstsq(a, p, rcond=None)
+    r = p - a @ coef
+    dof = max(p.size - 3, 1)
+    s2 = float(r @ r) / dof
+    c0, c1, c2 = (float(v) for v in coef)
+    # root of c2 x^2 + c1 x + (c0 - level) nearest the window centre
+    if abs(c2) < 1e-30 or abs(c2 * (x[-1] - x[0]) ** 2) < 1e-12 * abs(c1 * (x[-1] - x[0])):
+        xr = (level - c0) / c1
+    else:
+        disc = c1 * c1 - 4.0 * c2 * (c0 - level)
+        if disc < 0:
+            xr = (level - c0) / c1
+        else:
+            sq = math.sqrt(disc)
+            r1, r2 = (-c1 + sq) / (2 * c2), (-c1 - sq) / (2 * c2)
+            xr = r1 if abs(r1) < abs(r2) else r2
+    slope = c1 + 2.0 * c2 * xr
+    # delta method: var(f(xr)) / slope^2 with f = c0 + c1 x + c2 x^2
+    try:
+        cov = s2 * np.linalg.inv(a.T @ a)
+        g = np.array([1.0, xr, xr * xr])
+        var_f = float(g @ cov @ g)
+    except np.linalg.LinAlgError:
+        var_f = math.inf
+    std = math.sqrt(max(var_f, 0.0)) / abs(slope) if slope != 0 else math.inf
+    return tm + xr, std, slope
+
+
+def corner_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
+               ) -> tuple[float, float, float]:
+    """Sub-sample instant of a slope change: p = c0 + quadratic in u- and in u+.
+
+    u- = min(t - tc, 0) and u+ = max(t - tc, 0); tc in [t_lo, t_hi] minimises the profiled
+    sum of squares (grid on the sample instants, then golden section). Used for the
+    closing instant of an aborted unload.
+
+    Parameters
+    ----------
+    t, p : ndarray
+        Window of samples [s], [Pa].
+    t_lo, t_hi : float
+        Search interval [s].
+
+    Returns
+    -------
+    tuple
+        (tc [s], p(tc) [Pa], residual rms [Pa]).
+    """
+    tm = t - t[0]
+    sc = max(float(tm[-1]), 1e-12)
+
+    def solve(tc: float) -> tuple[float, FloatArray]:
+        u = (tm - (tc - t[0])) / sc
+        um, up = np.minimum(u, 0.0), np.maximum(u, 0.0)
+        a = np.column_stack((np.ones_like(u), um, um * um, up, up * up))
+        coef, *_ = np.linalg.lstsq(a, p, rcond=None)
+        r = p - a @ coef
+        return float(r @ r), coef
+
+    tc = grid_then_golden(lambda x: solve(x)[0], t, t_lo, t_hi, n_grid=96, rel_tol=1e-6)
+    sse0, coef = solve(tc)
+    return tc, float(coef[0]), math.sqrt(sse0 / max(p.size - 6, 1))

@@ -1,0 +1,220 @@
+"""Aborted unload and SSE (eq 23): closing instant, pressure recovery, SSE result.
+
+When the valve closes before p*, the closing instant comes from a corner fit, the abort is
+reported at once, and the isochoric re-heating that follows is fitted as it grows; its
+plateau p1_inf (recorded or extrapolated) gives the SSE value of eq 23 under the same
+unload index. Values in signal units unless stated, times in s, indices in buffer samples.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from pneumatic_unload import physics
+from pneumatic_unload.estimation.decisions import (
+    PERIOD,
+    PLATEAU,
+    check_indices,
+    recovery_due,
+    stall_window,
+)
+from pneumatic_unload.estimation.refine import model_inversion, recovery_fit
+from pneumatic_unload.estimation.regression import corner_fit
+from pneumatic_unload.estimation.state import RECOVERY, EstimatorState
+from pneumatic_unload.estimation.types import UnloadResult
+
+#: Relative 1-sigma of eq 23 itself [-]: it assumes an isentropic unload (wall heat flow
+#: during the unload shifts it by up to ~0.5 %) and writes p_N for rho_N R T_N (0.28 %).
+SSE_MODEL_REL_STD = 0.01
+
+
+def on_abort(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """The unload stalled above p* at index i: find the closing instant, report the abort
+    and wait for the recovery (or report a stuck sensor)."""
+    u = st.unload
+    tv, pv = st.buf.views(i + 1)
+    tail = pv[max(u.i0, i - 2 * PERIOD + 1):i + 1]
+    if tail.size >= 2 * PERIOD and float(np.ptp(tail)) == 0.0:
+        return st.bad(i, f"sensor stuck at {float(tail[0])!r} during the unload "
+                         f"({tail.size} identical samples, no noise): no estimate")
+    st.diag("warn", "unload stopped before p*: valve closed (aborted unload)", float(tv[i]))
+    # closing instant: a corner fit (quadratic before and after the closing instant)
+    # on a wide window, then again on a window local to the first estimate
+    span = i - u.i0
+    w = int(stall_window(span))
+    lo = max(u.i0 + 1, i - 6 * w)
+    t_c, p_c, _rms = corner_fit(tv[lo:i + 1], pv[lo:i + 1], float(tv[lo + 8]),
+                                float(tv[i - 8]))
+    j = int(np.searchsorted(tv, t_c))
+    half = max(64, (j - u.i0) // 5)
+    lo2, hi2 = max(u.i0 + 1, j - half), min(i + 1, j + half)
+    if hi2 - lo2 >= 24:
+        t_c, p_c, _rms = corner_fit(tv[lo2:hi2], pv[lo2:hi2], float(tv[lo2 + 4]),
+                                    float(tv[hi2 - 5]))
+    u.t_close, u.p_close = t_c, p_c
+    u.i_close = min(int(np.searchsorted(tv, u.t_close)), i)
+    u.rec_span = 0
+    u.rec_fit = None
+    st.mode = RECOVERY
+    st.level = -math.inf
+    st.next_check = i + PERIOD
+    # report the abort at once (a live node must not stay silent through a recovery
+    # that may take minutes); the SSE result follows under the same index, final=True
+    t_star = u.t_close - u.t0
+    res = st.empty_result(
+        "aborted", f"valve closed {t_star:.4f} s after the start, before p*: aborted "
+        "unload; waiting for the pressure recovery (SSE, eq 23)", i, count=False)
+    if u.refined:
+        res.p10, res.t_start = st.to_pa(u.p10), u.t0
+        res.i_start = u.i0 + st.buf.shift
+    return [res]
+
+
+def fit_recovery_to(st: EstimatorState, i: int) -> Any:
+    """Fit the recovery from the closing instant to index i (None when it fails); a
+    successful call records the fit and its span."""
+    u = st.unload
+    tv, pv = st.buf.views(i + 1)
+    j = u.i_close
+    fit = recovery_fit(tv[j:i + 1], pv[j:i + 1], u.t_close)
+    if fit is None:
+        return None
+    u.rec_fit, u.rec_span = fit, i - j
+    return fit
+
+
+def expected_recovery_time(st: EstimatorState) -> float:
+    """Initial thermal time constant m c_v / (h A) of the closed tank [s], with h from
+    the natural-convection correlation at the closing state (the recovery is not
+    declared over before three of these, however flat it looks: a slow re-heating
+    is indistinguishable from a plateau over a short record)."""
+    s, u = st.settings, st.unload
+    gas = s.gas
+    p10 = st.to_pa(u.p10)
+    p_c = st.to_pa(u.p_close)
+    t10 = s.initial_temperature
+    t_w = s.wall_temperature or t10
+    ratio = max(p_c / p10, 1e-3) if p10 > 0 else 1.0
+    t_gas = t10 * ratio ** ((gas.gamma - 1.0) / gas.gamma)
+    length, _d, area = physics.tank_geometry(s.volume, s.length_diameter_ratio)
+    h = physics.natural_convection_h(p_c, t_gas, t_w if abs(t_w - t_gas) > 0.1
+                                     else t_gas + 0.1, length, gas)
+    mass = p_c * s.volume / (gas.gas_constant * t_gas)
+    return mass * gas.cv / (h * area)
+
+
+def recovery_significant(fit: Any, sigma: float) -> bool:
+    """True when the fitted re-heating rise is clearly above the noise sigma [signal
+    units]."""
+    if fit is None or not fit.success or not math.isfinite(fit.p_inf_std):
+        return False
+    seen = fit.rise - fit.remaining  # rise observed so far [signal units]
+    return bool(abs(seen) > 8.0 * sigma / math.sqrt(max(fit.n / 4, 1)))
+
+
+def step_recovery(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """Periodic recovery check: refit as the record grows (each 25 % longer); the
+    recovery is over when the fitted remaining rise is below 5 % of the total (the
+    fit extrapolates the rest), p1_inf is known to 2 % of the rise, and the record
+    covers 3 expected and 4 fitted thermal time constants."""
+    if i != st.next_check:
+        return []
+    st.next_check = i + PERIOD
+    u = st.unload
+    if not recovery_due(i, u.i_close, u.rec_span):
+        return []
+    span = i - u.i_close
+    fit = fit_recovery_to(st, i)
+    if fit is None:
+        return []
+    dt = st.dt
+    if (recovery_significant(fit, st.sigma) and fit.remaining <= 0.05 * fit.rise
+            and fit.p_inf_std < 0.02 * fit.rise
+            and span * dt >= 3.0 * expected_recovery_time(st)
+            and span * dt >= 4.0 * fit.tau):
+        res = abort_result(st, i, recovered=True)
+        res.final = True
+        st.to_waiting(i + 1)
+        return [res]
+    t_star = u.t_close - u.t0
+    if not recovery_significant(fit, st.sigma) and span * dt > max(20.0 * t_star, 2.0) \
+            and span >= 4 * PLATEAU:
+        res = abort_result(st, i, recovered=False, text=(
+            "valve closed before p*; no pressure recovery after closing (no re-heating "
+            "seen), so no SSE value"))
+        res.final = True
+        st.to_waiting(i + 1)
+        return [res]
+    return []
+
+
+def scan_recovery(st: EstimatorState, i: int, end: int) -> int:
+    """Next index in [i, end) where :func:`step_recovery` refits (end: none)."""
+    ks = check_indices(st.next_check, end)
+    if ks.size == 0:
+        return end
+    u = st.unload
+    hit = np.flatnonzero(recovery_due(ks, u.i_close, u.rec_span))
+    k = int(hit[0]) if hit.size else ks.size
+    if k > 0:
+        st.next_check = int(ks[k - 1]) + PERIOD
+    return int(ks[k]) if k < ks.size else end
+
+
+def abort_result(st: EstimatorState, i: int, recovered: bool, text: str = "") -> UnloadResult:
+    """Result of an aborted unload at index i; with ``recovered`` (or a recovery fit good
+    enough to extrapolate at the end of the stream), the SSE value of eq 23."""
+    s, u = st.settings, st.unload
+    res = st.empty_result("aborted", text or "valve closed before p*; no recovery "
+                          "plateau recorded (SSE needs it)", i)
+    if not u.refined:
+        return res
+    p10 = st.to_pa(u.p10)
+    res.p10, res.t_start = p10, u.t0
+    res.i_start = u.i0 + st.buf.shift
+    if st.mode != RECOVERY:
+        return res
+    fit = u.rec_fit
+    if not recovered and i - u.i_close >= 16 and i - u.i_close != u.rec_span:
+        fit = fit_recovery_to(st, i)
+    if not recovery_significant(fit, st.sigma):
+        return res
+    gain = abs(s.signal_gain)
+    p_inf = st.to_pa(fit.p_inf)
+    p_inf_std = gain * fit.p_inf_std
+    p_close = st.to_pa(u.p_close)
+    t_star = u.t_close - u.t0
+    t_star_std = u.t0_std
+    gas, t10, vol = s.gas, s.initial_temperature, s.volume
+    c = physics.conductance_sse(t_star, p10, p_inf, vol, t10, gas)
+    dc_dp = (physics.conductance_sse(t_star, p10, p_inf + p_inf_std, vol, t10, gas) - c)
+    c_std = math.hypot(dc_dp, c * t_star_std / t_star, c * SSE_MODEL_REL_STD)
+    if not (math.isfinite(c) and c > 0 and c_std < 0.25 * c):
+        res.status_text += (f"; recovery fit too uncertain for SSE (p_inf = {p_inf:.0f} "
+                            f"+- {p_inf_std:.0f} Pa)")
+        return res
+    done = 1.0 - fit.remaining / fit.rise
+    how = ("recovery plateau" if recovered else
+           f"recovery extrapolated from {100 * done:.0f} % of the re-heating")
+    res.status = "aborted_sse"
+    res.status_text = (f"valve closed after {t_star:.4f} s before p*; SSE (eq 23) from "
+                       f"the {how}, p1_inf = {p_inf:.0f} +- {p_inf_std:.0f} Pa")
+    res.conductance = c
+    # model-based: the discharge model inverted at the closing instant and pressure
+    c_isen = physics.conductance_isentropic_inversion(t_star, p_close, p10, vol, t10, gas)
+    atm = s.atmosphere if s.atmosphere is not None else 101325.0
+    c_model, c_model_std, method = model_inversion(s, t_star, t_star_std, p10, atm, p_close,
+                                                   c_isen)
+    res.conductance_model = c_model
+    res.conductance_model_std = c_model_std
+    res.conductance_isentropic = c_isen
+    res.quality = 0.7 if recovered else 0.5
+    res.method = "sse-eq23;" + method.replace("eq39+", "") + "-at-closing"
+    res.extra = {"t_star": t_star, "t_close": u.t_close, "p1_inf": p_inf,
+                 "p1_inf_std": p_inf_std, "p_close": p_close, "sse_std": c_std,
+                 "recovered_fraction": done, "recovery_tau": fit.tau,
+                 "recovery_exponent": fit.exponent}
+    return res

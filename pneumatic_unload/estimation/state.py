@@ -1,0 +1,188 @@
+"""Mutable state of the streaming estimator, shared by its phase modules.
+
+:class:`UnloadState` holds what one unload has established (start, p10, p*, the pending
+crossing result, the closing instant of an aborted unload...), :class:`EstimatorState`
+the detector's state across unloads (phase, next check, trigger level, plateau and noise,
+buffer, counters) with the small helpers every phase uses. Values are in the input's
+signal units unless stated (Pa when ``signal_gain`` is 1), times in s, indices in samples
+of the buffer.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from pneumatic_unload.estimation.buffer import SampleBuffer
+from pneumatic_unload.estimation.decisions import DT_DEFAULT, TRIM_MIN, trim_keep
+from pneumatic_unload.estimation.types import (
+    Diagnostic,
+    EstimatorSettings,
+    FloatArray,
+    UnloadResult,
+)
+from pneumatic_unload.physics import P_STAR_FRACTION
+
+#: Phases of the detector.
+WAITING, CONFIRM, UNLOADING, TAIL, RECOVERY = (
+    "waiting", "confirming", "unloading", "tail", "recovery")
+
+
+@dataclass
+class UnloadState:
+    """What the current unload has established so far (signal units, s, buffer indices).
+
+    Attributes
+    ----------
+    trigger : int
+        Index of the sample that triggered the detection [-].
+    dp_guess : float
+        Expected drop p10 - p_atm before the start fit [signal units].
+    refined : bool
+        The start (hinge) fit has run: t0, i0, p10, slope0 are known.
+    t0, t0_std : float
+        Start instant and its standard deviation [s].
+    i0 : int
+        First sample at or after t0 [-].
+    p10 : float
+        Pre-step plateau [signal units].
+    slope0 : float
+        Initial fall rate [signal units/s].
+    atm, pstar, half : float
+        p_atm, p* and the half-width of the crossing window [signal units] (NaN until
+        known).
+    pending : UnloadResult or None
+        Crossing result waiting for the end of the tail (curve fit).
+    tail_low : float
+        Lowest PERIOD-sample mean of the tail so far [signal units].
+    t_close, p_close : float
+        Closing instant [s] and pressure [signal units] of an aborted unload.
+    i_close : int
+        First sample at or after the closing instant [-].
+    rec_span : int
+        Samples covered by the last recovery fit [-].
+    rec_fit : Any
+        Last recovery fit (:func:`pneumatic_unload.fitting.fit_recovery`), or None.
+    """
+
+    trigger: int
+    dp_guess: float = math.nan
+    refined: bool = False
+    t0: float = math.nan
+    t0_std: float = math.nan
+    i0: int = -1
+    p10: float = math.nan
+    slope0: float = math.nan
+    atm: float = math.nan
+    pstar: float = math.nan
+    half: float = math.nan
+    pending: UnloadResult | None = None
+    tail_low: float = math.inf
+    t_close: float = math.nan
+    p_close: float = math.nan
+    i_close: int = -1
+    rec_span: int = 0
+    rec_fit: Any = None
+
+
+class EstimatorState:
+    """Detector state across unloads and the helpers the phases share.
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Tank, gas and detection settings.
+    """
+
+    def __init__(self, settings: EstimatorSettings) -> None:
+        self.settings = settings
+        self.buf = SampleBuffer()
+        self.diagnostics: list[Diagnostic] = []
+        self.n_unloads = 0
+        self.last_t = -math.inf  # last accepted stamp [s]
+        self.dt_nominal = math.nan  # nominal sample period [s]
+        self.gap_limit = math.inf  # stamp step that counts as a gap [s]
+        self.stuck_reported = False
+        self.unload = UnloadState(trigger=-1)
+        self.to_waiting(0)
+
+    # -------------------------------------------------------------- transitions
+    def to_waiting(self, n: int) -> None:
+        """Re-arm: wait for a new plateau starting at index n [-]."""
+        self.mode = WAITING
+        self.level = -math.inf  # a sample below this level calls the step [signal units]
+        self.next_check = n + self.settings.min_plateau - 1  # next periodic check [-]
+        self.arm_index = n  # first sample of the current plateau [-]
+        self.unload = UnloadState(trigger=-1)
+        self.gap_in_unload = False
+        self.plateau_level = math.nan  # [signal units]
+        self.sigma = math.nan  # noise standard deviation [signal units]
+
+    def set_pstar(self, atm: float) -> None:
+        """Set p_atm (and so p* and the crossing window) [signal units]."""
+        u = self.unload
+        u.atm = atm
+        dp = u.p10 - atm
+        u.pstar = atm + P_STAR_FRACTION * dp
+        u.half = max(6.0 * self.sigma, 0.05 * abs(dp))
+        self.level = u.pstar - u.half
+
+    def trim(self, n: int) -> None:
+        """Drop samples that no later decision can need (keeps memory bounded); n: samples
+        held [-]."""
+        keep = int(trim_keep(n, self.arm_index))
+        if keep > TRIM_MIN and self.mode == WAITING:
+            self.buf.trim(keep)
+            self.next_check -= keep
+            self.arm_index -= keep
+
+    # -------------------------------------------------------------- helpers
+    def set_period(self, dt_nominal: float) -> None:
+        """Set the nominal sample period [s], and so the gap limit ``max_gap_factor``
+        periods [s] (inf while the period is unknown)."""
+        self.dt_nominal = dt_nominal
+        self.gap_limit = (math.inf if math.isnan(dt_nominal)
+                          else self.settings.max_gap_factor * dt_nominal)
+
+    @property
+    def dt(self) -> float:
+        """Nominal sample period, DT_DEFAULT while unknown [s]."""
+        return self.dt_nominal if math.isfinite(self.dt_nominal) else DT_DEFAULT
+
+    def diag(self, level: str, message: str, t: float) -> None:
+        """Record a diagnostic ('ok', 'warn', 'error') at sample time t [s]."""
+        self.diagnostics.append(Diagnostic(level, self.mode, message, t))
+
+    def to_pa(self, x: float) -> float:
+        """Signal value to pressure [Pa]."""
+        return self.settings.signal_offset + self.settings.signal_gain * x
+
+    def to_pa_array(self, x: FloatArray) -> FloatArray:
+        """Signal values to pressures [Pa]."""
+        s = self.settings
+        return s.signal_offset + s.signal_gain * x
+
+    def empty_result(self, status: str, text: str, i: int, *, count: bool = True
+                     ) -> UnloadResult:
+        """A result without estimates, completed at index i [-]; ``count``: it takes a new
+        unload index."""
+        s = self.settings
+        nan = math.nan
+        res = UnloadResult(
+            index=self.n_unloads, status=status, status_text=text, t_start=nan, t_cross=nan,
+            tau_exp=nan, tau_exp_std=nan, p10=nan, p_atm=s.atmosphere or nan, p_star=nan,
+            initial_temperature=s.initial_temperature, volume=s.volume, conductance=nan,
+            conductance_model=nan, conductance_model_std=nan, quality=0.0,
+            method="unloading-time", i_complete=i + self.buf.shift,
+            t_complete=float(self.buf.t[i]))
+        if count:
+            self.n_unloads += 1
+        return res
+
+    def bad(self, i: int, text: str) -> list[UnloadResult]:
+        """Unusable data at index i: a 'bad_data' result, then re-arm."""
+        self.diag("error", text, float(self.buf.t[i]))
+        res = self.empty_result("bad_data", text, i)
+        self.to_waiting(i + 1)
+        return [res]

@@ -1,0 +1,296 @@
+"""The streaming estimator: samples in (one by one or in blocks), results out.
+
+:class:`StreamingEstimator` is fed pressure samples one at a time (:meth:`push`) or in
+blocks (:meth:`push_block`); both paths give bit-identical results, because every decision
+is taken at a sample index from the samples up to that index only, with O(1) statistics
+from running prefix sums, and each decision is one function of :mod:`.decisions` that the
+per-sample path calls with one index and the block path with many, calling the phase's
+step only where something happens. Times in s, values in Pa absolute (or the input's
+signal units with ``signal_gain``/``signal_offset``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from pneumatic_unload.estimation import decisions, detector, sse, tail, unloading
+from pneumatic_unload.estimation.buffer import SampleBuffer
+from pneumatic_unload.estimation.decisions import SCAN_HORIZON, first_below
+from pneumatic_unload.estimation.state import (
+    CONFIRM,
+    RECOVERY,
+    TAIL,
+    UNLOADING,
+    WAITING,
+    EstimatorState,
+)
+from pneumatic_unload.estimation.types import (
+    EstimationError,
+    EstimatorSettings,
+    FloatArray,
+    UnloadResult,
+)
+
+#: Decision step of each phase at one buffer index.
+STEPS: dict[str, Callable[[EstimatorState, int], list[UnloadResult]]] = {
+    WAITING: detector.step_waiting,
+    CONFIRM: detector.step_confirm,
+    UNLOADING: unloading.step_unloading,
+    TAIL: tail.step_tail,
+    RECOVERY: sse.step_recovery,
+}
+
+
+class StreamingEstimator:
+    """Sample-by-sample unloading-time estimator; see the package docstring.
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Tank, gas and detection settings.
+
+    Examples
+    --------
+    >>> est = StreamingEstimator(EstimatorSettings(volume=5e-3))
+    >>> results = []
+    >>> for ti, pi in zip(t, p):  # doctest: +SKIP
+    ...     results += est.push(ti, pi)
+    >>> results += est.finish()  # doctest: +SKIP
+    """
+
+    #: Samples between periodic checks [-].
+    PERIOD = decisions.PERIOD
+    #: Samples used for the plateau level and noise [-].
+    PLATEAU = decisions.PLATEAU
+    #: Samples that must confirm a trigger [-].
+    CONFIRM = decisions.CONFIRM
+    #: Samples between the end of the reference plateau window and now [-].
+    LAG = decisions.LAG
+    #: Most pre-step plateau samples used by the start (hinge) fit [-].
+    HINGE_PLATEAU = decisions.HINGE_PLATEAU
+    #: Recovery samples needed before the first recovery fit [-].
+    RECOVERY_MIN = decisions.RECOVERY_MIN
+    #: Samples looked ahead per vectorised scan [-].
+    SCAN_HORIZON = decisions.SCAN_HORIZON
+
+    def __init__(self, settings: EstimatorSettings | None = None) -> None:
+        self.settings = settings or EstimatorSettings()
+        self._st = EstimatorState(self.settings)
+        self.diagnostics = self._st.diagnostics
+        self.results: list[UnloadResult] = []
+        self._append = self._st.buf.append  # hot path (trimming keeps the buffer object)
+
+    # ------------------------------------------------------------------ public API
+    @property
+    def state(self) -> str:
+        """'waiting', 'confirming', 'unloading', 'tail' or 'recovery'."""
+        return self._st.mode
+
+    @property
+    def n_samples(self) -> int:
+        """Valid samples received so far [-]."""
+        buf = self._st.buf
+        return len(buf) + buf.shift
+
+    @property
+    def buffer(self) -> SampleBuffer:
+        """The samples held and their prefix sums (read only)."""
+        return self._st.buf
+
+    def push(self, t: float, p: float) -> list[UnloadResult]:
+        """Feed one sample.
+
+        Parameters
+        ----------
+        t : float
+            Sample instant [s] (strictly increasing).
+        p : float
+            Pressure [Pa absolute], or the raw signal when ``signal_gain`` converts it.
+
+        Returns
+        -------
+        list of UnloadResult
+            Results completed by this sample (usually empty).
+        """
+        st = self._st
+        if not t > st.last_t:  # also catches NaN stamps
+            self._reject(t, p)
+            return []
+        if p != p or p in (math.inf, -math.inf):
+            st.diag("warn", f"non-finite pressure sample {p!r} at t={t:.6f} s ignored", t)
+            return []
+        if t - st.last_t > st.gap_limit:
+            self._on_gap(t)
+        st.last_t = t
+        i = self._append(t, p)
+        # a periodic check, or decisions.below(p, level) inlined (the hot path)
+        if i == st.next_check or p < st.level:
+            out = STEPS[st.mode](st, i)
+            if out:
+                self.results += out
+            return out
+        return []
+
+    def push_block(self, t: ArrayLike, p: ArrayLike) -> list[UnloadResult]:
+        """Feed a block of samples; same results as calling :meth:`push` on each.
+
+        Parameters
+        ----------
+        t : array_like
+            Sample instants [s].
+        p : array_like
+            Pressures [Pa absolute] (or raw signal, see :meth:`push`).
+
+        Returns
+        -------
+        list of UnloadResult
+            Results completed inside the block.
+        """
+        t = np.asarray(t, dtype=float).ravel()
+        p = np.asarray(p, dtype=float).ravel()
+        if t.shape != p.shape:
+            raise EstimationError(f"t and p differ in length: {t.size} vs {p.size}")
+        if t.size == 0:
+            return []
+        st = self._st
+        # vectorised validity: finite, strictly increasing against the last accepted stamp
+        fin_p = np.isfinite(p)
+        prev_max = np.maximum.accumulate(np.concatenate(([st.last_t], t[:-1])))
+        ok_t = (t > prev_max) & np.isfinite(t)
+        if not (ok_t.all() and fin_p.all()):
+            return self._push_slow(t, p)
+        out: list[UnloadResult] = []
+        k, size = 0, t.size
+        while k < size:
+            if math.isnan(st.dt_nominal):
+                # sample by sample until the nominal period (and so the gap limit) is known
+                out += self.push(float(t[k]), float(p[k]))
+                k += 1
+                continue
+            prev = np.concatenate(([st.last_t], t[k:size - 1]))
+            gaps = np.flatnonzero(t[k:] - prev > st.gap_limit)
+            if gaps.size and gaps[0] == 0:
+                out += self.push(float(t[k]), float(p[k]))  # diagnoses the gap
+                k += 1
+                continue
+            g = k + int(gaps[0]) if gaps.size else size
+            out += self._push_fast(t[k:g], p[k:g])
+            k = g
+        return out
+
+    def finish(self) -> list[UnloadResult]:
+        """End of stream: report an unload still pending (aborted, or crossing not reached).
+
+        Returns
+        -------
+        list of UnloadResult
+            The pending unload's result, if any.
+        """
+        st = self._st
+        u = st.unload
+        n = len(st.buf)
+        out: list[UnloadResult] = []
+        if st.mode == RECOVERY:
+            out.append(sse.abort_result(st, n - 1, recovered=False))
+            out[-1].final = True
+        elif st.mode == UNLOADING and unloading.end_plateau_auto(st, n - 1):
+            # p_atm from the final samples (short record, e.g. 1 Hz): crossing, then tail
+            out += unloading.check_final_plateau_auto(st, n - 1, at_end=True)
+            if st.mode == TAIL and st.unload.pending is not None:
+                out += tail.finish_tail(st, n - 1, ended=True)
+        elif st.mode == UNLOADING:
+            auto = u.refined and not math.isfinite(u.pstar)
+            text = ("stream ended before the final plateau: p_atm unknown (give the "
+                    "atmospheric pressure)" if auto else "stream ended before the p* crossing")
+            st.diag("warn", text, st.last_t)
+            out.append(sse.abort_result(st, n - 1, recovered=False, text=text))
+        elif st.mode == TAIL and u.pending is not None:
+            out += tail.finish_tail(st, n - 1, ended=True)
+        st.to_waiting(n)
+        self.results += out
+        return out
+
+    # ------------------------------------------------------------------ block path
+    def _push_fast(self, t: FloatArray, p: FloatArray) -> list[UnloadResult]:
+        """Block of finite, increasing samples without gaps: jump between decisions.
+
+        The periodic checks that change nothing but the running statistics are evaluated
+        for many check indices at once (:meth:`_scan`), with the same decision functions
+        as the phase steps evaluate them one by one; the step runs only where something
+        may happen.
+        """
+        st = self._st
+        buf = st.buf
+        out: list[UnloadResult] = []
+        start = len(buf)
+        buf.extend(t, p)
+        st.last_t = float(t[-1])
+        end = len(buf)
+        i = start
+        while i < end:
+            j = self._scan(i, min(end, i + SCAN_HORIZON))
+            if j >= end:
+                break
+            if j >= i + SCAN_HORIZON:  # horizon reached without a decision
+                i = j
+                continue
+            shift = buf.shift
+            out += STEPS[st.mode](st, j)
+            trimmed = buf.shift - shift
+            i, end = j + 1 - trimmed, end - trimmed
+        self.results += out
+        return out
+
+    def _scan(self, i: int, end: int) -> int:
+        """Next index in [i, end) where the phase's step must run (end: none).
+
+        Checks before that index that decide nothing have their effect (running
+        statistics, next check index) applied by the phase's scan, exactly as its step
+        would.
+        """
+        st = self._st
+        mode = st.mode
+        if st.next_check < i:
+            st.next_check = i  # cannot happen; keeps the scan safe
+        if mode == WAITING and not math.isnan(st.dt_nominal):
+            return detector.scan_waiting(st, i, end)
+        if mode == UNLOADING and (not st.unload.refined or math.isfinite(st.unload.pstar)):
+            return unloading.scan_unloading(st, i, end)
+        if mode == TAIL:
+            return tail.scan_tail(st, i, end)
+        if mode == RECOVERY:
+            return sse.scan_recovery(st, i, end)
+        # any other phase: the next periodic check or level trigger
+        nc = st.next_check
+        j = first_below(np.frombuffer(st.buf.p, dtype=float), i, min(end, nc), st.level)
+        if j < min(end, nc):
+            return j
+        return nc if nc < end else end
+
+    # ------------------------------------------------------------------ input problems
+    def _reject(self, t: float, p: float) -> None:
+        st = self._st
+        if t != t:
+            st.diag("warn", "sample with a NaN stamp ignored", t)
+        elif t == st.last_t:
+            st.diag("warn", f"duplicate stamp t={t:.9f} s ignored", t)
+        else:
+            st.diag("warn", f"stamp going backwards ({t:.9f} s after {st.last_t:.9f} s)"
+                    " ignored", t)
+
+    def _push_slow(self, t: FloatArray, p: FloatArray) -> list[UnloadResult]:
+        out: list[UnloadResult] = []  # push() records them in self.results
+        for ti, pi in zip(t.tolist(), p.tolist(), strict=True):
+            out += self.push(ti, pi)
+        return out
+
+    def _on_gap(self, t: float) -> None:
+        st = self._st
+        gap = t - st.last_t
+        st.diag("warn", f"gap of {gap:.6f} s in the samples before t={t:.6f} s", t)
+        if st.mode in (CONFIRM, UNLOADING):
+            st.gap_in_unload = True

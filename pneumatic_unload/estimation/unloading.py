@@ -1,0 +1,250 @@
+"""Unloading phase: the start (hinge) fit, the stall test, p_atm auto and the p* crossing.
+
+Values in signal units unless stated, times in s, indices in buffer samples.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pneumatic_unload import physics
+from pneumatic_unload.estimation.decisions import (
+    CONFIRM,
+    HINGE_PLATEAU,
+    PERIOD,
+    below,
+    check_indices,
+    first_below,
+    flat,
+    flat_window,
+    settled_at_end,
+    stalled,
+)
+from pneumatic_unload.estimation.refine import model_inversion
+from pneumatic_unload.estimation.regression import crossing_fit, hinge_fit, rms_sigma
+from pneumatic_unload.estimation.sse import on_abort
+from pneumatic_unload.estimation.state import TAIL, EstimatorState
+from pneumatic_unload.estimation.tail import finish_tail
+from pneumatic_unload.estimation.types import UnloadResult
+
+
+def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """Confirmed step at index i: p_atm from the settings (or later from the final
+    plateau); the start is refined once the drop reaches 10 % of the pressure change."""
+    s, u = st.settings, st.unload
+    p_plateau = st.plateau_level
+    p_atm = s.atmosphere
+    atm_signal = math.nan
+    if p_atm is not None:
+        atm_signal = (p_atm - s.signal_offset) / s.signal_gain
+    u.atm = atm_signal
+    guess_atm = (atm_signal if p_atm is not None
+                 else (101325.0 - s.signal_offset) / s.signal_gain)
+    dp = p_plateau - guess_atm
+    if p_atm is not None and dp * math.copysign(1.0, s.signal_gain) <= 0:
+        return st.bad(i, f"p10 ({st.to_pa(p_plateau):.0f} Pa) is not above p_atm "
+                         f"({p_atm:.0f} Pa): nothing to unload")
+    u.dp_guess = abs(dp) if math.isfinite(dp) else abs(p_plateau) * 0.5
+    u.refined = False
+    st.level = p_plateau - 0.1 * u.dp_guess
+    st.next_check = i + PERIOD
+    return []
+
+
+def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """Hinge fit of the valve-opening instant, p10 and the initial slope (index i: first
+    sample 10 % down); sets p* when p_atm is given."""
+    n = i + 1
+    u = st.unload
+    tv, pv = st.buf.views(n)
+    trig = u.trigger
+    back = i - trig + 4 * CONFIRM
+    lo = max(st.arm_index, trig - back - HINGE_PLATEAU)
+    t_lo = float(tv[max(st.arm_index, trig - back)])
+    t0, p10, slope, _curv, rms = hinge_fit(tv[lo:n], pv[lo:n], t_lo, float(tv[trig]))
+    pre = pv[lo:int(np.searchsorted(tv, t0))]
+    sig_pre = rms_sigma(pre) if pre.size > 3 else rms
+    if pre.size >= 8:
+        vmax = float(np.max(pre))
+        frac_at_max = float(np.mean(pre == vmax))
+        if frac_at_max > 0.5 and sig_pre == 0.0 and rms > 0.0:
+            return st.bad(
+                i, f"sensor saturated on the pre-step plateau at {vmax!r}: p10 unknown")
+    u.t0 = t0
+    u.i0 = int(np.searchsorted(tv, t0))
+    n_pre, n_post = max(u.i0 - lo, 1), max(n - u.i0, 1)
+    # noise over the initial slope, with the plateau (p10) and post-start samples
+    u.t0_std = (rms / slope * math.sqrt(1.0 / n_pre + 4.0 / n_post)
+                if slope > 0 else math.inf)
+    u.p10 = p10
+    u.slope0 = slope
+    st.sigma = max(rms, 1e-12)
+    u.refined = True
+    if st.settings.atmosphere is not None:
+        st.set_pstar(u.atm)
+    else:
+        u.pstar = math.nan
+        st.level = -math.inf
+    st.next_check = i + PERIOD
+    return []
+
+
+def stalled_at(st: EstimatorState, k: int | np.ndarray) -> np.bool_ | np.ndarray:
+    """:func:`~.decisions.stalled` with the current unload's start, noise and slope."""
+    u = st.unload
+    tv, _pv = st.buf.views()
+    cs, _cq = st.buf.sums()
+    return stalled(cs, tv, k, i0=u.i0, sigma=st.sigma, slope0=u.slope0)
+
+
+def step_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """Decision at index i: the start fit, the p* crossing, p_atm auto or an abort."""
+    u = st.unload
+    p = st.buf.p[i]
+    if not u.refined:
+        if below(p, st.level):
+            return refine_start(st, i)
+        if i == st.next_check:
+            st.next_check = i + PERIOD  # the stall test needs the start fit
+        return []
+    if below(p, st.level) and math.isfinite(u.pstar):
+        return complete_crossing(st, i)
+    if i == st.next_check:
+        st.next_check = i + PERIOD
+        if not math.isfinite(u.pstar):
+            return check_final_plateau_auto(st, i)
+        if stalled_at(st, i):
+            return on_abort(st, i)
+    return []
+
+
+def scan_unloading(st: EstimatorState, i: int, end: int) -> int:
+    """Next index in [i, end) where :func:`step_unloading` decides something (end: none);
+    only while p* is known or the start not yet refined."""
+    pv = np.frombuffer(st.buf.p, dtype=float)
+    j = first_below(pv, i, end, st.level)
+    ks = check_indices(st.next_check, min(j, end))
+    if ks.size == 0:
+        return j
+    if st.unload.refined:
+        hit = np.flatnonzero(stalled_at(st, ks))
+        if hit.size:
+            st.next_check = int(ks[int(hit[0])])
+            return st.next_check
+    st.next_check = int(ks[-1]) + PERIOD
+    return j
+
+
+def end_plateau_auto(st: EstimatorState, i: int) -> bool:
+    """p_atm auto at the end of the stream (index i): see
+    :func:`~.decisions.settled_at_end`."""
+    u = st.unload
+    if not u.refined or math.isfinite(u.pstar):
+        return False
+    return settled_at_end(st.buf.cs, i, i0=u.i0, p10=u.p10, dp_guess=u.dp_guess)
+
+
+def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
+                             ) -> list[UnloadResult]:
+    """p_atm auto: once the final plateau is reached, set p* and find the crossing
+    (``at_end``: the stream ended on a plateau judged by :func:`end_plateau_auto`)."""
+    u = st.unload
+    tv, pv = st.buf.views(i + 1)
+    tau_guess = (float(tv[i]) - u.t0) / 4.0
+    if at_end:
+        w = max((i - u.i0) // 8, 8)
+        st.set_pstar(st.buf.mean(i - w + 1, i + 1))
+        j = first_below(pv, u.i0, i + 1, st.level)
+        if j > i:
+            return []
+        return complete_crossing(st, j)
+    if not flat(st.buf.cs, i, i0=u.i0, tau=tau_guess, dt_nominal=st.dt_nominal, p10=u.p10,
+                sigma=st.sigma):
+        return []
+    w = flat_window(tau_guess, st.dt_nominal)
+    level = float(np.mean(pv[i - w + 1:i + 1]))
+    drop = u.p10 - level
+    if drop < 0.5 * u.dp_guess:
+        return on_abort(st, i)
+    st.set_pstar(level)
+    j = first_below(pv, u.i0, i + 1, st.level)
+    if j > i:
+        return on_abort(st, i)
+    return complete_crossing(st, j, settle_index=i)
+
+
+def complete_crossing(st: EstimatorState, i: int, settle_index: int | None = None
+                      ) -> list[UnloadResult]:
+    """Crossing window closed at index i (first sample below p* - half): the crossing
+    result, then the tail (``settle_index``: the tail already settled there)."""
+    n = i + 1
+    u = st.unload
+    tv, pv = st.buf.views(n)
+    lvl_hi = u.pstar + u.half
+    # last sample above the upper bound before i
+    above = np.flatnonzero(pv[u.i0:n] > lvl_hi)
+    j_lo = u.i0 + (int(above[-1]) if above.size else 0)
+    tw, pw = tv[j_lo:n], pv[j_lo:n]
+    if tw.size < 5:
+        tw, pw = tv[max(u.i0, n - 5):n], pv[max(u.i0, n - 5):n]
+    t_cross, t_std, _slope = crossing_fit(tw, pw, u.pstar)
+    # second pass on a window symmetric in time about the first estimate: the ends of
+    # the first window were chosen by noisy sample values, which biases the fit
+    h = float(tv[n - 1]) - t_cross
+    if h > 0:
+        k0 = int(np.searchsorted(tv, t_cross - h))
+        if n - k0 >= 5:
+            t_cross, t_std, _slope = crossing_fit(tv[k0:n], pv[k0:n], u.pstar)
+    gap = bool(np.any(np.diff(tw) > st.gap_limit)) if tw.size > 1 else False
+    k = i if settle_index is None else settle_index
+    res = crossing_result(st, k, t_cross, t_std, gap)
+    u.pending = res
+    st.mode = TAIL
+    u.tail_low = math.inf
+    st.level = -math.inf
+    st.next_check = k + PERIOD
+    if settle_index is not None:
+        return [res, *finish_tail(st, k, ended=False)]
+    return [res]
+
+
+def crossing_result(st: EstimatorState, i: int, t_cross: float, t_std: float, gap: bool
+                    ) -> UnloadResult:
+    """Result of an unload from its crossing instant t_cross and its 1-sigma t_std [s]:
+    eq 39, the isentropic inversion and the model inversion; completed at index i."""
+    s, u = st.settings, st.unload
+    gas = s.gas
+    p10 = st.to_pa(u.p10)
+    p_atm = st.to_pa(u.atm)
+    p_star = st.to_pa(u.pstar)
+    tau = t_cross - u.t0
+    tau_std = math.hypot(t_std, u.t0_std)
+    status, text, quality = "ok", "p* crossing found", 1.0
+    c39 = physics.conductance_eq39(tau, p10, p_atm, s.volume, s.initial_temperature, gas)
+    c_isen = physics.conductance_isentropic_inversion(
+        tau, p_star, p10, s.volume, s.initial_temperature, gas)
+    if s.critical_ratio > 0 and p_star < p_atm / s.critical_ratio:
+        status, text = "not_choked", (
+            f"flow subsonic before p* (p* = {p_star:.0f} Pa < p_atm/b = "
+            f"{p_atm / s.critical_ratio:.0f} Pa): eq 39 assumes choked flow")
+        quality = 0.5
+    c_model, c_model_std, method = model_inversion(s, tau, tau_std, p10, p_atm, p_star, c_isen)
+    if gap or st.gap_in_unload:
+        text += "; gap in the samples during the unload"
+        quality = min(quality, 0.5)
+    if tau_std / tau > 0.01:
+        quality = min(quality, 0.5)
+    shift = st.buf.shift
+    res = UnloadResult(
+        index=st.n_unloads, status=status, status_text=text, t_start=u.t0,
+        t_cross=t_cross, tau_exp=tau, tau_exp_std=tau_std, p10=p10, p_atm=p_atm,
+        p_star=p_star, initial_temperature=s.initial_temperature, volume=s.volume,
+        conductance=c39, conductance_model=c_model, conductance_model_std=c_model_std,
+        conductance_isentropic=c_isen, quality=quality, method=method,
+        noise_std=abs(st.sigma * s.signal_gain), i_start=u.i0 + shift,
+        i_cross=shift + int(np.searchsorted(st.buf.views(i + 1)[0], t_cross)),
+        i_complete=i + shift, t_complete=float(st.buf.t[i]))
+    st.n_unloads += 1
+    return res
