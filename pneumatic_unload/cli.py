@@ -22,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from pneumatic_unload.config import ConfigError, RigConfig
+from pneumatic_unload.config import TANK_FIELDS, ConfigError, RigConfig, TankSpec, adapters
+from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySettings
 from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
@@ -83,48 +84,29 @@ def load_trace(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, dict[s
 def settings_from(args: argparse.Namespace, cfg: dict[str, Any]) -> EstimatorSettings:
     """Estimator settings: command-line values first, then the live estimator's settings
     recorded in the bag (so that the analysis reproduces what it published), then the bag's
-    rig configuration, then defaults."""
+    rig configuration (tank and gas), then the defaults of
+    :class:`~pneumatic_unload.estimation.EstimatorSettings`."""
+    given = adapters.given_options(args, EstimatorSettings)
+    if getattr(args, "atmosphere_auto", False):
+        given["atmosphere"] = None
     live = cfg.get("estimator_settings")
-    if live is not None:
-        try:
-            base = EstimatorSettings(**live)
-        except (TypeError, EstimationError) as exc:
-            raise CliError(f"the estimator settings stored in the bag are invalid: {exc}"
-                           ) from exc
-        given = {
-            "volume": args.volume, "initial_temperature": args.initial_temperature,
-            "atmosphere": args.atmosphere,
-            "length_diameter_ratio": args.length_diameter_ratio,
-            "wall_temperature": args.wall_temperature, "heat_model": args.heat_model,
-            "critical_ratio": args.critical_ratio}
-        changes = {k: v for k, v in given.items() if v is not None}
-        if args.atmosphere_auto:
-            changes["atmosphere"] = None
-        if args.no_curve_fit:
-            changes["curve_fit"] = False
-        try:
-            return dataclasses.replace(base, **changes)
-        except EstimationError as exc:
-            raise CliError(str(exc)) from exc
-    volume = args.volume if args.volume is not None else cfg.get("volume")
-    if volume is None:
-        raise CliError("--volume M3 is required (the input carries no rig configuration)")
-    t10 = args.initial_temperature or cfg.get("initial_temperature") or \
-        cfg.get("measured_initial_temperature") or 293.15
-    if args.atmosphere_auto:
-        atm = None
-    else:
-        atm = args.atmosphere if args.atmosphere is not None else cfg.get("atmosphere", 101325.0)
     try:
-        return EstimatorSettings(
-            volume=float(volume), initial_temperature=float(t10), atmosphere=atm,
-            length_diameter_ratio=float(args.length_diameter_ratio
-                                        or cfg.get("length_diameter_ratio", 2.0)),
-            wall_temperature=args.wall_temperature or cfg.get("wall_temperature"),
-            heat_model=args.heat_model or "natural",
-            critical_ratio=0.5 if args.critical_ratio is None else args.critical_ratio,
-            curve_fit=not args.no_curve_fit)
-    except EstimationError as exc:
+        if live is not None:
+            try:
+                base = EstimatorSettings(**adapters.from_mapping(EstimatorSettings, live,
+                                                                 strict=False))
+            except (TypeError, ConfigError, EstimationError) as exc:
+                raise CliError(f"the estimator settings stored in the bag are invalid: {exc}"
+                               ) from exc
+            return dataclasses.replace(base, **given)
+        kw = TankSpec.fields_of(cfg)  # the bag's rig: tank and gas
+        if "initial_temperature" not in kw and "measured_initial_temperature" in cfg:
+            kw["initial_temperature"] = cfg["measured_initial_temperature"]
+        kw.update(given)
+        if "volume" not in kw:
+            raise CliError("--volume M3 is required (the input carries no rig configuration)")
+        return EstimatorSettings(**kw)
+    except (EstimationError, ConfigError) as exc:
         raise CliError(str(exc)) from exc
 
 
@@ -257,7 +239,6 @@ def _load_temperature(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray]
 
 def cmd_discrepancy(args: argparse.Namespace) -> int:
     """Name the effect the discharge model misses, with evidence (one or several runs)."""
-    from pneumatic_unload.discrepancy import DiscrepancyError, DiscrepancySettings
     from pneumatic_unload.discrepancy.multirun import fit_geometry_law
     from pneumatic_unload.discrepancy.report import write_law_report, write_report
     from pneumatic_unload.discrepancy.workflow import find_discrepancy
@@ -265,17 +246,17 @@ def cmd_discrepancy(args: argparse.Namespace) -> int:
     lds = args.length_diameter_ratio or [None]
     if len(lds) not in (1, len(args.paths)):
         raise CliError("give one --length-diameter-ratio for all runs or one per PATH")
+    own = adapters.given_options(args, DiscrepancySettings, exclude=TANK_FIELDS)
     results, names, settings = [], [], []
     for i, path in enumerate(args.paths):
         ns = argparse.Namespace(**vars(args))
         ns.path = path
         ns.length_diameter_ratio = lds[i] if len(lds) > 1 else lds[0]
-        ns.heat_model, ns.critical_ratio, ns.no_curve_fit = "adiabatic", 0.5, True
         t, p, cfg = load_trace(ns)
+        cfg.pop("estimator_settings", None)  # the tank and gas only: the fit is its own
         try:
-            ds = DiscrepancySettings.from_estimator(
-                settings_from(ns, cfg), fit_wall_temperature=args.fit_wall_temperature,
-                max_effects=args.max_effects, profile=not args.no_profile)
+            tank = settings_from(ns, cfg).tank
+            ds = DiscrepancySettings(**tank.tank_fields(), **own)
             res = find_discrepancy(t, p, ds, temperature=_load_temperature(ns))
         except DiscrepancyError as exc:
             raise CliError(f"{path}: {exc}") from exc
@@ -324,29 +305,15 @@ def add_discrepancy_parser(sub: Any) -> None:
     dc.add_argument("paths", nargs="+", metavar="PATH",
                     help="rosbag2 directory, .mcap file or .csv log (several: one shared "
                          "geometry law of C)")
-    dc.add_argument("--volume", type=float, help="tank volume [m^3] (default: from the bag)")
-    dc.add_argument("--initial-temperature", type=float, help="T10 [K]")
-    dc.add_argument("--atmosphere", type=float,
-                    help="atmospheric pressure [Pa absolute] (default 101325 or the bag's)")
-    dc.add_argument("--atmosphere-auto", action="store_true",
-                    help="fit p_atm (offset and gain then become hard to identify)")
+    adapters.add_options(dc, TankSpec, exclude=("length_diameter_ratio",))
     dc.add_argument("--length-diameter-ratio", type=float, nargs="+",
                     help="tank L/D [-], one for all runs or one per PATH")
-    dc.add_argument("--wall-temperature", type=float, help="wall temperature [K]")
-    dc.add_argument("--fit-wall-temperature", action="store_true",
-                    help="fit the wall temperature with the heat-transfer effect")
-    dc.add_argument("--max-effects", type=int, default=3, choices=(1, 2, 3),
-                    help="add at most this many effects (greedy)")
-    dc.add_argument("--no-profile", action="store_true",
-                    help="linear intervals only (faster)")
-    dc.add_argument("--topic", default="/tank/pressure", help="pressure topic of a bag")
-    dc.add_argument("--time-column", help="CSV time column [s]")
-    dc.add_argument("--pressure-column", help="CSV pressure column")
-    dc.add_argument("--pressure-unit", choices=tuple(PRESSURE_UNITS), default=None,
-                    help="CSV pressure unit (default: from the header, else Pa)")
-    dc.add_argument("--gauge", action="store_true",
-                    help="CSV pressures are gauge: add --atmosphere to every reading")
-    dc.add_argument("--json", action="store_true", help="print a JSON object")
+    adapters.add_options(dc, DiscrepancySettings,
+                         only=("fit_wall_temperature", "profile", "bic_threshold",
+                               "resolution", "candidates"))
+    dc.add_argument("--max-effects", type=int, default=None, choices=(1, 2, 3),
+                    help="add at most this many effects (greedy), default 3")
+    add_input_options(dc)
     dc.add_argument("--report", metavar="DIR",
                     help="write report.md with PNG plots into DIR")
     dc.set_defaults(func=cmd_discrepancy)
@@ -355,28 +322,27 @@ def add_discrepancy_parser(sub: Any) -> None:
 # --------------------------------------------------------------------------- parser
 def add_config_options(parser: argparse.ArgumentParser) -> None:
     """One option per :class:`RigConfig` field (name with dashes), with unit and range."""
-    for row in RigConfig.describe():
-        name = row["name"]
-        flag = "--" + name.replace("_", "-")
-        unit = f" [{row['unit']}]" if row.get("unit") else ""
-        if name == "effects":
-            parser.add_argument(flag, default=None, help="comma-separated effects: "
-                                + ", ".join(row["choices"]))
-        elif "choices" in row:
-            parser.add_argument(flag, default=None, choices=row["choices"], help=row["doc"])
-        elif name == "seed":
-            parser.add_argument(flag, type=int, default=None, help=row["doc"])
-        else:
-            parser.add_argument(flag, type=float, default=None, metavar="X",
-                                help=f"{row['doc']}{unit}, default {row['default']:g}, "
-                                     f"range [{row['min']:g}, {row['max']:g}]")
+    adapters.add_options(parser, RigConfig)
 
 
 def config_from_args(args: argparse.Namespace) -> RigConfig:
     """RigConfig from the options of :func:`add_config_options` (unset: defaults)."""
-    kw = {row["name"]: getattr(args, row["name"]) for row in RigConfig.describe()
-          if getattr(args, row["name"], None) is not None}
-    return RigConfig.from_dict(kw)
+    return RigConfig(**adapters.given_options(args, RigConfig))
+
+
+def add_input_options(parser: argparse.ArgumentParser) -> None:
+    """Options that say how to read the input (bag topic, CSV columns and units)."""
+    parser.add_argument("--atmosphere-auto", action="store_true",
+                        help="take p_atm from the final plateau (as --atmosphere 0 would not: "
+                             "0 is a value)")
+    parser.add_argument("--topic", default="/tank/pressure", help="pressure topic of a bag")
+    parser.add_argument("--time-column", help="CSV time column [s]")
+    parser.add_argument("--pressure-column", help="CSV pressure column")
+    parser.add_argument("--pressure-unit", choices=tuple(PRESSURE_UNITS), default=None,
+                        help="CSV pressure unit (default: from the header, else Pa)")
+    parser.add_argument("--gauge", action="store_true",
+                        help="CSV pressures are gauge: add --atmosphere to every reading")
+    parser.add_argument("--json", action="store_true", help="print a JSON object")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -389,27 +355,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     an = sub.add_parser("analyze", help="estimate C, b and tau_exp from a bag or a CSV log")
     an.add_argument("path", help="rosbag2 directory, .mcap file or .csv log")
-    an.add_argument("--volume", type=float, help="tank volume [m^3] (default: from the bag)")
-    an.add_argument("--initial-temperature", type=float, help="T10 [K]")
-    an.add_argument("--atmosphere", type=float,
-                    help="atmospheric pressure [Pa absolute] (default 101325 or the bag's)")
-    an.add_argument("--atmosphere-auto", action="store_true",
-                    help="take p_atm from the final plateau")
-    an.add_argument("--length-diameter-ratio", type=float, help="tank L/D [-]")
-    an.add_argument("--wall-temperature", type=float, help="wall temperature [K]")
-    an.add_argument("--heat-model", choices=("natural", "adiabatic"), default=None,
-                    help="wall heat transfer assumed by the model-based C")
-    an.add_argument("--critical-ratio", type=float, default=None,
-                    help="b assumed before the curve fit [-]")
-    an.add_argument("--no-curve-fit", action="store_true", help="skip the full-curve fit")
-    an.add_argument("--topic", default="/tank/pressure", help="pressure topic of a bag")
-    an.add_argument("--time-column", help="CSV time column [s]")
-    an.add_argument("--pressure-column", help="CSV pressure column")
-    an.add_argument("--pressure-unit", choices=tuple(PRESSURE_UNITS), default=None,
-                    help="CSV pressure unit (default: from the header, else Pa)")
-    an.add_argument("--gauge", action="store_true",
-                    help="CSV pressures are gauge: add --atmosphere to every reading")
-    an.add_argument("--json", action="store_true", help="print a JSON object")
+    adapters.add_options(an, EstimatorSettings)
+    add_input_options(an)
     an.add_argument("--plot", metavar="FILE.png", help="write a plot of the analysis")
     an.set_defaults(func=cmd_analyze)
 

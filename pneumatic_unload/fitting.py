@@ -34,7 +34,7 @@ from pneumatic_unload.fit.profile import valley_std
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.fit.uncertainty import residual_inflation
 from pneumatic_unload.model import discharge
-from pneumatic_unload.model.effects import ParametricModel, Start, Tank
+from pneumatic_unload.model.effects import ParametricModel, Start
 from pneumatic_unload.physics import P_STAR_FRACTION, tau_exp_eq38
 
 if TYPE_CHECKING:
@@ -52,21 +52,13 @@ CRITICAL_RATIO_PRIOR_STD = 0.1
 CURVE_FIT_RESOLUTION = 0.01
 
 
-def tank_from_settings(settings: EstimatorSettings, p_atm: float | None = None) -> Tank:
-    """The tank and gas the estimator assumes [SI]; ``p_atm`` overrides the settings'."""
-    t10 = settings.initial_temperature
-    return Tank(volume=settings.volume, initial_temperature=t10,
-                wall_temperature=settings.wall_temperature or t10,
-                length_diameter_ratio=settings.length_diameter_ratio,
-                atmosphere=settings.atmosphere if p_atm is None else p_atm, gas=settings.gas)
-
-
 def estimator_model(settings: EstimatorSettings, start: Start, *,
                     p_atm: float | None = None) -> ParametricModel:
     """The parametric model of the estimator: natural-convection heat transfer or none."""
     effects = ("heat_transfer",) if settings.heat_model == "natural" else ()
-    return ParametricModel(effects, tank_from_settings(settings, p_atm), start,
-                           heat_law="natural")
+    tank = settings.tank if p_atm is None else dataclasses.replace(settings.tank,
+                                                                  atmosphere=p_atm)
+    return ParametricModel(effects, tank, start, heat_law="natural")
 
 
 def rig_from_settings(settings: EstimatorSettings, *, conductance: float, p10: float,
@@ -142,6 +134,8 @@ INVERSION_ODE_RTOL = 1e-6
 def may_turn_subsonic(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
     """True when, for a b within 2 sigma of its prior, the flow turns subsonic before p*.
 
+    The flow is choked while p1 >= p_atm/b: the smaller b, the earlier it turns subsonic.
+
     Parameters
     ----------
     settings : EstimatorSettings
@@ -149,8 +143,8 @@ def may_turn_subsonic(settings: EstimatorSettings, p_atm: float, p_star: float) 
     p_atm, p_star : float
         Atmospheric and crossing pressures [Pa absolute].
     """
-    b_hi = min(settings.critical_ratio + 2.0 * CRITICAL_RATIO_PRIOR_STD, 0.99)
-    return p_star < p_atm / b_hi
+    b_lo = max(settings.critical_ratio - 2.0 * CRITICAL_RATIO_PRIOR_STD, 0.01)
+    return p_star < p_atm / b_lo
 
 
 def invert_crossing(
@@ -432,8 +426,20 @@ def refine_with_curve_fit(
         c_std = math.hypot(c_std, res.conductance_model_std)
     extra = {"curve_fit": dataclasses.asdict(fit), "noise_std": noise_std,
              "conductance_crossing_inversion": res.conductance_model}
+    status, text = res.status, res.status_text
+    b = fit.critical_ratio
+    if math.isfinite(b) and b > 0:
+        # the fit measured b: whether the flow stayed choked down to p* is now known
+        limit = res.p_atm / b
+        if res.p_star >= limit and status == "not_choked":
+            status, text = "ok", (f"choked down to p* with the fitted b = {b:.3f} (p* = "
+                                  f"{res.p_star:.0f} Pa >= p_atm/b = {limit:.0f} Pa)")
+        elif res.p_star < limit and status == "ok":
+            status, text = "not_choked", (
+                f"flow subsonic before p* with the fitted b = {b:.3f} (p* = {res.p_star:.0f}"
+                f" Pa < p_atm/b = {limit:.0f} Pa): eq 39 assumes choked flow")
     return dataclasses.replace(
-        res, final=True, conductance_model=fit.conductance, conductance_model_std=c_std,
+        res, final=True, status=status, status_text=text, conductance_model=fit.conductance, conductance_model_std=c_std,
         t_start_model=fit.t_start, tau_exp_model=fitted_tau_exp(fit, settings, res.tau_exp),
         critical_ratio=fit.critical_ratio, critical_ratio_std=fit.critical_ratio_std,
         method=res.method + "+curve-fit", extra=extra,

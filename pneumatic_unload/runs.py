@@ -9,19 +9,17 @@ SI units; bag stamps in integer nanoseconds.
 
 from __future__ import annotations
 
-import dataclasses
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pneumatic_unload.config import RigConfig
+from pneumatic_unload.config import RigConfig, adapters
 from pneumatic_unload.estimation import (
-    STATUSES,
     EstimatorSettings,
     StreamingEstimator,
     UnloadResult,
+    estimate_fields,
 )
 from pneumatic_unload.model import simulate
 
@@ -30,35 +28,9 @@ TEMPERATURE_RATE = 10.0
 
 
 def settings_for(cfg: RigConfig) -> EstimatorSettings:
-    """Estimator settings matching a rig configuration (what an operator would enter)."""
-    return EstimatorSettings(
-        volume=cfg.volume, initial_temperature=cfg.initial_temperature,
-        atmosphere=cfg.atmosphere, length_diameter_ratio=cfg.length_diameter_ratio,
-        wall_temperature=cfg.wall_temperature, gas_constant=cfg.gas_constant,
-        gamma=cfg.gamma)
-
-
-def settings_json(s: EstimatorSettings) -> str:
-    """JSON of estimator settings, as the live estimator publishes them on
-    ``/estimator/settings`` and ``pneumatic-unload analyze`` reads them back from a bag."""
-    return json.dumps(dataclasses.asdict(s), sort_keys=True)
-
-
-def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
-    """UnloadEstimate message fields of a result (stamps in ns, NaN kept)."""
-    return {
-        "header_stamp_ns": int(round(r.t_cross * 1e9)) if np.isfinite(r.t_cross)
-        else int(round(r.t_complete * 1e9)),
-        "frame_id": frame_id,
-        "unload_start_ns": int(round(r.t_start * 1e9)) if np.isfinite(r.t_start) else 0,
-        "unload_index": r.index, "status": STATUSES.index(r.status),
-        "status_text": r.status_text, "method": r.method, "quality": r.quality,
-        "conductance": r.conductance, "conductance_model": r.conductance_model,
-        "conductance_model_std": r.conductance_model_std,
-        "critical_ratio": r.critical_ratio, "critical_ratio_std": r.critical_ratio_std,
-        "tau_exp": r.tau_exp, "p10": r.p10, "p_atm": r.p_atm, "p_star": r.p_star,
-        "initial_temperature": r.initial_temperature, "volume": r.volume,
-    }
+    """Estimator settings matching a rig configuration: its tank and gas (what an operator
+    would enter), the estimator's defaults otherwise."""
+    return EstimatorSettings(**cfg.tank_fields())
 
 
 def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
@@ -121,7 +93,7 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
             from pneumatic_unload.io.bag import MSGTYPE_CONFIG, TOPIC_SETTINGS, make_typestore
 
             store = make_typestore()
-            text = store.types[MSGTYPE_CONFIG](data=settings_json(settings))
+            text = store.types[MSGTYPE_CONFIG](data=adapters.to_json(settings))
             rec.write_raw(TOPIC_SETTINGS, MSGTYPE_CONFIG, int(t_ns[0]),
                           store.serialize_cdr(text, MSGTYPE_CONFIG))
         for r in results:

@@ -36,7 +36,13 @@ def test_model_c_and_b_one_sigma_coverage_with_heat_transfer():
     for cfg in _rigs(12, seed=7, heat=True):
         sim = simulate(cfg)
         r = merge_final(analyze(sim.t, sim.measured, settings_for(cfg)))[0]
-        assert r.final and r.status == "ok"
+        assert r.final
+        # the final status follows the fitted b: eq 39 assumes choked flow down to p*
+        b = cfg.critical_ratio
+        if r.p_star >= cfg.atmosphere / (b - 0.03):
+            assert r.status == "ok"
+        elif r.p_star < cfg.atmosphere / (b + 0.03):
+            assert r.status == "not_choked"
         assert abs(r.conductance_model / cfg.conductance - 1.0) < 0.02
         assert abs(r.critical_ratio - cfg.critical_ratio) < 0.03
         zc.append((r.conductance_model - cfg.conductance) / r.conductance_model_std)

@@ -51,8 +51,10 @@ def test_adiabatic_recovery_over_the_range():
         sim = simulate(cfg)
         st = dataclasses.replace(settings_for(cfg), heat_model="adiabatic", curve_fit=False)
         res = analyze(sim.t, sim.measured, st)
-        assert len(res) == 1 and res[0].status == "ok"
         r = res[0]
+        # eq 39 assumes choked flow down to p*: flagged when the assumed b says otherwise
+        choked = r.p_star >= cfg.atmosphere / st.critical_ratio
+        assert len(res) == 1 and r.status == ("ok" if choked else "not_choked")
         tau_true = _true_crossing(sim, cfg.atmosphere)
         errs.append(abs(r.tau_exp / tau_true - 1.0))
         worst_tau = max(worst_tau, errs[-1])
@@ -82,7 +84,9 @@ def test_heat_transfer_model_based_c_within_2_percent_while_eq39_is_off():
         sim = simulate(cfg)
         res = merge_final(analyze(sim.t, sim.measured, settings_for(cfg)))
         r = res[0]
-        assert r.final and r.status == "ok"
+        b = cfg.critical_ratio  # the final status follows the fitted b
+        assert r.final and r.status == ("ok" if r.p_star >= cfg.atmosphere / b else
+                                        "not_choked")
         worst_model = max(worst_model, abs(r.conductance_model / cfg.conductance - 1))
         worst_39 = max(worst_39, abs(r.conductance / cfg.conductance - 1))
         assert abs(r.critical_ratio - cfg.critical_ratio) < 0.03
@@ -275,8 +279,10 @@ def test_no_unload_returns_nothing():
 
 def test_p10_below_atmosphere_is_bad_data():
     cfg, sim = _simple()
-    st = dataclasses.replace(settings_for(cfg), atmosphere=9e5, heat_model="adiabatic")
-    res = analyze(sim.t, sim.measured, st)
+    with pytest.raises(EstimationError, match="atmosphere"):  # no atmosphere is 9 bar
+        dataclasses.replace(settings_for(cfg), atmosphere=9e5)
+    st = dataclasses.replace(settings_for(cfg), atmosphere=1.9e5, heat_model="adiabatic")
+    res = analyze(sim.t, 0.25 * sim.measured, st)  # a plateau of 1.75 bar, below p_atm
     assert res and res[0].status == "bad_data" and "not above p_atm" in res[0].status_text
 
 

@@ -17,8 +17,7 @@ from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySett
 from pneumatic_unload.estimation import EstimationError, EstimatorSettings, analyze
 from pneumatic_unload.fit.noise import estimate_noise
 from pneumatic_unload.fit.trace import Trace
-from pneumatic_unload.model.effects import ParametricModel, Start, Tank
-from pneumatic_unload.physics import Gas
+from pneumatic_unload.model.effects import ParametricModel, Start
 
 FloatArray = NDArray[np.float64]
 Values = dict[str, float]
@@ -52,11 +51,8 @@ class Problem:
         self.settings = settings
         self.t_ref = float(t[0])
         t = t - self.t_ref
-        est = EstimatorSettings(
-            volume=settings.volume, initial_temperature=settings.initial_temperature,
-            atmosphere=settings.atmosphere, length_diameter_ratio=settings.length_diameter_ratio,
-            heat_model="adiabatic", curve_fit=False, gas_constant=settings.gas_constant,
-            gamma=settings.gamma)
+        est = EstimatorSettings(**settings.tank_fields(), heat_model="adiabatic",
+                                curve_fit=False)
         try:
             results = [r for r in analyze(t, y, est) if r.status in ("ok", "not_choked")]
         except EstimationError as exc:
@@ -83,17 +79,12 @@ class Problem:
         self.t, self.y = t, y
         self.trace = Trace(t, y, self.noise, r.t_start, resolution=settings.resolution)
         self.lik = self.trace.lik
-        wall = settings.wall_temperature or settings.initial_temperature
-        self.tank = Tank(volume=settings.volume, initial_temperature=settings.initial_temperature,
-                         wall_temperature=wall,
-                         length_diameter_ratio=settings.length_diameter_ratio,
-                         atmosphere=settings.atmosphere,
-                         gas=Gas(gas_constant=settings.gas_constant, gamma=settings.gamma),
-                         fit_wall_temperature=settings.fit_wall_temperature)
+        self.tank = settings.tank
 
     def model(self, effects: tuple[str, ...], heat_law: str = "natural") -> ParametricModel:
         """The parametric model with these effects."""
-        return ParametricModel(effects, self.tank, self.start, heat_law=heat_law)
+        return ParametricModel(effects, self.tank, self.start, heat_law=heat_law,
+                               fit_wall_temperature=self.settings.fit_wall_temperature)
 
     def fit(self, model: ParametricModel, starts: list[Values], *, screen_nfev: int = 12,
             max_nfev: int = 200) -> Fit:

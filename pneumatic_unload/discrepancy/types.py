@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.config import EFFECTS
+from pneumatic_unload.config import EFFECTS, TankSpec
+from pneumatic_unload.config.fields import ConfigError, flag, integer, names, number, validate
 from pneumatic_unload.estimation import EstimatorSettings
 from pneumatic_unload.fit.lsq import FitResult
 from pneumatic_unload.fit.noise import NoiseModel
 from pneumatic_unload.fit.profile import Interval
 from pneumatic_unload.model.effects import ParametricModel
-from pneumatic_unload.physics import AIR, T_N
 
 FloatArray = NDArray[np.float64]
 
@@ -38,25 +38,16 @@ class DiscrepancyError(ValueError):
 
 
 @dataclass(frozen=True)
-class DiscrepancySettings:
-    """Settings of :func:`find_discrepancy`.
+class DiscrepancySettings(TankSpec):
+    """Settings of :func:`~pneumatic_unload.discrepancy.workflow.find_discrepancy`: the tank
+    and gas (:class:`~pneumatic_unload.config.tank.TankSpec`; ``atmosphere`` None: fitted,
+    offset and gain then become hard to tell from p_atm and p10) and these.
 
     Attributes
     ----------
-    volume : float
-        Tank volume V [m^3].
-    initial_temperature : float
-        Initial gas temperature T10 [K].
-    atmosphere : float or None
-        Atmospheric pressure [Pa absolute]; None: fitted (offset and gain then become
-        hard to tell from p_atm and p10).
-    length_diameter_ratio : float
-        Tank L/D [-].
-    wall_temperature : float or None
-        Wall temperature [K]; None: equal to T10.
     fit_wall_temperature : bool
-        Fit the wall temperature together with the heat-transfer time constant (when the
-        gas starts warmer or colder than the wall, e.g. just after charging).
+        Fit the wall temperature together with the heat transfer (when the gas starts
+        warmer or colder than the wall, e.g. just after charging).
     candidates : tuple of str
         Effects tried (default all of :data:`pneumatic_unload.config.EFFECTS`).
     max_effects : int
@@ -67,45 +58,28 @@ class DiscrepancySettings:
         Check the linear intervals with the profile likelihood.
     resolution : float
         Relative bin width of the likelihood [-] (smaller: slower, a little more power).
-    gas_constant, gamma : float
-        Gas [J/(kg K)], [-].
     """
 
-    volume: float
-    initial_temperature: float = T_N
-    atmosphere: float | None = 101325.0
-    length_diameter_ratio: float = 2.0
-    wall_temperature: float | None = None
-    fit_wall_temperature: bool = False
-    candidates: tuple[str, ...] = EFFECTS
-    max_effects: int = 3
-    bic_threshold: float = 10.0
-    profile: bool = True
-    resolution: float = 0.03
-    gas_constant: float = AIR.gas_constant
-    gamma: float = AIR.gamma
+    fit_wall_temperature: bool = flag(False, "fit the wall temperature with heat transfer")
+    candidates: tuple[str, ...] = names(EFFECTS, EFFECTS, "candidate effects tried")
+    max_effects: int = integer(3, 1, 3, "at most this many effects are added")
+    bic_threshold: float = number(10.0, "-", 0.0, 1e6,
+                                  "delta-BIC needed to claim an effect and to name it alone")
+    profile: bool = flag(True, "check the linear intervals with profile likelihoods")
+    resolution: float = number(0.03, "-", 1e-3, 0.5, "relative bin width of the likelihood")
 
     def __post_init__(self) -> None:
-        """Validate (raises :class:`DiscrepancyError`)."""
-        if not (self.volume > 0 and math.isfinite(self.volume)):
-            raise DiscrepancyError("volume must be a positive number of m^3")
-        if not self.initial_temperature > 0:
-            raise DiscrepancyError("initial_temperature must be > 0 K")
-        if self.atmosphere is not None and not self.atmosphere > 0:
-            raise DiscrepancyError("atmosphere must be > 0 Pa")
-        bad = [c for c in self.candidates if c not in EFFECTS]
-        if bad:
-            raise DiscrepancyError(f"unknown candidate effect(s) {bad}; known: {EFFECTS}")
-        if not 1 <= self.max_effects <= 3:
-            raise DiscrepancyError("max_effects must be 1, 2 or 3")
+        """Validate (raises :class:`DiscrepancyError` with the reason)."""
+        try:
+            validate(self)
+        except ConfigError as exc:
+            msg = str(exc).replace("unknown candidates", "unknown candidate effect(s)")
+            raise DiscrepancyError(msg) from exc
 
     @classmethod
     def from_estimator(cls, s: EstimatorSettings, **kw: Any) -> DiscrepancySettings:
-        """Settings matching an :class:`EstimatorSettings` (the ``analyze`` options)."""
-        return cls(volume=s.volume, initial_temperature=s.initial_temperature,
-                   atmosphere=s.atmosphere, length_diameter_ratio=s.length_diameter_ratio,
-                   wall_temperature=s.wall_temperature, gas_constant=s.gas_constant,
-                   gamma=s.gamma, **kw)
+        """Settings with the tank and gas of an :class:`EstimatorSettings`."""
+        return cls(**s.tank_fields(), **kw)
 
 
 @dataclass

@@ -44,6 +44,7 @@ from pneumatic_unload.estimation.types import (
     EstimatorSettings,
     FloatArray,
     UnloadResult,
+    estimate_fields,
 )
 
 __all__ = [
@@ -58,6 +59,7 @@ __all__ = [
     "analyze",
     "corner_fit",
     "crossing_fit",
+    "estimate_fields",
     "hinge_fit",
     "merge_final",
 ]

@@ -96,7 +96,7 @@ def expected_recovery_time(st: EstimatorState) -> float:
     p10 = st.to_pa(u.p10)
     p_c = st.to_pa(u.p_close)
     t10 = s.initial_temperature
-    t_w = s.wall_temperature or t10
+    t_w = t10 if s.wall_temperature is None else s.wall_temperature
     ratio = max(p_c / p10, 1e-3) if p10 > 0 else 1.0
     t_gas = t10 * ratio ** ((gas.gamma - 1.0) / gas.gamma)
     length, _d, area = physics.tank_geometry(s.volume, s.length_diameter_ratio)

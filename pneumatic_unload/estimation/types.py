@@ -15,8 +15,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload import physics
-from pneumatic_unload.physics import AIR, T_N
+from pneumatic_unload.config.fields import (
+    ConfigError,
+    choice,
+    flag,
+    integer,
+    number,
+    validate,
+)
+from pneumatic_unload.config.tank import TankSpec
 
 #: Array of float64 samples (times [s], pressures [Pa] or signal units).
 FloatArray = NDArray[np.float64]
@@ -30,25 +37,18 @@ class EstimationError(ValueError):
 
 
 @dataclass(frozen=True)
-class EstimatorSettings:
-    """Settings of the unloading-time estimator.
+class EstimatorSettings(TankSpec):
+    """Settings of the unloading-time estimator: the tank and gas
+    (:class:`~pneumatic_unload.config.tank.TankSpec`: volume, length_diameter_ratio,
+    initial_temperature, wall_temperature, atmosphere, gas_constant, gamma) and these.
 
     Attributes
     ----------
-    volume : float
-        Tank volume V [m^3].
-    initial_temperature : float
-        Initial gas temperature T10 [K].
-    atmosphere : float or None
-        Atmospheric pressure [Pa absolute]; None: from the final plateau (auto).
-    length_diameter_ratio : float
-        Tank L/D [-] (natural-convection model of the model-based C).
-    wall_temperature : float or None
-        Wall temperature [K]; None: equal to T10.
     heat_model : str
         'natural' (natural-convection wall heat transfer) or 'adiabatic' for the model-based C.
     critical_ratio : float
-        b [-] assumed by the model-based inversion at the crossing (the curve fit refines it).
+        b [-] assumed at the crossing (the prior mean; its 1-sigma is
+        :data:`pneumatic_unload.fitting.CRITICAL_RATIO_PRIOR_STD`); the curve fit measures b.
     signal_gain : float
         Pressure per unit of input signal [Pa per unit] (1 for an input in Pa).
     signal_offset : float
@@ -61,48 +61,30 @@ class EstimatorSettings:
         A stamp step larger than this many nominal periods is a gap [-].
     curve_fit : bool
         Run the full-curve least-squares fit (C, b) when the unload ends.
-    gas_constant, gamma : float
-        Gas properties [J/(kg K)], [-].
     """
 
-    volume: float = 5e-3
-    initial_temperature: float = T_N
-    atmosphere: float | None = 101325.0
-    length_diameter_ratio: float = 2.0
-    wall_temperature: float | None = None
-    heat_model: str = "natural"
-    critical_ratio: float = 0.5
-    signal_gain: float = 1.0
-    signal_offset: float = 0.0
-    trigger_sigma: float = 8.0
-    min_plateau: int = 32
-    max_gap_factor: float = 5.0
-    curve_fit: bool = True
-    gas_constant: float = AIR.gas_constant
-    gamma: float = AIR.gamma
+    heat_model: str = choice("natural", ("natural", "adiabatic"),
+                             "heat-transfer model of the model-based C")
+    critical_ratio: float = number(0.4, "-", 0.0, 0.99,
+                                   "critical pressure ratio b assumed at the crossing")
+    signal_gain: float = number(1.0, "Pa/unit", -1e12, 1e12,
+                                "pressure per unit of input signal (1: input in Pa)")
+    signal_offset: float = number(0.0, "Pa", -1e9, 1e9, "pressure at zero input signal")
+    trigger_sigma: float = number(8.0, "-", 1.0, 1000.0,
+                                  "trigger drop in noise standard deviations")
+    min_plateau: int = integer(32, 4, 1_000_000, "pre-step plateau samples needed")
+    max_gap_factor: float = number(5.0, "-", 1.0, 1e6,
+                                   "a stamp step above this many periods is a gap")
+    curve_fit: bool = flag(True, "full-curve fit (C, b) once the unload's tail is recorded")
 
     def __post_init__(self) -> None:
-        """Validate (raises :class:`EstimationError`)."""
-        checks = [
-            (self.volume > 0, "volume must be > 0 m^3"),
-            (self.initial_temperature > 0, "initial_temperature must be > 0 K"),
-            (self.atmosphere is None or self.atmosphere > 0, "atmosphere must be > 0 Pa"),
-            (self.heat_model in ("natural", "adiabatic"),
-             "heat_model must be 'natural' or 'adiabatic'"),
-            (0.0 <= self.critical_ratio < 1.0, "critical_ratio must be in [0, 1)"),
-            (self.signal_gain != 0 and math.isfinite(self.signal_gain),
-             "signal_gain must be finite and non-zero"),
-            (self.trigger_sigma > 0, "trigger_sigma must be > 0"),
-            (self.min_plateau >= 4, "min_plateau must be >= 4 samples"),
-        ]
-        for ok, msg in checks:
-            if not ok:
-                raise EstimationError(msg)
-
-    @property
-    def gas(self) -> physics.Gas:
-        """Gas properties."""
-        return physics.Gas(gas_constant=self.gas_constant, gamma=self.gamma)
+        """Validate every field (raises :class:`EstimationError` with the reason)."""
+        try:
+            validate(self)
+        except ConfigError as exc:
+            raise EstimationError(str(exc)) from exc
+        if self.signal_gain == 0:
+            raise EstimationError("signal_gain must be non-zero")
 
 
 @dataclass
@@ -185,3 +167,20 @@ class Diagnostic:
     state: str
     message: str
     t: float
+
+
+def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
+    """UnloadEstimate message fields of a result (stamps in ns, NaN kept)."""
+    return {
+        "header_stamp_ns": int(round(r.t_cross * 1e9)) if math.isfinite(r.t_cross)
+        else int(round(r.t_complete * 1e9)),
+        "frame_id": frame_id,
+        "unload_start_ns": int(round(r.t_start * 1e9)) if math.isfinite(r.t_start) else 0,
+        "unload_index": r.index, "status": STATUSES.index(r.status),
+        "status_text": r.status_text, "method": r.method, "quality": r.quality,
+        "conductance": r.conductance, "conductance_model": r.conductance_model,
+        "conductance_model_std": r.conductance_model_std,
+        "critical_ratio": r.critical_ratio, "critical_ratio_std": r.critical_ratio_std,
+        "tau_exp": r.tau_exp, "p10": r.p10, "p_atm": r.p_atm, "p_star": r.p_star,
+        "initial_temperature": r.initial_temperature, "volume": r.volume,
+    }

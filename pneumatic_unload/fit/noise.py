@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2 as chi2_dist
+from scipy.special import gammaincc, gammainccinv
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -200,7 +200,7 @@ def highpass_noise(y: FloatArray, rho: float, k_open: int, *,
     rss = np.einsum("ij,jk,ik->i", seg, m, seg)
     first = np.arange(nw) * window
     keep = (first > k_open + window) | (first + window < k_open - window)
-    limit = float(chi2_dist.isf(HIGHPASS_OUTLIER_P, dof)) / dof
+    limit = float(2.0 * gammainccinv(0.5 * dof, HIGHPASS_OUTLIER_P)) / dof
     for _ in range(10):
         if np.count_nonzero(keep) < HIGHPASS_MIN_WINDOWS:
             return None
@@ -342,4 +342,4 @@ def ljung_box(x: FloatArray, lags: int = 20) -> tuple[float, float]:
         return math.nan, math.nan
     r = np.array([float(x[k:] @ x[:-k]) / den for k in range(1, h + 1)])
     q = n * (n + 2) * float(np.sum(r * r / (n - np.arange(1, h + 1))))
-    return q, float(chi2_dist.sf(q, h))
+    return q, float(gammaincc(0.5 * h, 0.5 * q))

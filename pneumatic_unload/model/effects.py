@@ -23,11 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.config import EFFECTS, RigConfig
+from pneumatic_unload.config import EFFECTS, RigConfig, TankSpec
 from pneumatic_unload.fit.params import Parameter, Parameters
 from pneumatic_unload.model.ode import integrate, valve_events
 from pneumatic_unload.model.sensor import sensor_response
-from pneumatic_unload.physics import AIR, RHO_N, T_N, Gas
+from pneumatic_unload.physics import RHO_N, T_N
 
 FloatArray = NDArray[np.float64]
 
@@ -35,37 +35,6 @@ FloatArray = NDArray[np.float64]
 #: p10, well under a Pa) stays far below the noise and below the finite-difference steps of
 #: the engine (:data:`pneumatic_unload.fit.lsq.DIFF_STEP`, ~1e-4 relative).
 FIT_RTOL = 1e-8
-
-
-@dataclass(frozen=True)
-class Tank:
-    """What is known about the tank and the gas (not fitted).
-
-    Attributes
-    ----------
-    volume : float
-        Tank volume V [m^3].
-    initial_temperature : float
-        T10 [K].
-    wall_temperature : float
-        Wall temperature [K] (the start when it is fitted).
-    length_diameter_ratio : float
-        Tank L/D [-].
-    atmosphere : float or None
-        p_atm [Pa absolute]; None: fitted.
-    gas : Gas
-        Gas properties.
-    fit_wall_temperature : bool
-        Fit the wall temperature with the heat-transfer effect.
-    """
-
-    volume: float
-    initial_temperature: float = T_N
-    wall_temperature: float = T_N
-    length_diameter_ratio: float = 2.0
-    atmosphere: float | None = 101325.0
-    gas: Gas = AIR
-    fit_wall_temperature: bool = False
 
 
 @dataclass(frozen=True)
@@ -157,7 +126,7 @@ class Effect:
     params: tuple[EffectParam, ...]
     off: Callable[[Start], Values]
     starts: Callable[[Start], list[Values]]
-    apply: Callable[[Values, Tank], dict[str, object]]
+    apply: Callable[[Values, TankSpec], dict[str, object]]
 
 
 def _fast(s: Start) -> list[float]:
@@ -168,14 +137,14 @@ def _small(s: Start) -> float:
     return max(s.tau * 0.01, 3 * s.dt)
 
 
-def _heat_fixed(v: Values, tank: Tank) -> dict[str, object]:
+def _heat_fixed(v: Values, tank: TankSpec) -> dict[str, object]:
     g = tank.gas
     h_a = v["p10"] * tank.volume / ((g.gamma - 1.0) * tank.initial_temperature * v["tau_heat"])
     return {"heat_transfer_mode": "fixed",
             "heat_transfer_coefficient": float(np.clip(h_a, 0.0, 1e4))}
 
 
-def _leak(v: Values, tank: Tank) -> dict[str, object]:
+def _leak(v: Values, tank: TankSpec) -> dict[str, object]:
     p_atm = v.get("p_atm", tank.atmosphere or 101325.0)
     g0 = v["C"] * RHO_N * v["p10"] * math.sqrt(T_N / tank.initial_temperature)
     k = v["leak_fraction"] * g0 / max(v["p10"] - p_atm, 1.0)
@@ -304,16 +273,18 @@ class ParametricModel:
     ----------
     effects : tuple of str
         Effects switched on (names of :data:`REGISTRY`).
-    tank : Tank
-        Known tank and gas data.
+    tank : TankSpec
+        Known tank and gas data (``atmosphere`` None: p_atm is fitted).
     start : Start
         Neutral values (centres of the fitted coordinates, bounds of t_open).
     heat_law : str
         Law of the heat-transfer effect: 'natural' or 'fixed' (:data:`HEAT_VARIANTS`).
+    fit_wall_temperature : bool
+        Fit the wall temperature with the heat-transfer effect (start: ``tank.wall``).
     """
 
-    def __init__(self, effects: tuple[str, ...], tank: Tank, start: Start, *,
-                 heat_law: str = "natural") -> None:
+    def __init__(self, effects: tuple[str, ...], tank: TankSpec, start: Start, *,
+                 heat_law: str = "natural", fit_wall_temperature: bool = False) -> None:
         bad = [e for e in effects if e not in REGISTRY]
         if bad:
             raise ValueError(f"unknown effect(s) {bad}; known: {', '.join(REGISTRY)}")
@@ -323,6 +294,7 @@ class ParametricModel:
         self.tank = tank
         self.start = start
         self.heat_law = heat_law
+        self.fit_wall_temperature = fit_wall_temperature
         self.records = tuple(HEAT_VARIANTS[heat_law] if e == "heat_transfer" else REGISTRY[e]
                              for e in self.effects)
         self.parameters = self._parameters()
@@ -349,9 +321,9 @@ class ParametricModel:
                 c = q.centre(s)
                 ps.append(Parameter(q.name, c, q.lo, q.hi, q.unit, log=q.log, scale=q.scale,
                                     doc=q.doc))
-            if rec.name == "heat_transfer" and self.tank.fit_wall_temperature:
+            if rec.name == "heat_transfer" and self.fit_wall_temperature:
                 q = WALL_TEMPERATURE
-                ps.append(Parameter(q.name, self.tank.wall_temperature, q.lo, q.hi, q.unit,
+                ps.append(Parameter(q.name, self.tank.wall, q.lo, q.hi, q.unit,
                                     scale=q.scale, doc=q.doc))
         return Parameters(ps)
 
@@ -364,16 +336,16 @@ class ParametricModel:
         """Values that switch ``effect`` (almost) off [SI]."""
         rec = self._record(effect)
         out = dict(rec.off(self.start))
-        if effect == "heat_transfer" and self.tank.fit_wall_temperature:
-            out["t_wall"] = self.tank.wall_temperature
+        if effect == "heat_transfer" and self.fit_wall_temperature:
+            out["t_wall"] = self.tank.wall
         return out
 
     def effect_starts(self, effect: str) -> list[Values]:
         """Starting values of an effect's parameters (small and large) [SI]."""
         rec = self._record(effect)
         out = rec.starts(self.start)
-        if effect == "heat_transfer" and self.tank.fit_wall_temperature:
-            out = [{**d, "t_wall": self.tank.wall_temperature} for d in out]
+        if effect == "heat_transfer" and self.fit_wall_temperature:
+            out = [{**d, "t_wall": self.tank.wall} for d in out]
         return out
 
     def _record(self, effect: str) -> Effect:
@@ -395,7 +367,7 @@ class ParametricModel:
             initial_pressure=float(np.clip(v["p10"], 1e4, 5e7)),
             initial_temperature=tank.initial_temperature,
             atmosphere=float(np.clip(p_atm, 1e3, 2e5)),
-            wall_temperature=float(v.get("t_wall", tank.wall_temperature)),
+            wall_temperature=float(v.get("t_wall", tank.wall)),
             gas_constant=gas.gas_constant, gamma=gas.gamma, effects=self.effects,
             pre_time=0.0, noise_std=0.0, **kw)  # type: ignore[arg-type]
 

@@ -44,7 +44,7 @@ def heat_flow_function(cfg: RigConfig) -> Callable[[float, float], float] | None
     """
     if not cfg.has("heat_transfer"):
         return None
-    t_wall = cfg.wall_temperature
+    t_wall = cfg.wall
     if cfg.heat_transfer_mode == "fixed":
         h_a = cfg.heat_transfer_coefficient
 
@@ -84,9 +84,9 @@ def thermal_time_constant(cfg: RigConfig, p: float, t_gas: float) -> float:
     q = heat_flow_function(cfg)
     if q is None:
         return math.inf
-    dt = cfg.wall_temperature - t_gas
-    probe = t_gas if abs(dt) > 1e-9 else cfg.wall_temperature - 10.0
-    h_a = q(p, probe) / (cfg.wall_temperature - probe)
+    dt = cfg.wall - t_gas
+    probe = t_gas if abs(dt) > 1e-9 else cfg.wall - 10.0
+    h_a = q(p, probe) / (cfg.wall - probe)
     gas = cfg.gas
     m_cv = p * cfg.volume / (gas.gas_constant * t_gas) * gas.gas_constant / (gas.gamma - 1.0)
     return m_cv / h_a if h_a > 0 else math.inf

@@ -117,7 +117,7 @@ def right_hand_side(cfg: RigConfig, t_open: float
     cp = gas.cp
     vol = cfg.volume
     p_atm = cfg.atmosphere
-    t_wall = cfg.wall_temperature
+    t_wall = cfg.wall
     b, m = cfg.critical_ratio, cfg.subsonic_index
     c_rho = cfg.conductance * RHO_N
     leak = cfg.leak_coefficient if cfg.has("leak") else 0.0

@@ -5,7 +5,6 @@ Nodes stay thin: they convert messages, hold parameters and call the ROS-free co
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -28,7 +27,8 @@ from rclpy.qos import (
     ReliabilityPolicy,
 )
 
-from pneumatic_unload.config import EFFECTS, ConfigError, RigConfig
+from pneumatic_unload.config import ConfigError, RigConfig, adapters
+from pneumatic_unload.config.adapters import ParameterSpec
 
 #: Pressure samples: reliable, deep history (the subscriber's callback is the bottleneck).
 PRESSURE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
@@ -69,36 +69,28 @@ def ns_to_seconds(ns: int) -> float:
 
 
 # --------------------------------------------------------------------------- parameters
-def rig_parameter_descriptors() -> dict[str, tuple[Any, ParameterDescriptor]]:
-    """ROS parameter (default, descriptor) of every RigConfig field.
+def descriptor(spec: ParameterSpec) -> ParameterDescriptor:
+    """ParameterDescriptor of a settings field (its range, unit and meaning)."""
+    kinds = {"double": ParameterType.PARAMETER_DOUBLE, "integer": ParameterType.PARAMETER_INTEGER,
+             "string": ParameterType.PARAMETER_STRING, "bool": ParameterType.PARAMETER_BOOL}
+    d = ParameterDescriptor(name=spec.name, type=kinds[spec.kind], description=spec.description)
+    if spec.kind == "double" and spec.lo is not None and spec.hi is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(spec.lo),
+                                                     to_value=float(spec.hi), step=0.0)]
+    elif spec.kind == "integer" and spec.lo is not None and spec.hi is not None:
+        d.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi), step=1)]
+    return d
 
-    Numbers get a FloatingPointRange/IntegerRange from the field's bounds; ``effects`` is a
-    comma-separated string of effect names; choice fields list their choices.
-    """
-    out: dict[str, tuple[Any, ParameterDescriptor]] = {}
-    for f in dataclasses.fields(RigConfig):
-        md = f.metadata
-        unit = f" [{md['unit']}]" if md.get("unit") else ""
-        if f.name == "effects":
-            out[f.name] = ("", ParameterDescriptor(
-                name=f.name, type=ParameterType.PARAMETER_STRING,
-                description=f"{md['doc']}: comma-separated, from {', '.join(EFFECTS)}"))
-        elif "choices" in md:
-            out[f.name] = (f.default, ParameterDescriptor(
-                name=f.name, type=ParameterType.PARAMETER_STRING,
-                description=f"{md['doc']} (one of {', '.join(md['choices'])})"))
-        elif f.name == "seed":
-            out[f.name] = (int(f.default), ParameterDescriptor(
-                name=f.name, type=ParameterType.PARAMETER_INTEGER, description=md["doc"],
-                integer_range=[IntegerRange(from_value=int(md["min"]), to_value=int(md["max"]),
-                                            step=1)]))
-        else:
-            out[f.name] = (float(f.default), ParameterDescriptor(
-                name=f.name, type=ParameterType.PARAMETER_DOUBLE,
-                description=f"{md['doc']}{unit}",
-                floating_point_range=[FloatingPointRange(
-                    from_value=float(md["min"]), to_value=float(md["max"]), step=0.0)]))
-    return out
+
+def settings_parameters(cls: type, **kw: Any) -> dict[str, tuple[Any, ParameterDescriptor]]:
+    """ROS parameter (default, descriptor) of every field of a settings class
+    (:func:`pneumatic_unload.config.adapters.parameter_specs`; ``kw`` as there)."""
+    return {n: (s.default, descriptor(s)) for n, s in adapters.parameter_specs(cls, **kw).items()}
+
+
+def rig_parameter_descriptors() -> dict[str, tuple[Any, ParameterDescriptor]]:
+    """ROS parameter (default, descriptor) of every RigConfig field."""
+    return settings_parameters(RigConfig)
 
 
 def double_param(description: str, lo: float, hi: float) -> ParameterDescriptor:
@@ -127,8 +119,7 @@ def bool_param(description: str) -> ParameterDescriptor:
 
 def rig_config_from(values: dict[str, Any]) -> RigConfig:
     """RigConfig from ROS parameter values (raises ConfigError with the reason)."""
-    names = {f.name for f in dataclasses.fields(RigConfig)}
-    return RigConfig.from_dict({k: v for k, v in values.items() if k in names})
+    return RigConfig(**adapters.from_parameters(RigConfig, values))
 
 
 def validating_callback(check: Callable[[dict[str, Any]], str]

@@ -44,14 +44,15 @@ from sensor_msgs.msg import FluidPressure, Temperature
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
+from pneumatic_unload.config import adapters
 from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
     StreamingEstimator,
     UnloadResult,
+    estimate_fields,
 )
 from pneumatic_unload.nodes import common
-from pneumatic_unload.runs import estimate_fields, settings_json
 
 #: Node states reported on /diagnostics and in the action's feedback.
 STATES = ("waiting", "unloading", "done", "error")
@@ -94,23 +95,11 @@ class EstimatorNode(Node):
 
         self._Measure = Measure
         self._UnloadEstimate = UnloadEstimate
-        d, i, s, b = common.double_param, common.int_param, common.str_param, common.bool_param
+        d, s, b = common.double_param, common.str_param, common.bool_param
         params: dict[str, tuple[Any, Any]] = {
-            "volume": (5e-3, d("tank volume V [m^3]", 1e-7, 10.0)),
-            "initial_temperature": (293.15, d("initial gas temperature T10 [K]", 150.0, 600.0)),
+            **common.settings_parameters(EstimatorSettings),
             "temperature_from_topic": (False, b(
                 "T10 from /tank/temperature (last value before the unload)")),
-            "atmosphere": (101325.0, d(
-                "atmospheric pressure [Pa absolute]; 0: from the final plateau", 0.0, 2e5)),
-            "length_diameter_ratio": (2.0, d("tank L/D [-]", 0.1, 50.0)),
-            "wall_temperature": (0.0, d("wall temperature [K]; 0: equal to T10", 0.0, 600.0)),
-            "heat_model": ("natural", s("model-based C: 'natural' or 'adiabatic'")),
-            "critical_ratio": (0.5, d("b assumed at the crossing inversion [-]", 0.0, 0.99)),
-            "signal_gain": (1.0, d("Pa per unit of input signal (1: input in Pa)", -1e12, 1e12)),
-            "signal_offset": (0.0, d("Pa at zero input signal", -1e9, 1e9)),
-            "trigger_sigma": (8.0, d("trigger drop in noise standard deviations", 1.0, 1000.0)),
-            "min_plateau": (32, i("pre-step plateau samples needed", 4, 1_000_000)),
-            "curve_fit": (True, b("full-curve fit (C, b) once the unload's tail is recorded")),
             "pressure_topic": ("/tank/pressure", s("pressure topic (FluidPressure)")),
             "block_topic": ("/tank/pressure_block", s("pressure block topic (PressureBlock)")),
             "input": ("sample", s("'sample': FluidPressure per sample; 'block': PressureBlock")),
@@ -166,7 +155,7 @@ class EstimatorNode(Node):
         self._pub_est = self.create_publisher(UnloadEstimate, "~/estimate", common.LATCHED_QOS)
         self._pub_settings = self.create_publisher(String, "~/settings", common.LATCHED_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self._pub_settings.publish(String(data=settings_json(self._settings)))
+        self._pub_settings.publish(String(data=adapters.to_json(self._settings)))
         self._valve_client = None
         self._goal_lock = threading.Lock()
         self._active_goal = False
@@ -191,14 +180,10 @@ class EstimatorNode(Node):
         return self.get_parameter(name).value
 
     def _settings_from(self, changes: dict[str, Any]) -> EstimatorSettings:
-        v = {n: self._p(n) for n in (
-            "volume", "initial_temperature", "atmosphere", "length_diameter_ratio",
-            "wall_temperature", "heat_model", "critical_ratio", "signal_gain", "signal_offset",
-            "trigger_sigma", "min_plateau", "curve_fit")}
+        names = adapters.parameter_specs(EstimatorSettings)
+        v = {n: self._p(n) for n in names}
         v.update({k: val for k, val in changes.items() if k in v})
-        v["atmosphere"] = v["atmosphere"] if v["atmosphere"] > 0 else None
-        v["wall_temperature"] = v["wall_temperature"] if v["wall_temperature"] > 0 else None
-        return EstimatorSettings(**v)
+        return EstimatorSettings(**adapters.from_parameters(EstimatorSettings, v))
 
     def _check(self, changes: dict[str, Any]) -> str:
         fixed = {"pressure_topic", "block_topic", "input", "qos", "frame_id", "diagnostics_period"}
@@ -214,7 +199,7 @@ class EstimatorNode(Node):
                     return "an unload is being analysed; change settings when it is done"
                 self._settings = new
                 self._est.settings = new
-            self._pub_settings.publish(String(data=settings_json(new)))
+            self._pub_settings.publish(String(data=adapters.to_json(new)))
         return ""
 
     # ------------------------------------------------------------------ input
@@ -259,7 +244,7 @@ class EstimatorNode(Node):
                         t - self._settings.initial_temperature) > 1e-6:
                     self._settings = dataclasses.replace(self._settings, initial_temperature=t)
                     self._est.settings = self._settings
-                    self._pub_settings.publish(String(data=settings_json(self._settings)))
+                    self._pub_settings.publish(String(data=adapters.to_json(self._settings)))
 
     # ------------------------------------------------------------------ worker
     def _work(self) -> None:

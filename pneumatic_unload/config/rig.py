@@ -1,0 +1,144 @@
+"""The simulated rig: the tank (:class:`~pneumatic_unload.config.tank.TankSpec`), the
+component, the real-rig effects and the pressure sensor.
+
+:class:`RigConfig` is a frozen dataclass whose fields carry their unit, bounds and
+description in ``field.metadata``. The simulator node declares its ROS parameters from it,
+the ``pneumatic-unload simulate`` command builds its options from it (both through
+:mod:`pneumatic_unload.config.adapters`), and bags store it as JSON so that offline analysis
+needs no extra arguments. SI units throughout.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from typing import Any
+
+from pneumatic_unload.config.fields import (
+    ConfigError,
+    choice,
+    describe,
+    integer,
+    names,
+    number,
+    parse_names,
+    validate,
+)
+from pneumatic_unload.config.tank import TankSpec
+from pneumatic_unload.physics import orifice_conductance
+
+#: Names of the switchable real-rig effects of the discharge model.
+EFFECTS: tuple[str, ...] = (
+    "heat_transfer",
+    "valve_opening",
+    "sensor_lag",
+    "leak",
+    "pipe_volume",
+    "sensor_offset",
+    "sensor_gain",
+)
+
+
+@dataclass(frozen=True)
+class RigConfig(TankSpec):
+    """A tank-discharge rig: tank, component, gas, effects and sensor.
+
+    Every numeric field is SI; see ``RigConfig.describe()`` for units, ranges and meaning.
+    ``effects`` names the real-rig effects switched on (a subset of :data:`EFFECTS`); the
+    parameters of effects that are off are ignored.
+    """
+
+    # --- tank and component
+    conductance: float = number(
+        orifice_conductance(1.5e-3), "m^3/(s Pa)", 1e-13, 1e-5,
+        "sonic conductance C of the component under test")
+    critical_ratio: float = number(0.4, "-", 0.0, 0.99, "critical pressure ratio b")
+    subsonic_index: float = number(0.5, "-", 0.1, 1.0, "ISO 6358 subsonic index m")
+    initial_pressure: float = number(7e5, "Pa", 1e4, 5e7, "initial tank pressure p10 (absolute)")
+    # --- switchable effects
+    effects: tuple[str, ...] = names((), EFFECTS, "real-rig effects switched on (names)")
+    heat_transfer_mode: str = choice(
+        "natural", ("natural", "fixed"),
+        "wall heat transfer: natural-convection correlation or fixed h*A")
+    heat_transfer_coefficient: float = number(
+        1.0, "W/K", 0.0, 1e4, "wall conductance h*A when heat_transfer_mode is fixed")
+    heat_transfer_scale: float = number(
+        1.0, "-", 0.0, 100.0, "multiplier on the natural-convection correlation")
+    valve_opening_time: float = number(
+        0.02, "s", 0.0, 10.0, "valve opening: linear ramp of the effective area")
+    sensor_lag: float = number(0.01, "s", 0.0, 10.0, "first-order time constant of the sensor")
+    leak_coefficient: float = number(
+        2e-10, "kg/(s Pa)", 0.0, 1e-5, "laminar leak to atmosphere: G = K (p - p_atm)")
+    pipe_volume: float = number(5e-4, "m^3", 0.0, 10.0, "volume between tank and component")
+    pipe_conductance: float = number(
+        1e-8, "m^3/(s Pa)", 1e-13, 1e-5, "sonic conductance of the pipe/fittings in series")
+    sensor_offset: float = number(3000.0, "Pa", -1e6, 1e6, "transducer zero offset")
+    sensor_gain: float = number(0.01, "-", -0.5, 0.5, "transducer relative gain error")
+    # --- timing and valve schedule
+    rate: float = number(1000.0, "Hz", 1.0, 100_000.0, "sample rate")
+    pre_time: float = number(0.2, "s", 0.0, 3600.0, "time recorded before the valve opens")
+    duration: float = number(
+        0.0, "s", 0.0, 36_000.0, "time recorded after the valve opens (0: automatic)")
+    valve_close_time: float = number(
+        0.0, "s", 0.0, 36_000.0,
+        "close the valve this long after opening: an aborted unload (0: never)")
+    # --- sensor imperfections
+    noise_std: float = number(1000.0, "Pa", 0.0, 1e6, "white noise standard deviation")
+    noise_ar_rho: float = number(0.0, "-", 0.0, 0.999, "AR(1) coefficient of correlated noise")
+    noise_ar_std: float = number(0.0, "Pa", 0.0, 1e6, "stationary std of the AR(1) noise")
+    quantization: float = number(0.0, "Pa", 0.0, 1e5, "quantisation step (0: none)")
+    full_scale: float = number(
+        0.0, "Pa", 0.0, 1e8, "sensor saturates above this absolute pressure (0: never)")
+    transducer_zero: float = number(0.0, "V", -100.0, 100.0, "transducer output at 0 Pa absolute")
+    transducer_sensitivity: float = number(
+        1e-5, "V/Pa", 1e-12, 1.0, "transducer sensitivity (for volts output)")
+    seed: int = integer(0, 0, 2**31 - 1, "random seed of the sensor noise")
+
+    def __post_init__(self) -> None:
+        """Validate ranges and effect names (raises :class:`ConfigError`)."""
+        validate(self)
+        if self.atmosphere is None:
+            raise ConfigError("a simulated rig needs its atmosphere [Pa absolute]")
+
+    def has(self, effect: str) -> bool:
+        """True when ``effect`` is switched on."""
+        return effect in self.effects
+
+    def replace(self, **changes: Any) -> RigConfig:
+        """A copy with ``changes`` applied (validated)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict (JSON-ready; effects as a list)."""
+        d = dataclasses.asdict(self)
+        d["effects"] = list(self.effects)
+        return d
+
+    def to_json(self) -> str:
+        """JSON text of :meth:`to_dict`."""
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], *, strict: bool = True) -> RigConfig:
+        """Build from a dict; unknown keys raise :class:`ConfigError` when ``strict``."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown and strict:
+            raise ConfigError(f"unknown configuration key(s): {', '.join(unknown)}")
+        kw = {k: v for k, v in d.items() if k in names}
+        if "effects" in kw:
+            kw["effects"] = parse_names(kw["effects"])
+        if "seed" in kw:
+            kw["seed"] = int(kw["seed"])
+        return cls(**kw)
+
+    @classmethod
+    def describe(cls) -> list[dict[str, Any]]:
+        """One dict per field: name, default, kind, unit, min/max or choices, doc."""
+        return describe(cls)
+
+
+def parse_effects(value: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
+    """Effect names from a comma-separated string or a sequence ('' or 'none': none)."""
+    return parse_names(value)
