@@ -439,7 +439,8 @@ def refine_with_curve_fit(
                 f"flow subsonic before p* with the fitted b = {b:.3f} (p* = {res.p_star:.0f}"
                 f" Pa < p_atm/b = {limit:.0f} Pa): eq 39 assumes choked flow")
     return dataclasses.replace(
-        res, final=True, status=status, status_text=text, conductance_model=fit.conductance, conductance_model_std=c_std,
+        res, final=True, status=status, status_text=text, conductance_model=fit.conductance,
+        conductance_model_std=c_std,
         t_start_model=fit.t_start, tau_exp_model=fitted_tau_exp(fit, settings, res.tau_exp),
         critical_ratio=fit.critical_ratio, critical_ratio_std=fit.critical_ratio_std,
         method=res.method + "+curve-fit", extra=extra,

@@ -88,7 +88,7 @@ def fit_recovery(t: FloatArray, p: FloatArray, t_close: float, *, max_points: in
     dD/dt = -(D0/tau) (D/D0)^n: n = 1 for a constant h A, n = 1.25 for laminar natural
     convection (h proportional to dT^0.25), n = 4/3 turbulent. p_inf and D0 enter linearly:
     a grid over tau with the linear pair solved exactly finds the basin, the engine's
-    least squares (:func:`pneumatic_unload.fit.lsq.minimize`, with its polish) refines all
+    least squares (:func:`pneumatic_unload.fit.lsq.minimize`, to the exact minimum) refines all
     four, and the 1-sigma of p_inf comes from the Jacobian with n free (under its prior),
     so that an unfinished recovery is extrapolated with an honest uncertainty.
 

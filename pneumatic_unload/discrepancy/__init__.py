@@ -14,13 +14,29 @@ and :mod:`~pneumatic_unload.discrepancy.report` (the engineer's report). The eff
 their parameters are the model's registry, :mod:`pneumatic_unload.model.effects`.
 """
 
-from pneumatic_unload.discrepancy.intervals import GEOMETRY_FACTOR
+from typing import Any
+
 from pneumatic_unload.discrepancy.types import (
     DiscrepancyError,
     DiscrepancyResult,
     DiscrepancySettings,
 )
-from pneumatic_unload.discrepancy.workflow import find_discrepancy, find_discrepancy_runs
+
+#: Names loaded on first use (PEP 562): the workflow pulls in the fitting engine, which
+#: the command line does not need to build its options.
+_LAZY = {"GEOMETRY_FACTOR": "pneumatic_unload.discrepancy.intervals",
+         "find_discrepancy": "pneumatic_unload.discrepancy.workflow",
+         "find_discrepancy_runs": "pneumatic_unload.discrepancy.workflow"}
+
+
+def __getattr__(name: str) -> Any:
+    """Load the workflow's names on first use."""
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "GEOMETRY_FACTOR",

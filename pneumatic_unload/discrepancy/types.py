@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,10 +15,12 @@ from numpy.typing import NDArray
 from pneumatic_unload.config import EFFECTS, TankSpec
 from pneumatic_unload.config.fields import ConfigError, flag, integer, names, number, validate
 from pneumatic_unload.estimation import EstimatorSettings
-from pneumatic_unload.fit.lsq import FitResult
-from pneumatic_unload.fit.noise import NoiseModel
-from pneumatic_unload.fit.profile import Interval
-from pneumatic_unload.model.effects import ParametricModel
+
+if TYPE_CHECKING:  # annotations only: the settings stay importable without the engine
+    from pneumatic_unload.fit.lsq import FitResult
+    from pneumatic_unload.fit.noise import NoiseModel
+    from pneumatic_unload.fit.profile import Interval
+    from pneumatic_unload.model.effects import ParametricModel
 
 FloatArray = NDArray[np.float64]
 

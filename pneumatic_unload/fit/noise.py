@@ -38,7 +38,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import gammaincc, gammainccinv
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -200,6 +199,8 @@ def highpass_noise(y: FloatArray, rho: float, k_open: int, *,
     rss = np.einsum("ij,jk,ik->i", seg, m, seg)
     first = np.arange(nw) * window
     keep = (first > k_open + window) | (first + window < k_open - window)
+    from scipy.special import gammainccinv  # local: ~0.3 s to import, the estimator needs none
+
     limit = float(2.0 * gammainccinv(0.5 * dof, HIGHPASS_OUTLIER_P)) / dof
     for _ in range(10):
         if np.count_nonzero(keep) < HIGHPASS_MIN_WINDOWS:
@@ -342,4 +343,6 @@ def ljung_box(x: FloatArray, lags: int = 20) -> tuple[float, float]:
         return math.nan, math.nan
     r = np.array([float(x[k:] @ x[:-k]) / den for k in range(1, h + 1)])
     q = n * (n + 2) * float(np.sum(r * r / (n - np.arange(1, h + 1))))
+    from scipy.special import gammaincc  # local: ~0.3 s to import
+
     return q, float(gammaincc(0.5 * h, 0.5 * q))

@@ -14,7 +14,6 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter
 
 from pneumatic_unload.config import RigConfig
 
@@ -71,6 +70,8 @@ def first_order_lag(t: FloatArray, u: FloatArray, tau: float,
             zi = np.array([(1.0 - b0) * float(u[0])])
         else:
             zi = np.array([a * y_prev + b1 * u_prev])
+        from scipy.signal import lfilter  # local: scipy.signal costs ~0.8 s to import
+
         y, _ = lfilter([b0, b1], [1.0, -a], u, zi=zi)
     else:
         y = np.empty_like(u)
@@ -160,6 +161,8 @@ class SensorChain:
                 zi = np.zeros(1)
             else:
                 zi = np.array([rho * self._ar])
+            from scipy.signal import lfilter  # local: scipy.signal costs ~0.8 s to import
+
             ar, _ = lfilter([1.0], [1.0, -rho], w, zi=zi)
             self._ar = float(ar[-1])
             e += ar
