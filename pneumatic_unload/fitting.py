@@ -35,7 +35,7 @@ from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.fit.uncertainty import residual_inflation
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import ParametricModel, Start
-from pneumatic_unload.physics import P_STAR_FRACTION, tau_exp_eq38
+from pneumatic_unload.physics import P_STAR_FRACTION, isentropic_crossing_time, tau_exp_eq38
 
 if TYPE_CHECKING:
     from pneumatic_unload.estimation import EstimatorSettings, UnloadResult
@@ -216,6 +216,124 @@ def invert_crossing(
         tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
         var += (c * (tm / tau_exp - 1.0)) ** 2
     return c, math.sqrt(var)
+
+
+#: Grid of the inversion table: points and half-width in log C around the guess [-].
+TABLE_POINTS, TABLE_SPAN = 7, 0.7
+
+
+@dataclass(frozen=True)
+class InversionTable:
+    """The model's crossing time t(C) tabulated before the crossing, so that the inversion
+    at the crossing is a lookup (the live estimator publishes it at that sample).
+
+    Built when the pressure is half way to p* (:func:`inversion_table`): V, T10, p10, p_atm
+    and p* are known then, and the time so far gives C to within the bias of eq 39 (a few
+    tens of per cent), which a grid of :data:`TABLE_POINTS` values of C over
+    exp(+-:data:`TABLE_SPAN`) around it covers. log C is interpolated as a cubic in
+    log t through the four nearest points (the curve is nearly a line of slope -1: exactly
+    so without heat transfer), which reproduces the iterative inversion to ~1e-7.
+
+    Attributes
+    ----------
+    log_c, log_t : ndarray
+        Grid: log C [log m^3/(s Pa)] and log of the model's crossing time [log s]
+        (decreasing).
+    rel_heat : ndarray
+        Relative change of the crossing time when the natural-convection correlation is
+        :data:`HEAT_CORRELATION_REL_STD` stronger [-] at the first, middle and last grid
+        points (zeros when adiabatic); interpolated linearly in log C.
+    rel_b : float
+        Largest relative change of the crossing time for b one prior sigma either way [-]
+        (0 when the flow stays choked to p* for every plausible b).
+    """
+
+    log_c: FloatArray
+    log_t: FloatArray
+    rel_heat: FloatArray
+    rel_b: float
+
+    def covers(self, tau: float) -> bool:
+        """True when tau [s] lies inside the tabulated range."""
+        return bool(math.isfinite(tau) and tau > 0
+                    and self.log_t[-1] <= math.log(tau) <= self.log_t[0])
+
+    def invert(self, tau: float, tau_std: float) -> tuple[float, float]:
+        """C and its 1-sigma [m^3/(s Pa)] for a measured tau_exp and its 1-sigma [s]."""
+        y = math.log(tau)
+        k = int(np.searchsorted(-self.log_t, -y))
+        j = min(max(k - 2, 0), self.log_t.size - 4)
+        ys, xs = self.log_t[j:j + 4], self.log_c[j:j + 4]
+        x, dxdy = 0.0, 0.0
+        for a in range(4):  # Lagrange cubic x(y) and its derivative
+            others = [ys[b] for b in range(4) if b != a]
+            den = float(np.prod([ys[a] - o for o in others]))
+            num = float(np.prod([y - o for o in others]))
+            dnum = sum(float(np.prod([y - o for o in others if o is not skip]))
+                       for skip in others)
+            x += xs[a] * num / den
+            dxdy += xs[a] * dnum / den
+        c = math.exp(x)
+        ends = self.log_c[[0, self.log_c.size // 2, -1]]
+        rel_heat = float(np.interp(x, ends, self.rel_heat))
+        var = (c * dxdy * tau_std / tau) ** 2 + (c * self.rel_b) ** 2 + (c * rel_heat) ** 2
+        return c, math.sqrt(var)
+
+
+def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_star: float,
+                    c_guess: float) -> InversionTable | None:
+    """Tabulate the model's crossing time around ``c_guess`` (see :class:`InversionTable`).
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Tank, gas and heat model.
+    p10, p_atm, p_star : float
+        Pressures [Pa absolute].
+    c_guess : float
+        Expected C [m^3/(s Pa)] (e.g. the isentropic inversion half way to p*).
+
+    Returns
+    -------
+    InversionTable or None
+        None when a crossing time cannot be computed (the model never reaches p*).
+    """
+    if not (math.isfinite(c_guess) and c_guess > 0):
+        return None
+    gas, vol, t10 = settings.gas, settings.volume, settings.initial_temperature
+    log_c = math.log(c_guess) + np.linspace(-TABLE_SPAN, TABLE_SPAN, TABLE_POINTS)
+    times = []
+    for lc in log_c:
+        c = math.exp(lc)
+        guess = isentropic_crossing_time(p_star, p10, vol, c, t10, gas)
+        cfg = rig_from_settings(settings, conductance=c, p10=p10, p_atm=p_atm)
+        tm = model_crossing_time(cfg, p_star, guess, rtol=INVERSION_ODE_RTOL)
+        if not (math.isfinite(tm) and tm > 0):
+            return None
+        times.append(tm)
+    log_t = np.log(np.array(times))
+    if not np.all(np.diff(log_t) < 0):
+        return None
+    t_mid = times[TABLE_POINTS // 2]
+    rel_b = 0.0
+    rel_heat = np.zeros(3)
+    if settings.heat_model == "natural":
+        for j, g in enumerate((0, TABLE_POINTS // 2, TABLE_POINTS - 1)):
+            cfg = rig_from_settings(settings, conductance=math.exp(log_c[g]), p10=p10,
+                                    p_atm=p_atm, heat_scale=1.0 + HEAT_CORRELATION_REL_STD)
+            tm = model_crossing_time(cfg, p_star, times[g], rtol=INVERSION_ODE_RTOL)
+            rel_heat[j] = abs(tm / times[g] - 1.0) if math.isfinite(tm) else math.inf
+    if may_turn_subsonic(settings, p_atm, p_star):
+        b0, b_sd = settings.critical_ratio, CRITICAL_RATIO_PRIOR_STD
+        for b in (b0 - b_sd, b0 + b_sd):
+            if 0.0 < b < 0.99:
+                cfg = rig_from_settings(settings, conductance=c_guess, p10=p10,
+                                        p_atm=p_atm, critical_ratio=b)
+                tm = model_crossing_time(cfg, p_star, t_mid, rtol=INVERSION_ODE_RTOL)
+                if math.isfinite(tm):
+                    rel_b = max(rel_b, abs(tm / t_mid - 1.0))
+    return InversionTable(log_c=np.asarray(log_c), log_t=log_t, rel_heat=rel_heat,
+                          rel_b=rel_b)
 
 
 @dataclass(frozen=True)

@@ -11,11 +11,46 @@ from typing import Any
 
 import numpy as np
 
+from pneumatic_unload import physics
 from pneumatic_unload.estimation.types import EstimatorSettings, FloatArray, UnloadResult
 
 
+def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
+    """True when the model-based C needs the discharge model (not the closed form): heat
+    transfer, or a flow that may turn subsonic before p* (pressures [Pa absolute])."""
+    from pneumatic_unload.fitting import may_turn_subsonic  # local: keeps import light
+
+    return settings.heat_model != "adiabatic" or may_turn_subsonic(settings, p_atm, p_star)
+
+
+def prepare_inversion(settings: EstimatorSettings, t_mid: float, p_mid: float, p10: float,
+                      p_atm: float, p_star: float) -> Any:
+    """The inversion table, built when the pressure is half way to p* (a few model
+    integrations, so that the crossing itself is a lookup); None when it cannot be built.
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Tank, gas and heat-model settings.
+    t_mid : float
+        Time from the start to the half-way pressure [s].
+    p_mid, p10, p_atm, p_star : float
+        Half-way, initial, atmospheric and crossing pressures [Pa absolute].
+    """
+    from pneumatic_unload.fitting import inversion_table
+
+    c_guess = physics.conductance_isentropic_inversion(
+        t_mid, p_mid, p10, settings.volume, settings.initial_temperature, settings.gas)
+    try:
+        return inversion_table(settings, p10=p10, p_atm=p_atm, p_star=p_star,
+                               c_guess=c_guess)
+    except (ValueError, ArithmeticError):
+        return None
+
+
 def model_inversion(settings: EstimatorSettings, tau: float, tau_std: float, p10: float,
-                    p_atm: float, p_star: float, c_isen: float) -> tuple[float, float, str]:
+                    p_atm: float, p_star: float, c_isen: float, table: Any = None
+                    ) -> tuple[float, float, str]:
     """Model-based C: exact inversion of the discharge model at the crossing.
 
     Parameters
@@ -28,6 +63,8 @@ def model_inversion(settings: EstimatorSettings, tau: float, tau_std: float, p10
         Initial, atmospheric and crossing pressures [Pa absolute].
     c_isen : float
         Isentropic-inversion C, the start value [m^3/(s Pa)].
+    table : InversionTable, optional
+        Crossing times tabulated before the crossing: a lookup when it covers tau.
 
     Returns
     -------
@@ -41,8 +78,11 @@ def model_inversion(settings: EstimatorSettings, tau: float, tau_std: float, p10
         c = c_isen
         std = c * tau_std / tau
         return c, std, "eq39+isentropic-inversion"
-    c, std = invert_crossing(
-        tau, tau_std, p10=p10, p_atm=p_atm, p_star=p_star, settings=settings, c_start=c_isen)
+    if table is not None and table.covers(tau):
+        c, std = table.invert(tau, tau_std)
+    else:
+        c, std = invert_crossing(tau, tau_std, p10=p10, p_atm=p_atm, p_star=p_star,
+                                 settings=settings, c_start=c_isen)
     law = "natural-convection" if settings.heat_model == "natural" else "adiabatic"
     return c, std, f"eq39+model-inversion({law})"
 

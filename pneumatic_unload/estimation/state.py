@@ -63,7 +63,12 @@ class UnloadState:
     rec_span : int
         Samples covered by the last recovery fit [-].
     rec_fit : Any
-        Last recovery fit (:func:`pneumatic_unload.fitting.fit_recovery`), or None.
+        Last recovery fit (:func:`pneumatic_unload.recovery.fit_recovery`), or None.
+    mid_pending : bool
+        The inversion table is still to be built, when the pressure is half way to p*.
+    table : Any
+        The model's crossing times tabulated half way to p*
+        (:class:`pneumatic_unload.fitting.InversionTable`), or None.
     """
 
     trigger: int
@@ -84,6 +89,8 @@ class UnloadState:
     i_close: int = -1
     rec_span: int = 0
     rec_fit: Any = None
+    mid_pending: bool = False
+    table: Any = None
 
 
 class EstimatorState:

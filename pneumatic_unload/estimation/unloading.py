@@ -22,7 +22,7 @@ from pneumatic_unload.estimation.decisions import (
     settled_at_end,
     stalled,
 )
-from pneumatic_unload.estimation.refine import model_inversion
+from pneumatic_unload.estimation.refine import model_inversion, needs_model, prepare_inversion
 from pneumatic_unload.estimation.regression import crossing_fit, hinge_fit, rms_sigma
 from pneumatic_unload.estimation.sse import on_abort
 from pneumatic_unload.estimation.state import TAIL, EstimatorState
@@ -84,10 +84,26 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     u.refined = True
     if st.settings.atmosphere is not None:
         st.set_pstar(u.atm)
+        if needs_model(st.settings, st.to_pa(u.atm), st.to_pa(u.pstar)):
+            # first stop half way to p*: tabulate the model there, so that the crossing
+            # estimate is a lookup when its sample arrives
+            u.mid_pending = True
+            st.level = u.p10 - 0.5 * (u.p10 - u.pstar)
     else:
         u.pstar = math.nan
         st.level = -math.inf
     st.next_check = i + PERIOD
+    return []
+
+
+def prepare_crossing(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """Half way to p* (index i): tabulate the model's crossing time, then wait for p*."""
+    u = st.unload
+    u.mid_pending = False
+    t_mid = float(st.buf.t[i]) - u.t0
+    u.table = prepare_inversion(st.settings, t_mid, st.to_pa(float(st.buf.p[i])),
+                                st.to_pa(u.p10), st.to_pa(u.atm), st.to_pa(u.pstar))
+    st.level = u.pstar - u.half
     return []
 
 
@@ -110,6 +126,8 @@ def step_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
             st.next_check = i + PERIOD  # the stall test needs the start fit
         return []
     if below(p, st.level) and math.isfinite(u.pstar):
+        if u.mid_pending:
+            return prepare_crossing(st, i)
         return complete_crossing(st, i)
     if i == st.next_check:
         st.next_check = i + PERIOD
@@ -230,7 +248,8 @@ def crossing_result(st: EstimatorState, i: int, t_cross: float, t_std: float, ga
             f"flow subsonic before p* (p* = {p_star:.0f} Pa < p_atm/b = "
             f"{p_atm / s.critical_ratio:.0f} Pa): eq 39 assumes choked flow")
         quality = 0.5
-    c_model, c_model_std, method = model_inversion(s, tau, tau_std, p10, p_atm, p_star, c_isen)
+    c_model, c_model_std, method = model_inversion(s, tau, tau_std, p10, p_atm, p_star, c_isen,
+                                                   table=u.table)
     if gap or st.gap_in_unload:
         text += "; gap in the samples during the unload"
         quality = min(quality, 0.5)
