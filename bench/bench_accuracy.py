@@ -218,8 +218,7 @@ def start(n: int, seed: int = 300, pre_times: tuple[float, ...] = (0.2, 5.0)) ->
                                      curve_fit=False)
             r = analyze(sim.t, sim.measured, st)[0]
             fit = fit_curve(sim.t, sim.measured, st, t_start=r.t_start, p10=r.p10,
-                            p_atm=r.p_atm, conductance=r.conductance_model,
-                            max_points=20000)
+                            p_atm=r.p_atm, conductance=r.conductance_model)
             sd_t0, sd_tau = crlb(cfg, sim.t)
             tau_fit = fitted_tau_exp(fit, st, r.tau_exp)
             tau_true = true_crossing(sim, cfg.atmosphere)
