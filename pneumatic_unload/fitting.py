@@ -22,12 +22,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config import RigConfig
+from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.fit.likelihood import make_bins
 from pneumatic_unload.fit.noise import NoiseModel
 from pneumatic_unload.fit.profile import valley_std
@@ -36,9 +36,6 @@ from pneumatic_unload.fit.uncertainty import residual_inflation
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import ParametricModel, Start
 from pneumatic_unload.physics import P_STAR_FRACTION, isentropic_crossing_time, tau_exp_eq38
-
-if TYPE_CHECKING:
-    from pneumatic_unload.estimation import EstimatorSettings, UnloadResult
 
 FloatArray = NDArray[np.float64]
 
@@ -508,58 +505,3 @@ def fitted_tau_exp(fit: CurveFit, settings: EstimatorSettings, t_guess: float) -
         return float(tt[j - 1] + (pp[j - 1] - ps) / (pp[j - 1] - pp[j]) * (tt[j] - tt[j - 1]))
     except ValueError:
         return math.nan
-
-
-def refine_with_curve_fit(
-    res: UnloadResult, t: FloatArray, p: FloatArray, settings: EstimatorSettings,
-    *, noise_std: float,
-) -> UnloadResult | None:
-    """Final result of an unload: the crossing result refined by :func:`fit_curve`.
-
-    Parameters
-    ----------
-    res : UnloadResult
-        The estimate published at the p* crossing.
-    t, p : ndarray
-        Samples of the unload [s], [Pa absolute], plateau to end.
-    settings : EstimatorSettings
-        Estimator settings.
-    noise_std : float
-        Sample noise [Pa] (for the report).
-
-    Returns
-    -------
-    UnloadResult or None
-        A copy with ``final=True`` and the fitted values, or None when the fit failed.
-    """
-    if res.status not in ("ok", "not_choked") or not math.isfinite(res.conductance_model):
-        return None
-    try:
-        fit = fit_curve(t, p, settings, t_start=res.t_start, p10=res.p10, p_atm=res.p_atm,
-                        conductance=res.conductance_model)
-    except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
-        return dataclasses.replace(res, final=True, extra={"curve_fit_error": str(exc)})
-    c_std = fit.conductance_std
-    if settings.heat_model == "natural" and not math.isfinite(fit.heat_scale_std):
-        c_std = math.hypot(c_std, res.conductance_model_std)
-    extra = {"curve_fit": dataclasses.asdict(fit), "noise_std": noise_std,
-             "conductance_crossing_inversion": res.conductance_model}
-    status, text = res.status, res.status_text
-    b = fit.critical_ratio
-    if math.isfinite(b) and b > 0:
-        # the fit measured b: whether the flow stayed choked down to p* is now known
-        limit = res.p_atm / b
-        if res.p_star >= limit and status == "not_choked":
-            status, text = "ok", (f"choked down to p* with the fitted b = {b:.3f} (p* = "
-                                  f"{res.p_star:.0f} Pa >= p_atm/b = {limit:.0f} Pa)")
-        elif res.p_star < limit and status == "ok":
-            status, text = "not_choked", (
-                f"flow subsonic before p* with the fitted b = {b:.3f} (p* = {res.p_star:.0f}"
-                f" Pa < p_atm/b = {limit:.0f} Pa): eq 39 assumes choked flow")
-    return dataclasses.replace(
-        res, final=True, status=status, status_text=text, conductance_model=fit.conductance,
-        conductance_model_std=c_std,
-        t_start_model=fit.t_start, tau_exp_model=fitted_tau_exp(fit, settings, res.tau_exp),
-        critical_ratio=fit.critical_ratio, critical_ratio_std=fit.critical_ratio_std,
-        method=res.method + "+curve-fit", extra=extra,
-        quality=res.quality if fit.success else min(res.quality, 0.5))

@@ -33,6 +33,7 @@ eq 23), :mod:`.refine` (every call into :mod:`pneumatic_unload.fitting`),
 (:class:`StreamingEstimator`) and :mod:`.batch` (:func:`analyze`, :func:`merge_final`).
 """
 
+from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.batch import analyze, merge_final
 from pneumatic_unload.estimation.regression import corner_fit, crossing_fit, hinge_fit
 from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
@@ -40,8 +41,6 @@ from pneumatic_unload.estimation.streaming import StreamingEstimator
 from pneumatic_unload.estimation.types import (
     STATUSES,
     Diagnostic,
-    EstimationError,
-    EstimatorSettings,
     FloatArray,
     UnloadResult,
     estimate_fields,

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.streaming import StreamingEstimator
-from pneumatic_unload.estimation.types import EstimationError, EstimatorSettings, UnloadResult
+from pneumatic_unload.estimation.types import UnloadResult
 
 
 def analyze(

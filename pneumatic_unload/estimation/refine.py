@@ -1,18 +1,21 @@
 """Refinement: model inversion at the crossing, final curve fit, SSE recovery fit.
 
-The only module of the package that calls :mod:`pneumatic_unload.fitting` (imported lazily:
+The only module of the estimator that calls :mod:`pneumatic_unload.fitting` (imported lazily:
 it pulls in scipy), so those calls can be re-pointed in one place. SI units: s, Pa
 absolute, m^3/(s Pa); the recovery fit works in the input's signal units.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from typing import Any
 
 import numpy as np
 
 from pneumatic_unload import physics
-from pneumatic_unload.estimation.types import EstimatorSettings, FloatArray, UnloadResult
+from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 
 
 def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
@@ -102,8 +105,6 @@ def final_curve_fit(res: UnloadResult, t: FloatArray, p: FloatArray,
     noise_std : float
         Noise standard deviation [Pa].
     """
-    from pneumatic_unload.fitting import refine_with_curve_fit
-
     return refine_with_curve_fit(res, t, p, settings, noise_std=noise_std)
 
 
@@ -116,3 +117,60 @@ def recovery_fit(t: FloatArray, p: FloatArray, t_close: float) -> Any:
         return fit_recovery(t, p, t_close)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         return None
+
+
+def refine_with_curve_fit(
+    res: UnloadResult, t: FloatArray, p: FloatArray, settings: EstimatorSettings,
+    *, noise_std: float,
+) -> UnloadResult | None:
+    """Final result of an unload: the crossing result refined by :func:`fit_curve`.
+
+    Parameters
+    ----------
+    res : UnloadResult
+        The estimate published at the p* crossing.
+    t, p : ndarray
+        Samples of the unload [s], [Pa absolute], plateau to end.
+    settings : EstimatorSettings
+        Estimator settings.
+    noise_std : float
+        Sample noise [Pa] (for the report).
+
+    Returns
+    -------
+    UnloadResult or None
+        A copy with ``final=True`` and the fitted values, or None when the fit failed.
+    """
+    if res.status not in ("ok", "not_choked") or not math.isfinite(res.conductance_model):
+        return None
+    from pneumatic_unload.fitting import fit_curve, fitted_tau_exp  # local: keeps import light
+
+    try:
+        fit = fit_curve(t, p, settings, t_start=res.t_start, p10=res.p10, p_atm=res.p_atm,
+                        conductance=res.conductance_model)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+        return dataclasses.replace(res, final=True, extra={"curve_fit_error": str(exc)})
+    c_std = fit.conductance_std
+    if settings.heat_model == "natural" and not math.isfinite(fit.heat_scale_std):
+        c_std = math.hypot(c_std, res.conductance_model_std)
+    extra = {"curve_fit": dataclasses.asdict(fit), "noise_std": noise_std,
+             "conductance_crossing_inversion": res.conductance_model}
+    status, text = res.status, res.status_text
+    b = fit.critical_ratio
+    if math.isfinite(b) and b > 0:
+        # the fit measured b: whether the flow stayed choked down to p* is now known
+        limit = res.p_atm / b
+        if res.p_star >= limit and status == "not_choked":
+            status, text = "ok", (f"choked down to p* with the fitted b = {b:.3f} (p* = "
+                                  f"{res.p_star:.0f} Pa >= p_atm/b = {limit:.0f} Pa)")
+        elif res.p_star < limit and status == "ok":
+            status, text = "not_choked", (
+                f"flow subsonic before p* with the fitted b = {b:.3f} (p* = {res.p_star:.0f}"
+                f" Pa < p_atm/b = {limit:.0f} Pa): eq 39 assumes choked flow")
+    return dataclasses.replace(
+        res, final=True, status=status, status_text=text, conductance_model=fit.conductance,
+        conductance_model_std=c_std,
+        t_start_model=fit.t_start, tau_exp_model=fitted_tau_exp(fit, settings, res.tau_exp),
+        critical_ratio=fit.critical_ratio, critical_ratio_std=fit.critical_ratio_std,
+        method=res.method + "+curve-fit", extra=extra,
+        quality=res.quality if fit.success else min(res.quality, 0.5))

@@ -14,14 +14,10 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.buffer import SampleBuffer
 from pneumatic_unload.estimation.decisions import DT_DEFAULT, TRIM_MIN, trim_keep
-from pneumatic_unload.estimation.types import (
-    Diagnostic,
-    EstimatorSettings,
-    FloatArray,
-    UnloadResult,
-)
+from pneumatic_unload.estimation.types import Diagnostic, FloatArray, UnloadResult
 from pneumatic_unload.physics import P_STAR_FRACTION
 
 #: Phases of the detector.

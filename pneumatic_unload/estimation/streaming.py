@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation import decisions, detector, sse, tail, unloading
 from pneumatic_unload.estimation.buffer import SampleBuffer
 from pneumatic_unload.estimation.decisions import SCAN_HORIZON, first_below
@@ -28,12 +29,7 @@ from pneumatic_unload.estimation.state import (
     WAITING,
     EstimatorState,
 )
-from pneumatic_unload.estimation.types import (
-    EstimationError,
-    EstimatorSettings,
-    FloatArray,
-    UnloadResult,
-)
+from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 
 #: Decision step of each phase at one buffer index.
 STEPS: dict[str, Callable[[EstimatorState, int], list[UnloadResult]]] = {

@@ -1,0 +1,73 @@
+"""The estimator's settings: the tank and gas (:class:`~pneumatic_unload.config.tank.TankSpec`)
+and how the unloads are detected and refined; declared here with the other settings so that
+the model-based fits below the estimator use them without importing it. SI units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pneumatic_unload.config.fields import (
+    ConfigError,
+    choice,
+    flag,
+    integer,
+    number,
+    validate,
+)
+from pneumatic_unload.config.tank import TankSpec
+
+
+class EstimationError(ValueError):
+    """Input that cannot be analysed at all (too few samples, wrong shapes...)."""
+
+
+@dataclass(frozen=True)
+class EstimatorSettings(TankSpec):
+    """Settings of the unloading-time estimator: the tank and gas
+    (:class:`~pneumatic_unload.config.tank.TankSpec`: volume, length_diameter_ratio,
+    initial_temperature, wall_temperature, atmosphere, gas_constant, gamma) and these.
+
+    Attributes
+    ----------
+    heat_model : str
+        'natural' (natural-convection wall heat transfer) or 'adiabatic' for the model-based C.
+    critical_ratio : float
+        b [-] assumed at the crossing (the prior mean; its 1-sigma is
+        :data:`pneumatic_unload.fitting.CRITICAL_RATIO_PRIOR_STD`); the curve fit measures b.
+    signal_gain : float
+        Pressure per unit of input signal [Pa per unit] (1 for an input in Pa).
+    signal_offset : float
+        Pressure at zero input [Pa] (0 for an input in Pa absolute).
+    trigger_sigma : float
+        Drop below the plateau that triggers detection, in noise standard deviations [-].
+    min_plateau : int
+        Samples of pre-step plateau needed before a trigger is accepted [-].
+    max_gap_factor : float
+        A stamp step larger than this many nominal periods is a gap [-].
+    curve_fit : bool
+        Run the full-curve least-squares fit (C, b) when the unload ends.
+    """
+
+    heat_model: str = choice("natural", ("natural", "adiabatic"),
+                             "heat-transfer model of the model-based C")
+    critical_ratio: float = number(0.4, "-", 0.0, 0.99,
+                                   "critical pressure ratio b assumed at the crossing")
+    signal_gain: float = number(1.0, "Pa/unit", -1e12, 1e12,
+                                "pressure per unit of input signal (1: input in Pa)")
+    signal_offset: float = number(0.0, "Pa", -1e9, 1e9, "pressure at zero input signal")
+    trigger_sigma: float = number(8.0, "-", 1.0, 1000.0,
+                                  "trigger drop in noise standard deviations")
+    min_plateau: int = integer(32, 4, 1_000_000, "pre-step plateau samples needed")
+    max_gap_factor: float = number(5.0, "-", 1.0, 1e6,
+                                   "a stamp step above this many periods is a gap")
+    curve_fit: bool = flag(True, "full-curve fit (C, b) once the unload's tail is recorded")
+
+    def __post_init__(self) -> None:
+        """Validate every field (raises :class:`EstimationError` with the reason)."""
+        try:
+            validate(self)
+        except ConfigError as exc:
+            raise EstimationError(str(exc)) from exc
+        if self.signal_gain == 0:
+            raise EstimationError("signal_gain must be non-zero")
