@@ -44,6 +44,9 @@ HEAT_CORRELATION_REL_STD = 0.3
 #: 1-sigma of the critical pressure ratio b about the settings' value at the crossing,
 #: where the data do not yet show b [-] (orifices 0.3-0.5, valves 0.2-0.4).
 CRITICAL_RATIO_PRIOR_STD = 0.1
+#: The heat-scale profile of :func:`fit_curve` runs only when sigma(log h) is at least this
+#: [-] (a narrower likelihood is quadratic over +-1.5 sigma).
+PROFILE_MIN_SD = 0.1
 #: Relative bin width of the curve fit's likelihood [-] (see
 #: :func:`pneumatic_unload.fit.likelihood.make_bins`).
 CURVE_FIT_RESOLUTION = 0.01
@@ -437,11 +440,14 @@ def fit_curve(
     free = list(fit.params.free)
     sd_x = {k: math.sqrt(cov[i, i]) if cov[i, i] >= 0 else math.nan
             for i, k in enumerate(free)}
-    if profile_heat and "heat_scale" in free and np.all(np.isfinite(cov)) \
-            and sd_x["heat_scale"] * fit.params["heat_scale"].scale < 0.5:
+    sd_log_h = sd_x.get("heat_scale", math.nan) * fit.params["heat_scale"].scale \
+        if "heat_scale" in free else math.nan
+    if profile_heat and np.all(np.isfinite(cov)) and PROFILE_MIN_SD <= sd_log_h < 0.5:
         # the heat scale enters non-linearly and is strongly correlated with C
         # (|rho| ~ 0.95): combine the conditional covariance of the others with the valley
-        # found by profiling it at +-1.5 sigma; keep the larger sigma of C
+        # found by profiling it at +-1.5 sigma; keep the larger sigma of C. Below
+        # PROFILE_MIN_SD the likelihood is quadratic over that span (measured: the profile
+        # changed sigma(C) by < 0.5 %), and the two extra fits are skipped.
         ip = free.index("heat_scale")
         prof = valley_std(trace, model, fit, "heat_scale", cov, s2)
         if prof is not None:
