@@ -59,7 +59,8 @@ def ideal_z(sim: Simulation, settings: EstimatorSettings, t_end: float, t_start:
     bins and window as the production fit. Exactly N(0, 1) over noise draws, so it tells a
     defect of the fit from an unlucky set of seeds (the controlled experiment of issue 3)."""
     from pneumatic_unload.fit.uncertainty import covariance
-    from pneumatic_unload.fitting import curve_fit_bins, rig_from_settings
+    from pneumatic_unload.fitting import curve_fit_bins
+    from pneumatic_unload.inversion import rig_from_settings
     from pneumatic_unload.model import discharge
 
     cfg = sim.config

@@ -1,18 +1,13 @@
-"""Model-based sonic conductance: remove the known bias of eq 39.
+"""Model-based sonic conductance from the whole record: the final curve fit.
 
-Both estimators use the one parametric model
+:func:`fit_curve` fits the estimator's parametric model
 (:class:`pneumatic_unload.model.effects.ParametricModel`: the discharge of
-:mod:`pneumatic_unload.model` with natural-convection wall heat transfer from the tank's V
-and L/D, or adiabatic) and the one engine (:mod:`pneumatic_unload.fit`):
-
-* :func:`invert_crossing` - the exact inversion of the model at the measured p* crossing:
-  the C for which the model reaches p* at tau_exp. Cheap (a few ms), so the live estimator
-  publishes it with the eq 39 value.
-* :func:`fit_curve` - a least-squares fit of the whole recorded discharge for C, b, the
-  start instant, p10 (and p_atm when it is not given, and the heat-transfer scale when the
-  data carry it) with the binned likelihood (the model evaluated per bin, so the cost does
-  not grow with the record), and standard deviations from the Jacobian scaled by the
-  residual and inflated for structured residuals.
+:mod:`pneumatic_unload.model`, with wall heat transfer by the law the data choose, or
+adiabatic) through the one engine (:mod:`pneumatic_unload.fit`) for C, b, the start
+instant, p10 (and p_atm when it is not given, and the heat exchange when the data carry
+it), with the binned likelihood (the model evaluated per bin, so the cost does not grow with
+the record), and standard deviations from the Jacobian scaled by the residual and inflated
+for structured residuals. The inversion at the crossing is :mod:`pneumatic_unload.inversion`.
 
 SI units: s, Pa absolute, K, m^3, m^3/(s Pa).
 """
@@ -33,308 +28,24 @@ from pneumatic_unload.fit.noise import NoiseModel
 from pneumatic_unload.fit.profile import valley_std
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.fit.uncertainty import residual_inflation
+from pneumatic_unload.inversion import (
+    estimator_model,
+    model_crossing_time,
+    rig_from_settings,
+)
 from pneumatic_unload.model import discharge
-from pneumatic_unload.model.effects import ParametricModel, Start
-from pneumatic_unload.physics import P_STAR_FRACTION, isentropic_crossing_time, tau_exp_eq38
+from pneumatic_unload.model.effects import Start
+from pneumatic_unload.model.heat import thermal_time_constant
+from pneumatic_unload.physics import P_STAR_FRACTION, tau_exp_eq38
 
 FloatArray = NDArray[np.float64]
 
-#: Relative 1-sigma uncertainty assumed for the natural-convection correlation [-].
-HEAT_CORRELATION_REL_STD = 0.3
-#: 1-sigma of the critical pressure ratio b about the settings' value at the crossing,
-#: where the data do not yet show b [-] (orifices 0.3-0.5, valves 0.2-0.4).
-CRITICAL_RATIO_PRIOR_STD = 0.1
 #: The heat-scale profile of :func:`fit_curve` runs only when sigma(log h) is at least this
 #: [-] (a narrower likelihood is quadratic over +-1.5 sigma).
 PROFILE_MIN_SD = 0.1
 #: Relative bin width of the curve fit's likelihood [-] (see
 #: :func:`pneumatic_unload.fit.likelihood.make_bins`).
 CURVE_FIT_RESOLUTION = 0.01
-
-
-def estimator_model(settings: EstimatorSettings, start: Start, *,
-                    p_atm: float | None = None) -> ParametricModel:
-    """The parametric model of the estimator: natural-convection heat transfer or none."""
-    effects = ("heat_transfer",) if settings.heat_model == "natural" else ()
-    tank = settings.tank if p_atm is None else dataclasses.replace(settings.tank,
-                                                                  atmosphere=p_atm)
-    return ParametricModel(effects, tank, start, heat_law="natural")
-
-
-def rig_from_settings(settings: EstimatorSettings, *, conductance: float, p10: float,
-                      p_atm: float, critical_ratio: float | None = None,
-                      heat_scale: float = 1.0) -> RigConfig:
-    """The discharge-model configuration the estimator assumes [SI].
-
-    Parameters
-    ----------
-    settings : EstimatorSettings
-        Tank and gas settings.
-    conductance : float
-        C [m^3/(s Pa)].
-    p10, p_atm : float
-        Initial and atmospheric pressure [Pa absolute].
-    critical_ratio : float, optional
-        b [-]; default the settings' value.
-    heat_scale : float
-        Multiplier on the natural-convection correlation [-].
-    """
-    b = settings.critical_ratio if critical_ratio is None else critical_ratio
-    start = Start(conductance=conductance, critical_ratio=b, t_open=0.0, p10=p10,
-                  p_atm=p_atm, tau=1.0, dt=1e-3, t_first=0.0, t_last=1.0)
-    model = estimator_model(settings, start, p_atm=p_atm)
-    return model.config({"C": conductance, "b": b, "t_open": 0.0, "p10": p10,
-                         "p_atm": p_atm, "heat_scale": heat_scale})
-
-
-def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float, *,
-                        rtol: float = 1e-7) -> float:
-    """Time for the model's tank pressure to fall from p10 to p_star [s].
-
-    Parameters
-    ----------
-    cfg : RigConfig
-        Model (valve opens at t = 0).
-    p_star : float
-        Threshold [Pa absolute].
-    t_guess : float
-        Expected crossing time [s] (sets the output grid: the integration stops at
-        1.25 t_guess unless the crossing lies beyond).
-    rtol : float
-        Integrator relative tolerance [-].
-    """
-    horizon = 1.25 * t_guess
-    for _ in range(8):
-        t = np.linspace(0.0, horizon, 129)
-        p, _ = discharge(cfg, t, 0.0, rtol=rtol)
-        k = np.flatnonzero(p < p_star)
-        if k.size:
-            j = int(k[0])
-            j0 = min(max(j - 1, 1), t.size - 2)
-            # quadratic through three points around the crossing, solved for p = p_star
-            tt, pp = t[j0 - 1:j0 + 2], p[j0 - 1:j0 + 2]
-            c2, c1, c0 = np.polyfit(tt - tt[1], pp, 2)
-            disc = c1 * c1 - 4 * c2 * (c0 - p_star)
-            if abs(c2) > 0 and disc >= 0:
-                r = [(-c1 + s * math.sqrt(disc)) / (2 * c2) for s in (1.0, -1.0)]
-                x = min(r, key=lambda v: abs(v - (t[j] - tt[1])))
-            else:
-                x = (p_star - c0) / c1
-            return float(tt[1] + x)
-        horizon *= 2.0
-    return math.inf
-
-
-#: Relative tolerance on C of :func:`invert_crossing` (far below any stated uncertainty).
-INVERSION_RTOL = 1e-6
-#: Integrator tolerance of the inversion: crossing times to about 1e-6 relative [-].
-INVERSION_ODE_RTOL = 1e-6
-
-
-def may_turn_subsonic(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
-    """True when, for a b within 2 sigma of its prior, the flow turns subsonic before p*.
-
-    The flow is choked while p1 >= p_atm/b: the smaller b, the earlier it turns subsonic.
-
-    Parameters
-    ----------
-    settings : EstimatorSettings
-        Its ``critical_ratio`` is the prior mean of b [-].
-    p_atm, p_star : float
-        Atmospheric and crossing pressures [Pa absolute].
-    """
-    b_lo = max(settings.critical_ratio - 2.0 * CRITICAL_RATIO_PRIOR_STD, 0.01)
-    return p_star < p_atm / b_lo
-
-
-def invert_crossing(
-    tau_exp: float, tau_std: float, *, p10: float, p_atm: float, p_star: float,
-    settings: EstimatorSettings, c_start: float,
-) -> tuple[float, float]:
-    """C for which the discharge model crosses p_star at tau_exp, and its 1-sigma [m^3/(s Pa)].
-
-    The model's crossing time is nearly proportional to 1/C (exactly so without heat
-    transfer), so a secant iteration on log t(C) - log tau_exp converges in two or three
-    integrations (this runs inside the live estimator, at the sample that completes the
-    estimate). The standard deviation combines the timing uncertainty and, for the
-    natural-convection model, the uncertainty of the heat-transfer correlation
-    (:data:`HEAT_CORRELATION_REL_STD`).
-
-    Parameters
-    ----------
-    tau_exp, tau_std : float
-        Measured unloading time and its standard deviation [s].
-    p10, p_atm, p_star : float
-        Pressures [Pa absolute].
-    settings : EstimatorSettings
-        Tank and gas settings.
-    c_start : float
-        Starting value, e.g. the isentropic inversion [m^3/(s Pa)].
-    """
-    if not (math.isfinite(tau_exp) and tau_exp > 0 and math.isfinite(c_start) and c_start > 0):
-        return math.nan, math.nan
-
-    def g(log_c: float) -> float:
-        """log(model crossing time / tau_exp) at C = exp(log_c)."""
-        cfg = rig_from_settings(settings, conductance=math.exp(log_c), p10=p10, p_atm=p_atm)
-        tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
-        return math.log(tm / tau_exp) if math.isfinite(tm) and tm > 0 else math.nan
-
-    x0 = math.log(c_start)
-    f0 = g(x0)
-    if not math.isfinite(f0):
-        return math.nan, math.nan
-    x1 = x0 + f0  # exact for t proportional to 1/C
-    for _ in range(8):
-        f1 = g(x1)
-        if not math.isfinite(f1):
-            return math.nan, math.nan
-        if abs(f1) < INVERSION_RTOL:
-            break
-        slope = (f1 - f0) / (x1 - x0) if x1 != x0 else -1.0
-        if not slope < -0.2:  # t(C) falls with C; guard against a flat or noisy secant
-            slope = -1.0
-        x0, f0, x1 = x1, f1, x1 - f1 / slope
-    c = math.exp(x1)
-    var = (c * tau_std / tau_exp) ** 2
-    b0, b_sd = settings.critical_ratio, CRITICAL_RATIO_PRIOR_STD
-    if may_turn_subsonic(settings, p_atm, p_star):
-        # the flow may turn subsonic before p*, where b matters and is not yet measured:
-        # the spread of the model's crossing time over b +- 1 sigma enters the variance
-        worst = 0.0
-        for b in (b0 - b_sd, b0 + b_sd):
-            if 0.0 < b < 0.99:
-                cfg = rig_from_settings(settings, conductance=c, p10=p10, p_atm=p_atm,
-                                        critical_ratio=b)
-                tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
-                if math.isfinite(tm):
-                    worst = max(worst, abs(tm / tau_exp - 1.0))
-        var += (c * worst) ** 2
-    if settings.heat_model == "natural":
-        cfg = rig_from_settings(settings, conductance=c, p10=p10, p_atm=p_atm,
-                                heat_scale=1.0 + HEAT_CORRELATION_REL_STD)
-        tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
-        var += (c * (tm / tau_exp - 1.0)) ** 2
-    return c, math.sqrt(var)
-
-
-#: Grid of the inversion table: points and half-width in log C around the guess [-].
-TABLE_POINTS, TABLE_SPAN = 7, 0.7
-
-
-@dataclass(frozen=True)
-class InversionTable:
-    """The model's crossing time t(C) tabulated before the crossing, so that the inversion
-    at the crossing is a lookup (the live estimator publishes it at that sample).
-
-    Built when the pressure is half way to p* (:func:`inversion_table`): V, T10, p10, p_atm
-    and p* are known then, and the time so far gives C to within the bias of eq 39 (a few
-    tens of per cent), which a grid of :data:`TABLE_POINTS` values of C over
-    exp(+-:data:`TABLE_SPAN`) around it covers. log C is interpolated as a cubic in
-    log t through the four nearest points (the curve is nearly a line of slope -1: exactly
-    so without heat transfer), which reproduces the iterative inversion to ~1e-7.
-
-    Attributes
-    ----------
-    log_c, log_t : ndarray
-        Grid: log C [log m^3/(s Pa)] and log of the model's crossing time [log s]
-        (decreasing).
-    rel_heat : ndarray
-        Relative change of the crossing time when the natural-convection correlation is
-        :data:`HEAT_CORRELATION_REL_STD` stronger [-] at the first, middle and last grid
-        points (zeros when adiabatic); interpolated linearly in log C.
-    rel_b : float
-        Largest relative change of the crossing time for b one prior sigma either way [-]
-        (0 when the flow stays choked to p* for every plausible b).
-    """
-
-    log_c: FloatArray
-    log_t: FloatArray
-    rel_heat: FloatArray
-    rel_b: float
-
-    def covers(self, tau: float) -> bool:
-        """True when tau [s] lies inside the tabulated range."""
-        return bool(math.isfinite(tau) and tau > 0
-                    and self.log_t[-1] <= math.log(tau) <= self.log_t[0])
-
-    def invert(self, tau: float, tau_std: float) -> tuple[float, float]:
-        """C and its 1-sigma [m^3/(s Pa)] for a measured tau_exp and its 1-sigma [s]."""
-        y = math.log(tau)
-        k = int(np.searchsorted(-self.log_t, -y))
-        j = min(max(k - 2, 0), self.log_t.size - 4)
-        ys, xs = self.log_t[j:j + 4], self.log_c[j:j + 4]
-        x, dxdy = 0.0, 0.0
-        for a in range(4):  # Lagrange cubic x(y) and its derivative
-            others = [ys[b] for b in range(4) if b != a]
-            den = float(np.prod([ys[a] - o for o in others]))
-            num = float(np.prod([y - o for o in others]))
-            dnum = sum(float(np.prod([y - o for o in others if o is not skip]))
-                       for skip in others)
-            x += xs[a] * num / den
-            dxdy += xs[a] * dnum / den
-        c = math.exp(x)
-        ends = self.log_c[[0, self.log_c.size // 2, -1]]
-        rel_heat = float(np.interp(x, ends, self.rel_heat))
-        var = (c * dxdy * tau_std / tau) ** 2 + (c * self.rel_b) ** 2 + (c * rel_heat) ** 2
-        return c, math.sqrt(var)
-
-
-def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_star: float,
-                    c_guess: float) -> InversionTable | None:
-    """Tabulate the model's crossing time around ``c_guess`` (see :class:`InversionTable`).
-
-    Parameters
-    ----------
-    settings : EstimatorSettings
-        Tank, gas and heat model.
-    p10, p_atm, p_star : float
-        Pressures [Pa absolute].
-    c_guess : float
-        Expected C [m^3/(s Pa)] (e.g. the isentropic inversion half way to p*).
-
-    Returns
-    -------
-    InversionTable or None
-        None when a crossing time cannot be computed (the model never reaches p*).
-    """
-    if not (math.isfinite(c_guess) and c_guess > 0):
-        return None
-    gas, vol, t10 = settings.gas, settings.volume, settings.initial_temperature
-    log_c = math.log(c_guess) + np.linspace(-TABLE_SPAN, TABLE_SPAN, TABLE_POINTS)
-    times = []
-    for lc in log_c:
-        c = math.exp(lc)
-        guess = isentropic_crossing_time(p_star, p10, vol, c, t10, gas)
-        cfg = rig_from_settings(settings, conductance=c, p10=p10, p_atm=p_atm)
-        tm = model_crossing_time(cfg, p_star, guess, rtol=INVERSION_ODE_RTOL)
-        if not (math.isfinite(tm) and tm > 0):
-            return None
-        times.append(tm)
-    log_t = np.log(np.array(times))
-    if not np.all(np.diff(log_t) < 0):
-        return None
-    t_mid = times[TABLE_POINTS // 2]
-    rel_b = 0.0
-    rel_heat = np.zeros(3)
-    if settings.heat_model == "natural":
-        for j, g in enumerate((0, TABLE_POINTS // 2, TABLE_POINTS - 1)):
-            cfg = rig_from_settings(settings, conductance=math.exp(log_c[g]), p10=p10,
-                                    p_atm=p_atm, heat_scale=1.0 + HEAT_CORRELATION_REL_STD)
-            tm = model_crossing_time(cfg, p_star, times[g], rtol=INVERSION_ODE_RTOL)
-            rel_heat[j] = abs(tm / times[g] - 1.0) if math.isfinite(tm) else math.inf
-    if may_turn_subsonic(settings, p_atm, p_star):
-        b0, b_sd = settings.critical_ratio, CRITICAL_RATIO_PRIOR_STD
-        for b in (b0 - b_sd, b0 + b_sd):
-            if 0.0 < b < 0.99:
-                cfg = rig_from_settings(settings, conductance=c_guess, p10=p10,
-                                        p_atm=p_atm, critical_ratio=b)
-                tm = model_crossing_time(cfg, p_star, t_mid, rtol=INVERSION_ODE_RTOL)
-                if math.isfinite(tm):
-                    rel_b = max(rel_b, abs(tm / t_mid - 1.0))
-    return InversionTable(log_c=np.asarray(log_c), log_t=log_t, rel_heat=rel_heat,
-                          rel_b=rel_b)
-
 
 @dataclass(frozen=True)
 class CurveFit:
@@ -361,6 +72,15 @@ class CurveFit:
     inflation : float
         Variance inflation applied for serially correlated residuals [-]
         (:func:`residual_inflation`).
+    heat_law : str
+        Heat-transfer law the data chose ('natural', 'fixed'; 'none' when adiabatic).
+    tau_heat : float
+        Thermal time constant m0 c_v/(hA) of the 'fixed' law [s] (NaN otherwise).
+    model_form_std : float
+        Model-form 1-sigma of C from the laws that fit about as well (delta-BIC < 10) but
+        give another C [m^3/(s Pa)] (included in ``conductance_std``).
+    laws : dict
+        Per law tried: C [m^3/(s Pa)], chi2 and BIC [-].
     """
 
     conductance: float
@@ -376,6 +96,24 @@ class CurveFit:
     n: int
     success: bool
     inflation: float = 1.0
+    heat_law: str = "natural"
+    tau_heat: float = math.nan
+    model_form_std: float = 0.0
+    laws: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
+
+    def config(self, settings: EstimatorSettings) -> RigConfig:
+        """The fitted model's configuration (valve opening at t = 0) [SI]."""
+        b = self.critical_ratio if math.isfinite(self.critical_ratio) else None
+        cfg = rig_from_settings(settings, conductance=self.conductance, p10=self.p10,
+                                p_atm=self.p_atm, critical_ratio=b,
+                                heat_scale=self.heat_scale)
+        if self.heat_law == "fixed" and math.isfinite(self.tau_heat):
+            g = settings.gas
+            h_a = self.p10 * settings.volume / ((g.gamma - 1.0) * settings.initial_temperature
+                                                * self.tau_heat)
+            cfg = cfg.replace(heat_transfer_mode="fixed",
+                              heat_transfer_coefficient=float(np.clip(h_a, 0.0, 1e4)))
+        return cfg
 
 
 
@@ -385,12 +123,98 @@ def curve_fit_bins(t: FloatArray, t_start: float) -> NDArray[np.int64]:
     return make_bins(np.asarray(t, dtype=float), t_start, resolution=CURVE_FIT_RESOLUTION)
 
 
+#: Laws fitted in turn by :func:`fit_curve` when the natural model is on (the data choose).
+CURVE_FIT_LAWS: tuple[str, ...] = ("natural", "fixed")
+#: Delta-BIC below which another law counts as fitting about as well [-].
+LAW_BIC_THRESHOLD = 10.0
+
+
 def fit_curve(
     t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_start: float,
     p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
-    profile_heat: bool = True,
+    profile_heat: bool = True, laws: tuple[str, ...] | None = None,
 ) -> CurveFit:
-    """Least-squares fit of the discharge model to a recorded unload.
+    """Least-squares fit of the discharge model to a recorded unload, with the heat law
+    chosen by the data.
+
+    With the natural model on, every law of ``laws`` (default :data:`CURVE_FIT_LAWS`: the
+    natural-convection correlation with a fitted scale, and a constant hA with a fitted
+    thermal time constant) is fitted; the lowest BIC wins. A law within
+    :data:`LAW_BIC_THRESHOLD` of it fits about as well: its weight exp(-dBIC/2) times the
+    square of its C's distance from the winner's enters the variance of C (the model-form
+    term, never hidden).
+
+    Parameters
+    ----------
+    t, p : ndarray
+        Samples [s], [Pa absolute] from the pre-step plateau to the end of the record.
+    settings : EstimatorSettings
+        Tank, gas and heat model (``atmosphere=None`` fits p_atm).
+    t_start, p10, p_atm, conductance : float
+        Starting values [s], [Pa], [Pa], [m^3/(s Pa)].
+    fit_heat : bool, optional
+        Fit the heat transfer; default: only when the natural model is on (False holds the
+        natural correlation as published).
+    profile_heat : bool
+        Standard deviations also from a profile of the fit over the heat-transfer scale
+        where its likelihood is not quadratic.
+    laws : tuple of str, optional
+        Heat laws to try (see above).
+
+    Returns
+    -------
+    CurveFit
+        The chosen law's fitted values with standard deviations.
+    """
+    natural = settings.heat_model == "natural"
+    if fit_heat is None:
+        fit_heat = natural
+    tried = (laws or CURVE_FIT_LAWS) if (natural and fit_heat) else ("natural",)
+    fits: dict[str, tuple[CurveFit, float, float]] = {}
+    start: dict[str, float] | None = None
+    for law in tried:
+        fits[law] = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
+                             conductance=conductance, fit_heat=bool(fit_heat and natural),
+                             profile_heat=profile_heat, law=law, start=start,
+                             max_nfev=200 if not fits else 32)
+        first = fits[law][0]
+        if start is None and first.inflation < 2.0 and math.isfinite(first.conductance):
+            # the next law starts from this fit when it is close (white residuals), its heat
+            # exchange expressed as the thermal time constant of the gas 20 K below the
+            # wall; otherwise from the neutral values, with a second start screened
+            cfg = first.config(settings)
+            start = {"C": first.conductance, "t_open": first.t_start - float(t[0]),
+                     "p10": first.p10, "tau_heat": thermal_time_constant(
+                         cfg, first.p10, cfg.wall - 20.0)}
+            if math.isfinite(first.critical_ratio):
+                start["b"] = first.critical_ratio
+            if settings.atmosphere is None:
+                start["p_atm"] = first.p_atm
+    bic = {law: f[1] for law, f in fits.items()}
+    best = min(bic, key=lambda k: bic[k])
+    cf = fits[best][0]
+    var_mf, w_sum = 0.0, 0.0
+    for other, b_other, _chi2 in fits.values():
+        d = b_other - bic[best]
+        if d < LAW_BIC_THRESHOLD and math.isfinite(other.conductance):
+            w = math.exp(-0.5 * d)
+            w_sum += w
+            var_mf += w * (other.conductance - cf.conductance) ** 2
+    mf = math.sqrt(var_mf / w_sum) if w_sum > 0 else 0.0
+    table = {law: {"conductance": f[0].conductance, "bic": f[1], "chi2": f[2]}
+             for law, f in fits.items()}
+    return dataclasses.replace(
+        cf, conductance_std=math.hypot(cf.conductance_std, mf), model_form_std=mf,
+        laws=table, heat_law=best if natural else "none")
+
+
+def _fit_law(
+    t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_start: float,
+    p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
+    profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
+    max_nfev: int = 200,
+) -> tuple[CurveFit, float, float]:
+    """One law's fit for :func:`fit_curve`; returns (fit, BIC, chi^2 [-]).
 
     Parameters
     ----------
@@ -407,10 +231,14 @@ def fit_curve(
         (two more fits), not from the Gauss-Newton covariance alone, which can under-state
         them for this non-linear, strongly correlated parameter.
 
-    Returns
-    -------
-    CurveFit
-        Fitted values with standard deviations.
+    law : str
+        Heat-transfer law ('natural' or 'fixed').
+    start : dict, optional
+        Starting values [SI] (e.g. another law's fit); without it the fixed law also
+        screens a slow-exchange start.
+    max_nfev : int
+        Evaluation budget [-] (a second law that has not converged within a few iterations
+        from the first law's fit is not the better law).
     """
     t_abs = np.asarray(t, dtype=float)
     t_ref = float(t_abs[0])
@@ -418,20 +246,25 @@ def fit_curve(
     t_start = t_start - t_ref
     p = np.asarray(p, dtype=float)
     natural = settings.heat_model == "natural"
-    if fit_heat is None:
-        fit_heat = natural
-    fit_heat = bool(fit_heat and natural)
     dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
     tau = tau_exp_eq38(p10, p_atm, settings.volume, conductance, settings.initial_temperature,
                        settings.gas)
-    start = Start(conductance=conductance, critical_ratio=settings.critical_ratio,
+    neutral = Start(conductance=conductance, critical_ratio=settings.critical_ratio,
                   t_open=float(np.clip(t_start, t[0], t[-1])), p10=p10, p_atm=p_atm,
                   tau=tau, dt=dt, t_first=float(t[0]), t_last=float(t[-1]))
-    model = estimator_model(settings, start)
+    model = estimator_model(settings, neutral, heat_law=law)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
+    starts = [{"tau_heat": 5.0 * tau}] if law == "fixed" and start is None else None
     trace = Trace(t, p, NoiseModel(sigma=1.0, rho=0.0, n=int(t.size), source="unit"),
                   t_start, edges=curve_fit_bins(t, t_start))
-    fit = trace.fit(model, fixed=fixed, max_nfev=200)
+    if start is not None:
+        lo_t, hi_t = 0.0, math.inf
+        if "tau_heat" in model.parameters:
+            lo_t, hi_t = model.parameters["tau_heat"].lo, model.parameters["tau_heat"].hi
+        start = {k: (float(np.clip(v, 1.001 * lo_t, 0.999 * hi_t)) if k == "tau_heat" else v)
+                 for k, v in start.items() if math.isfinite(v)}
+    fit = trace.fit(model, fixed=fixed, start=start, starts=starts, screen_nfev=9,
+                    max_nfev=max_nfev)
     v = fit.values
     # residuals are bin sums / sqrt(count): their variance is the per-sample variance
     s2 = fit.chi2 / fit.dof
@@ -466,12 +299,14 @@ def fit_curve(
         b, b_std = math.nan, math.nan
     h = v.get("heat_scale", 1.0)
     h_std = float(std["heat_scale"]) if "heat_scale" in free else math.nan
-    return CurveFit(
+    cf = CurveFit(
         conductance=c, conductance_std=float(std["C"]), critical_ratio=b,
         critical_ratio_std=b_std, t_start=v["t_open"] + t_ref, p10=v["p10"],
         p_atm=v.get("p_atm", p_atm) if settings.atmosphere is None else p_atm,
         heat_scale=h, heat_scale_std=h_std, rms=math.sqrt(s2), n=int(t.size),
-        success=bool(fit.success), inflation=inflation)
+        success=bool(fit.success), inflation=inflation, heat_law=law,
+        tau_heat=v.get("tau_heat", math.nan))
+    return cf, fit.bic, fit.chi2
 
 
 def fitted_tau_exp(fit: CurveFit, settings: EstimatorSettings, t_guess: float) -> float:
@@ -491,11 +326,8 @@ def fitted_tau_exp(fit: CurveFit, settings: EstimatorSettings, t_guess: float) -
     """
     if not (math.isfinite(t_guess) and t_guess > 0):
         return math.nan
-    b = fit.critical_ratio if math.isfinite(fit.critical_ratio) else None
     try:
-        cfg = rig_from_settings(settings, conductance=fit.conductance, p10=fit.p10,
-                                p_atm=fit.p_atm, critical_ratio=b,
-                                heat_scale=fit.heat_scale)
+        cfg = fit.config(settings)
         ps = fit.p_atm + P_STAR_FRACTION * (fit.p10 - fit.p_atm)
         tc = model_crossing_time(cfg, ps, t_guess)
         if not math.isfinite(tc):

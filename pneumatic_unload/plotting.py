@@ -19,7 +19,8 @@ from pneumatic_unload.estimation import EstimatorSettings, UnloadResult
 def _model_curve(t: NDArray[np.float64], r: UnloadResult, settings: EstimatorSettings
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """Model pressure [Pa] over the unload of r (fitted values when the curve fit ran)."""
-    from pneumatic_unload.fitting import rig_from_settings
+    from pneumatic_unload.fitting import CurveFit
+    from pneumatic_unload.inversion import rig_from_settings
     from pneumatic_unload.model import discharge
 
     if not math.isfinite(r.conductance_model) or r.conductance_model <= 0:
@@ -30,10 +31,12 @@ def _model_curve(t: NDArray[np.float64], r: UnloadResult, settings: EstimatorSet
     p_atm = float(fit.get("p_atm", r.p_atm))
     if not (math.isfinite(t0) and math.isfinite(p10) and math.isfinite(p_atm)):
         return None
-    b = r.critical_ratio if math.isfinite(r.critical_ratio) else None
-    scale = float(fit.get("heat_scale", 1.0))
-    cfg = rig_from_settings(settings, conductance=r.conductance_model, p10=p10, p_atm=p_atm,
-                            critical_ratio=b, heat_scale=scale if math.isfinite(scale) else 1.0)
+    if fit:
+        cfg = CurveFit(**fit).config(settings)
+    else:
+        b = r.critical_ratio if math.isfinite(r.critical_ratio) else None
+        cfg = rig_from_settings(settings, conductance=r.conductance_model, p10=p10,
+                                p_atm=p_atm, critical_ratio=b)
     t_end = r.t_end if math.isfinite(r.t_end) else float(t[-1])
     lo = max(float(t[0]), t0 - 0.05 * (t_end - t0))
     sel = (t >= lo) & (t <= t_end)

@@ -99,7 +99,8 @@ def test_curve_fit_reaches_the_least_squares_minimum():
     (C off by ~0.4 sigma from the least-squares solution). After the fit, a Gauss-Newton
     step with a fresh Jacobian must predict essentially no further chi^2 drop, and the
     estimate must agree with the ideal linearised estimator (true Jacobian, same bins)."""
-    from pneumatic_unload.fitting import curve_fit_bins, fit_curve, rig_from_settings
+    from pneumatic_unload.fitting import curve_fit_bins, fit_curve
+    from pneumatic_unload.inversion import rig_from_settings
 
     cfg = RigConfig(volume=12e-3, conductance=orifice_conductance(1.5e-3),
                     initial_pressure=7.5e5, critical_ratio=0.31, noise_std=NOISE,

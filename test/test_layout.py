@@ -321,7 +321,8 @@ LAYERS: dict[str, int] = {
     "fit": 2,  # the fitting engine: parameters, likelihood, least squares, uncertainty
     "model": 3,  # the discharge model (ODE, heat law, sensor, effects)
     "rig": 4,  # the simulator's sample stream
-    "fitting": 4,  # model-based C: crossing inversion, curve fit
+    "inversion": 4,  # model-based C at the crossing (and its table)
+    "fitting": 4,  # model-based C: the curve fit, its heat-law choice
     "recovery": 4,  # SSE: the re-heating after an aborted unload
     "estimation": 5,  # the streaming estimator and batch analysis
     "discrepancy": 6,

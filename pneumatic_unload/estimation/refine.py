@@ -21,7 +21,7 @@ from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
     """True when the model-based C needs the discharge model (not the closed form): heat
     transfer, or a flow that may turn subsonic before p* (pressures [Pa absolute])."""
-    from pneumatic_unload.fitting import may_turn_subsonic  # local: keeps import light
+    from pneumatic_unload.inversion import may_turn_subsonic  # local: keeps import light
 
     return settings.heat_model != "adiabatic" or may_turn_subsonic(settings, p_atm, p_star)
 
@@ -40,7 +40,7 @@ def prepare_inversion(settings: EstimatorSettings, t_mid: float, p_mid: float, p
     p_mid, p10, p_atm, p_star : float
         Half-way, initial, atmospheric and crossing pressures [Pa absolute].
     """
-    from pneumatic_unload.fitting import inversion_table
+    from pneumatic_unload.inversion import inversion_table
 
     c_guess = physics.conductance_isentropic_inversion(
         t_mid, p_mid, p10, settings.volume, settings.initial_temperature, settings.gas)
@@ -74,7 +74,7 @@ def model_inversion(settings: EstimatorSettings, tau: float, tau_std: float, p10
     tuple
         (C [m^3/(s Pa)], its 1-sigma [m^3/(s Pa)], method name).
     """
-    from pneumatic_unload.fitting import invert_crossing, may_turn_subsonic  # local: light
+    from pneumatic_unload.inversion import invert_crossing, may_turn_subsonic  # local: light
 
     if settings.heat_model == "adiabatic" and not may_turn_subsonic(settings, p_atm, p_star):
         # choked up to p*: the isentropic closed form is the adiabatic model's exact inverse
@@ -151,7 +151,7 @@ def refine_with_curve_fit(
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return dataclasses.replace(res, final=True, extra={"curve_fit_error": str(exc)})
     c_std = fit.conductance_std
-    if settings.heat_model == "natural" and not math.isfinite(fit.heat_scale_std):
+    if fit.heat_law == "natural" and not math.isfinite(fit.heat_scale_std):
         c_std = math.hypot(c_std, res.conductance_model_std)
     extra = {"curve_fit": dataclasses.asdict(fit), "noise_std": noise_std,
              "conductance_crossing_inversion": res.conductance_model}

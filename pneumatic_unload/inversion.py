@@ -1,0 +1,315 @@
+"""Model inversion at the p* crossing: the C for which the discharge model reaches p* at the
+measured tau_exp, directly (a secant on log t(C)) or from a table of the model's crossing
+times built half way to p* (so that the live estimate is a lookup at the crossing sample).
+
+The model is the estimator's :class:`~pneumatic_unload.model.effects.ParametricModel`
+(natural-convection wall heat transfer from the tank's V and L/D, or adiabatic). SI units:
+s, Pa absolute, K, m^3, m^3/(s Pa).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pneumatic_unload.config import RigConfig
+from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.model import discharge
+from pneumatic_unload.model.effects import ParametricModel, Start
+from pneumatic_unload.physics import isentropic_crossing_time
+
+FloatArray = NDArray[np.float64]
+
+#: Relative 1-sigma uncertainty assumed for the natural-convection correlation [-].
+HEAT_CORRELATION_REL_STD = 0.3
+#: 1-sigma of the critical pressure ratio b about the settings' value at the crossing,
+#: where the data do not yet show b [-] (orifices 0.3-0.5, valves 0.2-0.4).
+CRITICAL_RATIO_PRIOR_STD = 0.1
+
+def estimator_model(settings: EstimatorSettings, start: Start, *,
+                    p_atm: float | None = None, heat_law: str = "natural"
+                    ) -> ParametricModel:
+    """The parametric model of the estimator: heat transfer (``heat_law``) or none."""
+    effects = ("heat_transfer",) if settings.heat_model == "natural" else ()
+    tank = settings.tank if p_atm is None else dataclasses.replace(settings.tank,
+                                                                  atmosphere=p_atm)
+    return ParametricModel(effects, tank, start, heat_law=heat_law)
+
+
+def rig_from_settings(settings: EstimatorSettings, *, conductance: float, p10: float,
+                      p_atm: float, critical_ratio: float | None = None,
+                      heat_scale: float = 1.0) -> RigConfig:
+    """The discharge-model configuration the estimator assumes [SI].
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Tank and gas settings.
+    conductance : float
+        C [m^3/(s Pa)].
+    p10, p_atm : float
+        Initial and atmospheric pressure [Pa absolute].
+    critical_ratio : float, optional
+        b [-]; default the settings' value.
+    heat_scale : float
+        Multiplier on the natural-convection correlation [-].
+    """
+    b = settings.critical_ratio if critical_ratio is None else critical_ratio
+    start = Start(conductance=conductance, critical_ratio=b, t_open=0.0, p10=p10,
+                  p_atm=p_atm, tau=1.0, dt=1e-3, t_first=0.0, t_last=1.0)
+    model = estimator_model(settings, start, p_atm=p_atm)
+    return model.config({"C": conductance, "b": b, "t_open": 0.0, "p10": p10,
+                         "p_atm": p_atm, "heat_scale": heat_scale})
+
+
+def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float, *,
+                        rtol: float = 1e-7) -> float:
+    """Time for the model's tank pressure to fall from p10 to p_star [s].
+
+    Parameters
+    ----------
+    cfg : RigConfig
+        Model (valve opens at t = 0).
+    p_star : float
+        Threshold [Pa absolute].
+    t_guess : float
+        Expected crossing time [s] (sets the output grid: the integration stops at
+        1.25 t_guess unless the crossing lies beyond).
+    rtol : float
+        Integrator relative tolerance [-].
+    """
+    horizon = 1.25 * t_guess
+    for _ in range(8):
+        t = np.linspace(0.0, horizon, 129)
+        p, _ = discharge(cfg, t, 0.0, rtol=rtol)
+        k = np.flatnonzero(p < p_star)
+        if k.size:
+            j = int(k[0])
+            j0 = min(max(j - 1, 1), t.size - 2)
+            # quadratic through three points around the crossing, solved for p = p_star
+            tt, pp = t[j0 - 1:j0 + 2], p[j0 - 1:j0 + 2]
+            c2, c1, c0 = np.polyfit(tt - tt[1], pp, 2)
+            disc = c1 * c1 - 4 * c2 * (c0 - p_star)
+            if abs(c2) > 0 and disc >= 0:
+                r = [(-c1 + s * math.sqrt(disc)) / (2 * c2) for s in (1.0, -1.0)]
+                x = min(r, key=lambda v: abs(v - (t[j] - tt[1])))
+            else:
+                x = (p_star - c0) / c1
+            return float(tt[1] + x)
+        horizon *= 2.0
+    return math.inf
+
+
+#: Relative tolerance on C of :func:`invert_crossing` (far below any stated uncertainty).
+INVERSION_RTOL = 1e-6
+#: Integrator tolerance of the inversion: crossing times to about 1e-6 relative [-].
+INVERSION_ODE_RTOL = 1e-6
+
+
+def may_turn_subsonic(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
+    """True when, for a b within 2 sigma of its prior, the flow turns subsonic before p*.
+
+    The flow is choked while p1 >= p_atm/b: the smaller b, the earlier it turns subsonic.
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Its ``critical_ratio`` is the prior mean of b [-].
+    p_atm, p_star : float
+        Atmospheric and crossing pressures [Pa absolute].
+    """
+    b_lo = max(settings.critical_ratio - 2.0 * CRITICAL_RATIO_PRIOR_STD, 0.01)
+    return p_star < p_atm / b_lo
+
+
+def invert_crossing(
+    tau_exp: float, tau_std: float, *, p10: float, p_atm: float, p_star: float,
+    settings: EstimatorSettings, c_start: float,
+) -> tuple[float, float]:
+    """C for which the discharge model crosses p_star at tau_exp, and its 1-sigma [m^3/(s Pa)].
+
+    The model's crossing time is nearly proportional to 1/C (exactly so without heat
+    transfer), so a secant iteration on log t(C) - log tau_exp converges in two or three
+    integrations (this runs inside the live estimator, at the sample that completes the
+    estimate). The standard deviation combines the timing uncertainty and, for the
+    natural-convection model, the uncertainty of the heat-transfer correlation
+    (:data:`HEAT_CORRELATION_REL_STD`).
+
+    Parameters
+    ----------
+    tau_exp, tau_std : float
+        Measured unloading time and its standard deviation [s].
+    p10, p_atm, p_star : float
+        Pressures [Pa absolute].
+    settings : EstimatorSettings
+        Tank and gas settings.
+    c_start : float
+        Starting value, e.g. the isentropic inversion [m^3/(s Pa)].
+    """
+    if not (math.isfinite(tau_exp) and tau_exp > 0 and math.isfinite(c_start) and c_start > 0):
+        return math.nan, math.nan
+
+    def g(log_c: float) -> float:
+        """log(model crossing time / tau_exp) at C = exp(log_c)."""
+        cfg = rig_from_settings(settings, conductance=math.exp(log_c), p10=p10, p_atm=p_atm)
+        tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
+        return math.log(tm / tau_exp) if math.isfinite(tm) and tm > 0 else math.nan
+
+    x0 = math.log(c_start)
+    f0 = g(x0)
+    if not math.isfinite(f0):
+        return math.nan, math.nan
+    x1 = x0 + f0  # exact for t proportional to 1/C
+    for _ in range(8):
+        f1 = g(x1)
+        if not math.isfinite(f1):
+            return math.nan, math.nan
+        if abs(f1) < INVERSION_RTOL:
+            break
+        slope = (f1 - f0) / (x1 - x0) if x1 != x0 else -1.0
+        if not slope < -0.2:  # t(C) falls with C; guard against a flat or noisy secant
+            slope = -1.0
+        x0, f0, x1 = x1, f1, x1 - f1 / slope
+    c = math.exp(x1)
+    var = (c * tau_std / tau_exp) ** 2
+    b0, b_sd = settings.critical_ratio, CRITICAL_RATIO_PRIOR_STD
+    if may_turn_subsonic(settings, p_atm, p_star):
+        # the flow may turn subsonic before p*, where b matters and is not yet measured:
+        # the spread of the model's crossing time over b +- 1 sigma enters the variance
+        worst = 0.0
+        for b in (b0 - b_sd, b0 + b_sd):
+            if 0.0 < b < 0.99:
+                cfg = rig_from_settings(settings, conductance=c, p10=p10, p_atm=p_atm,
+                                        critical_ratio=b)
+                tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
+                if math.isfinite(tm):
+                    worst = max(worst, abs(tm / tau_exp - 1.0))
+        var += (c * worst) ** 2
+    if settings.heat_model == "natural":
+        cfg = rig_from_settings(settings, conductance=c, p10=p10, p_atm=p_atm,
+                                heat_scale=1.0 + HEAT_CORRELATION_REL_STD)
+        tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
+        var += (c * (tm / tau_exp - 1.0)) ** 2
+    return c, math.sqrt(var)
+
+
+#: Grid of the inversion table: points and half-width in log C around the guess [-].
+TABLE_POINTS, TABLE_SPAN = 7, 0.7
+
+
+@dataclass(frozen=True)
+class InversionTable:
+    """The model's crossing time t(C) tabulated before the crossing, so that the inversion
+    at the crossing is a lookup (the live estimator publishes it at that sample).
+
+    Built when the pressure is half way to p* (:func:`inversion_table`): V, T10, p10, p_atm
+    and p* are known then, and the time so far gives C to within the bias of eq 39 (a few
+    tens of per cent), which a grid of :data:`TABLE_POINTS` values of C over
+    exp(+-:data:`TABLE_SPAN`) around it covers. log C is interpolated as a cubic in
+    log t through the four nearest points (the curve is nearly a line of slope -1: exactly
+    so without heat transfer), which reproduces the iterative inversion to ~1e-7.
+
+    Attributes
+    ----------
+    log_c, log_t : ndarray
+        Grid: log C [log m^3/(s Pa)] and log of the model's crossing time [log s]
+        (decreasing).
+    rel_heat : ndarray
+        Relative change of the crossing time when the natural-convection correlation is
+        :data:`HEAT_CORRELATION_REL_STD` stronger [-] at the first, middle and last grid
+        points (zeros when adiabatic); interpolated linearly in log C.
+    rel_b : float
+        Largest relative change of the crossing time for b one prior sigma either way [-]
+        (0 when the flow stays choked to p* for every plausible b).
+    """
+
+    log_c: FloatArray
+    log_t: FloatArray
+    rel_heat: FloatArray
+    rel_b: float
+
+    def covers(self, tau: float) -> bool:
+        """True when tau [s] lies inside the tabulated range."""
+        return bool(math.isfinite(tau) and tau > 0
+                    and self.log_t[-1] <= math.log(tau) <= self.log_t[0])
+
+    def invert(self, tau: float, tau_std: float) -> tuple[float, float]:
+        """C and its 1-sigma [m^3/(s Pa)] for a measured tau_exp and its 1-sigma [s]."""
+        y = math.log(tau)
+        k = int(np.searchsorted(-self.log_t, -y))
+        j = min(max(k - 2, 0), self.log_t.size - 4)
+        ys, xs = self.log_t[j:j + 4], self.log_c[j:j + 4]
+        x, dxdy = 0.0, 0.0
+        for a in range(4):  # Lagrange cubic x(y) and its derivative
+            others = [ys[b] for b in range(4) if b != a]
+            den = float(np.prod([ys[a] - o for o in others]))
+            num = float(np.prod([y - o for o in others]))
+            dnum = sum(float(np.prod([y - o for o in others if o is not skip]))
+                       for skip in others)
+            x += xs[a] * num / den
+            dxdy += xs[a] * dnum / den
+        c = math.exp(x)
+        ends = self.log_c[[0, self.log_c.size // 2, -1]]
+        rel_heat = float(np.interp(x, ends, self.rel_heat))
+        var = (c * dxdy * tau_std / tau) ** 2 + (c * self.rel_b) ** 2 + (c * rel_heat) ** 2
+        return c, math.sqrt(var)
+
+
+def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_star: float,
+                    c_guess: float) -> InversionTable | None:
+    """Tabulate the model's crossing time around ``c_guess`` (see :class:`InversionTable`).
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Tank, gas and heat model.
+    p10, p_atm, p_star : float
+        Pressures [Pa absolute].
+    c_guess : float
+        Expected C [m^3/(s Pa)] (e.g. the isentropic inversion half way to p*).
+
+    Returns
+    -------
+    InversionTable or None
+        None when a crossing time cannot be computed (the model never reaches p*).
+    """
+    if not (math.isfinite(c_guess) and c_guess > 0):
+        return None
+    gas, vol, t10 = settings.gas, settings.volume, settings.initial_temperature
+    log_c = math.log(c_guess) + np.linspace(-TABLE_SPAN, TABLE_SPAN, TABLE_POINTS)
+    times = []
+    for lc in log_c:
+        c = math.exp(lc)
+        guess = isentropic_crossing_time(p_star, p10, vol, c, t10, gas)
+        cfg = rig_from_settings(settings, conductance=c, p10=p10, p_atm=p_atm)
+        tm = model_crossing_time(cfg, p_star, guess, rtol=INVERSION_ODE_RTOL)
+        if not (math.isfinite(tm) and tm > 0):
+            return None
+        times.append(tm)
+    log_t = np.log(np.array(times))
+    if not np.all(np.diff(log_t) < 0):
+        return None
+    t_mid = times[TABLE_POINTS // 2]
+    rel_b = 0.0
+    rel_heat = np.zeros(3)
+    if settings.heat_model == "natural":
+        for j, g in enumerate((0, TABLE_POINTS // 2, TABLE_POINTS - 1)):
+            cfg = rig_from_settings(settings, conductance=math.exp(log_c[g]), p10=p10,
+                                    p_atm=p_atm, heat_scale=1.0 + HEAT_CORRELATION_REL_STD)
+            tm = model_crossing_time(cfg, p_star, times[g], rtol=INVERSION_ODE_RTOL)
+            rel_heat[j] = abs(tm / times[g] - 1.0) if math.isfinite(tm) else math.inf
+    if may_turn_subsonic(settings, p_atm, p_star):
+        b0, b_sd = settings.critical_ratio, CRITICAL_RATIO_PRIOR_STD
+        for b in (b0 - b_sd, b0 + b_sd):
+            if 0.0 < b < 0.99:
+                cfg = rig_from_settings(settings, conductance=c_guess, p10=p10,
+                                        p_atm=p_atm, critical_ratio=b)
+                tm = model_crossing_time(cfg, p_star, t_mid, rtol=INVERSION_ODE_RTOL)
+                if math.isfinite(tm):
+                    rel_b = max(rel_b, abs(tm / t_mid - 1.0))
+    return InversionTable(log_c=np.asarray(log_c), log_t=log_t, rel_heat=rel_heat,
+                          rel_b=rel_b)

@@ -1,0 +1,36 @@
+"""The model-based C on data the package did not make: an independent discharge model with
+Newton cooling (constant hA) and the ISO flow law (``test/foreign/newton_tank.py``, which
+imports nothing from the package's model).
+
+Before the heat-law family (natural-convection scale only) the model C was 22 % low at a
+thermal time constant of 0.5-2 s and 3-4 % at 4 s, with a sigma that excluded the truth.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from foreign.newton_tank import discharge
+
+from pneumatic_unload.estimation import EstimatorSettings, analyze, merge_final
+
+
+@pytest.mark.parametrize("tau_heat,volume,conductance,b,seed", [
+    (0.5, 4e-3, 5e-9, 0.40, 1), (2.0, 2e-3, 4e-9, 0.30, 2), (4.0, 4e-3, 5e-9, 0.45, 3),
+    (10.0, 8e-3, 1.2e-8, 0.35, 4), (20.0, 3e-3, 3e-9, 0.50, 5)])
+def test_model_c_and_b_on_an_independent_newton_cooling_model(tau_heat, volume, conductance,
+                                                              b, seed):
+    p10, p_atm = 8e5, 101325.0
+    tau0 = volume / (1.4 * 1e5 * conductance)  # eq 28 [s]
+    t = np.arange(0.0, 0.2 + 8.0 * tau0, 1e-3)
+    p = discharge(t, volume=volume, conductance=conductance, b=b, p10=p10, t10=293.15,
+                  p_atm=p_atm, tau_heat=tau_heat, t_open=0.2)
+    y = p + np.random.default_rng(seed).normal(0.0, 1000.0, t.size)  # 0.1 % of 1 MPa
+    (r,) = merge_final(analyze(t, y, EstimatorSettings(volume=volume)))
+    assert r.final and math.isfinite(r.conductance_model)
+    assert abs(r.conductance_model / conductance - 1.0) < 0.02
+    assert abs(r.conductance_model - conductance) < 3.0 * r.conductance_model_std
+    assert abs(r.critical_ratio - b) < 0.03  # the subsonic tail is recorded
+    fit = r.extra["curve_fit"]
+    assert fit["heat_law"] == "fixed" or fit["laws"]["fixed"]["bic"] - \
+        fit["laws"][fit["heat_law"]]["bic"] < 10.0
