@@ -19,6 +19,7 @@ import dataclasses
 import difflib
 import json
 import math
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -53,7 +54,14 @@ class ArgumentParser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> Any:  # argparse's signature: NoReturn
-        """Print ``prog: error: message`` (one line, no usage) and exit with status 2."""
+        """Print ``prog: error: message`` (one line, no usage) and exit with status 2; an
+        unknown choice (a sub-command) gets the nearest known one."""
+        m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if m:
+            near = difflib.get_close_matches(m.group(1), re.findall(r"'([^']*)'", m.group(2)),
+                                             n=1)
+            if near:
+                message += f"; did you mean {near[0]}?"
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
