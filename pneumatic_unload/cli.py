@@ -6,15 +6,20 @@ analyze PATH     unloading-time analysis of a bag (directory or .mcap) or a CSV 
 simulate --out   write a simulated run as a rosbag2/MCAP bag, no ROS needed
 recover BAG      make a bag whose writer was killed readable again
 
-Errors on unreadable input exit with status 2 and one line on stderr.
+Errors on unreadable input or bad options exit with status 2 and one line on stderr (no
+prefix matching of options: an unknown one is answered with the nearest known one). A run
+with no unload, or whose readings look like gauge pressures taken as absolute, exits with
+status 1 and says why on stderr (and in ``--json``).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import difflib
 import json
 import math
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -31,12 +36,49 @@ from pneumatic_unload.estimation import (
     analyze,
     merge_final,
 )
+from pneumatic_unload.estimation.batch import explain_no_unload, gauge_suspicion
 
 PRESSURE_UNITS = {"Pa": 1.0, "kPa": 1e3, "bar": 1e5, "MPa": 1e6, "psi": 6894.757293168361}
 
 
 class CliError(Exception):
     """A user-facing error: printed as one line, exit status 2."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse without prefix matching (``allow_abbrev=False``, also for the sub-commands,
+    which are made with the parent's class) whose errors are one line on stderr, exit 2."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> Any:  # argparse's signature: NoReturn
+        """Print ``prog: error: message`` (one line, no usage) and exit with status 2; an
+        unknown choice (a sub-command) gets the nearest known one."""
+        m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if m:
+            near = difflib.get_close_matches(m.group(1), re.findall(r"'([^']*)'", m.group(2)),
+                                             n=1)
+            if near:
+                message += f"; did you mean {near[0]}?"
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _option_strings(parser: argparse.ArgumentParser) -> list[str]:
+    return [o for a in parser._actions for o in a.option_strings if o.startswith("--")]
+
+
+def unrecognized_message(parser: argparse.ArgumentParser, extra: Sequence[str]) -> str:
+    """'unrecognized argument --volum; did you mean --volume?' for the first unknown option
+    of ``extra`` (the nearest of ``parser``'s options), or the unknown arguments."""
+    for word in extra:
+        if word.startswith("-"):
+            name = word.split("=", 1)[0]
+            near = difflib.get_close_matches(name, _option_strings(parser), n=1)
+            hint = f"; did you mean {near[0]}?" if near else f" (see {parser.prog} --help)"
+            return f"unrecognized argument {name}{hint}"
+    return f"unrecognized argument(s): {' '.join(extra)}"
 
 
 # --------------------------------------------------------------------------- input
@@ -117,7 +159,12 @@ def _unload_json(r: UnloadResult) -> dict[str, Any]:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    """Run the unloading-time analysis and print the estimates."""
+    """Run the unloading-time analysis and print the estimates (exit status 1 when no unload
+    was found, with the reason, or when the readings look like gauge pressures)."""
+    if args.plot:
+        folder = Path(args.plot).parent
+        if not folder.is_dir():
+            raise CliError(f"--plot {args.plot}: folder {folder} does not exist")
     t, p, cfg = load_trace(args)
     settings = settings_from(args, cfg)
     try:
@@ -135,23 +182,37 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             settings = dataclasses.replace(settings, initial_temperature=t10)
             published = analyze(t, p, settings)
             unloads = merge_final(published)
+    why = None if unloads else explain_no_unload(t, p, settings)
+    problem = gauge_suspicion(t, p, settings)
+    if problem is not None:
+        # C from gauge readings taken as absolute is wrong: no unload may say "ok"
+        unloads = [dataclasses.replace(r, status="bad_data", status_text=problem)
+                   for r in unloads]
     if args.json:
         out = {"source": str(args.path), "samples": int(t.size),
                "settings": dict(vars(settings)),
                "unloads": [_unload_json(r) for r in unloads],
-               "published": [_unload_json(r) for r in published]}
+               "published": [_unload_json(r) for r in published],
+               "no_unload_reason": why, "input_problem": problem}
         print(json.dumps(out, indent=2, allow_nan=False, default=_json_default))
     else:
         print(f"{args.path}: {t.size} samples, {len(unloads)} unload(s)")
         for r in unloads:
             print(format_result(r))
+    if why is not None:
+        print(f"pneumatic-unload: no unload: {why}", file=sys.stderr)
+    elif problem is not None:
+        print(f"pneumatic-unload: {problem}", file=sys.stderr)
     if args.plot:
         from pneumatic_unload.plotting import plot_analysis
 
-        plot_analysis(t, p, unloads, settings, args.plot)
+        try:
+            plot_analysis(t, p, unloads, settings, args.plot)
+        except OSError as exc:
+            raise CliError(f"--plot {args.plot}: {exc}") from exc
         if not args.json:
             print(f"plot written to {args.plot}")
-    return 0 if unloads else 1
+    return 0 if unloads and problem is None else 1
 
 
 def _json_default(o: object) -> object:
@@ -191,6 +252,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         cfg = config_from_args(args)
     except ConfigError as exc:
         raise CliError(str(exc)) from exc
+    if cfg.atmosphere is not None and cfg.initial_pressure <= cfg.atmosphere:
+        raise CliError(f"initial_pressure={cfg.initial_pressure:g} Pa is not above the "
+                       f"atmosphere {cfg.atmosphere:g} Pa: nothing would flow out (pressures "
+                       f"are absolute: 6 bar gauge is --initial-pressure 7.01325bar)")
     try:
         info = write_simulated_bag(cfg, Path(args.out), analyze_live=not args.no_estimate)
     except (BagError, FileExistsError) as exc:
@@ -306,7 +371,9 @@ def add_discrepancy_parser(sub: Any) -> None:
                     help="rosbag2 directory, .mcap file or .csv log (several: one shared "
                          "geometry law of C)")
     adapters.add_options(dc, TankSpec, exclude=("length_diameter_ratio",))
-    dc.add_argument("--length-diameter-ratio", type=float, nargs="+",
+    dc.add_argument("--length-diameter-ratio", nargs="+",
+                    type=adapters.option_type(adapters.field_of(TankSpec,
+                                                                "length_diameter_ratio")),
                     help="tank L/D [-], one for all runs or one per PATH")
     adapters.add_options(dc, DiscrepancySettings,
                          only=("fit_wall_temperature", "profile", "bic_threshold",
@@ -347,7 +414,7 @@ def add_input_options(parser: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pneumatic-unload``."""
-    ap = argparse.ArgumentParser(
+    ap = ArgumentParser(
         prog="pneumatic-unload",
         description="Sonic conductance of pneumatic components from tank discharges "
                     "(unloading-time method with model-based bias correction).")
@@ -379,7 +446,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``pneumatic-unload``; returns the exit status."""
     ap = build_parser()
-    args = ap.parse_args(argv)
+    args, extra = ap.parse_known_args(argv)
+    if extra:
+        sub = ap._subparsers._group_actions[0].choices if ap._subparsers else {}
+        ap_cmd = sub.get(getattr(args, "command", None), ap)
+        ap_cmd.error(unrecognized_message(ap_cmd, extra))
     if getattr(args, "gauge", False) and args.atmosphere is None:
         print("pneumatic-unload: error: --gauge needs --atmosphere PA", file=sys.stderr)
         return 2

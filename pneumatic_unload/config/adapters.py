@@ -8,6 +8,11 @@ stored in bags. ROS-free: the nodes turn :class:`ParameterSpec` into ParameterDe
 Conventions: an option not given is None (the settings' or the bag's value is then used;
 zero is a value, never "not given"); an optional number (None meaning "auto" or "equal to
 T10") is a ROS parameter whose 0 means None, since ROS parameters cannot be null.
+
+Command-line numbers accept a unit suffix, case-insensitive (``16.18L``, ``2dm3``, ``25C``,
+``101.5kPa``, ``7bar``, ``100psi``, ``5e-9m3/(s Pa)``; a bare number is SI), are checked
+against the field's range when parsed (argparse exits 2 with one line), and a bare number
+out of range that is in range in a usual other unit is answered with "did you mean ...".
 """
 
 from __future__ import annotations
@@ -15,10 +20,138 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
+import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from pneumatic_unload.config.fields import ConfigError
+from pneumatic_unload.config.fields import ConfigError, check_value
+
+#: Unit suffixes accepted on the command line, per SI unit of a field: suffix -> (scale,
+#: offset), SI value = scale * x + offset. Matched case-insensitively, ignoring spaces and
+#: '^' ("16.18l", "5e-9 m^3/(s Pa)").
+_PSI = 6894.757293168361
+UNIT_SUFFIXES: dict[str, dict[str, tuple[float, float]]] = {
+    "m^3": {"m3": (1.0, 0.0), "L": (1e-3, 0.0), "dm3": (1e-3, 0.0), "cm3": (1e-6, 0.0),
+            "mL": (1e-6, 0.0)},
+    "K": {"K": (1.0, 0.0), "C": (1.0, 273.15), "degC": (1.0, 273.15)},
+    "Pa": {"Pa": (1.0, 0.0), "hPa": (1e2, 0.0), "mbar": (1e2, 0.0), "kPa": (1e3, 0.0),
+           "bar": (1e5, 0.0), "MPa": (1e6, 0.0), "psi": (_PSI, 0.0)},
+    "m^3/(s Pa)": {"m3/(s Pa)": (1.0, 0.0), "dm3/(s bar)": (1e-8, 0.0),
+                   "L/(s bar)": (1e-8, 0.0)},
+    "kg/(s Pa)": {"kg/(s Pa)": (1.0, 0.0)},
+    "s": {"s": (1.0, 0.0), "ms": (1e-3, 0.0), "min": (60.0, 0.0)},
+    "Hz": {"Hz": (1.0, 0.0), "kHz": (1e3, 0.0)},
+}
+
+#: The usual other units a bare number may have been meant in, per SI unit (in the order
+#: suggested): (how to name it, suffix to write).
+SUGGESTED_UNITS: dict[str, tuple[tuple[str, str], ...]] = {
+    "m^3": (("L", "L"),),
+    "K": (("degC", "C"),),
+    "Pa": (("kPa", "kPa"), ("bar", "bar"), ("MPa", "MPa")),
+    "m^3/(s Pa)": (("dm^3/(s bar)", "dm3/(s bar)"),),
+}
+
+_NUMBER = re.compile(r"\s*([-+]?(?:(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?|inf(?:inity)?|nan))"
+                     r"\s*(.*?)\s*", re.IGNORECASE)
+
+
+def _norm_unit(u: str) -> str:
+    return re.sub(r"[\s^*·]", "", u).lower()
+
+
+def parse_quantity(text: str, unit: str) -> tuple[float, bool]:
+    """A number with an optional unit suffix, in the SI ``unit`` of a field.
+
+    Parameters
+    ----------
+    text : str
+        E.g. ``"16.18L"``, ``"25 degC"``, ``"7bar"`` or a bare ``"0.01618"`` (SI).
+    unit : str
+        SI unit of the field (``"m^3"``, ``"K"``, ``"Pa"``...).
+
+    Returns
+    -------
+    value : float
+        The value in ``unit``.
+    bare : bool
+        True when no suffix was written.
+
+    Raises
+    ------
+    ValueError
+        Not a number, or a suffix that is not a unit of this field.
+    """
+    m = _NUMBER.fullmatch(text)
+    if m is None:
+        raise ValueError(f"{text!r} is not a number")
+    x = float(m.group(1))
+    suffix = _norm_unit(m.group(2))
+    if not suffix:
+        return x, True
+    table = {_norm_unit(k): v for k, v in UNIT_SUFFIXES.get(unit, {}).items()}
+    if unit and unit != "-" and suffix == _norm_unit(unit):
+        return x, False
+    if suffix not in table:
+        known = [unit, *UNIT_SUFFIXES.get(unit, {})] if unit and unit != "-" else []
+        hint = f"; units of this option: {', '.join(dict.fromkeys(known))}" if known \
+            else "; this option takes a plain number"
+        raise ValueError(f"{text!r}: unknown unit {m.group(2)!r}{hint}")
+    scale, offset = table[suffix]
+    return scale * x + offset, False
+
+
+def _did_you_mean(f: dataclasses.Field[Any], x: float) -> str:
+    """'; did you mean ...' when the bare number ``x`` fits in a usual other unit."""
+    md = f.metadata
+    if not math.isfinite(x):
+        return ""
+    hints = []
+    for name, suffix in SUGGESTED_UNITS.get(md.get("unit", ""), ()):
+        scale, offset = UNIT_SUFFIXES[md["unit"]][suffix]
+        v = scale * x + offset
+        if md["min"] <= v <= md["max"]:
+            # argparse takes "-5C" for an option: a negative value needs "--name=-5C"
+            write = f"{x:g}{suffix}" if x >= 0 else \
+                f"--{f.name.replace('_', '-')}={x:g}{suffix}"
+            hints.append(f"{x:g} {name} = {v:g} {md['unit']}? (write {write})")
+    return "; did you mean " + " or ".join(hints) if hints else ""
+
+
+def option_type(f: dataclasses.Field[Any]) -> Callable[[str], Any]:
+    """The argparse ``type=`` of a numeric field: unit suffixes, range check, hints.
+
+    The returned function turns the option's text into the field's SI value and raises
+    :class:`argparse.ArgumentTypeError` (one line: argparse exits 2) for a value that is not
+    a number, not finite or outside the field's range, adding "did you mean 16.18 L = 0.01618
+    m^3? (write 16.18L)" when a bare number would be in range in a usual other unit.
+    """
+    md = f.metadata
+
+    def convert(text: str) -> Any:
+        try:
+            x, bare = parse_quantity(text, md.get("unit", ""))
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from exc
+        if md["kind"] == "integer":
+            if not math.isfinite(x) or int(x) != x:
+                raise argparse.ArgumentTypeError(f"{f.name} must be an integer, got {text!r}")
+            x = int(x)
+        try:
+            return check_value(f, x)
+        except ConfigError as exc:
+            raise argparse.ArgumentTypeError(
+                str(exc) + (_did_you_mean(f, x) if bare else "")) from exc
+
+    convert.__name__ = f.name  # argparse names the type in its own messages
+    return convert
+
+
+def field_of(cls: type, name: str) -> dataclasses.Field[Any]:
+    """The dataclass field ``name`` of ``cls`` (for :func:`option_type`)."""
+    return {f.name: f for f in dataclasses.fields(cls)}[name]
 
 
 @dataclass(frozen=True)
@@ -75,6 +208,8 @@ def add_options(parser: argparse.ArgumentParser, cls: type, *,
                 only: tuple[str, ...] | None = None, exclude: tuple[str, ...] = ()) -> None:
     """One ``--name-with-dashes`` option per metadata field of ``cls`` (default None).
 
+    Numbers take a unit suffix and are range-checked when parsed (:func:`option_type`).
+
     Parameters
     ----------
     parser : argparse.ArgumentParser
@@ -89,9 +224,11 @@ def add_options(parser: argparse.ArgumentParser, cls: type, *,
         flag = "--" + f.name.replace("_", "-")
         kind = md["kind"]
         if kind in ("number", "optional"):
-            parser.add_argument(flag, type=float, default=None, metavar="X", help=_help(f))
+            parser.add_argument(flag, type=option_type(f), default=None, metavar="X",
+                                help=_help(f))
         elif kind == "integer":
-            parser.add_argument(flag, type=int, default=None, metavar="N", help=_help(f))
+            parser.add_argument(flag, type=option_type(f), default=None, metavar="N",
+                                help=_help(f))
         elif kind == "choice":
             parser.add_argument(flag, default=None, choices=md["choices"], help=_help(f))
         elif kind == "names":

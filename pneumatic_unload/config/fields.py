@@ -99,8 +99,11 @@ def check_value(f: dataclasses.Field[Any], v: Any) -> Any:
         raise ConfigError(f"{f.name} must be a number, got {v!r}")
     if kind == "integer" and int(v) != v:
         raise ConfigError(f"{f.name} must be an integer, got {v!r}")
-    if not math.isfinite(v) or not md["min"] <= v <= md["max"]:
-        unit = f" {md['unit']}" if md.get("unit") else ""
+    unit = f" {md['unit']}" if md.get("unit") and md["unit"] != "-" else ""
+    if not math.isfinite(v):
+        raise ConfigError(f"{f.name}={v!r}{unit} is not a finite number (range "
+                          f"[{md['min']:g}, {md['max']:g}]; {md['doc']})")
+    if not md["min"] <= v <= md["max"]:
         raise ConfigError(f"{f.name}={v!r}{unit} is outside [{md['min']:g}, {md['max']:g}]"
                           f" ({md['doc']})")
     return int(v) if kind == "integer" else v

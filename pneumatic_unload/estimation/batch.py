@@ -1,6 +1,9 @@
-"""Batch analysis of a whole trace, and one result per unload (SI units: s, Pa absolute)."""
+"""Batch analysis of a whole trace, one result per unload, and why a trace gave none
+(SI units: s, Pa absolute)."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -8,6 +11,7 @@ from numpy.typing import ArrayLike
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.streaming import StreamingEstimator
 from pneumatic_unload.estimation.types import UnloadResult
+from pneumatic_unload.physics import p_star
 
 
 def analyze(
@@ -61,3 +65,175 @@ def merge_final(results: list[UnloadResult]) -> list[UnloadResult]:
         if r.index not in by_index or r.final:
             by_index[r.index] = r
     return [by_index[k] for k in sorted(by_index)]
+
+
+#: A final plateau below this fraction of the stated p_atm means gauge readings [-].
+GAUGE_FINAL_FRACTION = 0.5
+#: Fewest finite samples beyond ``min_plateau`` that can hold a drop and its crossing [-].
+MIN_UNLOAD_SAMPLES = 16
+#: How to fix gauge readings taken as absolute (command line and library).
+GAUGE_FIX = ("pass --gauge --atmosphere PA (library: add p_atm [Pa] to the readings, or "
+             "signal_offset=p_atm)")
+
+
+def _finite_pa(t: ArrayLike, p: ArrayLike, s: EstimatorSettings
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Finite samples: times [s] and pressures [Pa] (signal converted by gain and offset)."""
+    t = np.asarray(t, dtype=float)
+    p = np.asarray(p, dtype=float)
+    if t.shape != p.shape or t.ndim != 1:
+        raise EstimationError(f"t and p must be 1-D arrays of equal length, got {t.shape} "
+                              f"and {p.shape}")
+    ok = np.isfinite(t) & np.isfinite(p)
+    return t[ok], s.signal_offset + s.signal_gain * p[ok]
+
+
+def _noise_std(pp: np.ndarray) -> float:
+    """Robust white-noise standard deviation of pressures [Pa] (MAD of first differences)."""
+    if pp.size < 3:
+        return 0.0
+    d = np.diff(pp)
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+
+
+def _final_level(pp: np.ndarray, s: EstimatorSettings) -> float:
+    """Median of the last ``min_plateau`` readings [Pa] (the final plateau, if recorded)."""
+    return float(np.median(pp[-min(pp.size, s.min_plateau):]))
+
+
+def gauge_suspicion(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | None = None
+                    ) -> str | None:
+    """Why the readings look like gauge pressures taken as absolute, or None.
+
+    A record in Pa absolute never reads at or below 0 Pa, and it ends near p_atm: a final
+    plateau below ``GAUGE_FINAL_FRACTION`` of the stated atmosphere, or readings at or below
+    zero (more than 0.1 % of them, at least 3), mean that the gauge readings were not
+    converted (the CLI's ``--gauge`` was forgotten); C computed from them is wrong.
+
+    Parameters
+    ----------
+    t : array_like
+        Sample instants [s].
+    p : array_like
+        Pressure [Pa absolute] (or a signal converted by ``signal_gain``/``signal_offset``).
+    settings : EstimatorSettings, optional
+        ``atmosphere`` [Pa], ``min_plateau`` and the signal conversion.
+
+    Returns
+    -------
+    str or None
+        One line naming the evidence and the fix, or None when the readings look absolute.
+    """
+    s = settings or EstimatorSettings()
+    _tt, pp = _finite_pa(t, p, s)
+    if pp.size == 0:
+        return None
+    final = _final_level(pp, s)
+    n_low = int(np.count_nonzero(pp <= 0.0))
+    evidence = []
+    if s.atmosphere is not None and final < GAUGE_FINAL_FRACTION * s.atmosphere:
+        evidence.append(f"final plateau {final:.0f} Pa, far below p_atm = "
+                        f"{s.atmosphere:.0f} Pa")
+    if n_low >= max(3, int(0.001 * pp.size)):
+        evidence.append(f"{n_low} of {pp.size} readings at or below 0 Pa")
+    if not evidence:
+        return None
+    return f"readings look like gauge pressures ({'; '.join(evidence)}): {GAUGE_FIX}"
+
+
+def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | None = None
+                      ) -> str:
+    """Why :func:`analyze` found no unload in a trace, in one line.
+
+    Checked in this order: no finite sample; too few samples; time stamps not increasing (a
+    reversed record); readings at or below zero or below p_atm throughout, or a final
+    plateau far below p_atm (gauge readings taken as absolute); a constant signal; no drop;
+    no plateau of ``min_plateau`` samples before the drop (a record that starts at the valve
+    opening); a drop that never reaches p* (eq 40); else the estimator's own diagnostics.
+
+    Parameters
+    ----------
+    t : array_like
+        Sample instants [s].
+    p : array_like
+        Pressure [Pa absolute] (or a signal converted by ``signal_gain``/``signal_offset``).
+    settings : EstimatorSettings, optional
+        The settings :func:`analyze` was called with.
+
+    Returns
+    -------
+    str
+        The reason, with what would fix it where known.
+    """
+    s = settings or EstimatorSettings()
+    n = np.asarray(t).size
+    tt, pp = _finite_pa(t, p, s)
+    m = tt.size
+    if m == 0:
+        return f"all {n} samples are non-finite (NaN or inf time stamps or pressures)"
+    need = s.min_plateau + MIN_UNLOAD_SAMPLES
+    if m < need:
+        return (f"too few samples: {m} finite of {n}; a pre-trigger plateau of min_plateau="
+                f"{s.min_plateau} samples and the drop need at least {need}")
+    dt = np.diff(tt)
+    back = int(np.count_nonzero(dt <= 0.0))
+    if back > dt.size // 2:
+        return (f"time stamps are not increasing ({back} of {dt.size} steps go backwards or "
+                f"stand still; a reversed record?): sort the samples by time")
+    hi = float(np.max(pp))
+    if hi <= 0.0:
+        return (f"all readings are at or below 0 Pa (highest {hi:.0f} Pa): gauge pressures "
+                f"taken as absolute? {GAUGE_FIX}")
+    if s.atmosphere is not None and hi <= s.atmosphere:
+        return (f"all readings are at or below p_atm = {s.atmosphere:.0f} Pa (highest "
+                f"{hi:.0f} Pa): gauge pressures taken as absolute? {GAUGE_FIX}")
+    gauge = gauge_suspicion(tt, pp, _pa_settings(s))
+    if gauge is not None:
+        return gauge
+    sigma = _noise_std(pp)
+    threshold = s.trigger_sigma * max(sigma, 1e-9 * abs(hi))
+    if float(np.ptp(pp)) <= threshold:
+        return (f"the pressure never drops: it stays at {np.median(pp):.0f} Pa (peak to peak "
+                f"{float(np.ptp(pp)):.3g} Pa, within trigger_sigma={s.trigger_sigma:g} noise "
+                f"std): no unload recorded, or the sensor is stuck")
+    start = float(np.median(pp[:4]))
+    below = np.flatnonzero(pp < start - threshold)
+    if below.size == 0:
+        return (f"no drop: the pressure never falls {threshold:.3g} Pa (trigger_sigma="
+                f"{s.trigger_sigma:g} noise std) below its initial {start:.0f} Pa; no unload "
+                f"recorded (or the record starts after it)")
+    i_drop = int(below[0])
+    if i_drop < s.min_plateau:
+        fix = (f", or pass --min-plateau {i_drop} (min_plateau) if those {i_drop} samples "
+               f"are a plateau" if i_drop >= 4 else "")
+        return (f"no plateau before the drop: the pressure falls from sample {i_drop} "
+                f"(t = {tt[i_drop]:.6g} s), but a pre-trigger plateau of at least min_plateau"
+                f"={s.min_plateau} samples is needed (the record starts at the valve "
+                f"opening?): record from before the valve opens{fix}")
+    p10 = float(np.median(pp[:i_drop]))
+    p_atm = s.atmosphere if s.atmosphere is not None else _final_level(pp, s)
+    ps = p_star(p10, p_atm)
+    low = float(np.min(pp[i_drop:]))
+    if low > ps:
+        return (f"the pressure never fell to p* = {ps:.0f} Pa (p10 = {p10:.0f} Pa, p_atm = "
+                f"{p_atm:.0f} Pa, lowest reading {low:.0f} Pa): the valve closed early or "
+                f"the record ends too soon")
+    return _estimator_reason(t, p, s)
+
+
+def _pa_settings(s: EstimatorSettings) -> EstimatorSettings:
+    """The settings for readings already converted to Pa (gain 1, offset 0)."""
+    return dataclasses.replace(s, signal_gain=1.0, signal_offset=0.0)
+
+
+def _estimator_reason(t: ArrayLike, p: ArrayLike, s: EstimatorSettings) -> str:
+    """The estimator's warnings and errors on the trace, or a generic reason."""
+    est = StreamingEstimator(s)
+    est.push_block(np.asarray(t, dtype=float), np.asarray(p, dtype=float))
+    est.finish()
+    msgs = list(dict.fromkeys(d.message for d in est.diagnostics if d.level != "ok"))
+    if msgs:
+        more = f" (and {len(msgs) - 3} more)" if len(msgs) > 3 else ""
+        return "no unload detected: " + "; ".join(msgs[:3]) + more
+    return ("no unload detected: no step met the detector's criteria (plateau of min_plateau "
+            "samples, a drop of trigger_sigma noise std, confirmation)")

@@ -401,14 +401,16 @@ def read_csv_trace(
     t = np.asarray(values[0]) * TIME_UNITS[t_unit]
     if n_rows > 1 and np.any(np.diff(t) <= 0.0):
         bad = int(np.argmax(np.diff(t) <= 0.0)) + 2
-        raise CsvFormatError(f"{file}: time does not increase at data row {bad}")
+        raise CsvFormatError(f"{file}: time does not increase at data row {bad} (a reversed "
+                             f"or merged record? sort the rows by time)")
     p = np.asarray(values[1]) * PRESSURE_UNITS[p_unit]
     if is_gauge:
         assert atmosphere is not None
         p = p + atmosphere
     if np.any(p <= 0.0):
         bad = int(np.argmax(p <= 0.0)) + 1
-        hint = "" if is_gauge else " (gauge readings? pass gauge=True, atmosphere=...)"
+        hint = "" if is_gauge else (" (gauge readings? pass gauge=True, atmosphere=p_atm [Pa];"
+                                    " command line: --gauge --atmosphere PA)")
         raise CsvFormatError(
             f"{file}: absolute pressure {p[bad - 1]:.6g} Pa <= 0 at data row {bad}{hint}"
         )
