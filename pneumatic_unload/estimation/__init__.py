@@ -34,7 +34,12 @@ eq 23), :mod:`.refine` (every call into :mod:`pneumatic_unload.fitting`),
 """
 
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.estimation.batch import analyze, merge_final
+from pneumatic_unload.estimation.batch import (
+    analyze,
+    explain_no_unload,
+    gauge_suspicion,
+    merge_final,
+)
 from pneumatic_unload.estimation.regression import corner_fit, crossing_fit, hinge_fit
 from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
 from pneumatic_unload.estimation.streaming import StreamingEstimator
@@ -59,6 +64,8 @@ __all__ = [
     "corner_fit",
     "crossing_fit",
     "estimate_fields",
+    "explain_no_unload",
+    "gauge_suspicion",
     "hinge_fit",
     "merge_final",
 ]
