@@ -170,7 +170,7 @@ def fit_curve(
     if fit_heat is None:
         fit_heat = natural
     tried = (laws or CURVE_FIT_LAWS) if (natural and fit_heat) else ("natural",)
-    fits: dict[str, tuple[CurveFit, float, float]] = {}
+    fits: dict[str, tuple[CurveFit, float, int]] = {}
     start: dict[str, float] | None = None
     for law in tried:
         fits[law] = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
@@ -190,19 +190,25 @@ def fit_curve(
                 start["b"] = first.critical_ratio
             if settings.atmosphere is None:
                 start["p_atm"] = first.p_atm
-    bic = {law: f[1] for law, f in fits.items()}
+    # information criterion on residuals normalised by the best law's residual variance
+    # (inflated when structured: correlated residuals carry less information)
+    lowest = min(fits, key=lambda k: fits[k][1])
+    ref = fits[lowest][0]
+    unit = max(ref.rms**2 * ref.inflation, 1e-300)  # [Pa^2] per residual
+    log_n = math.log(max(int(t.size), 2))
+    bic = {law: chi2 / unit + k * log_n for law, (_cf, chi2, k) in fits.items()}
     best = min(bic, key=lambda k: bic[k])
     cf = fits[best][0]
     var_mf, w_sum = 0.0, 0.0
-    for other, b_other, _chi2 in fits.values():
-        d = b_other - bic[best]
+    for law, (other, _chi2, _k) in fits.items():
+        d = bic[law] - bic[best]
         if d < LAW_BIC_THRESHOLD and math.isfinite(other.conductance):
             w = math.exp(-0.5 * d)
             w_sum += w
             var_mf += w * (other.conductance - cf.conductance) ** 2
     mf = math.sqrt(var_mf / w_sum) if w_sum > 0 else 0.0
-    table = {law: {"conductance": f[0].conductance, "bic": f[1], "chi2": f[2]}
-             for law, f in fits.items()}
+    table = {law: {"conductance": f[0].conductance, "bic": bic[law],
+                   "chi2": f[1] / unit} for law, f in fits.items()}
     return dataclasses.replace(
         cf, conductance_std=math.hypot(cf.conductance_std, mf), model_form_std=mf,
         laws=table, heat_law=best if natural else "none")
@@ -213,8 +219,9 @@ def _fit_law(
     p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
     profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
     max_nfev: int = 200,
-) -> tuple[CurveFit, float, float]:
-    """One law's fit for :func:`fit_curve`; returns (fit, BIC, chi^2 [-]).
+) -> tuple[CurveFit, float, int]:
+    """One law's fit for :func:`fit_curve`; returns (fit, chi^2 [Pa^2: residuals are bin
+    sums over sqrt(count)], free parameters [-]).
 
     Parameters
     ----------
@@ -306,7 +313,7 @@ def _fit_law(
         heat_scale=h, heat_scale_std=h_std, rms=math.sqrt(s2), n=int(t.size),
         success=bool(fit.success), inflation=inflation, heat_law=law,
         tau_heat=v.get("tau_heat", math.nan))
-    return cf, fit.bic, fit.chi2
+    return cf, fit.chi2, fit.k
 
 
 def fitted_tau_exp(fit: CurveFit, settings: EstimatorSettings, t_guess: float) -> float:
