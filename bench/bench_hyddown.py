@@ -1,0 +1,91 @@
+"""The model-based C on HydDown discharges (a peer simulator): a script, not a test.
+
+``python bench/bench_hyddown.py [FOLDER]`` (project venv, ``PYTHONPATH`` at the repo root):
+every ``FOLDER/*.npz`` written by ``bench/hyddown_traces.py`` (default: the committed small
+grid in ``test/data/hyddown``; the full grid is made in the HydDown venv with
+``/tmp/hyd-venv/bin/python bench/hyddown_traces.py --grid full --out DIR``) is resampled to
+1 kHz with a 0.2 s plateau and 1000 Pa white noise (as ``test/test_hyddown.py``), analysed,
+and printed as a Markdown table: V [L], L/D, orifice d [mm], Cd, p10 [bar abs], h_inner
+[W/(m^2 K)] or calc, truth C [dm^3/(s bar)], model-C error [%], z = error / sigma(C), eq 39
+error [%], the fitted b and the heat law the curve fit chose; then the worst and median
+|error| and the shares within 1 and 2 sigma (targets: 2 %, 55-80 %, 90-98 %).
+
+Measured on the full grid (24 cases, hyddown 0.50.0, package at c7e739e): worst |error|
+4.30 % (full16: 9 L, L/D 1.5, calc, b fitted 0.383 against ~0.52 elsewhere), median 0.21 %,
+23/24 within 2 %; within 1 sigma 2/24, within 2 sigma 3/24. Fixed h_inner <= 10 W/(m^2 K):
++0.39 ... +0.65 %; h_inner >= 17: -0.11 ... -0.22 %; calc: -0.17 ... +0.33 % (but full16).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
+from foreign.hyddown_data import DATA_DIR, Trace, record, traces
+
+from pneumatic_unload.estimation import EstimatorSettings, analyze, merge_final
+
+DM3_PER_S_BAR = 1e-3 / 1e5  # 1 dm^3/(s bar) in m^3/(s Pa)
+
+
+def row(trace: Trace) -> tuple[str, float, float]:
+    """One Markdown row of a trace, its model-C error [-] and z [-] (NaN when no result)."""
+    m = trace.meta
+    t, y = record(trace, zlib.crc32(trace.name.encode()))
+    settings = EstimatorSettings(volume=m["volume"],
+                                 length_diameter_ratio=m["length_diameter_ratio"],
+                                 initial_temperature=m["t10"])
+    results = merge_final(analyze(t, y, settings))
+    truth = m["truth_conductance"]
+    h = m["h_inner"] if m["h_inner"] == "calc" else f"{m['h_inner']:g}"
+    head = (f"| {trace.name} | {1e3 * m['volume']:.3g} | {m['length_diameter_ratio']:.2f} | "
+            f"{1e3 * m['orifice_diameter']:.2f} | {m['discharge_coef']:.3f} | "
+            f"{m['p10'] / 1e5:.2f} | {h} | {truth / DM3_PER_S_BAR:.4f} |")
+    if len(results) != 1 or not results[0].final:
+        return head + f" no single final result ({len(results)}) | | | | |", math.nan, math.nan
+    r = results[0]
+    error = r.conductance_model / truth - 1.0
+    z = (r.conductance_model - truth) / r.conductance_model_std
+    law = r.extra.get("curve_fit", {}).get("heat_law", "-")
+    return (head + f" {100 * error:+.3f} | {z:+.2f} | {100 * (r.conductance / truth - 1):+.2f} |"
+            f" {r.critical_ratio:.3f} | {law} |"), error, z
+
+
+def main(argv: list[str]) -> int:
+    """Print the table and the summary for the folder ``argv[0]`` (default: small grid)."""
+    folder = Path(argv[0]) if argv else DATA_DIR
+    items = traces(folder)
+    if not items:
+        print(f"no .npz traces in {folder}")
+        return 1
+    print(f"HydDown traces in {folder} (hyddown {items[0].meta['versions']['hyddown']}, "
+          f"CoolProp {items[0].meta['versions']['CoolProp']})\n")
+    print("| case | V [L] | L/D | d [mm] | Cd | p10 [bar] | h_inner | truth C [dm^3/(s bar)] "
+          "| model C err [%] | z | eq 39 err [%] | b | heat law |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    errors, zs = [], []
+    start = time.perf_counter()
+    for trace in items:
+        line, error, z = row(trace)
+        print(line, flush=True)
+        errors.append(error)
+        zs.append(z)
+    e = np.abs(np.asarray(errors))
+    zz = np.abs(np.asarray(zs))
+    n = len(items)
+    print(f"\n{n} cases, {time.perf_counter() - start:.0f} s: worst |error| "
+          f"{100 * np.nanmax(e):.3f} %, median {100 * np.nanmedian(e):.3f} %, "
+          f"within 2 %: {np.sum(e < 0.02)}/{n}; within 1 sigma {np.sum(zz <= 1.0)}/{n} "
+          f"({100 * np.sum(zz <= 1.0) / n:.0f} %), within 2 sigma {np.sum(zz <= 2.0)}/{n} "
+          f"({100 * np.sum(zz <= 2.0) / n:.0f} %); no result: {int(np.sum(np.isnan(e)))}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,111 @@
+"""The model-based C on discharges simulated by HydDown, a peer code (real-gas air by
+CoolProp, its own wall heat transfer, the Yellow Book orifice law), not by the package.
+
+The traces are committed (``test/data/hyddown``, made by ``bench/hyddown_traces.py`` with
+hyddown 0.50.0 / CoolProp 8.0.0 in its own venv); this test does not import HydDown. Each is
+resampled to 1 kHz, given a 0.2 s plateau at p10 and 0.1 %-of-1-MPa white noise (fixed seed
+per case), analysed, and the final model C compared with the orifice's truth C (Cd A and
+ideal-gas choked flow, ISO 6358 reference state).
+
+The issue's targets: model C within 2 % of the truth at every grid point; |error| <= 2 sigma
+in 90-98 % of trials and <= 1 sigma in 55-80 %. Where a case misses a target it is marked
+``xfail(strict=True)`` with the measured numbers (made with the package at commit c7e739e):
+
+* 2 %: met by 5 of 6 (-0.10 % ... +0.51 %). Not met at p10 = 4 bar with h_inner = 50
+  W/(m^2 K) (thermal time constant ~2 s against tau0 ~10 s, near-isothermal): -22.5 %, b not
+  found (NaN), heat law 'natural' chosen; the same tank at 8 bar gives -0.17 % (law 'fixed'),
+  at h 10 W/(m^2 K) +0.33 %.
+* sigma: sigma(C) is 0.01-0.07 % of C, the error against HydDown -0.10 ... +0.51 %, so |z|
+  is 2.8-27 and no case is within 2 sigma. Part of that difference is the truth's own
+  ambiguity (HydDown's explicit Euler step, ~0.03-0.05 % of C at dt = tau0/1000; real-gas
+  air, Z = 0.997 at 8 bar; the Yellow Book subsonic law against the ISO ellipse), none of
+  which sigma(C) accounts for.
+"""
+
+import math
+import zlib
+from functools import cache
+
+import pytest
+from foreign.hyddown_data import DATA_DIR, load, record
+
+from pneumatic_unload.estimation import EstimatorSettings, UnloadResult, analyze, merge_final
+
+CASES = ["v1l_ld1_d1_calc", "v2l_ld4_d2_h2", "v50l_ld3_d3_calc", "v10l_ld6_d2p5_h50",
+         "v20l_ld2_d3_h10", "v5l_ld1p5_d1p5_calc_t303"]
+TOLERANCE = 0.02  # model C against the truth [-]
+
+#: Cases missing the 2 % target, with the measured numbers.
+MISSES_2PCT = {
+    "v10l_ld6_d2p5_h50": "p10 4 bar, h_inner 50 W/(m^2 K): measured error -22.5 %, z = -8.5, "
+                         "b NaN, heat law 'natural' (at 8 bar: -0.17 %)",
+}
+#: Cases outside 2 sigma, with the measured numbers.
+MISSES_2SIGMA = {
+    "v1l_ld1_d1_calc": "measured: error -0.098 %, sigma 0.036 %, z = -2.76",
+    "v2l_ld4_d2_h2": "measured: error +0.506 %, sigma 0.019 %, z = +27.2",
+    "v50l_ld3_d3_calc": "measured: error -0.031 %, sigma 0.011 %, z = -2.95",
+    "v10l_ld6_d2p5_h50": "measured: error -22.5 %, sigma 2.7 %, z = -8.5",
+    "v20l_ld2_d3_h10": "measured: error +0.514 %, sigma 0.030 %, z = +17.0",
+    "v5l_ld1p5_d1p5_calc_t303": "measured: error +0.323 %, sigma 0.064 %, z = +5.07",
+}
+
+
+def _marked(misses: dict[str, str]) -> list:
+    return [pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=misses[c]))
+            if c in misses else c for c in CASES]
+
+
+@cache
+def result(name: str) -> tuple[UnloadResult, float]:
+    """The final result of one case's record and the truth C [m^3/(s Pa)]."""
+    trace = load(DATA_DIR / f"{name}.npz")
+    m = trace.meta
+    t, y = record(trace, zlib.crc32(name.encode()))
+    settings = EstimatorSettings(volume=m["volume"],
+                                 length_diameter_ratio=m["length_diameter_ratio"],
+                                 initial_temperature=m["t10"])
+    (r,) = merge_final(analyze(t, y, settings))
+    return r, m["truth_conductance"]
+
+
+def test_the_committed_grid_spans_the_issue_ranges():
+    metas = [load(DATA_DIR / f"{c}.npz").meta for c in CASES]
+    assert sorted(p.stem for p in DATA_DIR.glob("*.npz")) == sorted(CASES)
+    assert sum(m["h_inner"] == "calc" for m in metas) >= 2
+    assert sum(m["h_inner"] != "calc" for m in metas) >= 2
+    assert max(m["volume"] for m in metas) >= 0.05 - 1e-9
+    assert min(m["volume"] for m in metas) <= 2e-3 + 1e-9
+    assert sum((DATA_DIR / f"{c}.npz").stat().st_size for c in CASES) < 1_000_000
+    for m in metas:
+        assert m["versions"]["hyddown"] == "0.50.0"
+        assert 4e5 <= m["p10"] <= 8e5 and 1.0 <= m["length_diameter_ratio"] <= 6.0
+
+
+@pytest.mark.parametrize("name", _marked(MISSES_2PCT))
+def test_model_c_within_2_percent_of_hyddown(name):
+    r, truth = result(name)
+    assert r.final and math.isfinite(r.conductance_model)
+    error = r.conductance_model / truth - 1.0
+    z = (r.conductance_model - truth) / r.conductance_model_std
+    print(f"{name}: error {100 * error:+.3f} %, z {z:+.2f}, "
+          f"law {r.extra['curve_fit']['heat_law']}")
+    assert abs(error) < TOLERANCE
+
+
+@pytest.mark.parametrize("name", _marked(MISSES_2SIGMA))
+def test_model_c_within_2_sigma_of_hyddown(name):
+    r, truth = result(name)
+    assert r.final and r.conductance_model_std > 0.0
+    assert abs(r.conductance_model - truth) <= 2.0 * r.conductance_model_std
+
+
+@pytest.mark.xfail(strict=True, reason="measured: 0 of 6 cases within 2 sigma, 0 within 1 "
+                                       "sigma (targets 90-98 %, 55-80 %)")
+def test_sigma_coverage_over_the_grid():
+    z = [(r.conductance_model - c) / r.conductance_model_std
+         for r, c in (result(n) for n in CASES)]
+    within2 = sum(abs(v) <= 2.0 for v in z) / len(z)
+    within1 = sum(abs(v) <= 1.0 for v in z) / len(z)
+    # 6 cases cannot resolve the upper bounds (98 %, 80 %); the lower ones are checked
+    assert within2 >= 0.90 and within1 >= 0.55
