@@ -321,7 +321,9 @@ def read_estimates(
 
 
 def read_config(path: str | os.PathLike[str]) -> dict[str, Any] | None:
-    """The rig configuration of a bag: first ``/rig/config`` message, else metadata custom_data.
+    """The rig configuration of a bag: the metadata custom_data (where :class:`BagRecorder`
+    stores the text of its first ``/rig/config`` message), else the first ``/rig/config``
+    message (a bag whose metadata lacks it: no scan of the messages when it is there).
 
     Returns:
         The configuration dict (SI units as stored), or None if the bag has none.
@@ -330,12 +332,11 @@ def read_config(path: str | os.PathLike[str]) -> dict[str, Any] | None:
         BagFormatError: the stored configuration is not a JSON object.
     """
     src = resolve_bag(path)
-    text: str | None = None
-    for _, msg, _ in _deserialized(path, TOPIC_CONFIG, MSGTYPE_CONFIG, required=False):
-        text = msg.data
-        break
+    text: str | None = src.custom_data.get(CONFIG_METADATA_KEY)
     if text is None:
-        text = src.custom_data.get(CONFIG_METADATA_KEY)
+        for _, msg, _ in _deserialized(path, TOPIC_CONFIG, MSGTYPE_CONFIG, required=False):
+            text = msg.data
+            break
     if text is None:
         return None
     try:
