@@ -245,7 +245,8 @@ def minimize(residual: Residual, params: Parameters, *,
         Further starting values (missing names take ``params``' values); each is screened
         with ``screen_nfev`` evaluations and the best is fitted in full.
     screen_nfev, max_nfev : int
-        Evaluation budgets of the screening and of the full search [-].
+        Budgets of the screening (iterations per start) and of the full search (half as
+        many iterations) [-]; an iteration costs one evaluation per free parameter plus one.
     n_data : int, optional
         Number of data for the BIC [-] (default: the number of residuals).
 
@@ -272,7 +273,7 @@ def minimize(residual: Residual, params: Parameters, *,
         for x0 in pts:
             f0 = fun(x0)
             xs, fs, _j, _ok, n = levenberg_marquardt(fun, x0, f0, lo, hi,
-                                                     max_iter=max(1, screen_nfev // 3))
+                                                     max_iter=max(1, screen_nfev))
             nfev += n + 1
             scored.append((float(fs @ fs), xs, fs))
         scored.sort(key=lambda c: c[0])
@@ -282,7 +283,7 @@ def minimize(residual: Residual, params: Parameters, *,
         f0 = fun(x0)
         nfev += 1
     x, f, jac, ok, n_lm = levenberg_marquardt(fun, x0, f0, lo, hi,
-                                              max_iter=max(2, max_nfev // 4))
+                                              max_iter=max(2, max_nfev // 2))
     nfev += n_lm
     return FitResult(params=params, values=params.to_values(x), x=x, fun=f, jac=jac,
                      chi2=float(f @ f), success=bool(ok), nfev=nfev,
