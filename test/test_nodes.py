@@ -76,6 +76,14 @@ def test_simulator_estimator_recorder_end_to_end(tmp_path: Path, ros_node: Any,
     rec = NodeProcess("recorder", {"output": str(bag)}, tmp_path,
                       extra=["-p", "topics:=['/estimator/settings']"])
     est = NodeProcess("estimator", {"volume": RIG["volume"], "qos": "reliable"}, tmp_path)
+
+    def estimator_states() -> list[str]:
+        return [st.message.split(":")[0] for d in diags for st in d.status
+                if st.name.endswith("estimator")]
+
+    # the 1 Hz "waiting" report must reach this subscriber before the unload starts: DDS
+    # discovery of a new process can take seconds, so the rig starts once it has
+    spin_until(node, ex, lambda: "waiting" in estimator_states(), 30.0)
     # the simulator starts streaming once the estimator and the recorder are subscribed
     sim = NodeProcess("simulator", {**RIG, "start_delay": 1.5, "wait_for_subscribers": 2,
                                     "duration": 5.0, "auto_charge": False}, tmp_path)
@@ -87,8 +95,7 @@ def test_simulator_estimator_recorder_end_to_end(tmp_path: Path, ros_node: Any,
     finally:
         codes = {p.name: p.stop() for p in (sim, est, rec)}
     assert codes == {"simulator": 0, "estimator": 0, "recorder": 0}, codes
-    states = [st.message.split(":")[0] for d in diags for st in d.status
-              if st.name.endswith("estimator")]
+    states = estimator_states()
     for state in ("waiting", "unloading", "done"):  # reported on /diagnostics, in order
         assert state in states, states
     assert states.index("waiting") < states.index("unloading") < states.index("done")
