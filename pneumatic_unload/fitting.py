@@ -241,8 +241,8 @@ def _fit_law(
         Tank, gas and heat model (``atmosphere=None`` fits p_atm).
     t_start, p10, p_atm, conductance : float
         Starting values [s], [Pa], [Pa], [m^3/(s Pa)].
-    fit_heat : bool, optional
-        Fit the heat-transfer scale; default: only when the natural model is on.
+    fit_heat : bool
+        Fit the heat exchange (False holds the natural correlation as published).
     profile_heat : bool
         Standard deviations also from a profile of the fit over the heat-transfer scale
         (two more fits), not from the Gauss-Newton covariance alone, which can under-state

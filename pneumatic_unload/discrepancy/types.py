@@ -14,7 +14,6 @@ from numpy.typing import NDArray
 
 from pneumatic_unload.config import EFFECTS, TankSpec
 from pneumatic_unload.config.fields import ConfigError, flag, integer, names, number, validate
-from pneumatic_unload.estimation import EstimatorSettings
 
 if TYPE_CHECKING:  # annotations only: the settings stay importable without the engine
     from pneumatic_unload.fit.lsq import FitResult
@@ -77,11 +76,6 @@ class DiscrepancySettings(TankSpec):
         except ConfigError as exc:
             msg = str(exc).replace("unknown candidates", "unknown candidate effect(s)")
             raise DiscrepancyError(msg) from exc
-
-    @classmethod
-    def from_estimator(cls, s: EstimatorSettings, **kw: Any) -> DiscrepancySettings:
-        """Settings with the tank and gas of an :class:`EstimatorSettings`."""
-        return cls(**s.tank_fields(), **kw)
 
 
 @dataclass

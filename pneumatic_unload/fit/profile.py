@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.fit.lsq import FitResult
+from pneumatic_unload.fit.params import Parameter
 from pneumatic_unload.fit.trace import FittableModel, Trace
 from pneumatic_unload.fit.uncertainty import CHI2_95
 
@@ -124,10 +125,10 @@ def interval(trace: Trace, model: FittableModel, fit: FitResult, name: str,
                     identifiable=ident, doc=p.doc)
 
 
-def _value(p: object, x: float) -> float:
+def _value(p: Parameter, x: float) -> float:
     """Value [unit] of a scaled coordinate of parameter p."""
-    g = p.g_centre + p.scale * x  # type: ignore[attr-defined]
-    if p.log:  # type: ignore[attr-defined]
+    g = p.g_centre + p.scale * x
+    if p.log:
         return math.exp(min(g, 700.0))
     return float(g)
 

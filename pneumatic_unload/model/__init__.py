@@ -6,8 +6,10 @@ Modules, each of one role (SI units throughout):
 * :mod:`~pneumatic_unload.model.ode` - the right-hand side and the segmented integrator;
 * :mod:`~pneumatic_unload.model.sensor` - the sensor chain, batch and stateful;
 * :mod:`~pneumatic_unload.model.effects` - the registry of real-rig effects;
-* :mod:`~pneumatic_unload.model.simulate` - a simulated record on the sample grid;
-* :mod:`~pneumatic_unload.model.binned` - the model's bin means for the likelihood.
+* :mod:`~pneumatic_unload.model.simulate` - a simulated record on the sample grid.
+
+The model's bin means for the likelihood are computed by :mod:`pneumatic_unload.fit.likelihood`
+from the model evaluated at its quadrature nodes.
 """
 
 from pneumatic_unload.model.heat import HEAT_LAWS, heat_flow_function, thermal_time_constant
