@@ -10,6 +10,8 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
+    # the model's C kernel: compiled with the system's cc on first use (model/kernel.py)
+    package_data={f"{PACKAGE}.model": ["kernel.c"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -17,7 +19,7 @@ setup(
     ],
     install_requires=["setuptools", "numpy", "scipy", "rosbags", "mcap", "PyYAML"],
     extras_require={"test": ["pytest"]},
-    zip_safe=True,
+    zip_safe=False,
     maintainer="pneumatic_unload maintainers",
     maintainer_email="maintainers@pneumatic-unload.invalid",
     description="Sonic conductance of pneumatic components from a tank discharge (ROS 2).",

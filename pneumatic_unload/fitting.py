@@ -123,6 +123,14 @@ def curve_fit_bins(t: FloatArray, t_start: float) -> NDArray[np.int64]:
     return make_bins(np.asarray(t, dtype=float), t_start, resolution=CURVE_FIT_RESOLUTION)
 
 
+def curve_fit_trace(t: FloatArray, p: FloatArray, t_start: float) -> Trace:
+    """The curve fit's :class:`Trace` (unit noise: the residual variance is estimated
+    afterwards) of samples at relative times t [s] (t[0] = 0), p [Pa], the step near
+    t_start [s, relative]."""
+    return Trace(t, p, NoiseModel(sigma=1.0, rho=0.0, n=int(t.size), source="unit"),
+                 t_start, edges=curve_fit_bins(t, t_start))
+
+
 #: Laws fitted in turn by :func:`fit_curve` when the natural model is on (the data choose).
 CURVE_FIT_LAWS: tuple[str, ...] = ("natural", "fixed")
 #: Delta-BIC below which another law counts as fitting about as well [-].
@@ -172,11 +180,14 @@ def fit_curve(
     tried = (laws or CURVE_FIT_LAWS) if (natural and fit_heat) else ("natural",)
     fits: dict[str, tuple[CurveFit, float, int]] = {}
     start: dict[str, float] | None = None
+    t = np.asarray(t, dtype=float)
+    p = np.asarray(p, dtype=float)
+    trace = curve_fit_trace(t - t[0], p, t_start - float(t[0]))  # the same for every law
     for law in tried:
         fits[law] = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
                              profile_heat=profile_heat, law=law, start=start,
-                             max_nfev=200 if not fits else 32)
+                             max_nfev=200 if not fits else 32, trace=trace)
         first = fits[law][0]
         if start is None and first.inflation < 2.0 and math.isfinite(first.conductance):
             # the next law starts from this fit when it is close (white residuals), its heat
@@ -197,7 +208,8 @@ def fit_curve(
         for law in tried:
             again = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
-                             profile_heat=profile_heat, law=law, explore=True)
+                             profile_heat=profile_heat, law=law, explore=True,
+                             trace=trace)
             if again[1] < fits[law][1]:
                 fits[law] = again
     # information criterion on residuals normalised by the best law's residual variance
@@ -228,7 +240,7 @@ def _fit_law(
     t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_start: float,
     p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
     profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
-    max_nfev: int = 200, explore: bool = False,
+    max_nfev: int = 200, explore: bool = False, trace: Trace | None = None,
 ) -> tuple[CurveFit, float, int]:
     """One law's fit for :func:`fit_curve`; returns (fit, chi^2 [Pa^2: residuals are bin
     sums over sqrt(count)], free parameters [-]).
@@ -258,6 +270,8 @@ def _fit_law(
         from the first law's fit is not the better law).
     explore : bool
         Screen starts of strong and weak heat exchange too.
+    trace : Trace, optional
+        :func:`curve_fit_trace` of the same samples (shared by the laws of one fit).
     """
     t_abs = np.asarray(t, dtype=float)
     t_ref = float(t_abs[0])
@@ -277,8 +291,8 @@ def _fit_law(
     if explore and natural and fit_heat:
         starts = ([{"heat_scale": 30.0}, {"heat_scale": 0.1}] if law == "natural" else
                   [{"tau_heat": 0.05 * tau}, {"tau_heat": 20.0 * tau}])
-    trace = Trace(t, p, NoiseModel(sigma=1.0, rho=0.0, n=int(t.size), source="unit"),
-                  t_start, edges=curve_fit_bins(t, t_start))
+    if trace is None:
+        trace = curve_fit_trace(t, p, t_start)
     if start is not None:
         lo_t, hi_t = 0.0, math.inf
         if "tau_heat" in model.parameters:

@@ -115,31 +115,6 @@ def flow_function(
     return np.where(r > r_linear, lin, phi)
 
 
-def flow_function_scalar(
-    r: float, b: float, m: float = 0.5, r_linear: float = R_LINEAR
-) -> float:
-    """Scalar version of :func:`flow_function` (fast path for ODE right-hand sides) [-].
-
-    Parameters
-    ----------
-    r : float
-        Pressure ratio p2/p1 [-].
-    b : float
-        Critical pressure ratio [-].
-    m : float
-        Subsonic index [-].
-    r_linear : float
-        Start of the linear end region [-].
-    """
-    if r <= b:
-        return 1.0
-    if r > r_linear:
-        xl = (r_linear - b) / (1.0 - b)
-        return (1.0 - xl * xl) ** m * (1.0 - r) / (1.0 - r_linear)
-    x = (r - b) / (1.0 - b)
-    return (1.0 - x * x) ** m
-
-
 def mass_flow(
     p1: ArrayLike, t1: ArrayLike, p2: ArrayLike, conductance: float,
     critical_ratio: float, subsonic_index: float = 0.5,
@@ -471,32 +446,3 @@ def tank_geometry(volume: float, length_diameter_ratio: float) -> tuple[float, f
     length = length_diameter_ratio * d
     area = math.pi * d * length + 0.5 * math.pi * d * d
     return length, d, area
-
-
-def natural_convection_h(
-    p: float, t_gas: float, t_wall: float, length: float, gas: Gas = AIR
-) -> float:
-    """Natural-convection heat-transfer coefficient inside a tank [W/(m^2 K)].
-
-    Nu = 0.59 Ra^0.25 (laminar, 1e4 < Ra < 1e9) or 0.10 Ra^(1/3) (turbulent, Ra >= 1e9),
-    with a floor of Nu = 1 (conduction); Ra = g beta |dT| L^3 / (nu alpha), beta = 1/T.
-
-    Parameters
-    ----------
-    p : float
-        Gas pressure [Pa absolute].
-    t_gas : float
-        Gas temperature [K].
-    t_wall : float
-        Wall temperature [K].
-    length : float
-        Characteristic length [m].
-    gas : Gas
-        Gas properties.
-    """
-    rho = p / (gas.gas_constant * t_gas)
-    nu = gas.viscosity / rho
-    alpha = gas.conductivity / (rho * gas.cp)
-    ra = G_ACCEL * abs(t_wall - t_gas) / t_gas * length**3 / (nu * alpha)
-    nu_number = 0.59 * ra**0.25 if ra < 1e9 else 0.10 * ra ** (1.0 / 3.0)
-    return gas.conductivity / length * max(nu_number, 1.0)

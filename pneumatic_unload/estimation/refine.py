@@ -1,7 +1,9 @@
 """Refinement: model inversion at the crossing, final curve fit, SSE recovery fit.
 
-The only module of the estimator that calls :mod:`pneumatic_unload.fitting` (imported lazily:
-it pulls in scipy), so those calls can be re-pointed in one place. SI units: s, Pa
+The only module of the estimator that calls :mod:`pneumatic_unload.fitting`,
+:mod:`pneumatic_unload.inversion` and :mod:`pneumatic_unload.recovery` (imported at load: the
+compiled model imports in milliseconds, and a first unload must not pay the import inside its
+latency budget), so those calls can be re-pointed in one place. SI units: s, Pa
 absolute, m^3/(s Pa); the recovery fit works in the input's signal units.
 """
 
@@ -16,12 +18,14 @@ import numpy as np
 from pneumatic_unload import physics
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
+from pneumatic_unload.fitting import fit_curve, fitted_tau_exp
+from pneumatic_unload.inversion import inversion_table, invert_crossing, may_turn_subsonic
+from pneumatic_unload.recovery import fit_recovery
 
 
 def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
     """True when the model-based C needs the discharge model (not the closed form): heat
     transfer, or a flow that may turn subsonic before p* (pressures [Pa absolute])."""
-    from pneumatic_unload.inversion import may_turn_subsonic  # local: keeps import light
 
     return settings.heat_model != "adiabatic" or may_turn_subsonic(settings, p_atm, p_star)
 
@@ -40,7 +44,6 @@ def prepare_inversion(settings: EstimatorSettings, t_mid: float, p_mid: float, p
     p_mid, p10, p_atm, p_star : float
         Half-way, initial, atmospheric and crossing pressures [Pa absolute].
     """
-    from pneumatic_unload.inversion import inversion_table
 
     c_guess = physics.conductance_isentropic_inversion(
         t_mid, p_mid, p10, settings.volume, settings.initial_temperature, settings.gas)
@@ -74,7 +77,6 @@ def model_inversion(settings: EstimatorSettings, tau: float, tau_std: float, p10
     tuple
         (C [m^3/(s Pa)], its 1-sigma [m^3/(s Pa)], method name).
     """
-    from pneumatic_unload.inversion import invert_crossing, may_turn_subsonic  # local: light
 
     if settings.heat_model == "adiabatic" and not may_turn_subsonic(settings, p_atm, p_star):
         # choked up to p*: the isentropic closed form is the adiabatic model's exact inverse
@@ -111,7 +113,6 @@ def final_curve_fit(res: UnloadResult, t: FloatArray, p: FloatArray,
 def recovery_fit(t: FloatArray, p: FloatArray, t_close: float) -> Any:
     """Fit of the isochoric re-heating after the closing instant t_close [s] (samples t [s],
     p [signal units]); None when the fit fails."""
-    from pneumatic_unload.recovery import fit_recovery
 
     try:
         return fit_recovery(t, p, t_close)
@@ -143,7 +144,6 @@ def refine_with_curve_fit(
     """
     if res.status not in ("ok", "not_choked") or not math.isfinite(res.conductance_model):
         return None
-    from pneumatic_unload.fitting import fit_curve, fitted_tau_exp  # local: keeps import light
 
     try:
         fit = fit_curve(t, p, settings, t_start=res.t_start, p10=res.p10, p_atm=res.p_atm,

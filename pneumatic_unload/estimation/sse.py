@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from pneumatic_unload import physics
+from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation.decisions import (
     PERIOD,
     PLATEAU,
@@ -25,6 +26,7 @@ from pneumatic_unload.estimation.refine import model_inversion, recovery_fit
 from pneumatic_unload.estimation.regression import corner_fit
 from pneumatic_unload.estimation.state import RECOVERY, EstimatorState
 from pneumatic_unload.estimation.types import UnloadResult
+from pneumatic_unload.model.heat import thermal_time_constant
 
 #: Relative 1-sigma of eq 23 itself [-]: it assumes an isentropic unload (wall heat flow
 #: during the unload shifts it by up to ~0.5 %) and writes p_N for rho_N R T_N (0.28 %).
@@ -88,22 +90,21 @@ def fit_recovery_to(st: EstimatorState, i: int) -> Any:
 
 def expected_recovery_time(st: EstimatorState) -> float:
     """Initial thermal time constant m c_v / (h A) of the closed tank [s], with h from
-    the natural-convection correlation at the closing state (the recovery is not
-    declared over before three of these, however flat it looks: a slow re-heating
-    is indistinguishable from a plateau over a short record)."""
+    the natural-convection law of :mod:`pneumatic_unload.model.heat` (scale 1) at the
+    closing state (the recovery is not declared over before three of these, however flat
+    it looks: a slow re-heating is indistinguishable from a plateau over a short record)."""
     s, u = st.settings, st.unload
     gas = s.gas
     p10 = st.to_pa(u.p10)
     p_c = st.to_pa(u.p_close)
     t10 = s.initial_temperature
-    t_w = t10 if s.wall_temperature is None else s.wall_temperature
     ratio = max(p_c / p10, 1e-3) if p10 > 0 else 1.0
     t_gas = t10 * ratio ** ((gas.gamma - 1.0) / gas.gamma)
-    length, _d, area = physics.tank_geometry(s.volume, s.length_diameter_ratio)
-    h = physics.natural_convection_h(p_c, t_gas, t_w if abs(t_w - t_gas) > 0.1
-                                     else t_gas + 0.1, length, gas)
-    mass = p_c * s.volume / (gas.gas_constant * t_gas)
-    return mass * gas.cv / (h * area)
+    tank = RigConfig(volume=s.volume, length_diameter_ratio=s.length_diameter_ratio,
+                     initial_temperature=t10, wall_temperature=s.wall_temperature,
+                     gas_constant=gas.gas_constant, gamma=gas.gamma,
+                     atmosphere=101325.0, effects=("heat_transfer",))
+    return thermal_time_constant(tank, p_c, t_gas)
 
 
 def recovery_significant(fit: Any, sigma: float) -> bool:

@@ -156,43 +156,34 @@ class BinnedLikelihood:
         mid = (i0 + i1 - 1) // 2
         last = i1 - 1
         # node sample indices: every sample of narrow bins, first/middle/last of wide ones
-        narrow_idx = np.concatenate([np.arange(a, b) for a, b in zip(i0[~wide], i1[~wide],
-                                                                     strict=True)]
-                                    ) if np.any(~wide) else np.zeros(0, dtype=np.int64)
+        bin_of = np.repeat(np.arange(cnt.size), cnt)
+        narrow_idx = np.flatnonzero(~wide[bin_of])
         nodes = np.unique(np.concatenate((narrow_idx, i0[wide], mid[wide], last[wide],
                                           i0, last)).astype(np.int64))
         self.node_index = nodes
         self.node_t = self.t[nodes]
-        pos = {int(k): j for j, k in enumerate(nodes)}
         # weights: bin mean of the quadratic through (t_a, t_m, t_b), exact over the samples
         t = self.t
-        rows: list[int] = []
-        cols: list[int] = []
-        vals: list[float] = []
         tc = np.add.reduceat(t, i0) / cnt  # bin mean time
         dev = t - np.repeat(tc, cnt)
         m2 = np.add.reduceat(dev * dev, i0) / cnt  # bin variance of t
-        for b in range(cnt.size):
-            if not wide[b]:
-                for k in range(int(i0[b]), int(i1[b])):
-                    rows.append(b)
-                    cols.append(pos[k])
-                    vals.append(1.0)
-                continue
-            ta, tm, tb = t[i0[b]], t[mid[b]], t[last[b]]
-            mu, var = tc[b], m2[b]
-            # mean over samples of L_j(t) = (t - u)(t - v)/((tj - u)(tj - v)):
-            # E[(t-u)(t-v)] = var + (mu - u)(mu - v)
-            for tj, u, v, k in ((ta, tm, tb, i0[b]), (tm, ta, tb, mid[b]), (tb, ta, tm, last[b])):
-                w = (var + (mu - u) * (mu - v)) / ((tj - u) * (tj - v))
-                rows.append(b)
-                cols.append(pos[int(k)])
-                vals.append(float(w) * float(cnt[b]))
-        self._q_rows = np.asarray(rows, dtype=np.int64)
-        self._q_cols = np.asarray(cols, dtype=np.int64)
-        self._q_vals = np.asarray(vals, dtype=float)
-        self._pos_first = np.array([pos[int(k)] for k in i0], dtype=np.int64)
-        self._pos_last = np.array([pos[int(k)] for k in last], dtype=np.int64)
+        wb = np.flatnonzero(wide)
+        ta, tm, tb = t[i0[wb]], t[mid[wb]], t[last[wb]]
+        mu, var, nw = tc[wb], m2[wb], cnt[wb].astype(float)
+        # mean over samples of L_j(t) = (t - u)(t - v)/((tj - u)(tj - v)):
+        # E[(t-u)(t-v)] = var + (mu - u)(mu - v)
+        w = np.column_stack([(var + (mu - u) * (mu - v)) / ((tj - u) * (tj - v)) * nw
+                             for tj, u, v in ((ta, tm, tb), (tm, ta, tb), (tb, ta, tm))])
+        k_wide = np.column_stack((i0[wb], mid[wb], last[wb]))
+        rows = np.concatenate((bin_of[narrow_idx], np.repeat(wb, 3)))
+        cols = np.searchsorted(nodes, np.concatenate((narrow_idx, k_wide.ravel())))
+        vals = np.concatenate((np.ones(narrow_idx.size), w.ravel()))
+        order = np.argsort(rows, kind="stable")  # bin by bin, as the sums accumulate
+        self._q_rows = rows[order].astype(np.int64)
+        self._q_cols = cols[order].astype(np.int64)
+        self._q_vals = vals[order]
+        self._pos_first = np.searchsorted(nodes, i0).astype(np.int64)
+        self._pos_last = np.searchsorted(nodes, last).astype(np.int64)
 
     def model_binsums(self, model_at: ModelAt, events: Sequence[float] = ()) -> FloatArray:
         """Prewhitened bin sums of a model given as a function of time [unit of model].

@@ -2,8 +2,11 @@
 
 Modules, each of one role (SI units throughout):
 
-* :mod:`~pneumatic_unload.model.heat` - the wall heat-transfer laws;
-* :mod:`~pneumatic_unload.model.ode` - the right-hand side and the segmented integrator;
+* :mod:`~pneumatic_unload.model.kernel` - the compiled core (``kernel.c``): flow law, heat
+  laws, right-hand side, integrator;
+* :mod:`~pneumatic_unload.model.heat` - the wall heat-transfer laws' parameters;
+* :mod:`~pneumatic_unload.model.ode` - the configuration packed for the kernel, the
+  segmented integration;
 * :mod:`~pneumatic_unload.model.sensor` - the sensor chain, batch and stateful;
 * :mod:`~pneumatic_unload.model.effects` - the registry of real-rig effects;
 * :mod:`~pneumatic_unload.model.simulate` - a simulated record on the sample grid.

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config import EFFECTS, RigConfig, TankSpec
+from pneumatic_unload.config.fields import with_changes
 from pneumatic_unload.fit.params import Parameter, Parameters
 from pneumatic_unload.model.ode import integrate, valve_events
 from pneumatic_unload.model.sensor import sensor_response
@@ -71,6 +72,11 @@ class Start:
 
 
 Values = dict[str, float]
+
+
+def clamp(x: float, lo: float, hi: float) -> float:
+    """x limited to [lo, hi] as a float (np.clip without the array overhead) [unit of x]."""
+    return float(min(max(x, lo), hi))
 
 
 @dataclass(frozen=True)
@@ -141,14 +147,14 @@ def _heat_fixed(v: Values, tank: TankSpec) -> dict[str, object]:
     g = tank.gas
     h_a = v["p10"] * tank.volume / ((g.gamma - 1.0) * tank.initial_temperature * v["tau_heat"])
     return {"heat_transfer_mode": "fixed",
-            "heat_transfer_coefficient": float(np.clip(h_a, 0.0, 1e4))}
+            "heat_transfer_coefficient": clamp(h_a, 0.0, 1e4)}
 
 
 def _leak(v: Values, tank: TankSpec) -> dict[str, object]:
     p_atm = v.get("p_atm", tank.atmosphere or 101325.0)
     g0 = v["C"] * RHO_N * v["p10"] * math.sqrt(T_N / tank.initial_temperature)
     k = v["leak_fraction"] * g0 / max(v["p10"] - p_atm, 1.0)
-    return {"leak_coefficient": float(np.clip(k, 0.0, 1e-5))}
+    return {"leak_coefficient": clamp(k, 0.0, 1e-5)}
 
 
 HEAT_NATURAL = Effect(
@@ -210,8 +216,8 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
                       {"pipe_volume_ratio": 0.3, "pipe_conductance_ratio": 1.5}],
            lambda v, tank: {
                "pipe_volume": float(min(v["pipe_volume_ratio"] * tank.volume, 10.0)),
-               "pipe_conductance": float(np.clip(v["pipe_conductance_ratio"] * v["C"],
-                                                 1e-13, 1e-5))}),
+               "pipe_conductance": clamp(v["pipe_conductance_ratio"] * v["C"],
+                                         1e-13, 1e-5)}),
     Effect("sensor_offset",
            "the pressure transducer: a zero offset added to every reading",
            (EffectParam("offset", "Pa", False, -1e6, 1e6, lambda s: 0.0, 1000.0,
@@ -225,7 +231,7 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
                         "transducer relative gain error"),),
            lambda s: {"gain": 0.0},
            lambda s: [{"gain": 0.0}],
-           lambda v, tank: {"sensor_gain": float(np.clip(v["gain"], -0.5, 0.5))}),
+           lambda v, tank: {"sensor_gain": clamp(v["gain"], -0.5, 0.5)}),
 )}
 #: The heat-transfer laws a fit can choose from.
 HEAT_VARIANTS: dict[str, Effect] = {"natural": HEAT_NATURAL, "fixed": HEAT_FIXED}
@@ -298,6 +304,8 @@ class ParametricModel:
         self.records = tuple(HEAT_VARIANTS[heat_law] if e == "heat_transfer" else REGISTRY[e]
                              for e in self.effects)
         self.parameters = self._parameters()
+        self._last_config: tuple[tuple[tuple[str, float], ...], RigConfig] | None = None
+        self._base_config: RigConfig | None = None
 
     def _parameters(self) -> Parameters:
         s = self.start
@@ -305,7 +313,7 @@ class ParametricModel:
         ps = [
             Parameter("C", s.conductance, 1e-13, 1e-5, "m^3/(s Pa)", log=True, scale=0.1,
                       doc="sonic conductance"),
-            Parameter("b", float(np.clip(s.critical_ratio, 0.02, 0.94)), 0.01, 0.95, "-",
+            Parameter("b", clamp(s.critical_ratio, 0.02, 0.94), 0.01, 0.95, "-",
                       scale=0.1, doc="critical pressure ratio"),
             Parameter("t_open", s.t_open, s.t_first,
                       max(min(s.t_last, s.t_open + 0.5 * s.tau), s.t_open + s.dt), "s",
@@ -352,24 +360,40 @@ class ParametricModel:
         return HEAT_VARIANTS[self.heat_law] if effect == "heat_transfer" else REGISTRY[effect]
 
     def config(self, v: Values) -> RigConfig:
-        """The :class:`RigConfig` of parameter values (valve opens at ``v['t_open']``)."""
+        """The :class:`RigConfig` of parameter values (valve opens at ``v['t_open']``).
+
+        The last one is kept: a fit asks for the events and the signal of the same values.
+        """
+        key = tuple(v.items())
+        last = self._last_config
+        if last is not None and last[0] == key:
+            return last[1]
+        cfg = self._build_config(v)
+        self._last_config = (key, cfg)
+        return cfg
+
+    def _build_config(self, v: Values) -> RigConfig:
         tank = self.tank
-        gas = tank.gas
-        c = float(np.clip(v["C"], 1e-13, 1e-5))
+        c = clamp(v["C"], 1e-13, 1e-5)
         vv = {**v, "C": c}
         p_atm = v.get("p_atm", tank.atmosphere if tank.atmosphere is not None else 101325.0)
-        kw: dict[str, object] = {}
+        kw: dict[str, object] = {
+            "conductance": c, "critical_ratio": clamp(v["b"], 0.0, 0.99),
+            "initial_pressure": clamp(v["p10"], 1e4, 5e7),
+            "atmosphere": clamp(p_atm, 1e3, 2e5),
+            "wall_temperature": float(v.get("t_wall", tank.wall))}
         for rec in self.records:
             kw.update(rec.apply(vv, tank))
-        return RigConfig(
-            volume=tank.volume, length_diameter_ratio=tank.length_diameter_ratio,
-            conductance=c, critical_ratio=float(np.clip(v["b"], 0.0, 0.99)),
-            initial_pressure=float(np.clip(v["p10"], 1e4, 5e7)),
-            initial_temperature=tank.initial_temperature,
-            atmosphere=float(np.clip(p_atm, 1e3, 2e5)),
-            wall_temperature=float(v.get("t_wall", tank.wall)),
-            gas_constant=gas.gas_constant, gamma=gas.gamma, effects=self.effects,
-            pre_time=0.0, noise_std=0.0, **kw)  # type: ignore[arg-type]
+        if self._base_config is None:
+            gas = tank.gas
+            self._base_config = RigConfig(
+                volume=tank.volume, length_diameter_ratio=tank.length_diameter_ratio,
+                initial_temperature=tank.initial_temperature,
+                gas_constant=gas.gas_constant, gamma=gas.gamma, effects=self.effects,
+                pre_time=0.0, noise_std=0.0, **kw)  # type: ignore[arg-type]
+            return self._base_config
+        # the tank, gas and effects are fixed: only the fitted fields are checked again
+        return with_changes(self._base_config, kw)
 
     def events(self, v: Values) -> list[float]:
         """Instants where the model's signal is not smooth [s]."""

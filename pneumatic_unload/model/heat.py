@@ -10,9 +10,10 @@ The gas exchanges heat with the wall, Q = hA (T_wall - T) [W]. The wall conducta
   workflow fit, and what the simulator sets.
 * ``fixed`` - a constant hA = ``heat_transfer_coefficient`` [W/K] (Newton cooling).
 
-The simulator, the estimator's model inversion and curve fit, and the discrepancy's
-heat-transfer candidate all build their heat flow here, from the same
-:class:`~pneumatic_unload.config.RigConfig` fields. SI units.
+The formulae are compiled with the right-hand side
+(:func:`pneumatic_unload.model.kernel.heat_flow`); this module maps the fields of
+:class:`~pneumatic_unload.config.RigConfig` onto them, for the simulator, the estimator's
+model inversion and curve fit, and the discrepancy's heat-transfer candidate alike. SI units.
 """
 
 from __future__ import annotations
@@ -21,10 +22,42 @@ import math
 from collections.abc import Callable
 
 from pneumatic_unload.config import RigConfig
+from pneumatic_unload.model.kernel import HEAT_FIXED, HEAT_NATURAL, HEAT_NONE, heat_flow
 from pneumatic_unload.physics import G_ACCEL, tank_geometry
 
 #: Heat laws (values of ``RigConfig.heat_transfer_mode``).
 HEAT_LAWS: tuple[str, ...] = ("natural", "fixed")
+
+
+def heat_parameters(cfg: RigConfig) -> tuple[float, float, float]:
+    """The heat law of a configuration as the kernel's (mode, coefficient, Ra constant).
+
+    Parameters
+    ----------
+    cfg : RigConfig
+        Tank (V, L/D), gas, ``heat_transfer_mode`` and its parameter; adiabatic unless
+        ``heat_transfer`` is among ``cfg.effects``.
+
+    Returns
+    -------
+    tuple of float
+        (mode: :data:`~pneumatic_unload.model.kernel.HEAT_NONE`, ``HEAT_NATURAL`` or
+        ``HEAT_FIXED``; coefficient [W/K]: A_w k/L x scale for the natural law, hA for the
+        fixed one; Ra constant g L^3 c_p/(mu k R^2) [K^3/Pa^2 ... such that Ra is
+        dimensionless], 0 unless natural), as :func:`~pneumatic_unload.model.kernel.heat_flow`
+        takes them.
+    """
+    if not cfg.has("heat_transfer"):
+        return HEAT_NONE, 0.0, 0.0
+    if cfg.heat_transfer_mode == "fixed":
+        return HEAT_FIXED, float(cfg.heat_transfer_coefficient), 0.0
+    gas = cfg.gas
+    length, _d, area = tank_geometry(cfg.volume, cfg.length_diameter_ratio)
+    # Ra = g |dT|/T L^3 rho^2 c_p / (mu k), rho = p/(R T)
+    ra_const = G_ACCEL * length**3 * gas.cp / (gas.viscosity * gas.conductivity
+                                                * gas.gas_constant**2)
+    hk = area * gas.conductivity / length * cfg.heat_transfer_scale
+    return HEAT_NATURAL, hk, ra_const
 
 
 def heat_flow_function(cfg: RigConfig) -> Callable[[float, float], float] | None:
@@ -40,32 +73,17 @@ def heat_flow_function(cfg: RigConfig) -> Callable[[float, float], float] | None
     -------
     callable or None
         ``q(p, t_gas)``: heat flow into the gas [W] at gas pressure p [Pa absolute] and
-        mean gas temperature t_gas [K].
+        mean gas temperature t_gas [K] (the compiled law the integrator uses).
     """
-    if not cfg.has("heat_transfer"):
+    mode, coeff, ra_const = heat_parameters(cfg)
+    if mode == HEAT_NONE:
         return None
     t_wall = cfg.wall
-    if cfg.heat_transfer_mode == "fixed":
-        h_a = cfg.heat_transfer_coefficient
 
-        def q_fixed(p: float, t_gas: float) -> float:
-            return h_a * (t_wall - t_gas)
+    def q(p: float, t_gas: float) -> float:
+        return float(heat_flow(mode, coeff, ra_const, t_wall, p, t_gas))
 
-        return q_fixed
-    gas = cfg.gas
-    length, _d, area = tank_geometry(cfg.volume, cfg.length_diameter_ratio)
-    # Ra = g |dT|/T L^3 rho^2 c_p / (mu k), rho = p/(R T)
-    ra_const = G_ACCEL * length**3 * gas.cp / (gas.viscosity * gas.conductivity
-                                                * gas.gas_constant**2)
-    hk = area * gas.conductivity / length * cfg.heat_transfer_scale
-
-    def q_natural(p: float, t_gas: float) -> float:
-        dt_w = t_wall - t_gas
-        ra = ra_const * abs(dt_w) / t_gas * (p / t_gas) ** 2
-        nu = 0.59 * ra**0.25 if ra < 1e9 else 0.10 * ra ** (1.0 / 3.0)
-        return hk * (nu if nu > 1.0 else 1.0) * dt_w
-
-    return q_natural
+    return q
 
 
 def thermal_time_constant(cfg: RigConfig, p: float, t_gas: float) -> float:

@@ -10,25 +10,26 @@ With ``pipe_volume`` an isothermal volume and a series conductance sit between t
 the component (a third state, the pipe pressure). Without effects the model is the paper's
 isentropic discharge (eq 19-24).
 
-:func:`integrate` is the only integrator of the package: LSODA (:func:`scipy.integrate.odeint`)
-run in segments between the valve events (opening, end of the opening ramp, closing), so
-that a short ramp limits the step size only inside the ramp and a discontinuity is never
-stepped over. Output on any increasing grid. SI units: Pa absolute, K, m^3, s, kg/s.
+:func:`integrate` is the only integrator of the package: the compiled Dormand-Prince 5(4) of
+:mod:`pneumatic_unload.model.kernel` (which also holds the right-hand side) run in segments
+between the valve events (opening, end of the opening ramp, closing), so that a short ramp
+limits the step size only inside the ramp and a discontinuity is never stepped over. Output
+on any increasing grid; this module packs a ``RigConfig`` into the kernel's parameters.
+SI units: Pa absolute, K, m^3, s, kg/s.
 """
 
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.integrate import odeint
 
+import pneumatic_unload.model.kernel as kernel
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.model.heat import heat_flow_function
-from pneumatic_unload.physics import R_LINEAR, RHO_N, T_N, flow_function_scalar
+from pneumatic_unload.model.heat import heat_parameters
+from pneumatic_unload.physics import R_LINEAR, RHO_N, T_N
 
 FloatArray = NDArray[np.float64]
 
@@ -70,17 +71,13 @@ def opening_fraction(cfg: RigConfig, t_open: float) -> Callable[[float], float]:
     t_open : float
         Valve opening instant [s].
     """
-    ramp = opening_ramp(cfg)
-    t_close = t_open + cfg.valve_close_time if cfg.valve_close_time > 0 else math.inf
+    prm = kernel_parameters(cfg, t_open)
 
-    def opening(t: float) -> float:
-        if t < t_open or t >= t_close:
-            return 0.0
-        if ramp > 0.0 and t < t_open + ramp:
-            return (t - t_open) / ramp
-        return 1.0
+    def fraction(t: float) -> float:
+        return float(kernel.opening(t, prm[kernel.T_OPEN], prm[kernel.RAMP],
+                                    prm[kernel.T_CLOSE]))
 
-    return opening
+    return fraction
 
 
 def state_size(cfg: RigConfig) -> int:
@@ -96,9 +93,49 @@ def initial_state(cfg: RigConfig) -> list[float]:
     return y0
 
 
-def right_hand_side(cfg: RigConfig, t_open: float
-                    ) -> Callable[[float, FloatArray], list[float]]:
-    """Right-hand side f(t, y) of the discharge ODE (plain floats for speed).
+def kernel_parameters(cfg: RigConfig, t_open: float) -> FloatArray:
+    """The parameter vector of :func:`pneumatic_unload.model.kernel.rhs` for a configuration.
+
+    Parameters
+    ----------
+    cfg : RigConfig
+        Rig, component and effects.
+    t_open : float
+        Valve opening instant [s].
+
+    Returns
+    -------
+    ndarray
+        The kernel's slots (gas, tank, component, leak, heat law, pipe, valve schedule), SI.
+    """
+    gas = cfg.gas
+    prm = np.zeros(kernel.N_PARAMETERS)
+    prm[kernel.GAMMA] = gas.gamma
+    prm[kernel.R_GAS] = gas.gas_constant
+    prm[kernel.CP] = gas.cp
+    prm[kernel.VOLUME] = cfg.volume
+    prm[kernel.P_ATM] = cfg.atmosphere
+    prm[kernel.T_WALL] = cfg.wall
+    prm[kernel.B_RATIO] = cfg.critical_ratio
+    prm[kernel.M_INDEX] = cfg.subsonic_index
+    prm[kernel.C_RHO] = cfg.conductance * RHO_N
+    prm[kernel.LEAK] = cfg.leak_coefficient if cfg.has("leak") else 0.0
+    prm[kernel.HEAT_MODE], prm[kernel.HEAT_A], prm[kernel.HEAT_RA] = heat_parameters(cfg)
+    if cfg.has("pipe_volume"):
+        prm[kernel.PIPE] = 1.0
+        prm[kernel.PIPE_VOLUME] = cfg.pipe_volume
+        prm[kernel.PIPE_C_RHO] = cfg.pipe_conductance * RHO_N
+    prm[kernel.T_OPEN] = t_open
+    prm[kernel.RAMP] = opening_ramp(cfg)
+    prm[kernel.T_CLOSE] = t_open + cfg.valve_close_time if cfg.valve_close_time > 0 \
+        else math.inf
+    prm[kernel.R_LIN] = R_LINEAR
+    prm[kernel.SQRT_TN] = math.sqrt(T_N)
+    return prm
+
+
+def right_hand_side(cfg: RigConfig, t_open: float) -> Callable[[float, FloatArray], FloatArray]:
+    """Right-hand side f(t, y) of the discharge ODE (the compiled kernel, callable).
 
     Parameters
     ----------
@@ -112,48 +149,22 @@ def right_hand_side(cfg: RigConfig, t_open: float
     callable
         f(t [s], y = (p [Pa], T [K][, p_pipe [Pa]])) -> dy/dt [Pa/s, K/s[, Pa/s]].
     """
-    gas = cfg.gas
-    r_gas, gamma = gas.gas_constant, gas.gamma
-    cp = gas.cp
-    vol = cfg.volume
-    p_atm = cfg.atmosphere
-    t_wall = cfg.wall
-    b, m = cfg.critical_ratio, cfg.subsonic_index
-    c_rho = cfg.conductance * RHO_N
-    leak = cfg.leak_coefficient if cfg.has("leak") else 0.0
-    heat = heat_flow_function(cfg)
-    pipe = cfg.has("pipe_volume")
-    v2 = cfg.pipe_volume
-    cp_rho = cfg.pipe_conductance * RHO_N
-    sq_tn = math.sqrt(T_N)
-    phi = flow_function_scalar
-    r_lin = R_LINEAR
-    opening = opening_fraction(cfg, t_open)
+    prm = kernel_parameters(cfg, t_open)
 
-    def rhs(t: float, y: FloatArray) -> list[float]:
-        p1 = y[0]
-        t1 = y[1]
-        a = opening(t)
-        dp2 = 0.0
-        if pipe:
-            p2 = y[2]
-            g1 = cp_rho * p1 * sq_tn / math.sqrt(t1) * phi(p2 / p1, 0.5, 0.5, r_lin)
-            g2 = a * c_rho * p2 * sq_tn / math.sqrt(t_wall) * phi(p_atm / p2, b, m, r_lin) \
-                if a > 0.0 else 0.0
-            dp2 = r_gas * t_wall / v2 * (g1 - g2)
-        else:
-            g1 = a * c_rho * p1 * sq_tn / math.sqrt(t1) * phi(p_atm / p1, b, m, r_lin) \
-                if a > 0.0 else 0.0
-        g_out = g1 + leak * (p1 - p_atm)
-        q = heat(p1, t1) if heat is not None else 0.0
-        t_up = t1 if g_out >= 0.0 else t_wall
-        dp1 = (gamma - 1.0) / vol * (q - g_out * cp * t_up)
-        dt1 = t1 / p1 * dp1 + r_gas * t1 * t1 / (p1 * vol) * g_out
-        if pipe:
-            return [dp1, dt1, dp2]
-        return [dp1, dt1]
+    def f(t: float, y: FloatArray) -> FloatArray:
+        dy = np.empty(len(y))
+        kernel.rhs(float(t), np.asarray(y, dtype=float), prm, dy)
+        return dy
 
-    return rhs
+    return f
+
+
+#: Step budget of one segment of :func:`integrate` [-].
+MAX_STEPS = 2_000_000
+
+
+class IntegrationError(ArithmeticError):
+    """The integrator could not reach the end of a segment (budget, step size, NaN)."""
 
 
 def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTOL,
@@ -161,10 +172,11 @@ def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTO
     """Integrate the discharge from the state (p10, T10) at t[0] and return it at t.
 
     Integration runs segment by segment between the valve events of
-    :func:`valve_events`; inside the opening ramp the step is limited to a quarter of the
-    ramp, elsewhere LSODA chooses it freely. The output grid can be anything increasing
-    (every sample, or a few quadrature nodes per bin): the cost depends on the dynamics,
-    not on the number of output instants.
+    :func:`valve_events` with the compiled Dormand-Prince 5(4) of
+    :func:`pneumatic_unload.model.kernel.dopri5`; inside the opening ramp the step is
+    limited to a quarter of the ramp, elsewhere it follows the dynamics. The output grid
+    can be anything increasing (every sample, or a few quadrature nodes per bin): the cost
+    depends on the dynamics, not on the number of output instants.
 
     Parameters
     ----------
@@ -177,7 +189,8 @@ def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTO
     rtol : float
         Relative tolerance [-] (absolute tolerances are 1e-2 rtol of p10 and T10).
     quiet : bool
-        Silence LSODA's warnings (fits exploring extreme parameters).
+        A segment that cannot be integrated (fits exploring extreme parameters) leaves NaN
+        from where it stopped instead of raising :class:`IntegrationError`.
 
     Returns
     -------
@@ -186,42 +199,50 @@ def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTO
         (, pipe pressure [Pa absolute]).
     """
     t = np.asarray(t, dtype=float)
-    rhs = right_hand_side(cfg, t_open)
+    prm = kernel_parameters(cfg, t_open)
     y = np.asarray(initial_state(cfg), dtype=float)
-    atol = np.array([cfg.initial_pressure, cfg.initial_temperature]
-                    + ([cfg.initial_pressure] if y.size == 3 else [])) * rtol * 1e-2
-    out = np.empty((t.size, y.size))
+    atol = y * rtol * 1e-2
+    out = np.full((t.size, y.size), np.nan)
     if t.size == 0:
         return out
     ramp = opening_ramp(cfg)
     cuts = [e for e in valve_events(cfg, t_open) if t[0] < e < t[-1]]
     bounds = [float(t[0]), *cuts, float(t[-1])]
+    dy = np.empty(y.size)
     k = 0
-    with warnings.catch_warnings():
-        if quiet:
-            warnings.simplefilter("ignore")
-        for s in range(len(bounds) - 1):
-            a, b = bounds[s], bounds[s + 1]
-            last = s == len(bounds) - 2
-            j = t.size if last else int(np.searchsorted(t, b, side="left"))
-            seg = t[k:j]
-            starts_at_a = bool(seg.size) and seg[0] == a
-            grid = np.concatenate(([] if starts_at_a else [a], seg, [] if last else [b]))
-            in_ramp = ramp > 0 and t_open <= a < t_open + ramp
-            if b <= t_open and not any(rhs(a, y)):
-                # valve still shut and the gas at rest (no leak, at the wall temperature):
-                # the state stays where it is
-                ys = np.repeat(y[None, :], grid.size, axis=0)
-            elif grid.size > 1:
-                ys = odeint(rhs, y, grid, tfirst=True, rtol=rtol, atol=atol, mxstep=200_000,
-                            hmax=ramp / 4.0 if in_ramp else 0.0)
-            else:
-                ys = y[None, :]
-            off = 0 if starts_at_a else 1
-            out[k:j] = ys[off:off + seg.size]
-            y = ys[-1]
-            k = j
+    for s in range(len(bounds) - 1):
+        a, b = bounds[s], bounds[s + 1]
+        last = s == len(bounds) - 2
+        j = t.size if last else int(np.searchsorted(t, b, side="left"))
+        grid = np.concatenate((t[k:j], [] if last else [b]))
+        kernel.rhs(a, y, prm, dy)
+        if b <= t_open and not dy.any():
+            # valve still shut and the gas at rest (no leak, at the wall temperature):
+            # the state stays where it is
+            ys = np.repeat(y[None, :], grid.size, axis=0)
+        elif b > a:
+            ys = np.empty((grid.size, y.size))
+            status, done = kernel.dopri5(y, a, b, grid, prm, rtol, atol,
+                                         ramp / 4.0 if ramp > 0 and t_open <= a < t_open + ramp
+                                         else 0.0, MAX_STEPS, ys)
+            if status != kernel.OK:
+                if not quiet:
+                    raise IntegrationError(
+                        f"the discharge ODE could not be integrated from t = {a:g} s to "
+                        f"{b:g} s ({_FAILURES[status]}); state at the start {y.tolist()}")
+                out[k:k + min(done, j - k)] = ys[:min(done, j - k)]
+                return out
+        else:
+            ys = np.repeat(y[None, :], grid.size, axis=0)
+        out[k:j] = ys[:j - k]
+        y = ys[-1].copy()
+        k = j
     return out
+
+
+_FAILURES = {kernel.TOO_MANY_STEPS: f"more than {MAX_STEPS:,} steps",
+             kernel.STEP_TOO_SMALL: "step size underflow",
+             kernel.NOT_FINITE: "non-finite state"}
 
 
 def discharge(cfg: RigConfig, t: FloatArray, t_open: float | None = None, *,

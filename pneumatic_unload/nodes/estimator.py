@@ -228,8 +228,10 @@ class EstimatorNode(Node):
             self._rejected += 1
             self._diagnose(_WARN, f"pressure block with sample_period {period!r} ignored")
             return
-        for k, p in enumerate(msg.pressure):
-            self._queue.append((ns0 + round(k * period * 1e9), p, now))
+        p = np.asarray(msg.pressure, dtype=float)
+        # the stamps of the per-sample path, ns0 + round(k T 1e9), for the whole block
+        ns = ns0 + np.round(np.arange(p.size) * period * 1e9).astype(np.int64)
+        self._queue.append((ns, p, now))  # one item: the core takes it vectorised
         self._wake.set()
 
     def _on_temperature(self, msg: Temperature) -> None:
@@ -266,9 +268,16 @@ class EstimatorNode(Node):
             ns, p, arrived = q.popleft()
             with self._lock:
                 prev = est.state
-                out = est.push(common.ns_to_seconds(ns), p)
+                if isinstance(p, np.ndarray):  # a PressureBlock
+                    if not p.size:
+                        continue
+                    out = est.push_block(ns * 1e-9, p)  # = common.ns_to_seconds per sample
+                    self.received += p.size
+                    p = float(p[-1])
+                else:
+                    out = est.push(common.ns_to_seconds(ns), p)
+                    self.received += 1
                 state = est.state
-            self.received += 1
             self._last_pressure = p
             if out:
                 for r in out:

@@ -1,0 +1,378 @@
+/* The compiled core of the pneumatic_unload discharge model (see kernel.py, which builds
+ * and loads this file): the ISO 6358 flow function, the wall heat laws, the right-hand
+ * side of the tank's mass and energy balance, and a Dormand-Prince 5(4) integrator with
+ * its continuous extension. This is the only implementation of these formulae in the
+ * package; the Python side packs the parameters (model/ode.py, model/heat.py).
+ *
+ * SI units: Pa absolute, K, m^3, s, kg/s, W. Parameter slots: keep equal to kernel.py.
+ */
+#include <math.h>
+#include <stddef.h>
+
+enum {
+    GAMMA, R_GAS, CP, VOLUME, P_ATM, T_WALL, B_RATIO, M_INDEX, C_RHO, LEAK,
+    HEAT_MODE, HEAT_A, HEAT_RA, PIPE, PIPE_VOLUME, PIPE_C_RHO,
+    T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN, N_PARAMETERS
+};
+
+enum { HEAT_NONE = 0, HEAT_NATURAL = 1, HEAT_FIXED = 2 };
+enum { OK = 0, TOO_MANY_STEPS = 1, STEP_TOO_SMALL = 2, NOT_FINITE = 3 };
+
+#define MAX_STATES 8
+
+int pu_n_parameters(void) { return N_PARAMETERS; }
+
+/* ISO 6358 flow function phi(r), r = p2/p1 [-]; b critical ratio, m subsonic index,
+ * linear in (1 - r) above r_linear (0 at r = 1, negative beyond: reverse flow). */
+double pu_flow_phi(double r, double b, double m, double r_linear)
+{
+    if (r <= b) return 1.0;
+    if (r > r_linear) {
+        double xl = (r_linear - b) / (1.0 - b);
+        return pow(1.0 - xl * xl, m) * (1.0 - r) / (1.0 - r_linear);
+    }
+    double x = (r - b) / (1.0 - b);
+    return pow(1.0 - x * x, m);
+}
+
+/* Wall heat flow into the gas Q [W] at p [Pa], gas temperature t_gas [K].
+ * natural: Q = coeff Nu(Ra) (Tw - T), Nu = 0.59 Ra^0.25 (Ra < 1e9) or 0.10 Ra^(1/3),
+ * Nu >= 1, Ra = ra_const |Tw - T|/T (p/T)^2; fixed: Q = coeff (Tw - T); none: 0. */
+double pu_heat_flow(double mode, double coeff, double ra_const, double t_wall, double p,
+                    double t_gas)
+{
+    if (mode == HEAT_NONE) return 0.0;
+    double dt_w = t_wall - t_gas;
+    if (mode == HEAT_FIXED) return coeff * dt_w;
+    double ra = ra_const * fabs(dt_w) / t_gas * (p / t_gas) * (p / t_gas);
+    double nu = ra < 1e9 ? 0.59 * pow(ra, 0.25) : 0.10 * cbrt(ra);
+    return coeff * (nu > 1.0 ? nu : 1.0) * dt_w;
+}
+
+/* Valve effective-area fraction a(t) [-]: a linear ramp of `ramp` s from t_open, shut
+ * from t_close. */
+double pu_opening(double t, double t_open, double ramp, double t_close)
+{
+    if (t < t_open || t >= t_close) return 0.0;
+    if (ramp > 0.0 && t < t_open + ramp) return (t - t_open) / ramp;
+    return 1.0;
+}
+
+/* dy/dt of y = (p [Pa], T [K][, p_pipe [Pa]]) at t [s]. */
+void pu_rhs(double t, const double *y, const double *prm, double *dy)
+{
+    double p1 = y[0], t1 = y[1];
+    double a = pu_opening(t, prm[T_OPEN], prm[RAMP], prm[T_CLOSE]);
+    double p_atm = prm[P_ATM], t_wall = prm[T_WALL], sq_tn = prm[SQRT_TN];
+    double r_lin = prm[R_LIN];
+    double g1 = 0.0;
+    if (prm[PIPE] > 0.0) {
+        double p2 = y[2];
+        g1 = prm[PIPE_C_RHO] * p1 * sq_tn / sqrt(t1) * pu_flow_phi(p2 / p1, 0.5, 0.5, r_lin);
+        double g2 = 0.0;
+        if (a > 0.0)
+            g2 = a * prm[C_RHO] * p2 * sq_tn / sqrt(t_wall)
+                 * pu_flow_phi(p_atm / p2, prm[B_RATIO], prm[M_INDEX], r_lin);
+        dy[2] = prm[R_GAS] * t_wall / prm[PIPE_VOLUME] * (g1 - g2);
+    } else if (a > 0.0) {
+        g1 = a * prm[C_RHO] * p1 * sq_tn / sqrt(t1)
+             * pu_flow_phi(p_atm / p1, prm[B_RATIO], prm[M_INDEX], r_lin);
+    }
+    double g_out = g1 + prm[LEAK] * (p1 - p_atm);
+    double q = pu_heat_flow(prm[HEAT_MODE], prm[HEAT_A], prm[HEAT_RA], t_wall, p1, t1);
+    /* The gas leaving (or, for g < 0, entering) is taken at the tank gas temperature.
+     * Reverse flow through the component happens in these models only as the numerical
+     * overshoot of a discharge that ends on g = 0 (the valve closes before p_atm, heat
+     * transfer keeps the flow outwards); a switch to the surroundings' temperature for
+     * g < 0 put a kink exactly there, on which the stiff pipe model chattered (300 000
+     * steps instead of 3 000). */
+    double t_up = t1;
+    double vol = prm[VOLUME];
+    double dp1 = (prm[GAMMA] - 1.0) / vol * (q - g_out * prm[CP] * t_up);
+    dy[0] = dp1;
+    dy[1] = t1 / p1 * dp1 + prm[R_GAS] * t1 * t1 / (p1 * vol) * g_out;
+}
+
+static double error_norm(int n, const double *err, const double *y, const double *yn,
+                         double rtol, const double *atol)
+{
+    double s = 0.0;
+    for (int i = 0; i < n; i++) {
+        double ay = fabs(y[i]), an = fabs(yn[i]);
+        double sc = atol[i] + rtol * (ay > an ? ay : an);
+        s += (err[i] / sc) * (err[i] / sc);
+    }
+    return sqrt(s / n);
+}
+
+/* LU decomposition with partial pivoting of the n x n matrix a (row major), in place. */
+static int lu_factor(int n, double *a, int *piv)
+{
+    for (int k = 0; k < n; k++) {
+        int p = k;
+        for (int i = k + 1; i < n; i++)
+            if (fabs(a[i * n + k]) > fabs(a[p * n + k])) p = i;
+        piv[k] = p;
+        if (a[p * n + k] == 0.0 || !isfinite(a[p * n + k])) return 1;
+        if (p != k)
+            for (int j = 0; j < n; j++) {
+                double tmp = a[k * n + j];
+                a[k * n + j] = a[p * n + j];
+                a[p * n + j] = tmp;
+            }
+        for (int i = k + 1; i < n; i++) {
+            double f = a[i * n + k] / a[k * n + k];
+            a[i * n + k] = f;
+            for (int j = k + 1; j < n; j++) a[i * n + j] -= f * a[k * n + j];
+        }
+    }
+    return 0;
+}
+
+static void lu_solve(int n, const double *a, const int *piv, double *b)
+{
+    for (int k = 0; k < n; k++) {
+        double tmp = b[piv[k]];
+        b[piv[k]] = b[k];
+        b[k] = tmp;
+        for (int i = k + 1; i < n; i++) b[i] -= a[i * n + k] * b[k];
+    }
+    for (int k = n - 1; k >= 0; k--) {
+        for (int j = k + 1; j < n; j++) b[k] -= a[k * n + j] * b[j];
+        b[k] /= a[k * n + k];
+    }
+}
+
+/* Stiff continuation: the Rosenbrock 2(3) W-method of Shampine & Reichelt (1997, the
+ * formula of MATLAB's ode23s) from (t, y) to t1, with a finite-difference Jacobian and
+ * time derivative at every step and its own continuous extension for the outputs from
+ * index j. Same arguments and return codes as pu_dopri5. */
+static int rosenbrock(int n, double *y, double t, double t1, double h, int n_out,
+                      const double *t_out, int j, const double *prm, double rtol,
+                      const double *atol, double hmax, long steps, long max_steps,
+                      double *out, int *n_done)
+{
+    const double d = 1.0 / (2.0 + sqrt(2.0)), e32 = 6.0 + sqrt(2.0);
+    double f0[MAX_STATES], f1[MAX_STATES], f2[MAX_STATES], ft[MAX_STATES];
+    double k1[MAX_STATES], k2[MAX_STATES], k3[MAX_STATES], yt[MAX_STATES];
+    double yn[MAX_STATES], err[MAX_STATES], dfdt[MAX_STATES];
+    double jac[MAX_STATES * MAX_STATES], w[MAX_STATES * MAX_STATES];
+    int piv[MAX_STATES], i, c;
+    double span = t1 - t;
+    pu_rhs(t, y, prm, f0);
+    while (t < t1) {
+        if (steps >= max_steps) return TOO_MANY_STEPS;
+        int last = (t + h >= t1) || (t1 - (t + h) < 1e-12 * span);
+        if (last) h = t1 - t;
+        if (h <= 1e-14 * fmax(fabs(t), span)) return STEP_TOO_SMALL;
+        /* Jacobian and df/dt by forward differences */
+        for (c = 0; c < n; c++) {
+            double del = 1e-7 * fmax(fabs(y[c]), atol[c] / rtol);
+            for (i = 0; i < n; i++) yt[i] = y[i];
+            yt[c] += del;
+            pu_rhs(t, yt, prm, ft);
+            for (i = 0; i < n; i++) jac[i * n + c] = (ft[i] - f0[i]) / del;
+        }
+        double dt = 1e-7 * fmax(fabs(t), span);
+        if (t + dt > t1) dt = -dt;  /* stay inside the smooth segment */
+        pu_rhs(t + dt, y, prm, ft);
+        for (i = 0; i < n; i++) dfdt[i] = (ft[i] - f0[i]) / dt;
+        for (;;) {
+            for (i = 0; i < n; i++)
+                for (c = 0; c < n; c++)
+                    w[i * n + c] = (i == c ? 1.0 : 0.0) - h * d * jac[i * n + c];
+            if (lu_factor(n, w, piv)) {
+                h *= 0.25;
+                if (h <= 1e-14 * fmax(fabs(t), span)) return STEP_TOO_SMALL;
+                last = 0;
+                continue;
+            }
+            for (i = 0; i < n; i++) k1[i] = f0[i] + h * d * dfdt[i];
+            lu_solve(n, w, piv, k1);
+            for (i = 0; i < n; i++) yt[i] = y[i] + 0.5 * h * k1[i];
+            pu_rhs(t + 0.5 * h, yt, prm, f1);
+            for (i = 0; i < n; i++) k2[i] = f1[i] - k1[i];
+            lu_solve(n, w, piv, k2);
+            for (i = 0; i < n; i++) {
+                k2[i] += k1[i];
+                yn[i] = y[i] + h * k2[i];
+            }
+            double t_new = last ? t1 : t + h;
+            pu_rhs(t_new, yn, prm, f2);
+            for (i = 0; i < n; i++)
+                k3[i] = f2[i] - e32 * (k2[i] - f1[i]) - 2.0 * (k1[i] - f0[i]) + h * d * dfdt[i];
+            lu_solve(n, w, piv, k3);
+            for (i = 0; i < n; i++) err[i] = h / 6.0 * (k1[i] - 2.0 * k2[i] + k3[i]);
+            steps++;
+            double e = error_norm(n, err, y, yn, rtol, atol);
+            if (!isfinite(e) || e > 1.0) {
+                h *= isfinite(e) ? fmax(0.1, 0.8 * pow(e, -1.0 / 3.0)) : 0.1;
+                last = (t + h >= t1);
+                if (last) h = t1 - t;
+                if (h <= 1e-14 * fmax(fabs(t), span)) return isfinite(e) ? STEP_TOO_SMALL
+                                                                          : NOT_FINITE;
+                if (steps >= max_steps) return TOO_MANY_STEPS;
+                continue;
+            }
+            /* accepted: outputs in (t, t_new] from the method's interpolant */
+            while (j < n_out && t_out[j] <= t_new) {
+                double s = (t_out[j] - t) / h;
+                double a1 = s * (1.0 - s) / (1.0 - 2.0 * d), a2 = s * (s - 2.0 * d) / (1.0 - 2.0 * d);
+                for (i = 0; i < n; i++) out[j * n + i] = y[i] + h * (a1 * k1[i] + a2 * k2[i]);
+                j++;
+            }
+            *n_done = j;
+            t = t_new;
+            for (i = 0; i < n; i++) {
+                y[i] = yn[i];
+                f0[i] = f2[i];
+            }
+            double fac = e == 0.0 ? 5.0 : fmin(5.0, 0.8 * pow(e, -1.0 / 3.0));
+            h = fmin(h * fac, hmax);
+            break;
+        }
+    }
+    return OK;
+}
+
+/* Dormand-Prince 5(4) from (t0, y0) to t1 (> t0), the states at t_out[0..n_out) written
+ * row by row into out (n_out x n). Returns the status; *n_done receives the rows written.
+ * When the problem turns stiff (Hairer's test: h |lambda| > 3.25 on 15 accepted steps) the
+ * rest of the segment is integrated by the Rosenbrock method above. */
+int pu_dopri5(int n, const double *y0, double t0, double t1, int n_out, const double *t_out,
+              const double *prm, double rtol, const double *atol, double hmax,
+              long max_steps, double *out, int *n_done)
+{
+    double k1[MAX_STATES], k2[MAX_STATES], k3[MAX_STATES], k4[MAX_STATES];
+    double k5[MAX_STATES], k6[MAX_STATES], k7[MAX_STATES];
+    double y[MAX_STATES], yt[MAX_STATES], yn[MAX_STATES], err[MAX_STATES];
+    int j = 0, i;
+    *n_done = 0;
+    if (n < 1 || n > MAX_STATES) return NOT_FINITE;
+    for (i = 0; i < n; i++) y[i] = y0[i];
+    double t = t0;
+    while (j < n_out && t_out[j] <= t0) {
+        for (i = 0; i < n; i++) out[j * n + i] = y[i];
+        j++;
+    }
+    *n_done = j;
+    double span = t1 - t0;
+    if (!(span > 0.0)) return OK;
+    if (hmax <= 0.0) hmax = span;
+    pu_rhs(t, y, prm, k1);
+    /* initial step (Hairer, Norsett & Wanner, Solving ODE I, II.4) */
+    double d0 = 0.0, d1 = 0.0, d2 = 0.0;
+    for (i = 0; i < n; i++) {
+        double sc = atol[i] + rtol * fabs(y[i]);
+        d0 += (y[i] / sc) * (y[i] / sc);
+        d1 += (k1[i] / sc) * (k1[i] / sc);
+    }
+    d0 = sqrt(d0 / n);
+    d1 = sqrt(d1 / n);
+    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 * span : 0.01 * d0 / d1;
+    if (h0 > span) h0 = span;
+    for (i = 0; i < n; i++) yt[i] = y[i] + h0 * k1[i];
+    pu_rhs(t + h0, yt, prm, k2);
+    for (i = 0; i < n; i++) {
+        double sc = atol[i] + rtol * fabs(y[i]);
+        d2 += ((k2[i] - k1[i]) / sc) * ((k2[i] - k1[i]) / sc);
+    }
+    d2 = sqrt(d2 / n) / h0;
+    double dmax = d1 > d2 ? d1 : d2;
+    double h1 = dmax <= 1e-15 ? fmax(1e-6 * span, h0 * 1e-3) : pow(0.01 / dmax, 0.2);
+    double h = fmin(fmin(100.0 * h0, h1), hmax);
+    if (!(h > 0.0) || !isfinite(h)) return NOT_FINITE;
+    long steps = 0;
+    int rejected = 0, n_stiff = 0, non_stiff = 0;
+    while (t < t1) {
+        if (steps >= max_steps) return TOO_MANY_STEPS;
+        int last = (t + h >= t1) || (t1 - (t + h) < 1e-12 * span);
+        if (last) h = t1 - t;
+        if (h <= 1e-14 * fmax(fabs(t), span)) return STEP_TOO_SMALL;
+        for (i = 0; i < n; i++) yt[i] = y[i] + h * 0.2 * k1[i];
+        pu_rhs(t + 0.2 * h, yt, prm, k2);
+        for (i = 0; i < n; i++) yt[i] = y[i] + h * (3.0 / 40.0 * k1[i] + 9.0 / 40.0 * k2[i]);
+        pu_rhs(t + 0.3 * h, yt, prm, k3);
+        for (i = 0; i < n; i++)
+            yt[i] = y[i] + h * (44.0 / 45.0 * k1[i] - 56.0 / 15.0 * k2[i] + 32.0 / 9.0 * k3[i]);
+        pu_rhs(t + 0.8 * h, yt, prm, k4);
+        for (i = 0; i < n; i++)
+            yt[i] = y[i] + h * (19372.0 / 6561.0 * k1[i] - 25360.0 / 2187.0 * k2[i]
+                                + 64448.0 / 6561.0 * k3[i] - 212.0 / 729.0 * k4[i]);
+        pu_rhs(t + 8.0 / 9.0 * h, yt, prm, k5);
+        for (i = 0; i < n; i++)
+            yt[i] = y[i] + h * (9017.0 / 3168.0 * k1[i] - 355.0 / 33.0 * k2[i]
+                                + 46732.0 / 5247.0 * k3[i] + 49.0 / 176.0 * k4[i]
+                                - 5103.0 / 18656.0 * k5[i]);
+        double t_new = last ? t1 : t + h;
+        pu_rhs(t_new, yt, prm, k6);
+        for (i = 0; i < n; i++)
+            yn[i] = y[i] + h * (35.0 / 384.0 * k1[i] + 500.0 / 1113.0 * k3[i]
+                                + 125.0 / 192.0 * k4[i] - 2187.0 / 6784.0 * k5[i]
+                                + 11.0 / 84.0 * k6[i]);
+        pu_rhs(t_new, yn, prm, k7);
+        for (i = 0; i < n; i++)
+            err[i] = h * (-71.0 / 57600.0 * k1[i] + 71.0 / 16695.0 * k3[i]
+                          - 71.0 / 1920.0 * k4[i] + 17253.0 / 339200.0 * k5[i]
+                          - 22.0 / 525.0 * k6[i] + 1.0 / 40.0 * k7[i]);
+        steps++;
+        double e = error_norm(n, err, y, yn, rtol, atol);
+        if (!isfinite(e)) {
+            if (h <= 1e-12 * span) return NOT_FINITE;
+            h *= 0.1;
+            rejected = 1;
+            continue;
+        }
+        if (e > 1.0) {
+            h *= fmax(0.2, 0.9 * pow(e, -0.2));
+            rejected = 1;
+            continue;
+        }
+        /* accepted: the continuous extension for the outputs in (t, t_new] */
+        while (j < n_out && t_out[j] <= t_new) {
+            double th = (t_out[j] - t) / h, th1 = 1.0 - th;
+            for (i = 0; i < n; i++) {
+                double r2 = yn[i] - y[i];
+                double r3 = h * k1[i] - r2;
+                double r4 = r2 - h * k7[i] - r3;
+                double r5 = h * (-12715105075.0 / 11282082432.0 * k1[i]
+                                 + 87487479700.0 / 32700410799.0 * k3[i]
+                                 - 10690763975.0 / 1880347072.0 * k4[i]
+                                 + 701980252875.0 / 199316789632.0 * k5[i]
+                                 - 1453857185.0 / 822651844.0 * k6[i]
+                                 + 69997945.0 / 29380423.0 * k7[i]);
+                out[j * n + i] = y[i] + th * (r2 + th1 * (r3 + th * (r4 + th1 * r5)));
+            }
+            j++;
+        }
+        *n_done = j;
+        /* stiffness test (Hairer & Wanner, dopri5): h |lambda| from the last two stages */
+        double stnum = 0.0, stden = 0.0;
+        for (i = 0; i < n; i++) {
+            stnum += (k7[i] - k6[i]) * (k7[i] - k6[i]);
+            stden += (yn[i] - yt[i]) * (yn[i] - yt[i]);
+        }
+        if (stden > 0.0 && h * sqrt(stnum / stden) > 3.25) {
+            non_stiff = 0;
+            if (++n_stiff >= 15 && t_new < t1) {
+                for (i = 0; i < n; i++) y[i] = yn[i];
+                return rosenbrock(n, y, t_new, t1, h, n_out, t_out, j, prm, rtol, atol, hmax,
+                                  steps, max_steps, out, n_done);
+            }
+        } else if (++non_stiff >= 6) {
+            n_stiff = 0;
+        }
+        t = t_new;
+        for (i = 0; i < n; i++) {
+            y[i] = yn[i];
+            k1[i] = k7[i];
+        }
+        double fac = e == 0.0 ? 10.0 : fmin(10.0, fmax(0.2, 0.9 * pow(e, -0.2)));
+        if (rejected) {
+            fac = fmin(fac, 1.0);
+            rejected = 0;
+        }
+        h = fmin(h * fac, hmax);
+    }
+    return OK;
+}

@@ -1,0 +1,248 @@
+"""The compiled core of the discharge model: flow law, heat laws, right-hand side, integrator.
+
+The formulae live once, in C (``kernel.c`` beside this file): the ISO 6358 flow function,
+the wall heat laws, the tank's mass and energy balance and the integrator: Dormand-Prince
+5(4) with its continuous extension, switching for the rest of a segment to the Rosenbrock
+2(3) W-method of Shampine & Reichelt (MATLAB's ode23s; finite-difference Jacobian) when
+Hairer's stiffness test fires (a pipe volume far smaller than the tank, a very fast heat
+exchange). This module builds that file into a shared library with the
+system's C compiler the first time it is needed (``cc -O2``, about 0.3 s; ``make setup``
+does it ahead), keeps it under a name that holds the hash of the source and the flags (an
+edited ``kernel.c`` is never run stale), and calls it through :mod:`ctypes`. The library is
+written beside the source when that folder is writable (the development tree), else in
+``$XDG_CACHE_HOME/pneumatic_unload`` (an installed package); ``PNEUMATIC_UNLOAD_KERNEL_DIR``
+overrides both.
+
+Why compiled: a curve fit evaluates the model 30-60 times; the right-hand side as Python
+floats cost 2-4 ms per evaluation (the live final fit missed its 50 ms budget by 4x); this
+integrator takes about 0.1 ms for the same discharge and imports in milliseconds.
+
+Functions (SI units: Pa absolute, K, m^3, s, kg/s, W):
+
+* :func:`flow_phi` - phi(r) (the scalar twin of :func:`pneumatic_unload.physics.flow_function`;
+  a test holds them equal);
+* :func:`heat_flow` - the wall heat laws of :mod:`pneumatic_unload.model.heat`;
+* :func:`opening` - the valve's opening fraction;
+* :func:`rhs` - dy/dt of the discharge for a parameter vector
+  (:func:`pneumatic_unload.model.ode.kernel_parameters` packs it);
+* :func:`dopri5` - the integrator over one smooth segment (stiff-switching), output on any
+  grid.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import platform
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+# Slots of the parameter vector of :func:`rhs` (the enum of kernel.c, checked at load).
+GAMMA, R_GAS, CP, VOLUME, P_ATM, T_WALL = 0, 1, 2, 3, 4, 5
+B_RATIO, M_INDEX, C_RHO, LEAK = 6, 7, 8, 9
+HEAT_MODE, HEAT_A, HEAT_RA = 10, 11, 12
+PIPE, PIPE_VOLUME, PIPE_C_RHO = 13, 14, 15
+T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN = 16, 17, 18, 19, 20
+N_PARAMETERS = 21
+
+#: Heat-law codes of the HEAT_MODE slot.
+HEAT_NONE, HEAT_NATURAL, HEAT_FIXED = 0.0, 1.0, 2.0
+
+#: Return codes of :func:`dopri5`.
+OK, TOO_MANY_STEPS, STEP_TOO_SMALL, NOT_FINITE = 0, 1, 2, 3
+
+#: The most states the integrator takes (MAX_STATES of kernel.c).
+MAX_STATES = 8
+
+SOURCE = Path(__file__).with_name("kernel.c")
+CFLAGS = ("-O2", "-fPIC", "-shared", "-std=c99")
+
+
+class KernelBuildError(RuntimeError):
+    """The C kernel could not be compiled or loaded (no C compiler, no writable folder)."""
+
+
+def library_name() -> str:
+    """File name of the built kernel: hash of the source, the flags and the machine."""
+    h = hashlib.sha256(SOURCE.read_bytes())
+    h.update(" ".join(CFLAGS).encode())
+    h.update(platform.machine().encode())
+    return f"pneumatic_unload_kernel-{h.hexdigest()[:16]}.so"
+
+
+def library_dirs() -> list[Path]:
+    """Folders searched (and written, first writable one) for the built kernel."""
+    env = os.environ.get("PNEUMATIC_UNLOAD_KERNEL_DIR")
+    if env:
+        return [Path(env)]
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return [SOURCE.parent / "__pycache__", cache / "pneumatic_unload"]
+
+
+def build(folder: Path | None = None) -> Path:
+    """Compile ``kernel.c`` into ``folder`` (default: the first writable of
+    :func:`library_dirs`) and return the library's path; nothing to do when it exists.
+
+    Raises
+    ------
+    KernelBuildError
+        No C compiler (``$CC``, ``cc`` or ``gcc``), or the compiler failed, or no folder is
+        writable.
+    """
+    name = library_name()
+    for d in ([folder] if folder is not None else library_dirs()):
+        if (d / name).exists():
+            return d / name
+    cc = shutil.which(os.environ.get("CC") or "cc") or shutil.which("gcc")
+    if not cc:
+        raise KernelBuildError(
+            "the discharge model is compiled C (pneumatic_unload/model/kernel.c) and no C "
+            f"compiler was found ({os.environ.get('CC') or 'cc'}, gcc): install gcc (Debian: "
+            "apt install gcc) or set CC")
+    errors = []
+    for d in ([folder] if folder is not None else library_dirs()):
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=".kernel-", suffix=".so", dir=d)
+            os.close(fd)
+        except OSError as exc:
+            errors.append(f"{d}: {exc}")
+            continue
+        try:
+            proc = subprocess.run([cc, *CFLAGS, "-o", tmp, str(SOURCE), "-lm"],
+                                  capture_output=True, text=True, check=False)
+            if proc.returncode != 0:
+                raise KernelBuildError(f"compiling {SOURCE} with {cc} failed:\n"
+                                       f"{proc.stderr.strip()}")
+            os.replace(tmp, d / name)  # atomic: concurrent builders never see half a file
+            return d / name
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+    raise KernelBuildError("no writable folder for the compiled kernel: "
+                           + "; ".join(errors) + " (set PNEUMATIC_UNLOAD_KERNEL_DIR)")
+
+
+def _load() -> ctypes.CDLL:
+    lib = ctypes.CDLL(str(build()))
+    dbl, i32, i64 = ctypes.c_double, ctypes.c_int, ctypes.c_long
+    arr = ctypes.c_void_p  # float64 C-contiguous data, passed as ndarray.ctypes.data
+    lib.pu_n_parameters.restype = i32
+    if lib.pu_n_parameters() != N_PARAMETERS:
+        raise KernelBuildError("kernel.c and kernel.py disagree on the parameter slots")
+    lib.pu_flow_phi.restype = dbl
+    lib.pu_flow_phi.argtypes = [dbl] * 4
+    lib.pu_heat_flow.restype = dbl
+    lib.pu_heat_flow.argtypes = [dbl] * 6
+    lib.pu_opening.restype = dbl
+    lib.pu_opening.argtypes = [dbl] * 4
+    lib.pu_rhs.restype = None
+    lib.pu_rhs.argtypes = [dbl, arr, arr, arr]
+    lib.pu_dopri5.restype = i32
+    lib.pu_dopri5.argtypes = [i32, arr, dbl, dbl, i32, arr, arr, dbl, arr, dbl, i64, arr,
+                              ctypes.POINTER(i32)]
+    return lib
+
+
+_LIB = _load()
+
+
+def flow_phi(r: float, b: float, m: float, r_linear: float) -> float:
+    """ISO 6358 flow function phi(r) of the pressure ratio r = p2/p1 [-].
+
+    1 for r <= b (choked); [1 - ((r - b)/(1 - b))^2]^m up to r_linear; linear in (1 - r)
+    above, 0 at r = 1 and negative beyond (reverse flow). b: critical pressure ratio [-];
+    m: subsonic index [-]; r_linear [-].
+    """
+    return float(_LIB.pu_flow_phi(r, b, m, r_linear))
+
+
+def heat_flow(mode: float, coeff: float, ra_const: float, t_wall: float, p: float,
+              t_gas: float) -> float:
+    """Wall heat flow into the gas Q [W] at pressure p [Pa] and gas temperature t_gas [K].
+
+    mode :data:`HEAT_NATURAL`: Q = coeff Nu(Ra) (T_w - T), Nu = 0.59 Ra^0.25 (laminar) or
+    0.10 Ra^(1/3) (Ra >= 1e9), Nu >= 1, Ra = ra_const |T_w - T|/T (p/T)^2, coeff = A_w k/L
+    times the heat-transfer scale [W/K]; mode :data:`HEAT_FIXED`: Q = coeff (T_w - T),
+    coeff = hA [W/K]; :data:`HEAT_NONE`: 0. t_wall: wall temperature [K].
+    """
+    return float(_LIB.pu_heat_flow(mode, coeff, ra_const, t_wall, p, t_gas))
+
+
+def opening(t: float, t_open: float, ramp: float, t_close: float) -> float:
+    """Valve effective-area fraction a(t) [-]: 0 before t_open [s] and from t_close [s],
+    a linear ramp of ``ramp`` [s] (0: a step), then 1."""
+    return float(_LIB.pu_opening(t, t_open, ramp, t_close))
+
+
+def rhs(t: float, y: FloatArray, prm: FloatArray, dy: FloatArray) -> None:
+    """dy/dt of the discharge written into ``dy``: y = (p [Pa], T [K][, p_pipe [Pa]]) at
+    t [s] for the parameter vector ``prm`` -> (Pa/s, K/s[, Pa/s])."""
+    y = np.ascontiguousarray(y, dtype=float)
+    if prm.dtype != np.float64 or dy.dtype != np.float64 or not dy.flags.c_contiguous \
+            or dy.size < y.size or prm.size != N_PARAMETERS:
+        raise ValueError("rhs: dy and prm must be float64 arrays of the right sizes")
+    _LIB.pu_rhs(t, y.ctypes.data, prm.ctypes.data, dy.ctypes.data)
+
+
+def dopri5(y0: FloatArray, t0: float, t1: float, t_out: FloatArray, prm: FloatArray,
+           rtol: float, atol: FloatArray, hmax: float, max_steps: int,
+           out: FloatArray) -> tuple[int, int]:
+    """Integrate dy/dt = :func:`rhs` from (t0, y0) to t1 and write y at the instants t_out.
+
+    Dormand-Prince 5(4) (local extrapolation, FSAL) with its 4th-order continuous extension
+    for the output, so the steps follow the dynamics, not the grid; step control on the RMS
+    norm of the error scaled by atol + rtol |y|. After 15 accepted steps at the stability
+    limit (h |lambda| > 3.25) the rest of the segment is integrated by the Rosenbrock 2(3)
+    W-method (L-stable, its own interpolant), so stiff configurations cost thousands of
+    steps, not hundreds of thousands.
+
+    Parameters
+    ----------
+    y0 : ndarray
+        State at t0 (units of :func:`rhs`), at most :data:`MAX_STATES` entries.
+    t0, t1 : float
+        Segment [s], t1 > t0; the right-hand side must be smooth inside it.
+    t_out : ndarray
+        Increasing output instants in [t0, t1] [s].
+    prm : ndarray
+        Parameter vector of :func:`rhs` (:data:`N_PARAMETERS` entries).
+    rtol : float
+        Relative tolerance [-].
+    atol : ndarray
+        Absolute tolerance per state (units of y).
+    hmax : float
+        Largest step [s] (0: no limit).
+    max_steps : int
+        Step budget [-].
+    out : ndarray
+        C-contiguous (len(t_out), len(y0)) array receiving the states.
+
+    Returns
+    -------
+    tuple of int
+        (status: :data:`OK`, :data:`TOO_MANY_STEPS`, :data:`STEP_TOO_SMALL` or
+        :data:`NOT_FINITE`; number of rows of ``out`` written).
+    """
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    t_out = np.ascontiguousarray(t_out, dtype=float)
+    atol = np.ascontiguousarray(atol, dtype=float)
+    prm = np.ascontiguousarray(prm, dtype=float)
+    if prm.size != N_PARAMETERS or not 1 <= y0.size <= MAX_STATES or atol.size != y0.size \
+            or out.shape != (t_out.size, y0.size) or not out.flags.c_contiguous \
+            or out.dtype != np.float64:
+        raise ValueError("dopri5: inconsistent array sizes or types")
+    done = ctypes.c_int(0)
+    status = _LIB.pu_dopri5(y0.size, y0.ctypes.data, float(t0), float(t1), t_out.size,
+                            t_out.ctypes.data, prm.ctypes.data, float(rtol), atol.ctypes.data,
+                            float(hmax), int(max_steps), out.ctypes.data, ctypes.byref(done))
+    return int(status), int(done.value)
+
