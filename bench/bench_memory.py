@@ -93,8 +93,9 @@ def measure(path: Path, cfg: RigConfig, code: Path) -> dict[str, object]:
            "--volume", repr(cfg.volume), "--atmosphere", repr(cfg.atmosphere)]
     env = dict(os.environ, PYTHONPATH=str(code), OPENBLAS_NUM_THREADS="1",
                OMP_NUM_THREADS="1")
+    # cwd: `python -m` puts the working directory first on sys.path
     out = subprocess.run([sys.executable, "-c", _CHILD, *cmd], capture_output=True,
-                         text=True, env=env, check=True)
+                         text=True, env=env, check=True, cwd=code)
     return json.loads(out.stdout)
 
 
