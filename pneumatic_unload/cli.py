@@ -33,10 +33,11 @@ from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
     UnloadResult,
-    analyze,
     merge_final,
 )
-from pneumatic_unload.estimation.batch import explain_no_unload, gauge_suspicion
+from pneumatic_unload.estimation.chunked import ChunkedAnalysis
+from pneumatic_unload.io.csvheader import TEMPERATURE_UNITS, TIME_UNITS
+from pneumatic_unload.records import Record, RecordError, analyze_record, open_record
 
 PRESSURE_UNITS = {"Pa": 1.0, "kPa": 1e3, "bar": 1e5, "MPa": 1e6, "psi": 6894.757293168361}
 
@@ -83,44 +84,15 @@ def unrecognized_message(parser: argparse.ArgumentParser, extra: Sequence[str]) 
 
 # --------------------------------------------------------------------------- input
 def load_trace(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-    """Time [s], pressure [Pa absolute] and stored rig configuration of the input PATH."""
-    path = Path(args.path)
-    if not path.exists():
-        raise CliError(f"{path}: no such file or directory")
-    if path.suffix.lower() in (".csv", ".txt"):
-        from pneumatic_unload.io.csvlog import CsvFormatError, read_csv_trace
-
-        try:
-            tr = read_csv_trace(
-                path, time_column=args.time_column, pressure_column=args.pressure_column,
-                pressure_unit=args.pressure_unit, gauge=args.gauge or None,
-                atmosphere=args.atmosphere)
-        except (CsvFormatError, ValueError, OSError) as exc:
-            raise CliError(f"{path}: {exc}") from exc
-        meta: dict[str, Any] = {}
-        if tr.temperature is not None and tr.temperature.size:
-            meta["measured_initial_temperature"] = float(tr.temperature[0])
-            meta["temperature_trace"] = (np.asarray(tr.t, float),
-                                         np.asarray(tr.temperature, float))
-        return np.asarray(tr.t, float), np.asarray(tr.p, float), meta
-    from pneumatic_unload.io.bag import (
-        TOPIC_SETTINGS,
-        BagError,
-        read_config,
-        read_json_topic,
-        read_pressure,
-    )
-
+    """Time [s], pressure [Pa absolute] and stored rig configuration of the input PATH, as
+    whole arrays (what was assumed about the input is printed as warnings on stderr)."""
+    rec = open_input(args)
     try:
-        series = read_pressure(path, topic=args.topic)
-        cfg = read_config(path) or {}
-        live = read_json_topic(path, TOPIC_SETTINGS)
-    except BagError as exc:
+        parts = list(rec.chunks())
+    except RecordError as exc:
         raise CliError(str(exc)) from exc
-    if live is not None:
-        cfg = {**cfg, "estimator_settings": live}
-    t_ns, p = series[0], series[1]
-    return np.asarray(t_ns, dtype=np.int64) * 1e-9, np.asarray(p, float), cfg
+    return (np.concatenate([c[0] for c in parts]), np.concatenate([c[1] for c in parts]),
+            rec.cfg)
 
 
 def settings_from(args: argparse.Namespace, cfg: dict[str, Any]) -> EstimatorSettings:
@@ -158,45 +130,72 @@ def _unload_json(r: UnloadResult) -> dict[str, Any]:
     return d
 
 
+def open_input(args: argparse.Namespace) -> Record:
+    """The input PATH of ``analyze`` as a :class:`~pneumatic_unload.records.Record` (a CSV is
+    read in chunks later); what was assumed about it is printed as warnings on stderr."""
+    try:
+        rec = open_record(
+            args.path, topic=args.topic, time_column=args.time_column,
+            pressure_column=args.pressure_column, pressure_unit=args.pressure_unit,
+            time_unit=args.time_unit, temperature_unit=args.temperature_unit,
+            gauge=args.gauge or None, atmosphere=args.atmosphere)
+    except RecordError as exc:
+        raise CliError(str(exc)) from exc
+    for w in rec.warnings:
+        print(f"pneumatic-unload: warning: {args.path}: {w}", file=sys.stderr)
+    return rec
+
+
+def _run(rec: Record, settings: EstimatorSettings) -> ChunkedAnalysis:
+    try:
+        return analyze_record(rec, settings)
+    except RecordError as exc:
+        raise CliError(str(exc)) from exc
+
+
 def cmd_analyze(args: argparse.Namespace) -> int:
     """Run the unloading-time analysis and print the estimates (exit status 1 when no unload
-    was found, with the reason, or when the readings look like gauge pressures)."""
+    was found, with the reason, or when the readings look like gauge pressures). A CSV log
+    is read in chunks and streamed through the estimator: memory bounded by the chunk, the
+    overview of the record and the longest unload (see
+    :mod:`pneumatic_unload.estimation.chunked`)."""
     if args.plot:
         folder = Path(args.plot).parent
         if not folder.is_dir():
             raise CliError(f"--plot {args.plot}: folder {folder} does not exist")
-    t, p, cfg = load_trace(args)
-    settings = settings_from(args, cfg)
-    try:
-        published = analyze(t, p, settings)
-    except EstimationError as exc:
-        raise CliError(f"{args.path}: {exc}") from exc
-    unloads = merge_final(published)
-    temp = cfg.get("temperature_trace")
-    if (temp is not None and args.initial_temperature is None and unloads
+    rec = open_input(args)
+    settings = settings_from(args, rec.cfg)
+    run = _run(rec, settings)
+    unloads = merge_final(run.published)
+    if (rec.has_temperature and args.initial_temperature is None and unloads
             and math.isfinite(unloads[0].t_start)):
         # T10 from the temperature column: the gas temperature at the start of the unload
         # (the first row may be logged long before, during the charge)
-        t10 = float(np.interp(unloads[0].t_start, temp[0], temp[1]))
+        try:
+            t10 = rec.temperature_at(unloads[0].t_start)
+        except RecordError as exc:
+            raise CliError(str(exc)) from exc
         if abs(t10 - settings.initial_temperature) > 1e-3:
             settings = dataclasses.replace(settings, initial_temperature=t10)
-            published = analyze(t, p, settings)
-            unloads = merge_final(published)
-    why = None if unloads else explain_no_unload(t, p, settings)
-    problem = gauge_suspicion(t, p, settings)
+            run = _run(rec, settings)
+            unloads = merge_final(run.published)
+    published = run.published
+    why = None if unloads else run.explain_no_unload()
+    problem = run.gauge_suspicion()
     if problem is not None:
         # C from gauge readings taken as absolute is wrong: no unload may say "ok"
         unloads = [dataclasses.replace(r, status="bad_data", status_text=problem)
                    for r in unloads]
     if args.json:
-        out = {"source": str(args.path), "samples": int(t.size),
+        out = {"source": str(args.path), "samples": run.samples,
                "settings": dict(vars(settings)),
                "unloads": [_unload_json(r) for r in unloads],
                "published": [_unload_json(r) for r in published],
-               "no_unload_reason": why, "input_problem": problem}
+               "no_unload_reason": why, "input_problem": problem,
+               "input_warnings": list(rec.warnings)}
         print(json.dumps(out, indent=2, allow_nan=False, default=_json_default))
     else:
-        print(f"{args.path}: {t.size} samples, {len(unloads)} unload(s)")
+        print(f"{args.path}: {run.samples} samples, {len(unloads)} unload(s)")
         for r in unloads:
             print(format_result(r))
     if why is not None:
@@ -206,6 +205,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     if args.plot:
         from pneumatic_unload.plotting import plot_analysis
 
+        t, p = run.overview.arrays()
         try:
             plot_analysis(t, p, unloads, settings, args.plot)
         except OSError as exc:
@@ -287,7 +287,8 @@ def _load_temperature(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray]
 
             tr = read_csv_trace(
                 path, time_column=args.time_column, pressure_column=args.pressure_column,
-                pressure_unit=args.pressure_unit, gauge=args.gauge or None,
+                pressure_unit=args.pressure_unit, time_unit=args.time_unit,
+                temperature_unit=args.temperature_unit, gauge=args.gauge or None,
                 atmosphere=args.atmosphere)
             if tr.temperature is None or tr.temperature.size < 3:
                 return None
@@ -407,6 +408,10 @@ def add_input_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--pressure-column", help="CSV pressure column")
     parser.add_argument("--pressure-unit", choices=tuple(PRESSURE_UNITS), default=None,
                         help="CSV pressure unit (default: from the header, else Pa)")
+    parser.add_argument("--time-unit", choices=tuple(TIME_UNITS), default=None,
+                        help="CSV time unit (default: from the header, else s)")
+    parser.add_argument("--temperature-unit", choices=tuple(TEMPERATURE_UNITS), default=None,
+                        help="CSV gas-temperature unit (default: from the header, else C)")
     parser.add_argument("--gauge", action="store_true",
                         help="CSV pressures are gauge: add --atmosphere to every reading")
     parser.add_argument("--json", action="store_true", help="print a JSON object")

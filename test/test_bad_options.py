@@ -203,7 +203,8 @@ def test_too_few_samples_and_constant_signal(record):
 
 
 def _write_csv(path, t, p):
-    path.write_text("t,p\n" + "".join(f"{float(a)!r},{float(b)!r}\n"
+    # units stated: a unit not stated is a warning line of its own (test_csv_stream.py)
+    path.write_text("t [s],p [Pa]\n" + "".join(f"{float(a)!r},{float(b)!r}\n"
                                        for a, b in zip(t, p, strict=True)))
     return str(path)
 

@@ -328,6 +328,7 @@ LAYERS: dict[str, int] = {
     "discrepancy": 6,
     "runs": 6,
     "plotting": 6,
+    "records": 6,  # input records of the offline analysis: CSV in chunks, bags
     "cli": 7,
     "demo": 7,
     "nodes": 8,

@@ -30,16 +30,19 @@ vectorised over check indices), :mod:`.state` (detector and per-unload state),
 crossing), :mod:`.tail` (final plateau, curve fit), :mod:`.sse` (aborted unload, recovery,
 eq 23), :mod:`.refine` (every call into :mod:`pneumatic_unload.fitting`),
 :mod:`.regression` (hinge, crossing and corner fits), :mod:`.streaming`
-(:class:`StreamingEstimator`) and :mod:`.batch` (:func:`analyze`, :func:`merge_final`).
+(:class:`StreamingEstimator`), :mod:`.batch` (:func:`analyze`, :func:`merge_final`) and
+:mod:`.chunked` (:func:`analyze_chunks`: a record of any length, read in pieces).
 """
 
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.batch import (
     analyze,
     explain_no_unload,
+    gauge_evidence,
     gauge_suspicion,
     merge_final,
 )
+from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
 from pneumatic_unload.estimation.regression import corner_fit, crossing_fit, hinge_fit
 from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
 from pneumatic_unload.estimation.streaming import StreamingEstimator
@@ -54,6 +57,7 @@ from pneumatic_unload.estimation.types import (
 __all__ = [
     "SSE_MODEL_REL_STD",
     "STATUSES",
+    "ChunkedAnalysis",
     "Diagnostic",
     "EstimationError",
     "EstimatorSettings",
@@ -61,10 +65,12 @@ __all__ = [
     "StreamingEstimator",
     "UnloadResult",
     "analyze",
+    "analyze_chunks",
     "corner_fit",
     "crossing_fit",
     "estimate_fields",
     "explain_no_unload",
+    "gauge_evidence",
     "gauge_suspicion",
     "hinge_fit",
     "merge_final",

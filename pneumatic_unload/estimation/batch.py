@@ -4,13 +4,14 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.streaming import StreamingEstimator
-from pneumatic_unload.estimation.types import UnloadResult
+from pneumatic_unload.estimation.types import Diagnostic, UnloadResult
 from pneumatic_unload.physics import p_star
 
 
@@ -128,21 +129,45 @@ def gauge_suspicion(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | No
     _tt, pp = _finite_pa(t, p, s)
     if pp.size == 0:
         return None
-    final = _final_level(pp, s)
-    n_low = int(np.count_nonzero(pp <= 0.0))
+    return gauge_evidence(_final_level(pp, s), int(np.count_nonzero(pp <= 0.0)), pp.size, s)
+
+
+def gauge_evidence(final: float, n_low: int, n_finite: int,
+                   settings: EstimatorSettings | None = None) -> str | None:
+    """:func:`gauge_suspicion` from a record's statistics (for records read in chunks).
+
+    Parameters
+    ----------
+    final : float
+        Median of the last ``min_plateau`` finite readings [Pa].
+    n_low : int
+        Finite readings at or below 0 Pa [-].
+    n_finite : int
+        Finite readings [-].
+    settings : EstimatorSettings, optional
+        ``atmosphere`` [Pa].
+
+    Returns
+    -------
+    str or None
+        One line naming the evidence and the fix, or None when the readings look absolute.
+    """
+    s = settings or EstimatorSettings()
+    if n_finite == 0:
+        return None
     evidence = []
     if s.atmosphere is not None and final < GAUGE_FINAL_FRACTION * s.atmosphere:
         evidence.append(f"final plateau {final:.0f} Pa, far below p_atm = "
                         f"{s.atmosphere:.0f} Pa")
-    if n_low >= max(3, int(0.001 * pp.size)):
-        evidence.append(f"{n_low} of {pp.size} readings at or below 0 Pa")
+    if n_low >= max(3, int(0.001 * n_finite)):
+        evidence.append(f"{n_low} of {n_finite} readings at or below 0 Pa")
     if not evidence:
         return None
     return f"readings look like gauge pressures ({'; '.join(evidence)}): {GAUGE_FIX}"
 
 
-def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | None = None
-                      ) -> str:
+def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | None = None,
+                      *, diagnostics: Sequence[Diagnostic] | None = None) -> str:
     """Why :func:`analyze` found no unload in a trace, in one line.
 
     Checked in this order: no finite sample; too few samples; time stamps not increasing (a
@@ -159,6 +184,9 @@ def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | 
         Pressure [Pa absolute] (or a signal converted by ``signal_gain``/``signal_offset``).
     settings : EstimatorSettings, optional
         The settings :func:`analyze` was called with.
+    diagnostics : sequence of Diagnostic, optional
+        The estimator's diagnostics on this trace with these settings, when known (else
+        the estimator runs again on t and p).
 
     Returns
     -------
@@ -218,7 +246,7 @@ def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | 
         return (f"the pressure never fell to p* = {ps:.0f} Pa (p10 = {p10:.0f} Pa, p_atm = "
                 f"{p_atm:.0f} Pa, lowest reading {low:.0f} Pa): the valve closed early or "
                 f"the record ends too soon")
-    return _estimator_reason(t, p, s)
+    return estimator_reason(t, p, s, diagnostics)
 
 
 def _pa_settings(s: EstimatorSettings) -> EstimatorSettings:
@@ -226,12 +254,16 @@ def _pa_settings(s: EstimatorSettings) -> EstimatorSettings:
     return dataclasses.replace(s, signal_gain=1.0, signal_offset=0.0)
 
 
-def _estimator_reason(t: ArrayLike, p: ArrayLike, s: EstimatorSettings) -> str:
-    """The estimator's warnings and errors on the trace, or a generic reason."""
-    est = StreamingEstimator(s)
-    est.push_block(np.asarray(t, dtype=float), np.asarray(p, dtype=float))
-    est.finish()
-    msgs = list(dict.fromkeys(d.message for d in est.diagnostics if d.level != "ok"))
+def estimator_reason(t: ArrayLike, p: ArrayLike, s: EstimatorSettings,
+                     diagnostics: Sequence[Diagnostic] | None = None) -> str:
+    """The estimator's warnings and errors on the trace (t [s], p [Pa]; ``diagnostics``:
+    those of a run with settings ``s`` already made), or a generic reason."""
+    if diagnostics is None:
+        est = StreamingEstimator(s)
+        est.push_block(np.asarray(t, dtype=float), np.asarray(p, dtype=float))
+        est.finish()
+        diagnostics = est.diagnostics
+    msgs = list(dict.fromkeys(d.message for d in diagnostics if d.level != "ok"))
     if msgs:
         more = f" (and {len(msgs) - 3} more)" if len(msgs) > 3 else ""
         return "no unload detected: " + "; ".join(msgs[:3]) + more

@@ -41,6 +41,14 @@ RECOVERY_MIN = 256
 SCAN_HORIZON = 16384
 #: Idle samples that may be dropped before the buffer is trimmed [-].
 TRIM_MIN = 65536
+#: Samples of a long plateau kept while waiting [-] (at least; see :func:`idle_keep`): a
+#: plateau longer than twice this is trimmed to it, so that an idle record of any length
+#: holds a bounded buffer (about 32 B per sample kept). No decision of the waiting phase
+#: looks further back than PLATEAU + LAG samples; the start (hinge) fit looks back
+#: HINGE_PLATEAU samples plus the trigger-to-10 %-drop span, so its result changes only
+#: when that span exceeds IDLE_KEEP - HINGE_PLATEAU samples (a start slower than ~1 M
+#: samples).
+IDLE_KEEP = 1 << 20
 #: Sample period assumed while the nominal one is unknown [s].
 DT_DEFAULT = 1e-3
 
@@ -119,9 +127,18 @@ class PlateauCheck:
     event: Flag
 
 
-def trim_keep(n: Index, arm: int) -> Index:
-    """Samples that may be dropped from the buffer's start with n samples held [-]."""
-    return np.minimum(n - 4 * PLATEAU, arm)
+def idle_keep(min_plateau: int) -> int:
+    """Samples of a long plateau kept while waiting [-]: IDLE_KEEP, or more when
+    ``min_plateau`` [-] asks for a longer plateau (so that trimming never shortens one)."""
+    return max(IDLE_KEEP, 2 * min_plateau + 4 * PLATEAU)
+
+
+def trim_keep(n: Index, arm: int, keep_idle: int = IDLE_KEEP) -> Index:
+    """Samples that may be dropped from the buffer's start with n samples held [-]: those
+    before the current plateau (``arm``), keeping 4 PLATEAU samples; and on a plateau
+    longer than 2 ``keep_idle`` samples, all but its last ``keep_idle`` [-]."""
+    long = np.where(n > 2 * keep_idle, n - keep_idle, 0)
+    return np.maximum(np.minimum(n - 4 * PLATEAU, arm), long)
 
 
 def plateau_check(cs: FloatArray, cq: FloatArray, pv: FloatArray, k: Index, *, arm: int,
@@ -151,7 +168,7 @@ def plateau_check(cs: FloatArray, cq: FloatArray, pv: FloatArray, k: Index, *, a
     trigger = mean_low | below(pv[k], level)
     stuck = (sig == 0.0) & (hi - lo >= 2 * min_plateau)
     stuck_change = (sig > 0.0) if stuck_reported else stuck
-    trim = trim_keep(n, arm) > TRIM_MIN
+    trim = trim_keep(n, arm, idle_keep(min_plateau)) > TRIM_MIN
     event = rise | trigger | stuck_change | trim
     return PlateauCheck(plat, sig, level, lo, hi, rise, trigger, stuck, stuck_change, trim,
                         event)

@@ -16,7 +16,7 @@ from typing import Any
 
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.buffer import SampleBuffer
-from pneumatic_unload.estimation.decisions import DT_DEFAULT, TRIM_MIN, trim_keep
+from pneumatic_unload.estimation.decisions import DT_DEFAULT, TRIM_MIN, idle_keep, trim_keep
 from pneumatic_unload.estimation.types import Diagnostic, FloatArray, UnloadResult
 from pneumatic_unload.physics import P_STAR_FRACTION
 
@@ -132,13 +132,14 @@ class EstimatorState:
         self.level = u.pstar - u.half
 
     def trim(self, n: int) -> None:
-        """Drop samples that no later decision can need (keeps memory bounded); n: samples
-        held [-]."""
-        keep = int(trim_keep(n, self.arm_index))
+        """Drop samples that no later decision can need (keeps memory bounded while
+        waiting, see :data:`~.decisions.IDLE_KEEP`); n: samples held [-]. A plateau trimmed
+        from its start begins at the buffer's first sample."""
+        keep = int(trim_keep(n, self.arm_index, idle_keep(self.settings.min_plateau)))
         if keep > TRIM_MIN and self.mode == WAITING:
             self.buf.trim(keep)
             self.next_check -= keep
-            self.arm_index -= keep
+            self.arm_index = max(self.arm_index - keep, 0)
 
     # -------------------------------------------------------------- helpers
     def set_period(self, dt_nominal: float) -> None:

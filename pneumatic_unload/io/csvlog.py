@@ -3,8 +3,16 @@
 Units: the returned time is in s (starting wherever the logger clock starts), pressures in
 Pa absolute, temperatures in K. Input units come from the caller or from the bracketed unit
 of the column header (``Time [s]``, ``Pressure [kPa]``, ``Temp [C]``); where each unit came
-from is recorded in :class:`CsvSource` (``"argument"``, ``"header"`` or ``"default"``), and an
-explicit unit that contradicts the header is an error rather than a silent factor of 1000.
+from is recorded in :class:`CsvSource` (``"argument"``, ``"header"`` or ``"default"``), an
+assumed (default) unit is named in ``CsvSource.warnings``, and an explicit unit that
+contradicts the header is an error rather than a silent factor of 1000 (see
+:mod:`pneumatic_unload.io.csvheader`).
+
+Files of any length are read in chunks of about ``chunk_bytes`` (:class:`CsvStream`, one
+pass over the file per iteration, memory bounded by the chunk); :func:`read_csv_trace`
+gathers the chunks into whole arrays (16-24 B per row). Separators: ',', ';' or tab; with
+';' or tab, decimal commas are read (``0,5;700,3``). A row with more fields than the header
+is an error naming its line (with ',' separators: decimal commas, the usual cause).
 
 Example (the AeroLab file: gauge kPa, degrees C)::
 
@@ -17,94 +25,56 @@ from __future__ import annotations
 import csv
 import math
 import os
-import re
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Final, Literal
+from typing import BinaryIO, Final
 
 import numpy as np
 import numpy.typing as npt
 
+from pneumatic_unload.io.csvheader import (
+    PRESSURE_UNITS,
+    TEMPERATURE_UNITS,
+    TIME_UNITS,
+    CsvError,
+    CsvFormatError,
+    CsvLayout,
+    CsvOptionError,
+    CsvSource,
+    resolve_layout,
+    sniff_delimiter,
+)
+
 __all__ = [
+    "CHUNK_BYTES",
     "PRESSURE_UNITS",
     "TEMPERATURE_UNITS",
     "TIME_UNITS",
+    "CsvChunk",
     "CsvError",
     "CsvFormatError",
     "CsvOptionError",
     "CsvSource",
+    "CsvStream",
     "CsvTrace",
     "read_csv_trace",
 ]
 
-#: Pressure units accepted (case-insensitive) and their size [Pa].
-PRESSURE_UNITS: Final[dict[str, float]] = {
-    "Pa": 1.0,
-    "hPa": 1e2,
-    "kPa": 1e3,
-    "MPa": 1e6,
-    "mbar": 1e2,
-    "bar": 1e5,
-    "psi": 6894.757293168361,
-}
-#: Temperature units accepted: offset added to get K.
-TEMPERATURE_UNITS: Final[dict[str, float]] = {"C": 273.15, "K": 0.0}
-#: Time units accepted and their size [s].
-TIME_UNITS: Final[dict[str, float]] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "min": 60.0, "h": 3600.0}
+#: Bytes of text read per chunk [B] (about 200 k rows of 'time,pressure'; parsing takes about 12 B
+#: of memory per byte of text).
+CHUNK_BYTES: Final = 4 << 20
 
-UnitSource = Literal["argument", "header", "default"]
-
-_HEADER_RE = re.compile(r"^(?P<name>.*?)\s*[\[(](?P<unit>[^\])]*)[\])]\s*$")
-_GAUGE_SUFFIXES: Final = (
-    ("gauge", True),
-    ("g", True),
-    ("absolute", False),
-    ("abs", False),
-    ("a", False),
-)
-
-
-class CsvError(Exception):
-    """Base class of the errors of :mod:`pneumatic_unload.io.csvlog`."""
-
-
-class CsvFormatError(CsvError):
-    """The file cannot be read as a trace (empty, missing column, non-numeric cell, ...)."""
-
-
-class CsvOptionError(CsvError, ValueError):
-    """The options of :func:`read_csv_trace` are inconsistent (e.g. gauge without atmosphere)."""
-
-
-@dataclass(frozen=True)
-class CsvSource:
-    """Where a :class:`CsvTrace` came from and how its columns were interpreted."""
-
-    path: Path
-    rows: int  #: number of data rows
-    delimiter: str
-    columns: tuple[str, ...]  #: header cells as in the file
-    time_column: str
-    pressure_column: str
-    temperature_column: str | None
-    time_unit: str
-    time_unit_from: UnitSource
-    pressure_unit: str
-    pressure_unit_from: UnitSource
-    gauge: bool  #: the file holds gauge pressures (atmosphere was added)
-    gauge_from: UnitSource
-    atmosphere: float | None  #: atmospheric pressure added to gauge readings [Pa]
-    temperature_unit: str | None
-    temperature_unit_from: UnitSource | None
+FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)
 class CsvTrace:
     """A tank-discharge trace read from a CSV file."""
 
-    t: npt.NDArray[np.float64]  #: sample times [s], from the logger clock (not shifted to 0)
-    p: npt.NDArray[np.float64]  #: tank pressure [Pa absolute]
-    temperature: npt.NDArray[np.float64] | None  #: gas temperature [K], None if not logged
+    t: FloatArray  #: sample times [s], from the logger clock (not shifted to 0)
+    p: FloatArray  #: tank pressure [Pa absolute]
+    temperature: FloatArray | None  #: gas temperature [K], None if not logged
     source: CsvSource
 
     @property
@@ -113,115 +83,206 @@ class CsvTrace:
         return np.round(self.t * 1e9).astype(np.int64)
 
 
-# ------------------------------------------------------------------------------ helpers
+@dataclass(frozen=True)
+class CsvChunk:
+    """Consecutive rows of a CSV file, converted: t [s], p [Pa absolute], temperature [K]."""
+
+    t: FloatArray
+    p: FloatArray
+    temperature: FloatArray | None
+    first_row: int  #: data-row number of the first row (1-based) [-]
 
 
-def _split_header(cell: str) -> tuple[str, str | None]:
-    """('Pressure', 'kPa') for 'Pressure [kPa]'; (cell, None) without a bracketed unit."""
-    match = _HEADER_RE.match(cell.strip())
-    if match and match.group("name"):
-        return match.group("name").strip(), match.group("unit").strip()
-    return cell.strip(), None
-
-
-def _norm(unit: str) -> str:
-    return unit.replace("°", "").replace("deg", "").replace(" ", "").lower()
-
-
-def _lookup(unit: str, table: dict[str, float]) -> str | None:
-    """Canonical spelling of ``unit`` in ``table`` (case-insensitive), or None."""
-    key = _norm(unit)
-    return next((name for name in table if name.lower() == key), None)
-
-
-def _pressure_unit(text: str) -> tuple[str, bool | None] | None:
-    """('kPa', True) for 'kPa g' / 'kPag' / 'kPa(gauge)'; None if not a pressure unit."""
-    if (unit := _lookup(text, PRESSURE_UNITS)) is not None:
-        return unit, None
-    key = _norm(text).replace("(", "").replace(")", "")
-    for suffix, is_gauge in _GAUGE_SUFFIXES:
-        if key.endswith(suffix) and (unit := _lookup(key[: -len(suffix)], PRESSURE_UNITS)):
-            return unit, is_gauge
-    return None
-
-
-def _choose(
-    kind: str, names: list[tuple[str, str | None]], header: list[str], test: object
-) -> int | None:
-    """Index of the one column whose name passes ``test``; None if no column does."""
-    hits = [i for i, (name, _) in enumerate(names) if test(name.lower())]  # type: ignore[operator]
-    if len(hits) > 1:
-        cands = ", ".join(repr(header[i]) for i in hits)
-        raise CsvFormatError(
-            f"several columns look like {kind}: {cands}; pass {kind}_column= to choose"
-        )
-    return hits[0] if hits else None
-
-
-def _find(column: str, names: list[tuple[str, str | None]], header: list[str]) -> int | None:
-    """Index of an explicitly named column (full header text or name without unit)."""
-    for i, cell in enumerate(header):
-        if cell.strip() == column.strip():
-            return i
-    hits = [i for i, (name, _) in enumerate(names) if name.lower() == column.strip().lower()]
-    return hits[0] if len(hits) == 1 else None
-
-
-def _is_time(name: str) -> bool:
-    return name in ("t", "time", "timestamp", "elapsed", "seconds") or name.startswith("time")
-
-
-def _is_pressure(name: str) -> bool:
-    return name in ("p", "pres", "press") or "pressure" in name
-
-
-def _is_temperature(name: str) -> bool:
-    return name.startswith("temp") or name in ("t_gas", "gas temperature")
-
-
-def _unit(
-    what: str,
-    given: str | None,
-    header_unit: str | None,
-    table: dict[str, float],
-    default: str,
-    column: str,
-) -> tuple[str, UnitSource]:
-    """Resolve a (non-pressure) unit from the argument, the header bracket, or the default."""
-    from_header = _lookup(header_unit, table) if header_unit else None
-    if header_unit and from_header is None and given is None:
-        raise CsvFormatError(
-            f"column {column!r} has unit {header_unit!r}, not a known {what} unit "
-            f"({', '.join(table)}); pass {what}_unit="
-        )
-    if given is None:
-        return (from_header, "header") if from_header else (default, "default")
-    unit = _lookup(given, table)
-    if unit is None:
-        raise CsvOptionError(f"{what}_unit={given!r} is not one of {', '.join(table)}")
-    if from_header and from_header != unit:
-        raise CsvOptionError(
-            f"{what}_unit={given!r} contradicts the header of column {column!r} "
-            f"({header_unit!r}); fix the header or the argument"
-        )
-    return unit, "argument"
-
-
-def _read_lines(path: Path) -> list[str]:
+def _open(file: Path) -> BinaryIO:
     try:
-        raw = path.read_bytes()
+        return file.open("rb")
     except FileNotFoundError:
-        raise CsvFormatError(f"CSV file {path} does not exist") from None
+        raise CsvFormatError(f"CSV file {file} does not exist") from None
     except OSError as err:
-        raise CsvFormatError(f"cannot read CSV file {path}: {err}") from err
+        raise CsvFormatError(f"cannot read CSV file {file}: {err}") from err
+
+
+def _decode(raw: bytes) -> str:
     try:
-        text = raw.decode("utf-8-sig")
+        return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
-        text = raw.decode("latin-1")
-    return text.splitlines()
+        return raw.decode("latin-1")
 
 
-# ------------------------------------------------------------------------------- reader
+class CsvStream:
+    """A CSV trace read in chunks; each iteration is one pass over the file.
+
+    The header is read and resolved at construction (errors in it are raised there); the
+    rows are checked as they are read: a row with fewer cells than the columns used or more
+    non-empty fields than the header, a non-numeric or non-finite cell, time not increasing
+    and a pressure not positive once absolute are :class:`CsvFormatError` naming the line.
+
+    Args:
+        path: the CSV file.
+        chunk_bytes: text read per chunk [B] (whole lines; at least one line).
+        **options: as :func:`read_csv_trace` (columns, units, gauge, atmosphere [Pa],
+            delimiter).
+
+    Attributes:
+        layout: the resolved header (:class:`~pneumatic_unload.io.csvheader.CsvLayout`).
+        rows: data rows read by the last complete pass [-] (0 before one).
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, chunk_bytes: int = CHUNK_BYTES,
+                 delimiter: str | None = None, **options: object) -> None:
+        self.path = Path(path)
+        self.chunk_bytes = max(1, int(chunk_bytes))
+        self.rows = 0
+        with _open(self.path) as fh:
+            line_no = 0
+            while True:
+                raw = fh.readline()
+                if not raw:
+                    raise CsvFormatError(f"CSV file {self.path} is empty")
+                line_no += 1
+                text = _decode(raw).strip("\r\n")
+                if text.strip() and not text.lstrip().startswith("#"):
+                    break
+            self._data_offset = fh.tell()
+        self._header_line = line_no  # 1-based line number of the header
+        delim = delimiter if delimiter is not None else sniff_delimiter(text)
+        header = [cell.strip() for cell in next(csv.reader([text], delimiter=delim))]
+        self.header = header
+        self.layout: CsvLayout = resolve_layout(self.path, header, delim,
+                                                **options)  # type: ignore[arg-type]
+
+    @property
+    def source(self) -> CsvSource:
+        """The source metadata, with the row count of the last complete pass."""
+        return replace(self.layout.source, rows=self.rows)
+
+    # ------------------------------------------------------------------ reading
+    def __iter__(self) -> Iterator[CsvChunk]:
+        """Chunks of converted rows, in file order (one pass)."""
+        n_rows = 0
+        line = self._header_line  # lines consumed so far
+        last_t = -math.inf
+        with _open(self.path) as fh:
+            fh.seek(self._data_offset)
+            while True:
+                raw = fh.read(self.chunk_bytes)
+                if not raw:
+                    break
+                if not raw.endswith(b"\n"):
+                    raw += fh.readline()  # whole lines only
+                # data are numeric (ASCII): latin-1 never fails and keeps line numbers
+                lines = raw.decode("latin-1").splitlines()
+                del raw
+                vals = self._parse(lines, line, n_rows)
+                line += len(lines)
+                if vals.shape[0] == 0:
+                    continue
+                chunk = self._convert(vals, n_rows, last_t)
+                n_rows += vals.shape[0]
+                last_t = float(chunk.t[-1])
+                yield chunk
+        if n_rows == 0:
+            raise CsvFormatError(f"CSV file {self.path} has a header but no data rows")
+        self.rows = n_rows
+
+    def _parse(self, lines: list[str], line0: int, row0: int) -> FloatArray:
+        """Cells used of the rows in ``lines`` (line0: lines before them; row0: data rows
+        before them), shape (rows, columns used), in the file's units."""
+        lay = self.layout
+        d = lay.source.delimiter
+        cols = lay.columns
+        # fast path: every line has the header's number of fields and all cells parse
+        if lines and all(lines):
+            fast = [ln.replace(",", ".") for ln in lines] if d != "," else lines
+            if sum(ln.count(d) for ln in fast) == len(fast) * (len(self.header) - 1):
+                try:
+                    vals = np.loadtxt(fast, delimiter=d, usecols=cols, dtype=float,
+                                      comments=None, ndmin=2, quotechar='"')
+                except ValueError:
+                    vals = None
+                if (vals is not None and vals.shape == (len(lines), len(cols))
+                        and np.isfinite(vals).all()):
+                    return vals
+        return self._parse_slow(lines, line0, row0)
+
+    def _parse_slow(self, lines: list[str], line0: int, row0: int) -> FloatArray:
+        """Row by row, with the message of the first bad row."""
+        lay = self.layout
+        d = lay.source.delimiter
+        cols = lay.columns
+        kinds = ("time", "pressure", "temperature")
+        width = max(cols) + 1
+        n_head = len(self.header)
+        out: list[list[float]] = []
+        for k, row in enumerate(csv.reader(lines, delimiter=d)):
+            line = line0 + k + 1
+            if not any(cell.strip() for cell in row):
+                continue
+            if len(row) > n_head and any(cell.strip() for cell in row[n_head:]):
+                raise CsvFormatError(self._too_many(line, len(row)))
+            if len(row) < width:
+                raise CsvFormatError(
+                    f"{self.path}:{line}: row has {len(row)} fields, expected {n_head}")
+            vals = []
+            for i, kind in zip(cols, kinds, strict=False):
+                cell = row[i].strip()
+                try:
+                    value = float(cell.replace(",", ".") if d != "," else cell)
+                except ValueError:
+                    what = "an empty cell" if not cell else f"non-numeric value {cell!r}"
+                    raise CsvFormatError(
+                        f"{self.path}:{line} (data row {row0 + len(out) + 1}): {what} in "
+                        f"column {self.header[i]!r} ({kind})") from None
+                if not math.isfinite(value):
+                    raise CsvFormatError(
+                        f"{self.path}:{line} (data row {row0 + len(out) + 1}): non-finite "
+                        f"value {cell!r} in column {self.header[i]!r} ({kind})")
+                vals.append(value)
+            out.append(vals)
+        return np.asarray(out, dtype=float).reshape(len(out), len(cols))
+
+    def _too_many(self, line: int, n: int) -> str:
+        """Message for a row of n fields, more than the header's."""
+        n_head = len(self.header)
+        msg = (f"{self.path}:{line}: row has {n} fields, more than the {n_head} of the header "
+               f"{self.header!r}")
+        if self.layout.source.delimiter == ",":
+            return (msg + ": decimal commas with ',' as the field separator? ('0,5,700,3' "
+                    "is read as 4 fields). Save the file with ';' as the separator (decimal "
+                    "commas are then read) or with decimal points")
+        return msg + ": a missing header cell or a stray separator?"
+
+    def _convert(self, vals: FloatArray, row0: int, last_t: float) -> CsvChunk:
+        """SI values of parsed rows, checked (row0: data rows before them; last_t: time of
+        the row before them [s])."""
+        lay = self.layout
+        t = vals[:, 0] * lay.time_scale
+        steps = np.diff(t, prepend=last_t)
+        if np.any(steps <= 0.0):
+            bad = row0 + int(np.argmax(steps <= 0.0)) + 1
+            raise CsvFormatError(f"{self.path}: time does not increase at data row {bad} (a "
+                                 f"reversed or merged record? sort the rows by time)")
+        p = vals[:, 1] * lay.pressure_scale
+        if lay.source.gauge:
+            p = p + lay.pressure_offset
+        if np.any(p <= 0.0):
+            k = int(np.argmax(p <= 0.0))
+            hint = "" if lay.source.gauge else (
+                " (gauge readings? pass gauge=True, atmosphere=p_atm [Pa]; command line: "
+                "--gauge --atmosphere PA)")
+            raise CsvFormatError(f"{self.path}: absolute pressure {p[k]:.6g} Pa <= 0 at data "
+                                 f"row {row0 + k + 1}{hint}")
+        temperature = None
+        if lay.i_temp is not None:
+            temperature = vals[:, 2] + lay.temperature_offset
+            if np.any(temperature <= 0.0):
+                k = int(np.argmax(temperature <= 0.0))
+                raise CsvFormatError(
+                    f"{self.path}: temperature {temperature[k]:.6g} K <= 0 at data row "
+                    f"{row0 + k + 1} (wrong temperature_unit?)")
+        return CsvChunk(t=np.ascontiguousarray(t), p=np.ascontiguousarray(p),
+                        temperature=temperature if temperature is None
+                        else np.ascontiguousarray(temperature), first_row=row0 + 1)
 
 
 def read_csv_trace(
@@ -236,6 +297,7 @@ def read_csv_trace(
     gauge: bool | None = None,
     atmosphere: float | None = None,
     delimiter: str | None = None,
+    chunk_bytes: int = CHUNK_BYTES,
 ) -> CsvTrace:
     """Read a data-logger CSV file (header row, then one numeric row per sample).
 
@@ -243,8 +305,9 @@ def read_csv_trace(
     '...pressure...', 'p'; temperature: 'temp...'; the temperature column is optional).
     Units: an explicit argument, else the bracketed unit in the column header
     ('Pressure [kPa]', 'Temp [C]', 'Time [ms]', gauge markers like '[kPa g]', '[psig]',
-    '[bar(a)]'), else the default (Pa, C, s). An argument that contradicts the header is an
-    error. Lines before the header that start with '#' and blank lines are skipped.
+    '[bar(a)]'), else the default (Pa, C, s; named in ``source.warnings``). An argument
+    that contradicts the header is an error. Lines before the header that start with '#'
+    and blank lines are skipped.
 
     Args:
         path: the CSV file.
@@ -259,188 +322,30 @@ def read_csv_trace(
         atmosphere: atmospheric pressure added to gauge readings [Pa absolute]; required
             with gauge pressures, ignored with absolute ones (``source.atmosphere`` is None).
         delimiter: field separator; default: sniffed from the header (',', ';' or tab).
+            With ';' or tab, decimal commas are read as decimal points.
+        chunk_bytes: text parsed at a time [B] (the result does not depend on it).
 
     Returns:
         The trace: t [s], p [Pa absolute], temperature [K] or None, and its source metadata.
 
     Raises:
         CsvFormatError: empty file, missing or ambiguous column (the available ones are
-            listed), non-numeric or non-finite cell (with its line number), time not
-            increasing, unknown unit in a header, pressure not positive once absolute.
+            listed), non-numeric or non-finite cell or a row with more fields than the
+            header (with its line number), time not increasing, unknown unit in a header,
+            pressure not positive once absolute.
         CsvOptionError: unknown unit argument, unit or gauge flag contradicting the header,
             gauge without atmosphere.
     """
-    file = Path(path)
-    lines = _read_lines(file)
-    first = next(
-        (i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")), None
-    )
-    if first is None:
-        raise CsvFormatError(f"CSV file {file} is empty")
-    if delimiter is None:
-        counts = {d: lines[first].count(d) for d in (",", ";", "\t")}
-        delimiter = max(counts, key=lambda d: counts[d]) if any(counts.values()) else ","
-    rows = list(csv.reader(lines[first:], delimiter=delimiter))
-    header = [cell.strip() for cell in rows[0]]
-    names = [_split_header(cell) for cell in header]
-    available = ", ".join(repr(h) for h in header)
-
-    def locate(kind: str, given: str | None, test: object, required: bool) -> int | None:
-        if given is not None:
-            idx = _find(given, names, header)
-            if idx is None:
-                raise CsvFormatError(
-                    f"{file} has no column {given!r} ({kind}_column); columns: {available}"
-                )
-            return idx
-        idx = _choose(kind, names, header, test)
-        if idx is None and required:
-            raise CsvFormatError(
-                f"{file}: no {kind} column found by name; columns: {available}; "
-                f"pass {kind}_column="
-            )
-        return idx
-
-    i_time = locate("time", time_column, _is_time, True)
-    i_press = locate("pressure", pressure_column, _is_pressure, True)
-    i_temp = locate("temperature", temperature_column, _is_temperature, False)
-    assert i_time is not None and i_press is not None
-    used = [i for i in (i_time, i_press, i_temp) if i is not None]
-    if len(set(used)) < len(used):
-        raise CsvOptionError("time, pressure and temperature must be different columns")
-
-    # units ----------------------------------------------------------------------------
-    t_unit, t_from = _unit("time", time_unit, names[i_time][1], TIME_UNITS, "s", header[i_time])
-    p_header = names[i_press][1]
-    parsed = _pressure_unit(p_header) if p_header else None
-    if p_header and parsed is None and pressure_unit is None:
-        raise CsvFormatError(
-            f"column {header[i_press]!r} has unit {p_header!r}, not a known pressure unit "
-            f"({', '.join(PRESSURE_UNITS)}); pass pressure_unit="
-        )
-    header_p_unit, header_gauge = parsed if parsed else (None, None)
-    if pressure_unit is None:
-        p_unit, p_from = (header_p_unit, "header") if header_p_unit else ("Pa", "default")
-    else:
-        given = _pressure_unit(pressure_unit)
-        if given is None or given[1] is not None:
-            raise CsvOptionError(
-                f"pressure_unit={pressure_unit!r} is not one of {', '.join(PRESSURE_UNITS)} "
-                "(say gauge=True for gauge readings)"
-            )
-        p_unit, p_from = given[0], "argument"
-        if header_p_unit and header_p_unit != p_unit:
-            raise CsvOptionError(
-                f"pressure_unit={pressure_unit!r} contradicts the header of column "
-                f"{header[i_press]!r} ({p_header!r}); fix the header or the argument"
-            )
-    g_from: UnitSource
-    if gauge is None:
-        if header_gauge is not None:
-            is_gauge, g_from = header_gauge, "header"
-        else:
-            is_gauge, g_from = False, "default"
-    else:
-        if header_gauge is not None and header_gauge != gauge:
-            raise CsvOptionError(
-                f"gauge={gauge} contradicts the header of column {header[i_press]!r} "
-                f"({p_header!r})"
-            )
-        is_gauge, g_from = bool(gauge), "argument"
-    if is_gauge:
-        if atmosphere is None:
-            raise CsvOptionError(
-                "gauge pressures need atmosphere= (the atmospheric pressure [Pa absolute], "
-                "e.g. 101325.0) to become absolute"
-            )
-        if not (math.isfinite(atmosphere) and atmosphere > 0.0):
-            raise CsvOptionError(f"atmosphere must be a positive pressure [Pa], got {atmosphere}")
-    temp_unit: str | None = None
-    temp_from: UnitSource | None = None
-    if i_temp is not None:
-        temp_unit, temp_from = _unit(
-            "temperature", temperature_unit, names[i_temp][1], TEMPERATURE_UNITS, "C",
-            header[i_temp],
-        )
-
-    # values ---------------------------------------------------------------------------
-    wanted = [(i_time, "time"), (i_press, "pressure")]
-    if i_temp is not None:
-        wanted.append((i_temp, "temperature"))
-    values: list[list[float]] = [[] for _ in wanted]
-    width = max(i for i, _ in wanted) + 1
-    n_rows = 0
-    for k, row in enumerate(rows[1:], start=1):
-        line = first + k + 1  # 1-based line number in the file
-        if not any(cell.strip() for cell in row):
-            continue
-        if len(row) < width:
-            raise CsvFormatError(
-                f"{file}:{line}: row has {len(row)} fields, expected {len(header)}"
-            )
-        for j, (i, kind) in enumerate(wanted):
-            cell = row[i].strip()
-            try:
-                value = float(cell)
-            except ValueError:
-                what = "an empty cell" if not cell else f"non-numeric value {cell!r}"
-                raise CsvFormatError(
-                    f"{file}:{line} (data row {n_rows + 1}): {what} in column "
-                    f"{header[i]!r} ({kind})"
-                ) from None
-            if not math.isfinite(value):
-                raise CsvFormatError(
-                    f"{file}:{line} (data row {n_rows + 1}): non-finite value {cell!r} in "
-                    f"column {header[i]!r} ({kind})"
-                )
-            values[j].append(value)
-        n_rows += 1
-    if n_rows == 0:
-        raise CsvFormatError(f"CSV file {file} has a header but no data rows")
-
-    t = np.asarray(values[0]) * TIME_UNITS[t_unit]
-    if n_rows > 1 and np.any(np.diff(t) <= 0.0):
-        bad = int(np.argmax(np.diff(t) <= 0.0)) + 2
-        raise CsvFormatError(f"{file}: time does not increase at data row {bad} (a reversed "
-                             f"or merged record? sort the rows by time)")
-    p = np.asarray(values[1]) * PRESSURE_UNITS[p_unit]
-    if is_gauge:
-        assert atmosphere is not None
-        p = p + atmosphere
-    if np.any(p <= 0.0):
-        bad = int(np.argmax(p <= 0.0)) + 1
-        hint = "" if is_gauge else (" (gauge readings? pass gauge=True, atmosphere=p_atm [Pa];"
-                                    " command line: --gauge --atmosphere PA)")
-        raise CsvFormatError(
-            f"{file}: absolute pressure {p[bad - 1]:.6g} Pa <= 0 at data row {bad}{hint}"
-        )
+    stream = CsvStream(path, chunk_bytes=chunk_bytes, delimiter=delimiter,
+                       time_column=time_column, pressure_column=pressure_column,
+                       temperature_column=temperature_column, pressure_unit=pressure_unit,
+                       temperature_unit=temperature_unit, time_unit=time_unit, gauge=gauge,
+                       atmosphere=atmosphere)
+    chunks = list(stream)
+    t = np.concatenate([c.t for c in chunks])
+    p = np.concatenate([c.p for c in chunks])
     temperature = None
-    if i_temp is not None:
-        assert temp_unit is not None
-        temperature = np.asarray(values[2]) + TEMPERATURE_UNITS[temp_unit]
-        if np.any(temperature <= 0.0):
-            bad = int(np.argmax(temperature <= 0.0)) + 1
-            raise CsvFormatError(
-                f"{file}: temperature {temperature[bad - 1]:.6g} K <= 0 at data row {bad} "
-                "(wrong temperature_unit?)"
-            )
-
-    source = CsvSource(
-        path=file,
-        rows=n_rows,
-        delimiter=delimiter,
-        columns=tuple(header),
-        time_column=header[i_time],
-        pressure_column=header[i_press],
-        temperature_column=None if i_temp is None else header[i_temp],
-        time_unit=t_unit,
-        time_unit_from=t_from,
-        pressure_unit=p_unit,
-        pressure_unit_from=p_from,
-        gauge=is_gauge,
-        gauge_from=g_from,
-        atmosphere=float(atmosphere) if is_gauge and atmosphere is not None else None,
-        temperature_unit=temp_unit,
-        temperature_unit_from=temp_from,
-    )
-    return CsvTrace(t=t, p=p, temperature=temperature, source=source)
+    if stream.layout.i_temp is not None:
+        temperature = np.concatenate([c.temperature for c in chunks
+                                      if c.temperature is not None])
+    return CsvTrace(t=t, p=p, temperature=temperature, source=stream.source)

@@ -1,0 +1,161 @@
+"""Input records of the offline analysis: a CSV log read in chunks, or a bag.
+
+:func:`open_record` resolves the input (a CSV header is read and checked at once) and
+returns a :class:`Record` whose :meth:`Record.chunks` yields the samples in pieces (a CSV:
+one pass over the file per call, memory bounded by the chunk; a bag: its arrays, read
+whole); :func:`analyze_record` runs the estimator over them
+(:func:`~pneumatic_unload.estimation.chunked.analyze_chunks`). Every input problem is a
+:class:`RecordError` with a one-line message. SI units: s, Pa absolute, K.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
+from pneumatic_unload.estimation.types import FloatArray
+from pneumatic_unload.io.csvlog import CHUNK_BYTES, CsvError, CsvStream
+
+
+class RecordError(Exception):
+    """The input cannot be read (a one-line message naming the file)."""
+
+
+@dataclass
+class Record:
+    """An input record: samples in chunks, and what the input says about the rig.
+
+    Attributes
+    ----------
+    path : Path
+        The input.
+    cfg : dict
+        Stored rig configuration and estimator settings (a bag), or the gas temperature of
+        the first row (``measured_initial_temperature`` [K], a CSV with a temperature
+        column); empty otherwise.
+    warnings : tuple of str
+        What was assumed about the input (e.g. a CSV unit not stated).
+    stream : CsvStream or None
+        The CSV reader (None for a bag).
+    arrays : tuple of ndarray or None
+        A bag's stamps [s] and pressures [Pa] (None for a CSV).
+    """
+
+    path: Path
+    cfg: dict[str, Any] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+    stream: CsvStream | None = None
+    arrays: tuple[FloatArray, FloatArray] | None = None
+
+    @property
+    def has_temperature(self) -> bool:
+        """The record holds a gas-temperature column."""
+        return self.stream is not None and self.stream.layout.i_temp is not None
+
+    def chunks(self) -> Iterator[tuple[FloatArray, FloatArray]]:
+        """The samples in file order: (t [s], p [Pa absolute]) pieces."""
+        if self.arrays is not None:
+            yield self.arrays
+            return
+        assert self.stream is not None
+        try:
+            for c in self.stream:
+                yield c.t, c.p
+        except (CsvError, OSError) as exc:
+            raise RecordError(f"{self.path}: {exc}") from exc
+
+    def temperature_at(self, t: float) -> float:
+        """Gas temperature at instant t [s] (linear between rows, the end rows beyond)
+        [K]; NaN without a temperature column. One pass over the file."""
+        if not self.has_temperature:
+            return float("nan")
+        assert self.stream is not None
+        prev_t, prev_v = np.empty(0), np.empty(0)
+        try:
+            for c in self.stream:
+                assert c.temperature is not None
+                if t <= c.t[-1]:
+                    return float(np.interp(t, np.concatenate((prev_t, c.t)),
+                                           np.concatenate((prev_v, c.temperature))))
+                prev_t, prev_v = c.t[-1:], c.temperature[-1:]
+        except (CsvError, OSError) as exc:
+            raise RecordError(f"{self.path}: {exc}") from exc
+        return float(prev_v[-1])
+
+
+def open_record(path: str | Path, *, topic: str = "/tank/pressure",
+                chunk_bytes: int = CHUNK_BYTES, **csv_options: Any) -> Record:
+    """Open an input: a ``.csv``/``.txt`` log (header checked now, rows read in chunks
+    later) or a bag (directory or ``.mcap``, read whole).
+
+    Parameters
+    ----------
+    path : str or Path
+        The input.
+    topic : str
+        Pressure topic of a bag.
+    chunk_bytes : int
+        CSV text read per chunk [B].
+    **csv_options
+        :class:`~pneumatic_unload.io.csvlog.CsvStream` options (columns, units, gauge,
+        atmosphere [Pa]); None values are left out.
+
+    Raises
+    ------
+    RecordError
+        Missing file, unreadable header or bag, inconsistent options.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise RecordError(f"{p}: no such file or directory")
+    if p.suffix.lower() in (".csv", ".txt"):
+        opts = {k: v for k, v in csv_options.items() if v is not None}
+        try:
+            stream = CsvStream(p, chunk_bytes=chunk_bytes, **opts)
+            cfg: dict[str, Any] = {}
+            if stream.layout.i_temp is not None:
+                first = next(iter(stream))
+                assert first.temperature is not None
+                cfg["measured_initial_temperature"] = float(first.temperature[0])
+        except (CsvError, ValueError, OSError) as exc:
+            raise RecordError(f"{p}: {exc}") from exc
+        return Record(path=p, cfg=cfg, warnings=stream.layout.source.warnings, stream=stream)
+    from pneumatic_unload.io.bag import (
+        TOPIC_SETTINGS,
+        BagError,
+        read_config,
+        read_json_topic,
+        read_pressure,
+    )
+
+    try:
+        series = read_pressure(p, topic=topic)
+        cfg = read_config(p) or {}
+        live = read_json_topic(p, TOPIC_SETTINGS)
+    except BagError as exc:
+        raise RecordError(str(exc)) from exc
+    if live is not None:
+        cfg = {**cfg, "estimator_settings": live}
+    t = np.asarray(series[0], dtype=np.int64) * 1e-9
+    return Record(path=p, cfg=cfg, arrays=(t, np.asarray(series[1], float)))
+
+
+def analyze_record(record: Record, settings: EstimatorSettings) -> ChunkedAnalysis:
+    """The estimator over a record, chunk by chunk (see
+    :func:`~pneumatic_unload.estimation.chunked.analyze_chunks`).
+
+    Raises
+    ------
+    RecordError
+        A bad row of a CSV (named by its line), too few samples.
+    """
+    try:
+        return analyze_chunks(record.chunks(), settings)
+    except EstimationError as exc:
+        raise RecordError(f"{record.path}: {exc}") from exc
