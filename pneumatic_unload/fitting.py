@@ -279,7 +279,8 @@ def _fit_law(
     t_start = t_start - t_ref
     p = np.asarray(p, dtype=float)
     natural = settings.heat_model == "natural"
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    # the median sample period [s] (of the first 100 000 intervals: O(1) on long records)
+    dt = float(np.median(np.diff(t[:100_001]))) if t.size > 1 else 1.0
     tau = tau_exp_eq38(p10, p_atm, settings.volume, conductance, settings.initial_temperature,
                        settings.gas)
     neutral = Start(conductance=conductance, critical_ratio=settings.critical_ratio,

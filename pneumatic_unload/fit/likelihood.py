@@ -207,8 +207,16 @@ class BinnedLikelihood:
                     if 0 <= bb < self.n_bins and self.counts[bb] > EXACT_BIN:
                         ev_bins.add(bb)
         if ev_bins:
-            extra = np.concatenate([np.arange(e[b], e[b + 1]) for b in sorted(ev_bins)])
-            idx = np.union1d(self.node_index, extra)
+            # the nodes with every sample of the event bins spliced in (sorted by
+            # construction: no set operation over all the nodes at every evaluation)
+            nodes = self.node_index
+            parts, k = [], 0
+            for b in sorted(ev_bins):
+                lo, hi = np.searchsorted(nodes, (e[b], e[b + 1]))
+                parts += [nodes[k:lo], np.arange(e[b], e[b + 1], dtype=nodes.dtype)]
+                k = int(hi)
+            parts.append(nodes[k:])
+            idx = np.concatenate(parts)
         else:
             idx = self.node_index
         vals = np.asarray(model_at(t[idx]), dtype=float)
