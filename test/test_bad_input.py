@@ -90,3 +90,60 @@ def test_saturated_sensor_plateau_is_bad_data():
     _cfg, sim, st = _rig(full_scale=6.5e5)
     res, _ = _run(sim.t, sim.measured, st)
     assert res and res[0].status == "bad_data" and "saturated" in res[0].status_text
+
+
+def _two_unloads(sim, p):
+    """The record p (on sim.t [s]) followed by a 0.3 s charge and the clean record again."""
+    ramp = np.linspace(sim.pressure[-1], sim.pressure[0], 300)
+    t = np.concatenate([sim.t, sim.t[-1] + 1e-3 * np.arange(1, 301), sim.t[-1] + 0.301 + sim.t])
+    noise = np.random.default_rng(5).normal(0.0, FS_NOISE, 300)
+    return t, np.concatenate([p, ramp + noise, sim.measured])
+
+
+@pytest.mark.parametrize("full_scale", [6.5e5, 6.9e5])
+def test_clipped_plateau_is_one_bad_data_result_and_the_next_unload_is_found(full_scale):
+    # issue 13: the clipped unload also gave a phantom second unload with status ok
+    _cfg, sim, st = _rig(full_scale=full_scale, initial_pressure=7e5)
+    res = analyze(sim.t, sim.measured, st)
+    assert [r.status for r in res] == ["bad_data"] and "saturated" in res[0].status_text
+    clean = analyze(*_two_unloads(sim, sim.measured), st)
+    # the clean record is clipped too; only the statuses and the count matter here
+    assert [r.status for r in clean] == ["bad_data", "bad_data"]
+
+
+@pytest.mark.parametrize("offset", [0.02, 0.05, 0.2, 0.6, 1.0])
+@pytest.mark.parametrize("auto_atm", [False, True])
+def test_sensor_stuck_for_one_second_mid_unload_is_one_bad_data_result(offset, auto_atm):
+    # issue 13: stuck for 1 s in the middle of an unload gave bad_data plus a phantom unload
+    # (status ok, or more bad_data) from the stuck stretch taken as a new plateau
+    _cfg, sim, st = _rig(duration=6.0 if auto_atm else 3.0)
+    if auto_atm:
+        st = dataclasses.replace(st, atmosphere=None)
+    clean = analyze(sim.t, sim.measured, st)
+    assert [r.status for r in clean] == ["ok"]
+    p = sim.measured.copy()
+    i0 = int(np.searchsorted(sim.t, sim.t_open + offset))
+    p[i0:i0 + 1000] = p[i0]
+    res = analyze(sim.t, p, st)
+    assert [r.status for r in res] == ["bad_data"], [r.status_text for r in res]
+    assert "sensor stuck" in res[0].status_text and not math.isfinite(res[0].conductance)
+    # re-armed after the unload: the next (clean) unload gives its own result
+    both = analyze(*_two_unloads(sim, p), st)
+    assert [r.status for r in both] == ["bad_data", "ok"]
+    assert both[1].conductance == pytest.approx(clean[0].conductance, rel=1e-6)
+
+
+def test_sensor_stuck_after_the_crossing_keeps_the_crossing_and_adds_no_unload():
+    cfg, sim, st = _rig(duration=3.0)
+    st = dataclasses.replace(st, curve_fit=True)
+    clean = analyze(sim.t, sim.measured, st)
+    p = sim.measured.copy()
+    # after the crossing window closed (the crossing result is out): the tail ends there
+    i0 = int(np.searchsorted(sim.t, clean[0].t_complete + 0.05))
+    p[i0:i0 + 1000] = p[i0]
+    res = analyze(sim.t, p, st)
+    assert {r.index for r in res} == {0}
+    assert res[0].status == "ok" and res[0].tau_exp == clean[0].tau_exp
+    assert all(r.status == "ok" and r.conductance == pytest.approx(cfg.conductance, rel=0.1)
+               for r in res)
+    assert all("sensor stuck" in r.status_text for r in res if r.final)

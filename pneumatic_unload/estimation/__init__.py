@@ -45,6 +45,7 @@ from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
 from pneumatic_unload.estimation.streaming import StreamingEstimator
 from pneumatic_unload.estimation.types import (
     STATUSES,
+    STUCK_TEXT,
     Diagnostic,
     FloatArray,
     UnloadResult,
@@ -54,6 +55,7 @@ from pneumatic_unload.estimation.types import (
 __all__ = [
     "SSE_MODEL_REL_STD",
     "STATUSES",
+    "STUCK_TEXT",
     "Diagnostic",
     "EstimationError",
     "EstimatorSettings",

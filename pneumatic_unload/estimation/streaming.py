@@ -24,6 +24,7 @@ from pneumatic_unload.estimation.decisions import SCAN_HORIZON, first_below
 from pneumatic_unload.estimation.state import (
     CONFIRM,
     RECOVERY,
+    SKIP,
     TAIL,
     UNLOADING,
     WAITING,
@@ -38,6 +39,7 @@ STEPS: dict[str, Callable[[EstimatorState, int], list[UnloadResult]]] = {
     UNLOADING: unloading.step_unloading,
     TAIL: tail.step_tail,
     RECOVERY: sse.step_recovery,
+    SKIP: tail.step_skip,
 }
 
 
@@ -83,7 +85,8 @@ class StreamingEstimator:
     # ------------------------------------------------------------------ public API
     @property
     def state(self) -> str:
-        """'waiting', 'confirming', 'unloading', 'tail' or 'recovery'."""
+        """'waiting', 'confirming', 'unloading', 'tail', 'recovery' or 'skipping' (the
+        rest of an unload reported as bad data)."""
         return self._st.mode
 
     @property
@@ -260,6 +263,8 @@ class StreamingEstimator:
             return tail.scan_tail(st, i, end)
         if mode == RECOVERY:
             return sse.scan_recovery(st, i, end)
+        if mode == SKIP:
+            return tail.scan_skip(st, i, end)
         # any other phase: the next periodic check or level trigger
         nc = st.next_check
         j = first_below(np.frombuffer(st.buf.p, dtype=float), i, min(end, nc), st.level)
