@@ -112,7 +112,9 @@ def load_trace(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, dict[s
     )
 
     try:
-        series = read_pressure(path, topic=args.topic)
+        # write order: a clock that steps back in the header stamps stays visible to the
+        # estimator (log-time order may sort it away when log times are the stamps)
+        series = read_pressure(path, topic=args.topic, order="write")
         cfg = read_config(path) or {}
         live = read_json_topic(path, TOPIC_SETTINGS)
     except BagError as exc:

@@ -147,3 +147,70 @@ def test_sensor_stuck_after_the_crossing_keeps_the_crossing_and_adds_no_unload()
     assert all(r.status == "ok" and r.conductance == pytest.approx(cfg.conductance, rel=0.1)
                for r in res)
     assert all("sensor stuck" in r.status_text for r in res if r.final)
+
+
+def _stepped(sim, at, step=10.0):
+    """Stamps [s] of sim whose clock steps back ``step`` [s] at the instant ``at`` [s]."""
+    t = sim.t.copy()
+    t[int(np.searchsorted(t, at)):] -= step
+    return t
+
+
+def test_clock_stepping_back_mid_unload_is_bad_data_naming_the_step():
+    # issue 13: the samples until the clock caught up were dropped one by one and the rest
+    # analysed as if continuous: status ok, C several times too large
+    _cfg, sim, st = _rig(duration=14.0)
+    t = _stepped(sim, sim.t_open + 0.5)
+    res, msgs = _run(t, sim.measured, st)
+    assert [r.status for r in res] == ["bad_data"]
+    assert "clock stepped back 10" in res[0].status_text
+    assert "clock stepped back 10" in msgs
+
+
+def test_clock_step_after_the_crossing_keeps_the_crossing_and_before_the_unload_is_harmless():
+    _cfg, sim, st = _rig(duration=14.0)
+    st = dataclasses.replace(st, curve_fit=True)
+    clean = analyze(sim.t, sim.measured, st)
+    late = analyze(_stepped(sim, clean[0].t_complete + 0.1, 2.0), sim.measured, st)
+    # the crossing was found before the step (t_end: where the tail ended)
+    assert dict(late[0].to_dict(), t_end=0) == dict(clean[0].to_dict(), t_end=0)
+    assert {r.index for r in late} == {0}
+    assert all("clock stepped back 2" in r.status_text for r in late if r.final)
+    # on the plateau, well before the valve opens: the plateau starts again after the step
+    _cfg, sim, st = _rig(duration=14.0, pre_time=2.0)
+    early = analyze(_stepped(sim, 0.5, 0.3), sim.measured, st)
+    assert [r.status for r in early] == ["ok"]
+
+
+def _clock_step_bag(tmp_path, log_time_is_stamp):
+    from pneumatic_unload.io import BagRecorder
+
+    cfg, sim, _st = _rig(duration=14.0)
+    t_ns = np.round((1.7e9 + sim.t) * 1e9).astype(np.int64)
+    stamps = t_ns.copy()
+    stamps[int(np.searchsorted(sim.t, sim.t_open + 0.5)):] -= 10_000_000_000
+    path = tmp_path / f"clock_{log_time_is_stamp}"
+    with BagRecorder(path) as rec:
+        rec.write_pressures(stamps, sim.measured,
+                            log_time_ns=None if log_time_is_stamp else t_ns)
+    return cfg, path, stamps
+
+
+@pytest.mark.parametrize("log_time_is_stamp", [False, True])
+def test_cli_bag_whose_clock_steps_back_mid_unload_is_bad_data(tmp_path, log_time_is_stamp):
+    import json
+    import subprocess
+    import sys
+
+    from pneumatic_unload.io import read_pressure
+
+    cfg, path, stamps = _clock_step_bag(tmp_path, log_time_is_stamp)
+    # the write order keeps the step; the log order sorts it away when log time = stamp
+    assert np.array_equal(read_pressure(path, order="write").t_ns, stamps)
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path),
+                           "--volume", str(cfg.volume), "--json"], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode in (0, 1), proc.stderr
+    unloads = json.loads(proc.stdout)["unloads"]
+    assert unloads and all(u["status"] == "bad_data" for u in unloads), unloads
+    assert "clock stepped back 10" in unloads[0]["status_text"]

@@ -18,7 +18,7 @@ from pneumatic_unload.runs import settings_for
 
 FS_NOISE = 1000.0  # 0.1 % of a 1 MPa full-scale transducer [Pa]
 KINDS = ("clean", "heat", "aborted", "two_unloads", "auto_atm", "volts", "bad_stamps",
-         "spike_and_stuck", "stuck_in_unload", "saturated")
+         "spike_and_stuck", "stuck_in_unload", "saturated", "clock_step")
 
 
 def _rig(rng, seed, **kw):
@@ -91,6 +91,11 @@ def _trace(kind, seed):
         p[int(rng.integers(100, t.size - 1))] = np.nan
         t[int(rng.integers(100, t.size - 1))] = t[0]  # a stamp going backwards
         return st, t[keep], p[keep]
+    if kind == "clock_step":
+        # the clock steps back 0.5..3 s somewhere in the record (unload, tail or plateau)
+        k = int(rng.integers(100, t.size - 100))
+        t[k:] -= rng.uniform(0.5, 3.0)
+        return st, t, p
     if kind == "spike_and_stuck":
         j = int(rng.integers(300, 500))
         p[j] -= 40.0 * FS_NOISE  # a spike: a trigger that is not confirmed

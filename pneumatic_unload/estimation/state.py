@@ -125,6 +125,7 @@ class EstimatorState:
         self.dt_nominal = math.nan  # nominal sample period [s]
         self.gap_limit = math.inf  # stamp step that counts as a gap [s]
         self.stuck_reported = False
+        self.clock_step_at = -1  # samples accepted when the last clock step was handled
         self.unload = UnloadState(trigger=-1)
         self.to_waiting(0)
 

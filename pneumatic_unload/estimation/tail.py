@@ -97,8 +97,16 @@ def on_tail_stuck(st: EstimatorState, i: int) -> list[UnloadResult]:
     text = (f"{STUCK_TEXT} {value:.0f} Pa from t={t_lo:.6f} s after the p* crossing: "
             "the tail ends there")
     st.diag("warn", text, float(st.buf.t[i]))
+    return end_tail_and_skip(st, max(lo - 1, u.i0 + 1), i, text)
+
+
+def end_tail_and_skip(st: EstimatorState, i_end: int, i: int, text: str
+                      ) -> list[UnloadResult]:
+    """Close the unload's tail at index i_end (its final fit uses the samples up to there,
+    its text gets ``text``), decided at index i, then skip the rest of the unload [-]."""
+    u = st.unload
     sigma, level = st.sigma, st.plateau_level
-    out = finish_tail(st, max(lo - 1, u.i0 + 1), ended=False, decided=i)
+    out = finish_tail(st, i_end, ended=False, decided=i)
     for r in out:
         r.status_text += "; " + text
     st.unload, st.sigma, st.plateau_level = u, sigma, level
