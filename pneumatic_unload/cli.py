@@ -273,6 +273,8 @@ def cmd_recover(args: argparse.Namespace) -> int:
         report = recover(Path(args.bag))
     except BagError as exc:
         raise CliError(str(exc)) from exc
+    except OSError as exc:
+        raise CliError(f"recover {args.bag}: {exc}") from exc
     print(report)
     return 0
 

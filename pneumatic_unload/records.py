@@ -135,7 +135,9 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
     )
 
     try:
-        series = read_pressure(p, topic=topic)
+        # write order: a clock that steps back in the header stamps stays visible to the
+        # estimator (log-time order may sort it away when log times are the stamps)
+        series = read_pressure(p, topic=topic, order="write")
         cfg = read_config(p) or {}
         live = read_json_topic(p, TOPIC_SETTINGS)
     except BagError as exc:

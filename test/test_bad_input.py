@@ -90,3 +90,127 @@ def test_saturated_sensor_plateau_is_bad_data():
     _cfg, sim, st = _rig(full_scale=6.5e5)
     res, _ = _run(sim.t, sim.measured, st)
     assert res and res[0].status == "bad_data" and "saturated" in res[0].status_text
+
+
+def _two_unloads(sim, p):
+    """The record p (on sim.t [s]) followed by a 0.3 s charge and the clean record again."""
+    ramp = np.linspace(sim.pressure[-1], sim.pressure[0], 300)
+    t = np.concatenate([sim.t, sim.t[-1] + 1e-3 * np.arange(1, 301), sim.t[-1] + 0.301 + sim.t])
+    noise = np.random.default_rng(5).normal(0.0, FS_NOISE, 300)
+    return t, np.concatenate([p, ramp + noise, sim.measured])
+
+
+@pytest.mark.parametrize("full_scale", [6.5e5, 6.9e5])
+def test_clipped_plateau_is_one_bad_data_result_and_the_next_unload_is_found(full_scale):
+    # issue 13: the clipped unload also gave a phantom second unload with status ok
+    _cfg, sim, st = _rig(full_scale=full_scale, initial_pressure=7e5)
+    res = analyze(sim.t, sim.measured, st)
+    assert [r.status for r in res] == ["bad_data"] and "saturated" in res[0].status_text
+    clean = analyze(*_two_unloads(sim, sim.measured), st)
+    # the clean record is clipped too; only the statuses and the count matter here
+    assert [r.status for r in clean] == ["bad_data", "bad_data"]
+
+
+@pytest.mark.parametrize("offset", [0.02, 0.05, 0.2, 0.6, 1.0])
+@pytest.mark.parametrize("auto_atm", [False, True])
+def test_sensor_stuck_for_one_second_mid_unload_is_one_bad_data_result(offset, auto_atm):
+    # issue 13: stuck for 1 s in the middle of an unload gave bad_data plus a phantom unload
+    # (status ok, or more bad_data) from the stuck stretch taken as a new plateau
+    _cfg, sim, st = _rig(duration=6.0 if auto_atm else 3.0)
+    if auto_atm:
+        st = dataclasses.replace(st, atmosphere=None)
+    clean = analyze(sim.t, sim.measured, st)
+    assert [r.status for r in clean] == ["ok"]
+    p = sim.measured.copy()
+    i0 = int(np.searchsorted(sim.t, sim.t_open + offset))
+    p[i0:i0 + 1000] = p[i0]
+    res = analyze(sim.t, p, st)
+    assert [r.status for r in res] == ["bad_data"], [r.status_text for r in res]
+    assert "sensor stuck" in res[0].status_text and not math.isfinite(res[0].conductance)
+    # re-armed after the unload: the next (clean) unload gives its own result
+    both = analyze(*_two_unloads(sim, p), st)
+    assert [r.status for r in both] == ["bad_data", "ok"]
+    assert both[1].conductance == pytest.approx(clean[0].conductance, rel=1e-6)
+
+
+def test_sensor_stuck_after_the_crossing_keeps_the_crossing_and_adds_no_unload():
+    cfg, sim, st = _rig(duration=3.0)
+    st = dataclasses.replace(st, curve_fit=True)
+    clean = analyze(sim.t, sim.measured, st)
+    p = sim.measured.copy()
+    # after the crossing window closed (the crossing result is out): the tail ends there
+    i0 = int(np.searchsorted(sim.t, clean[0].t_complete + 0.05))
+    p[i0:i0 + 1000] = p[i0]
+    res = analyze(sim.t, p, st)
+    assert {r.index for r in res} == {0}
+    assert res[0].status == "ok" and res[0].tau_exp == clean[0].tau_exp
+    assert all(r.status == "ok" and r.conductance == pytest.approx(cfg.conductance, rel=0.1)
+               for r in res)
+    assert all("sensor stuck" in r.status_text for r in res if r.final)
+
+
+def _stepped(sim, at, step=10.0):
+    """Stamps [s] of sim whose clock steps back ``step`` [s] at the instant ``at`` [s]."""
+    t = sim.t.copy()
+    t[int(np.searchsorted(t, at)):] -= step
+    return t
+
+
+def test_clock_stepping_back_mid_unload_is_bad_data_naming_the_step():
+    # issue 13: the samples until the clock caught up were dropped one by one and the rest
+    # analysed as if continuous: status ok, C several times too large
+    _cfg, sim, st = _rig(duration=14.0)
+    t = _stepped(sim, sim.t_open + 0.5)
+    res, msgs = _run(t, sim.measured, st)
+    assert [r.status for r in res] == ["bad_data"]
+    assert "clock stepped back 10" in res[0].status_text
+    assert "clock stepped back 10" in msgs
+
+
+def test_clock_step_after_the_crossing_keeps_the_crossing_and_before_the_unload_is_harmless():
+    _cfg, sim, st = _rig(duration=14.0)
+    st = dataclasses.replace(st, curve_fit=True)
+    clean = analyze(sim.t, sim.measured, st)
+    late = analyze(_stepped(sim, clean[0].t_complete + 0.1, 2.0), sim.measured, st)
+    # the crossing was found before the step (t_end: where the tail ended)
+    assert dict(late[0].to_dict(), t_end=0) == dict(clean[0].to_dict(), t_end=0)
+    assert {r.index for r in late} == {0}
+    assert all("clock stepped back 2" in r.status_text for r in late if r.final)
+    # on the plateau, well before the valve opens: the plateau starts again after the step
+    _cfg, sim, st = _rig(duration=14.0, pre_time=2.0)
+    early = analyze(_stepped(sim, 0.5, 0.3), sim.measured, st)
+    assert [r.status for r in early] == ["ok"]
+
+
+def _clock_step_bag(tmp_path, log_time_is_stamp):
+    from pneumatic_unload.io import BagRecorder
+
+    cfg, sim, _st = _rig(duration=14.0)
+    t_ns = np.round((1.7e9 + sim.t) * 1e9).astype(np.int64)
+    stamps = t_ns.copy()
+    stamps[int(np.searchsorted(sim.t, sim.t_open + 0.5)):] -= 10_000_000_000
+    path = tmp_path / f"clock_{log_time_is_stamp}"
+    with BagRecorder(path) as rec:
+        rec.write_pressures(stamps, sim.measured,
+                            log_time_ns=None if log_time_is_stamp else t_ns)
+    return cfg, path, stamps
+
+
+@pytest.mark.parametrize("log_time_is_stamp", [False, True])
+def test_cli_bag_whose_clock_steps_back_mid_unload_is_bad_data(tmp_path, log_time_is_stamp):
+    import json
+    import subprocess
+    import sys
+
+    from pneumatic_unload.io import read_pressure
+
+    cfg, path, stamps = _clock_step_bag(tmp_path, log_time_is_stamp)
+    # the write order keeps the step; the log order sorts it away when log time = stamp
+    assert np.array_equal(read_pressure(path, order="write").t_ns, stamps)
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path),
+                           "--volume", str(cfg.volume), "--json"], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode in (0, 1), proc.stderr
+    unloads = json.loads(proc.stdout)["unloads"]
+    assert unloads and all(u["status"] == "bad_data" for u in unloads), unloads
+    assert "clock stepped back 10" in unloads[0]["status_text"]

@@ -540,6 +540,39 @@ def test_recover_leaves_complete_bags_alone_and_reports_errors(full_bag, tmp_pat
         recover(bad)
 
 
+@pytest.mark.parametrize("arg", ["{name}.mcap", ".", "../{name}"])
+def test_cli_recover_run_inside_the_bag_directory(tmp_path, arg):
+    # issue 13: "recover x.mcap" inside the bag directory ended in a WriterError traceback
+    t_ns, p = _pressure_data(3000)
+    name = "killed"
+    rec = BagRecorder(tmp_path / name, config=CONFIG, chunk_size=8192)
+    rec.write_pressures(t_ns, p)
+    rec.flush()
+    data = (tmp_path / name / f"{name}.mcap").read_bytes()
+    rec.close()
+    bag = tmp_path / name
+    (bag / "metadata.yaml").unlink()
+    (bag / f"{name}.mcap").write_bytes(data[: len(data) * 2 // 3])
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "recover",
+                           arg.format(name=name)], cwd=bag, capture_output=True, text=True,
+                          timeout=120, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr and f"recovered bag {bag}" in proc.stdout
+    assert 0 < len(read_pressure(bag).p) < 3000
+    assert not (bag / ".recover-tmp").exists()
+
+
+def test_cli_recover_errors_are_one_line(tmp_path):
+    (tmp_path / "bad.mcap").write_bytes(b"not an mcap")
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "recover",
+                           "bad.mcap"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120, env=env)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
+    assert "not an MCAP" in proc.stderr
+
+
 CHILD = """
 import sys, time
 from pneumatic_unload.io import BagRecorder

@@ -252,6 +252,43 @@ def test_bad_input_gives_clear_errors():
         DiscrepancySettings(volume=V, candidates=("magic",))
 
 
+def _stuck(cfg, offset):
+    """Simulated record (t [s], p [Pa]) whose sensor sticks 1 s from t_open + offset [s]."""
+    sim = simulate(cfg)
+    p = sim.measured.copy()
+    i0 = int(np.searchsorted(sim.t, sim.t_open + offset))
+    p[i0:i0 + 1000] = p[i0]
+    return sim.t, p
+
+
+@pytest.mark.parametrize("offset", [0.05, 0.3, 0.8])
+def test_stuck_sensor_is_the_finding_not_a_fitted_effect(offset):
+    # issue 13: fitted as "leak, heat transfer"; before, during and after the p* crossing
+    t, p = _stuck(_rig(duration=4.0), offset)
+    with pytest.raises(DiscrepancyError, match="bad data, not fitted: sensor stuck at"):
+        find_discrepancy(t, p, DiscrepancySettings(volume=V))
+
+
+def test_cli_stuck_sensor_is_named_in_bounded_time(tmp_path):
+    import subprocess
+    import sys
+    import time
+
+    t, p = _stuck(_rig(duration=4.0), 0.3)
+    csv = tmp_path / "stuck.csv"
+    csv.write_text("Time [s],Pressure [kPa]\n" + "\n".join(
+        f"{a:.4f},{b / 1e3:.4f}" for a, b in zip(t, p, strict=True)) + "\n")
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "discrepancy",
+                           str(csv), "--volume", str(V)], capture_output=True, text=True,
+                          timeout=120)
+    elapsed = time.monotonic() - t0
+    assert proc.returncode == 2, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert "sensor stuck at" in proc.stderr and "leak" not in proc.stderr + proc.stdout
+    assert elapsed < 60.0  # refused after the estimator's pass, not after a search
+
+
 def test_harness_draws_are_reproducible_and_in_range():
     a, b = draw_case("leak", 3), draw_case("leak", 3)
     assert a.config == b.config and a.truth == b.truth

@@ -18,7 +18,7 @@ from pneumatic_unload.runs import settings_for
 
 FS_NOISE = 1000.0  # 0.1 % of a 1 MPa full-scale transducer [Pa]
 KINDS = ("clean", "heat", "aborted", "two_unloads", "auto_atm", "volts", "bad_stamps",
-         "spike_and_stuck")
+         "spike_and_stuck", "stuck_in_unload", "saturated", "clock_step")
 
 
 def _rig(rng, seed, **kw):
@@ -55,6 +55,24 @@ def _trace(kind, seed):
                             a.t[-1] + 1e-3 * (n_ramp + 1) + b.t])
         p = np.concatenate([a.measured, ramp, b.measured])
         return dataclasses.replace(settings_for(cfg), curve_fit=False), t, p
+    if kind == "stuck_in_unload":
+        # stuck for 1 s somewhere in the unload (before or after the crossing), then a second
+        # clean unload: the skip phase after the bad_data result, then re-arming
+        cfg = _rig(rng, seed, pre_time=0.5)
+        cfg = cfg.replace(duration=1.2 * default_duration(cfg))
+        a, b = simulate(cfg), simulate(cfg.replace(seed=seed + 1))
+        p = a.measured.copy()
+        k = int(np.searchsorted(a.t, a.t_open + rng.uniform(0.02, 3.0)))
+        p[k:k + 1000] = p[k]
+        ramp = np.linspace(a.pressure[-1], b.pressure[0], 300)
+        t = np.concatenate([a.t, a.t[-1] + 1e-3 * np.arange(1, 301), a.t[-1] + 0.301 + b.t])
+        p = np.concatenate([p, ramp + rng.normal(0.0, FS_NOISE, 300), b.measured])
+        st = dataclasses.replace(settings_for(cfg), curve_fit=seed % 2 == 0)
+        return (dataclasses.replace(st, atmosphere=None) if seed == 13 else st), t, p
+    if kind == "saturated":
+        cfg = _rig(rng, seed, full_scale=0.9 * rng.uniform(4e5, 8e5), initial_pressure=8e5)
+        sim = simulate(cfg)
+        return dataclasses.replace(settings_for(cfg), curve_fit=False), sim.t, sim.measured
     cfg = _rig(rng, seed, pre_time=3.0 if kind == "spike_and_stuck" else 0.2)
     sim = simulate(cfg)
     st = dataclasses.replace(settings_for(cfg), curve_fit=False,
@@ -73,6 +91,11 @@ def _trace(kind, seed):
         p[int(rng.integers(100, t.size - 1))] = np.nan
         t[int(rng.integers(100, t.size - 1))] = t[0]  # a stamp going backwards
         return st, t[keep], p[keep]
+    if kind == "clock_step":
+        # the clock steps back 0.5..3 s somewhere in the record (unload, tail or plateau)
+        k = int(rng.integers(100, t.size - 100))
+        t[k:] -= rng.uniform(0.5, 3.0)
+        return st, t, p
     if kind == "spike_and_stuck":
         j = int(rng.integers(300, 500))
         p[j] -= 40.0 * FS_NOISE  # a spike: a trigger that is not confirmed

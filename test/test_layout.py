@@ -305,7 +305,7 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
         shebang = script.read_text().splitlines()[0]
         assert shebang.startswith("#!") and Path(shebang[2:].split()[0]).parent == prefix / "bin"
     assert (pkg_prefix / "share" / PKG / "package.xml").is_file()
-    for yaml_name in ("simulator.yaml", "estimator.yaml"):  # --params-file targets
+    for yaml_name in ("simulator.yaml", "estimator.yaml", "recorder.yaml", "replay.yaml"):
         assert (pkg_prefix / "share" / PKG / "config" / yaml_name).is_file()
     assert (msgs_prefix / "share" / MSGS_PKG / "msg" / "UnloadEstimate.msg").is_file()
 

@@ -163,13 +163,18 @@ class ParameterSpec:
     name : str
         Parameter (= field) name.
     kind : str
-        'double', 'integer', 'string' or 'bool'.
+        'double', 'integer', 'string', 'bool' or 'string_array'.
     default : Any
-        ROS default (0.0 for an optional number whose default is None).
+        ROS default (0.0 for an optional number whose default is None; None for an unset
+        string array).
     description : str
         Meaning, unit and range (and what 0 means for an optional number).
     lo, hi : float or None
         Range of a number.
+    dynamic_typing : bool
+        The parameter also takes another type (an integer for a double).
+    choices : tuple of str
+        The values a string parameter takes (empty: any).
     """
 
     name: str
@@ -178,6 +183,8 @@ class ParameterSpec:
     description: str
     lo: float | None = None
     hi: float | None = None
+    dynamic_typing: bool = False
+    choices: tuple[str, ...] = ()
 
 
 def _fields(cls: type, only: tuple[str, ...] | None, exclude: tuple[str, ...]

@@ -14,7 +14,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySettings, Fit
-from pneumatic_unload.estimation import EstimationError, EstimatorSettings, analyze
+from pneumatic_unload.estimation import (
+    STUCK_TEXT,
+    EstimationError,
+    EstimatorSettings,
+    StreamingEstimator,
+    UnloadResult,
+)
 from pneumatic_unload.fit.noise import estimate_noise
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.model.effects import ParametricModel, Start
@@ -53,19 +59,21 @@ class Problem:
         t = t - self.t_ref
         est = EstimatorSettings(**settings.tank_fields(), heat_model="adiabatic",
                                 curve_fit=False)
-        try:
-            results = [r for r in analyze(t, y, est) if r.status in ("ok", "not_choked")]
-        except EstimationError as exc:
-            raise DiscrepancyError(str(exc)) from exc
+        every = _unloads(t, y, est)
+        results = [r for r in every if r.status in ("ok", "not_choked")]
         if not results:
+            _refuse_bad_data(every, math.inf)
             raise DiscrepancyError("no complete unload found in the trace (the pressure "
                                    "must fall from a plateau through p*)")
         r = results[0]
         # keep one unload: cut before the next one starts
         later = [q.t_start for q in results[1:] if q.t_start > r.t_cross]
+        t_cut = math.inf
         if later:
-            keep = t < later[0] - 0.1 * (later[0] - r.t_cross)
+            t_cut = later[0] - 0.1 * (later[0] - r.t_cross)
+            keep = t < t_cut
             t, y = t[keep], y[keep]
+        _refuse_bad_data(every, t_cut)
         dt = float(np.median(np.diff(t)))
         c0 = r.conductance_isentropic if math.isfinite(r.conductance_isentropic) \
             else r.conductance
@@ -124,3 +132,33 @@ class Problem:
         for e in new_effects:
             combos = [{**c, **d} for c in combos for d in model.effect_starts(e)]
         return [{**base, **c} for base in bases for c in combos]
+
+
+def _unloads(t: FloatArray, y: FloatArray, est: EstimatorSettings) -> list[UnloadResult]:
+    """Every unload result of the trace (t [s], y [Pa]), with the estimator's stuck-sensor
+    findings as ``bad_data`` results (a stuck stretch after the p* crossing is only a
+    warning for the estimator, whose crossing stands; a fit would take it for data)."""
+    try:
+        se = StreamingEstimator(est)
+        out = se.push_block(t, y) + se.finish()
+    except EstimationError as exc:
+        raise DiscrepancyError(str(exc)) from exc
+    for d in se.diagnostics:
+        if d.level != "ok" and d.message.startswith(STUCK_TEXT) and not any(
+                r.status_text == d.message for r in out):
+            out.append(UnloadResult(
+                index=-1, status="bad_data", status_text=d.message, t_start=math.nan,
+                t_cross=math.nan, tau_exp=math.nan, tau_exp_std=math.nan, p10=math.nan,
+                p_atm=math.nan, p_star=math.nan, initial_temperature=math.nan,
+                volume=math.nan, conductance=math.nan, conductance_model=math.nan,
+                conductance_model_std=math.nan, t_complete=d.t))
+    return out
+
+
+def _refuse_bad_data(results: list[UnloadResult], t_cut: float) -> None:
+    """Raise when the kept part of the trace (before t_cut [s]) holds bad data (a stuck or
+    saturated transducer...): the finding is the bad data, not a model effect to fit."""
+    bad = [r for r in results if r.status == "bad_data" and r.t_complete < t_cut]
+    if bad:
+        raise DiscrepancyError(f"bad data, not fitted: {bad[0].status_text} (at t = "
+                               f"{bad[0].t_complete:.6g} s)")

@@ -48,6 +48,7 @@ from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
 from pneumatic_unload.estimation.streaming import StreamingEstimator
 from pneumatic_unload.estimation.types import (
     STATUSES,
+    STUCK_TEXT,
     Diagnostic,
     FloatArray,
     UnloadResult,
@@ -57,6 +58,7 @@ from pneumatic_unload.estimation.types import (
 __all__ = [
     "SSE_MODEL_REL_STD",
     "STATUSES",
+    "STUCK_TEXT",
     "ChunkedAnalysis",
     "Diagnostic",
     "EstimationError",

@@ -51,6 +51,8 @@ TRIM_MIN = 65536
 IDLE_KEEP = 1 << 20
 #: Sample period assumed while the nominal one is unknown [s].
 DT_DEFAULT = 1e-3
+#: Identical consecutive samples that mean a stuck sensor where the pressure must fall [-].
+STUCK_RUN = 2 * PERIOD
 
 
 def check_indices(next_check: int, end: int) -> NDArray[np.int64]:
@@ -242,6 +244,48 @@ def settled_at_end(cs: FloatArray, i: int, *, i0: int, p10: float, dp_guess: flo
     b = (cs[i + 1] - cs[i - w + 1]) / w
     drop = p10 - b
     return bool(abs(drop) > 0.5 * dp_guess and abs(a - b) < 0.005 * abs(drop))
+
+
+def stuck_run(cq: FloatArray, k: Index, *, first: int) -> Flag:
+    """The STUCK_RUN samples ending at index k are identical (no first difference at all,
+    from the prefix sums cq [signal units^2]): a stuck transducer, when the signal had noise
+    before. ``first``: the earliest index the run may start at (the trigger) [-]."""
+    lo = k - STUCK_RUN + 1
+    return (lo >= first) & (cq[k + 1] - cq[np.maximum(lo + 1, 0)] == 0.0)
+
+
+def settle_window(k: Index, origin: int) -> Index:
+    """Window of the settling test at index k: an eighth of the samples since ``origin``
+    (the unload's trigger), 128..16384 [-]."""
+    return np.minimum(np.maximum(128, (k - origin) // 8), SETTLE_MAX)
+
+
+def settled(cs: FloatArray, cq: FloatArray, k: Index, *, origin: int, since: int,
+            drop: float) -> Flag:
+    """After a bad unload, the signal has settled on a live plateau at index k.
+
+    The means of the last two windows of w samples (:func:`settle_window`: an eighth of the
+    time since ``origin``, so an exponential fall must be ~7 time constants old) differ by
+    less than 4 standard errors of their own noise (rms of first differences / sqrt 2) or
+    0.2 % of ``drop`` [signal units]; both windows vary (a stuck stretch is no plateau)
+    and lie after index ``since`` [-].
+    """
+    w = settle_window(k, origin)
+    ok = k - since >= 2 * w
+    mid = np.maximum(k - w + 1, 0)
+    lo = np.maximum(k - 2 * w + 1, 0)
+    a = (cs[mid] - cs[lo]) / w
+    b = (cs[k + 1] - cs[mid]) / w
+    qa = cq[mid] - cq[np.minimum(lo + 1, mid)]
+    qb = cq[k + 1] - cq[mid + 1]
+    sig = np.sqrt(np.maximum(qa + qb, 0.0) / (2 * w - 2) / 2.0)
+    se = sig * np.sqrt(2.0 / w)
+    return ok & (qa > 0.0) & (qb > 0.0) & (np.abs(a - b) < np.maximum(4.0 * se,
+                                                                      0.002 * abs(drop)))
+
+
+#: Widest settling window, see :func:`settle_window` [-].
+SETTLE_MAX = 16384
 
 
 def block_mean(cs: FloatArray, k: Index) -> Any:

@@ -25,7 +25,7 @@ from pneumatic_unload.estimation.decisions import (
 from pneumatic_unload.estimation.refine import model_inversion, recovery_fit
 from pneumatic_unload.estimation.regression import corner_fit
 from pneumatic_unload.estimation.state import RECOVERY, EstimatorState
-from pneumatic_unload.estimation.types import UnloadResult
+from pneumatic_unload.estimation.types import STUCK_TEXT, UnloadResult
 from pneumatic_unload.model.heat import thermal_time_constant
 
 #: Relative 1-sigma of eq 23 itself [-]: it assumes an isentropic unload (wall heat flow
@@ -40,7 +40,7 @@ def on_abort(st: EstimatorState, i: int) -> list[UnloadResult]:
     tv, pv = st.buf.views(i + 1)
     tail = pv[max(u.i0, i - 2 * PERIOD + 1):i + 1]
     if tail.size >= 2 * PERIOD and float(np.ptp(tail)) == 0.0:
-        return st.bad(i, f"sensor stuck at {float(tail[0])!r} during the unload "
+        return st.bad(i, f"{STUCK_TEXT} {float(tail[0])!r} during the unload "
                          f"({tail.size} identical samples, no noise): no estimate")
     st.diag("warn", "unload stopped before p*: valve closed (aborted unload)", float(tv[i]))
     # closing instant: a corner fit (quadratic before and after the closing instant)

@@ -16,13 +16,21 @@ from typing import Any
 
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.buffer import SampleBuffer
-from pneumatic_unload.estimation.decisions import DT_DEFAULT, TRIM_MIN, idle_keep, trim_keep
+from pneumatic_unload.estimation.decisions import (
+    DT_DEFAULT,
+    PERIOD,
+    TRIM_MIN,
+    effective_sigma,
+    idle_keep,
+    stuck_run,
+    trim_keep,
+)
 from pneumatic_unload.estimation.types import Diagnostic, FloatArray, UnloadResult
 from pneumatic_unload.physics import P_STAR_FRACTION
 
-#: Phases of the detector.
-WAITING, CONFIRM, UNLOADING, TAIL, RECOVERY = (
-    "waiting", "confirming", "unloading", "tail", "recovery")
+#: Phases of the detector (SKIP: the rest of an unload already reported as bad data).
+WAITING, CONFIRM, UNLOADING, TAIL, RECOVERY, SKIP = (
+    "waiting", "confirming", "unloading", "tail", "recovery", "skipping")
 
 
 @dataclass
@@ -65,6 +73,14 @@ class UnloadState:
     table : Any
         The model's crossing times tabulated half way to p*
         (:class:`pneumatic_unload.fitting.InversionTable`), or None.
+    noisy : bool
+        The pre-step plateau had noise (so identical samples later mean a stuck sensor).
+    skip_since : int
+        Index where the rest of a bad unload started being skipped [-] (may go negative
+        when the buffer is trimmed, like ``trigger``).
+    skip_rise : float
+        Rise of the block mean over its lowest value that ends the skip (a new charge)
+        [signal units].
     """
 
     trigger: int
@@ -87,6 +103,9 @@ class UnloadState:
     rec_fit: Any = None
     mid_pending: bool = False
     table: Any = None
+    noisy: bool = False
+    skip_since: int = -1
+    skip_rise: float = math.nan
 
 
 class EstimatorState:
@@ -107,6 +126,7 @@ class EstimatorState:
         self.dt_nominal = math.nan  # nominal sample period [s]
         self.gap_limit = math.inf  # stamp step that counts as a gap [s]
         self.stuck_reported = False
+        self.clock_step_at = -1  # samples accepted when the last clock step was handled
         self.unload = UnloadState(trigger=-1)
         self.to_waiting(0)
 
@@ -154,6 +174,14 @@ class EstimatorState:
         """Nominal sample period, DT_DEFAULT while unknown [s]."""
         return self.dt_nominal if math.isfinite(self.dt_nominal) else DT_DEFAULT
 
+    def stuck(self, k: Any) -> Any:
+        """:func:`~.decisions.stuck_run` at index (or indices) k during the current unload,
+        whose pressure keeps changing until its final plateau and whose plateaus are as
+        noisy as its pre-step one; only when that plateau had noise (a noiseless, quantised
+        signal may repeat a value)."""
+        u = self.unload
+        return stuck_run(self.buf.sums()[1], k, first=u.trigger) & u.noisy
+
     def diag(self, level: str, message: str, t: float) -> None:
         """Record a diagnostic ('ok', 'warn', 'error') at sample time t [s]."""
         self.diagnostics.append(Diagnostic(level, self.mode, message, t))
@@ -185,8 +213,25 @@ class EstimatorState:
         return res
 
     def bad(self, i: int, text: str) -> list[UnloadResult]:
-        """Unusable data at index i: a 'bad_data' result, then re-arm."""
+        """Unusable data at index i: a 'bad_data' result, then skip the rest of this
+        unload (:meth:`to_skip`): one physical unload gives one result."""
         self.diag("error", text, float(self.buf.t[i]))
         res = self.empty_result("bad_data", text, i)
-        self.to_waiting(i + 1)
+        self.to_skip(i)
         return [res]
+
+    def to_skip(self, i: int) -> None:
+        """Skip the rest of the unload reported bad at index i [-]: no re-arming until the
+        signal settles on a live plateau or rises (a new charge), see
+        :func:`pneumatic_unload.estimation.tail.step_skip`."""
+        u = self.unload
+        u.trigger = max(u.trigger, 0)
+        u.skip_since = i
+        sig = float(effective_sigma(self.sigma, self.plateau_level))
+        dp = u.dp_guess if math.isfinite(u.dp_guess) else 0.0
+        u.skip_rise = max(10.0 * sig / PERIOD ** 0.5 if math.isfinite(sig) else 0.0,
+                          0.02 * dp)
+        u.tail_low = math.inf
+        self.mode = SKIP
+        self.level = -math.inf
+        self.next_check = i + PERIOD

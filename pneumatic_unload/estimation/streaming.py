@@ -24,6 +24,7 @@ from pneumatic_unload.estimation.decisions import SCAN_HORIZON, first_below
 from pneumatic_unload.estimation.state import (
     CONFIRM,
     RECOVERY,
+    SKIP,
     TAIL,
     UNLOADING,
     WAITING,
@@ -38,6 +39,7 @@ STEPS: dict[str, Callable[[EstimatorState, int], list[UnloadResult]]] = {
     UNLOADING: unloading.step_unloading,
     TAIL: tail.step_tail,
     RECOVERY: sse.step_recovery,
+    SKIP: tail.step_skip,
 }
 
 
@@ -83,7 +85,8 @@ class StreamingEstimator:
     # ------------------------------------------------------------------ public API
     @property
     def state(self) -> str:
-        """'waiting', 'confirming', 'unloading', 'tail' or 'recovery'."""
+        """'waiting', 'confirming', 'unloading', 'tail', 'recovery' or 'skipping' (the
+        rest of an unload reported as bad data)."""
         return self._st.mode
 
     @property
@@ -114,8 +117,7 @@ class StreamingEstimator:
         """
         st = self._st
         if not t > st.last_t:  # also catches NaN stamps
-            self._reject(t, p)
-            return []
+            return self._reject(t, p)
         if p != p or p in (math.inf, -math.inf):
             st.diag("warn", f"non-finite pressure sample {p!r} at t={t:.6f} s ignored", t)
             return []
@@ -260,6 +262,8 @@ class StreamingEstimator:
             return tail.scan_tail(st, i, end)
         if mode == RECOVERY:
             return sse.scan_recovery(st, i, end)
+        if mode == SKIP:
+            return tail.scan_skip(st, i, end)
         # any other phase: the next periodic check or level trigger
         nc = st.next_check
         j = first_below(np.frombuffer(st.buf.p, dtype=float), i, min(end, nc), st.level)
@@ -268,7 +272,9 @@ class StreamingEstimator:
         return nc if nc < end else end
 
     # ------------------------------------------------------------------ input problems
-    def _reject(self, t: float, p: float) -> None:
+    def _reject(self, t: float, p: float) -> list[UnloadResult]:
+        """A sample whose stamp t [s] is NaN or not after the last one: ignored; a step back
+        of more than the gap limit is a clock step (:meth:`_on_clock_step`)."""
         st = self._st
         if t != t:
             st.diag("warn", "sample with a NaN stamp ignored", t)
@@ -277,6 +283,41 @@ class StreamingEstimator:
         else:
             st.diag("warn", f"stamp going backwards ({t:.9f} s after {st.last_t:.9f} s)"
                     " ignored", t)
+            accepted = len(st.buf) + st.buf.shift
+            if st.last_t - t > st.gap_limit and accepted != st.clock_step_at:
+                st.clock_step_at = accepted
+                # the step: from the expected next stamp (one nominal period on) to t
+                out = self._on_clock_step(st.last_t + st.dt_nominal - t, t)
+                self.results += out
+                return out
+        return []
+
+    def _on_clock_step(self, step: float, t: float) -> list[UnloadResult]:
+        """The clock stepped back by ``step`` [s] (new stamp t [s]): the samples until it
+        passes the last accepted stamp again are dropped, so the unload in progress has a
+        hidden hole in its time base. Before its crossing it gets a 'bad_data' result; after
+        it, the tail ends at the last good sample; then the rest of it is skipped."""
+        st = self._st
+        last = len(st.buf) - 1
+        where = f"clock stepped back {step:.6g} s at t={st.last_t:.6f} s (next stamp {t:.6f} s)"
+        st.diag("warn", f"{where}: samples are dropped until the clock passes "
+                f"{st.last_t:.6f} s again", t)
+        mode = st.mode
+        if mode in (CONFIRM, UNLOADING):
+            return st.bad(last, f"{where} during the unload: its time base has a hole, "
+                                "no estimate")
+        if mode == TAIL:
+            return tail.end_tail_and_skip(st, last, last, where + " in the tail: the tail "
+                                          "ends there")
+        if mode == RECOVERY:
+            res = sse.abort_result(st, last, recovered=False, text=(
+                f"valve closed before p*; {where} during the recovery: no SSE value"))
+            res.final = True
+            st.to_skip(last)
+            return [res]
+        if mode == WAITING:
+            st.to_waiting(len(st.buf))  # the plateau starts again after the step
+        return []
 
     def _push_slow(self, t: FloatArray, p: FloatArray) -> list[UnloadResult]:
         out: list[UnloadResult] = []  # push() records them in self.results

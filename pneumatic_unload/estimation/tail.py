@@ -1,24 +1,32 @@
 """Tail phase: after the crossing, wait for the final plateau (or a new charge), then close
-the unload with the full-curve fit. Values in signal units, times in s, indices in buffer
-samples."""
+the unload with the full-curve fit; and the skip phase, the rest of an unload already
+reported as bad data, which re-arms only once the signal settles on a live plateau or
+rises (so that one physical unload gives one result). Values in signal units, times in s,
+indices in buffer samples."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from pneumatic_unload.estimation.decisions import (
     PERIOD,
     PLATEAU,
+    SETTLE_MAX,
+    STUCK_RUN,
+    TRIM_MIN,
     block_mean,
     check_indices,
     flat,
     rise_threshold,
     rose,
     running_low,
+    settled,
 )
 from pneumatic_unload.estimation.refine import final_curve_fit
 from pneumatic_unload.estimation.state import EstimatorState
-from pneumatic_unload.estimation.types import UnloadResult
+from pneumatic_unload.estimation.types import STUCK_TEXT, UnloadResult
 
 
 def _flat_tail(st: EstimatorState, cs: np.ndarray, k: int | np.ndarray, tau: float
@@ -49,6 +57,8 @@ def step_tail(st: EstimatorState, i: int) -> list[UnloadResult]:
         out = finish_tail(st, max(i - 2 * PERIOD, u.i0 + 1), ended=False, decided=i)
         st.next_check = i + PERIOD
         return out
+    if st.stuck(i):
+        return on_tail_stuck(st, i)
     if res is not None and _flat_tail(st, np.frombuffer(cs, dtype=float), i, res.tau_exp):
         return finish_tail(st, i, ended=False)
     return []
@@ -65,6 +75,7 @@ def scan_tail(st: EstimatorState, i: int, end: int) -> int:
     m = block_mean(cs, ks)
     low_prev = running_low(u.tail_low, m)
     event = rose(m, low_prev, rise_threshold(st.sigma, u.p10, u.atm))
+    event |= st.stuck(ks)
     if u.pending is not None:
         event |= _flat_tail(st, cs, ks, u.pending.tau_exp)
     hit = np.flatnonzero(event)
@@ -73,6 +84,34 @@ def scan_tail(st: EstimatorState, i: int, end: int) -> int:
         u.tail_low = float(min(low_prev[k - 1], m[k - 1]))
         st.next_check = int(ks[k - 1]) + PERIOD
     return int(ks[k]) if k < ks.size else end
+
+
+def on_tail_stuck(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """The sensor stuck after the crossing (STUCK_RUN identical samples up to index i): the
+    tail ends where the run began (the curve fit uses the samples before it), and the rest
+    of the unload is skipped (no phantom unload from the stuck stretch)."""
+    u = st.unload
+    lo = i - STUCK_RUN + 1
+    value = st.to_pa(float(st.buf.p[i]))
+    t_lo = float(st.buf.t[lo])
+    text = (f"{STUCK_TEXT} {value:.0f} Pa from t={t_lo:.6f} s after the p* crossing: "
+            "the tail ends there")
+    st.diag("warn", text, float(st.buf.t[i]))
+    return end_tail_and_skip(st, max(lo - 1, u.i0 + 1), i, text)
+
+
+def end_tail_and_skip(st: EstimatorState, i_end: int, i: int, text: str
+                      ) -> list[UnloadResult]:
+    """Close the unload's tail at index i_end (its final fit uses the samples up to there,
+    its text gets ``text``), decided at index i, then skip the rest of the unload [-]."""
+    u = st.unload
+    sigma, level = st.sigma, st.plateau_level
+    out = finish_tail(st, i_end, ended=False, decided=i)
+    for r in out:
+        r.status_text += "; " + text
+    st.unload, st.sigma, st.plateau_level = u, sigma, level
+    st.to_skip(i)
+    return out
 
 
 def finish_tail(st: EstimatorState, i: int, ended: bool, decided: int | None = None
@@ -98,3 +137,76 @@ def finish_tail(st: EstimatorState, i: int, ended: bool, decided: int | None = N
                 out.append(fin)
     st.to_waiting(i + 1)
     return out
+
+
+def _skip_drop(st: EstimatorState) -> float:
+    """Expected drop of the skipped unload, 0 when unknown [signal units]."""
+    dp = st.unload.dp_guess
+    return dp if math.isfinite(dp) else 0.0
+
+
+def _skip_trim_keep(k: int | np.ndarray) -> int | np.ndarray:
+    """Samples that may be dropped while skipping at index k: all but the widest settling
+    test's two windows and 4 PLATEAU [-] (bounds the memory on a signal that never
+    settles)."""
+    return k + 1 - 2 * SETTLE_MAX - 4 * PLATEAU
+
+
+def _skip_events(st: EstimatorState, k: int | np.ndarray, low: float | np.ndarray
+                 ) -> tuple[np.bool_ | np.ndarray, np.bool_ | np.ndarray]:
+    """(rise, settled) at check index k, ``low``: lowest earlier block mean."""
+    u = st.unload
+    cs, cq = st.buf.sums()
+    m = block_mean(cs, k)
+    rise = rose(m, low, u.skip_rise)
+    calm = settled(cs, cq, k, origin=u.trigger, since=u.skip_since, drop=_skip_drop(st))
+    return rise, calm
+
+
+def step_skip(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """Periodic check while skipping a bad unload (index i): a rise re-arms two periods
+    back (before it began), a live plateau re-arms here; no result either way."""
+    if i != st.next_check:
+        return []
+    st.next_check = i + PERIOD
+    u = st.unload
+    rise, calm = _skip_events(st, i, u.tail_low)
+    m = float(block_mean(st.buf.sums()[0], i))
+    if m < u.tail_low:
+        u.tail_low = m
+    t = float(st.buf.t[i])
+    if rise:
+        st.diag("ok", "pressure rising again after the bad unload: re-armed", t)
+        st.to_waiting(max(i - 2 * PERIOD, u.skip_since) + 1)
+        st.next_check = i + PERIOD
+        return []
+    if calm:
+        st.diag("ok", "signal settled after the bad unload: re-armed", t)
+        st.to_waiting(i + 1)
+        return []
+    keep = int(_skip_trim_keep(i))
+    if keep > TRIM_MIN:
+        st.buf.trim(keep)
+        st.next_check -= keep
+        u.skip_since -= keep
+        u.trigger -= keep
+    return []
+
+
+def scan_skip(st: EstimatorState, i: int, end: int) -> int:
+    """Next index in [i, end) where :func:`step_skip` decides something (end: none); the
+    running lowest block mean of the checks before it is applied here."""
+    ks = check_indices(st.next_check, end)
+    if ks.size == 0:
+        return end
+    u = st.unload
+    m = block_mean(st.buf.sums()[0], ks)
+    low_prev = running_low(u.tail_low, m)
+    rise, calm = _skip_events(st, ks, low_prev)
+    event = rise | calm | (_skip_trim_keep(ks) > TRIM_MIN)
+    hit = np.flatnonzero(event)
+    k = int(hit[0]) if hit.size else ks.size
+    if k > 0:
+        u.tail_low = float(min(low_prev[k - 1], m[k - 1]))
+        st.next_check = int(ks[k - 1]) + PERIOD
+    return int(ks[k]) if k < ks.size else end

@@ -18,6 +18,9 @@ from numpy.typing import NDArray
 #: Array of float64 samples (times [s], pressures [Pa] or signal units).
 FloatArray = NDArray[np.float64]
 
+#: Opening of every message about a transducer stuck during an unload (its value follows).
+STUCK_TEXT = "sensor stuck at"
+
 #: Statuses of an :class:`UnloadResult` (same order as the message's STATUS_* constants).
 STATUSES = ("ok", "aborted_sse", "aborted", "not_choked", "bad_data")
 

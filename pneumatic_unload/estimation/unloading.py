@@ -14,6 +14,7 @@ from pneumatic_unload.estimation.decisions import (
     CONFIRM,
     HINGE_PLATEAU,
     PERIOD,
+    STUCK_RUN,
     below,
     check_indices,
     first_below,
@@ -27,7 +28,7 @@ from pneumatic_unload.estimation.regression import crossing_fit, hinge_fit, rms_
 from pneumatic_unload.estimation.sse import on_abort
 from pneumatic_unload.estimation.state import TAIL, EstimatorState
 from pneumatic_unload.estimation.tail import finish_tail
-from pneumatic_unload.estimation.types import UnloadResult
+from pneumatic_unload.estimation.types import STUCK_TEXT, UnloadResult
 
 
 def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
@@ -43,10 +44,11 @@ def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
     guess_atm = (atm_signal if p_atm is not None
                  else (101325.0 - s.signal_offset) / s.signal_gain)
     dp = p_plateau - guess_atm
+    u.dp_guess = abs(dp) if math.isfinite(dp) else abs(p_plateau) * 0.5
+    u.noisy = st.sigma > 0.0
     if p_atm is not None and dp * math.copysign(1.0, s.signal_gain) <= 0:
         return st.bad(i, f"p10 ({st.to_pa(p_plateau):.0f} Pa) is not above p_atm "
                          f"({p_atm:.0f} Pa): nothing to unload")
-    u.dp_guess = abs(dp) if math.isfinite(dp) else abs(p_plateau) * 0.5
     u.refined = False
     st.level = p_plateau - 0.1 * u.dp_guess
     st.next_check = i + PERIOD
@@ -69,7 +71,9 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     if pre.size >= 8:
         vmax = float(np.max(pre))
         frac_at_max = float(np.mean(pre == vmax))
-        if frac_at_max > 0.5 and sig_pre == 0.0 and rms > 0.0:
+        # clipped: most of the plateau at exactly its highest value, with no noise, or with
+        # only the few dips of the noise below the clipping level
+        if frac_at_max > 0.5 and (sig_pre == 0.0 or frac_at_max > 0.9) and rms > 0.0:
             return st.bad(
                 i, f"sensor saturated on the pre-step plateau at {vmax!r}: p10 unknown")
     u.t0 = t0
@@ -115,8 +119,17 @@ def stalled_at(st: EstimatorState, k: int | np.ndarray) -> np.bool_ | np.ndarray
     return stalled(cs, tv, k, i0=u.i0, sigma=st.sigma, slope0=u.slope0)
 
 
+def on_stuck(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """The sensor stuck while the pressure must fall (index i): one 'bad_data' result, and
+    the rest of the unload is skipped."""
+    return st.bad(i, f"{STUCK_TEXT} {st.to_pa(float(st.buf.p[i])):.0f} Pa during the "
+                     f"unload ({STUCK_RUN} identical samples, no noise, while the pressure "
+                     f"must fall): no estimate")
+
+
 def step_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
-    """Decision at index i: the start fit, the p* crossing, p_atm auto or an abort."""
+    """Decision at index i: the start fit, the p* crossing, p_atm auto, a stuck sensor or
+    an abort."""
     u = st.unload
     p = st.buf.p[i]
     if not u.refined:
@@ -124,6 +137,8 @@ def step_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
             return refine_start(st, i)
         if i == st.next_check:
             st.next_check = i + PERIOD  # the stall test needs the start fit
+            if st.stuck(i):
+                return on_stuck(st, i)
         return []
     if below(p, st.level) and math.isfinite(u.pstar):
         if u.mid_pending:
@@ -131,6 +146,8 @@ def step_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
         return complete_crossing(st, i)
     if i == st.next_check:
         st.next_check = i + PERIOD
+        if st.stuck(i):
+            return on_stuck(st, i)
         if not math.isfinite(u.pstar):
             return check_final_plateau_auto(st, i)
         if stalled_at(st, i):
@@ -146,11 +163,13 @@ def scan_unloading(st: EstimatorState, i: int, end: int) -> int:
     ks = check_indices(st.next_check, min(j, end))
     if ks.size == 0:
         return j
+    event = st.stuck(ks)
     if st.unload.refined:
-        hit = np.flatnonzero(stalled_at(st, ks))
-        if hit.size:
-            st.next_check = int(ks[int(hit[0])])
-            return st.next_check
+        event = event | stalled_at(st, ks)
+    hit = np.flatnonzero(event)
+    if hit.size:
+        st.next_check = int(ks[int(hit[0])])
+        return st.next_check
     st.next_check = int(ks[-1]) + PERIOD
     return j
 

@@ -28,6 +28,7 @@ from rclpy.qos import (
 )
 
 from pneumatic_unload.config import ConfigError, RigConfig, adapters
+from pneumatic_unload.config import nodes as config_nodes
 from pneumatic_unload.config.adapters import ParameterSpec
 
 #: Pressure samples: reliable, deep history (the subscriber's callback is the bottleneck).
@@ -72,8 +73,10 @@ def ns_to_seconds(ns: int) -> float:
 def descriptor(spec: ParameterSpec) -> ParameterDescriptor:
     """ParameterDescriptor of a settings field (its range, unit and meaning)."""
     kinds = {"double": ParameterType.PARAMETER_DOUBLE, "integer": ParameterType.PARAMETER_INTEGER,
-             "string": ParameterType.PARAMETER_STRING, "bool": ParameterType.PARAMETER_BOOL}
-    d = ParameterDescriptor(name=spec.name, type=kinds[spec.kind], description=spec.description)
+             "string": ParameterType.PARAMETER_STRING, "bool": ParameterType.PARAMETER_BOOL,
+             "string_array": ParameterType.PARAMETER_STRING_ARRAY}
+    d = ParameterDescriptor(name=spec.name, type=kinds[spec.kind], description=spec.description,
+                            dynamic_typing=spec.dynamic_typing)
     if spec.kind == "double" and spec.lo is not None and spec.hi is not None:
         d.floating_point_range = [FloatingPointRange(from_value=float(spec.lo),
                                                      to_value=float(spec.hi), step=0.0)]
@@ -86,6 +89,16 @@ def settings_parameters(cls: type, **kw: Any) -> dict[str, tuple[Any, ParameterD
     """ROS parameter (default, descriptor) of every field of a settings class
     (:func:`pneumatic_unload.config.adapters.parameter_specs`; ``kw`` as there)."""
     return {n: (s.default, descriptor(s)) for n, s in adapters.parameter_specs(cls, **kw).items()}
+
+
+def node_parameters(node: str) -> dict[str, tuple[Any, ParameterDescriptor]]:
+    """ROS parameter (default, descriptor) of every parameter of ``node``
+    (:func:`pneumatic_unload.config.nodes.node_parameters`: the same list as its ``--help``
+    and ``config/<node>.yaml``); an unset string array's default is its type."""
+    from rclpy.parameter import Parameter
+
+    return {n: (Parameter.Type.STRING_ARRAY if s.kind == "string_array" else s.default,
+                descriptor(s)) for n, s in config_nodes.node_parameters(node).items()}
 
 
 def rig_parameter_descriptors() -> dict[str, tuple[Any, ParameterDescriptor]]:

@@ -45,6 +45,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from pneumatic_unload.config import adapters
+from pneumatic_unload.config import nodes as config_nodes
 from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
@@ -95,23 +96,8 @@ class EstimatorNode(Node):
 
         self._Measure = Measure
         self._UnloadEstimate = UnloadEstimate
-        d, s, b = common.double_param, common.str_param, common.bool_param
-        params: dict[str, tuple[Any, Any]] = {
-            **common.settings_parameters(EstimatorSettings),
-            "temperature_from_topic": (False, b(
-                "T10 from /tank/temperature (last value before the unload)")),
-            "pressure_topic": ("/tank/pressure", s("pressure topic (FluidPressure)")),
-            "block_topic": ("/tank/pressure_block", s("pressure block topic (PressureBlock)")),
-            "input": ("sample", s("'sample': FluidPressure per sample; 'block': PressureBlock")),
-            "qos": ("sensor_data", s(
-                "'sensor_data' (best effort) or 'reliable' (KEEP_ALL: lossless, e.g. replays)")),
-            "frame_id": ("", s("accept only this header frame_id ('' accepts any)")),
-            "valve_service": ("/simulator/start_unload",
-                              s("std_srvs/Trigger service that opens the valve (action)")),
-            "measure_timeout": (60.0, d("default timeout of ~/measure [s]", 0.1, 1e6)),
-            "diagnostics_period": (1.0, d("period of /diagnostics reports [s]", 0.05, 60.0)),
-        }
-        for name, (default, desc) in params.items():
+        # the one list of parameters (also --help and config/estimator.yaml)
+        for name, (default, desc) in common.node_parameters("estimator").items():
             self.declare_parameter(name, default, desc)
         try:
             self._settings = self._settings_from({})
@@ -462,8 +448,10 @@ class EstimatorNode(Node):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    """Entry point of ``ros2 run pneumatic_unload estimator``."""
-    return common.run(EstimatorNode, args)
+    """Entry point of ``ros2 run pneumatic_unload estimator`` (``--help``: the parameters,
+    exit 0 without starting ROS)."""
+    code = config_nodes.help_or_none("estimator", args)
+    return code if code is not None else common.run(EstimatorNode, args)
 
 
 if __name__ == "__main__":

@@ -58,6 +58,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from pneumatic_unload.config import nodes as config_nodes
 from pneumatic_unload.io.bag import (
     MSGTYPE_CONFIG,
     MSGTYPE_ESTIMATE,
@@ -100,8 +101,8 @@ PACKAGE_TOPICS: dict[str, tuple[str, str, int]] = {
 CARRIED_TOPICS = frozenset({TOPIC_SETTINGS})
 SPLIT_MODES = ("run", "unload")
 LOG_TIME_MODES = ("receive", "header")
-#: Range of ``flush_interval`` [s].
-FLUSH_INTERVAL_RANGE = (1e-3, 10.0)
+#: Range of ``flush_interval`` [s] (with the parameter's declaration).
+FLUSH_INTERVAL_RANGE = config_nodes.FLUSH_INTERVAL_RANGE
 #: How often pending extra topics are looked up in the ROS graph [s].
 GRAPH_POLL_INTERVAL = 0.5
 
@@ -380,31 +381,22 @@ def _has_header(msg_class: Any) -> bool:
 
 def _make_node() -> Any:
     """Build the recorder node class (rclpy imported only here and in :func:`main`)."""
-    from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+    from rcl_interfaces.msg import SetParametersResult
     from rclpy.exceptions import ParameterUninitializedException
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from pneumatic_unload.nodes.common import node_parameters
 
     class Recorder(Node):
         """ROS side of the recorder: parameters, subscriptions, graph discovery."""
 
         def __init__(self) -> None:
             super().__init__("recorder")
-            desc = ParameterDescriptor
-            self.declare_parameter("output", "", desc(
-                description="bag directory (split=run) or parent of the bags (split=unload); "
-                "default runs/rec-<UTC time>"))
-            self.declare_parameter("split", "run", desc(
-                description="'run': one bag; 'unload': one bag per unload"))
-            self.declare_parameter("flush_interval", 0.5, desc(
-                description="maximal age of data not yet on disk [s]", dynamic_typing=True))
-            self.declare_parameter("log_time", "receive", desc(
-                description="bag log time: 'receive' or 'header' (header stamp)"))
-            self.declare_parameter("topics", Parameter.Type.STRING_ARRAY, desc(
-                description="extra topics to record (types from the graph)"))
-            self.declare_parameter("fsync", False, desc(
-                description="fsync at each flush"))
+            # the one list of parameters (also --help and config/recorder.yaml)
+            for name, (default, desc) in node_parameters("recorder").items():
+                self.declare_parameter(name, default, desc)
             self.add_on_set_parameters_callback(self._reject_changes)
 
             flush = self.get_parameter("flush_interval").value
@@ -512,6 +504,9 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.experimental import EventsExecutor
 
+    code = config_nodes.help_or_none("recorder", argv)
+    if code is not None:
+        return code
     rclpy.init(args=sys.argv if argv is None else argv)
     node = None
     try:

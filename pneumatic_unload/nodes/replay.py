@@ -42,6 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pneumatic_unload.config import nodes as config_nodes
 from pneumatic_unload.io.bag import (
     CONFIG_METADATA_KEY,
     MSGTYPE_CONFIG,
@@ -213,15 +214,19 @@ def _import_msg(msgtype: str) -> Any:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the replay node. Returns the exit code (0 done, 2 bad parameters or bag)."""
+    """Run the replay node. Returns the exit code (0 done, 2 bad parameters or bag;
+    ``--help``: the parameters, 0, without starting ROS)."""
+    code = config_nodes.help_or_none("replay", argv)
+    if code is not None:
+        return code
     import rclpy
-    from rcl_interfaces.msg import ParameterDescriptor
     from rclpy.duration import Duration
     from rclpy.exceptions import ParameterException, ParameterUninitializedException
     from rclpy.executors import ExternalShutdownException
     from rclpy.impl.implementation_singleton import rclpy_implementation
-    from rclpy.parameter import Parameter
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from pneumatic_unload.nodes.common import node_parameters
 
     RCLError = rclpy_implementation.RCLError
 
@@ -230,21 +235,10 @@ def main(argv: list[str] | None = None) -> int:
     node = rclpy.create_node("replay")
     log = node.get_logger()
     try:
-        desc = ParameterDescriptor
         try:
-            node.declare_parameter("bag", "", desc(description="bag directory or .mcap file"))
-            node.declare_parameter("rate", 1.0, desc(
-                description="time scale factor; 0 = as fast as the subscribers take them",
-                dynamic_typing=True))
-            node.declare_parameter("topics", Parameter.Type.STRING_ARRAY, desc(
-                description="topics to replay (default all)"))
-            node.declare_parameter("loop", False, desc(description="repeat until SIGINT"))
-            node.declare_parameter("wait_for_subscribers", True, desc(
-                description="wait for matched subscribers before publishing"))
-            node.declare_parameter("min_subscribers", 1, desc(
-                description="subscribers to wait for"))
-            node.declare_parameter("wait_timeout", 10.0, desc(
-                description="longest wait for subscribers [s]", dynamic_typing=True))
+            # the one list of parameters (also --help and config/replay.yaml)
+            for name, (default, desc) in node_parameters("replay").items():
+                node.declare_parameter(name, default, desc)
             try:
                 topics = list(node.get_parameter("topics").value or [])
             except ParameterUninitializedException:

@@ -39,6 +39,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from pneumatic_unload.config import ConfigError, RigConfig
+from pneumatic_unload.config import nodes as config_nodes
 from pneumatic_unload.nodes import common
 from pneumatic_unload.rig import RigStream
 
@@ -54,37 +55,8 @@ class SimulatorNode(Node):
 
         self._ValveState = ValveState
         self._PressureBlock = PressureBlock
-        for name, (default, desc) in common.rig_parameter_descriptors().items():
-            self.declare_parameter(name, default, desc)
-        own = {
-            "mode": ("service", common.str_param(
-                "'service': unload on ~/start_unload; 'cycle': charge, settle, unload, repeat")),
-            "start_delay": (-1.0, common.double_param(
-                "open the valve once by itself after this delay [s] (< 0: never)", -1.0, 1e6)),
-            "settle_time": (2.0, common.double_param(
-                "cycle mode: plateau before each unload [s]", 0.05, 1e5)),
-            "vent_time": (1.0, common.double_param(
-                "time vented at atmosphere after an unload before recharging [s]", 0.0, 1e5)),
-            "charge_time": (1.0, common.double_param("recharge duration [s]", 0.01, 1e5)),
-            "cycles": (0, common.int_param("cycle mode: number of unloads (0: forever)",
-                                           0, 1_000_000)),
-            "auto_charge": (True, common.bool_param(
-                "service mode: recharge by itself vent_time after an unload")),
-            "temperature_rate": (10.0, common.double_param(
-                "rate of /tank/temperature [Hz] (0: off)", 0.0, 1000.0)),
-            "block_size": (0, common.int_param(
-                "samples per /tank/pressure_block message (0: no blocks)", 0, 100_000)),
-            "per_sample": (True, common.bool_param(
-                "publish every sample as a FluidPressure on /tank/pressure")),
-            "frame_id": ("tank", common.str_param("frame_id of the published headers")),
-            "output_volts": (False, common.bool_param(
-                "publish the transducer's output in volts (transducer_zero + "
-                "transducer_sensitivity * p) instead of Pa: an uncalibrated rig")),
-            "wait_for_subscribers": (0, common.int_param(
-                "start streaming only when this many pressure subscribers match (of\n"
-                "/tank/pressure, or of /tank/pressure_block when per_sample is false)", 0, 100)),
-        }
-        for name, (default, desc) in own.items():
+        # the one list of parameters (also --help and config/simulator.yaml)
+        for name, (default, desc) in common.node_parameters("simulator").items():
             self.declare_parameter(name, default, desc)
         try:
             self._cfg = self._config_from_params({})
@@ -299,8 +271,10 @@ class SimulatorNode(Node):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    """Entry point of ``ros2 run pneumatic_unload simulator``."""
-    return common.run(SimulatorNode, args)
+    """Entry point of ``ros2 run pneumatic_unload simulator`` (``--help``: the parameters,
+    exit 0 without starting ROS)."""
+    code = config_nodes.help_or_none("simulator", args)
+    return code if code is not None else common.run(SimulatorNode, args)
 
 
 if __name__ == "__main__":

@@ -82,6 +82,7 @@ def fast_raw_pairs(
            npt.NDArray[np.float64]]:
     """Log times and decoded fields of one topic of an indexed MCAP file (numpy, no per-message
     Python work): uses the summary's chunk indexes and the per-chunk message indexes.
+    Messages come in the order they were written (chunks and messages by file offset).
     """
     from mcap.reader import make_reader
 
@@ -102,7 +103,7 @@ def fast_raw_pairs(
             and summary.schemas[ch.schema_id].name == msgtype
         }
         expected = sum(summary.statistics.channel_message_counts.get(c, 0) for c in cids)
-        for index in summary.chunk_indexes:
+        for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             wanted = [c for c in index.message_index_offsets if c in cids]
             if not wanted:
                 continue
@@ -127,8 +128,9 @@ def fast_raw_pairs(
                 if op != OP_MESSAGE_INDEX or mcid != cid:
                     raise NotFastDecodable
                 entries = np.frombuffer(blob, "<u8", count=nbytes // 8, offset=mpos + 15)
-                log_t = entries[0::2]
-                off = entries[1::2].astype(np.int64)
+                by_offset = np.argsort(entries[1::2], kind="stable")  # the write order
+                log_t = entries[0::2][by_offset]
+                off = entries[1::2][by_offset].astype(np.int64)
                 if off.size and (off.max() + MSG_HEAD_SIZE > buf.size):
                     raise NotFastDecodable
                 if np.any(buf[off] != OP_MESSAGE) or np.any(gather(buf, off + 9, "<u2") != cid):
@@ -175,11 +177,17 @@ def _slow_raw_pairs(
 
 
 def read_stamped_pairs(
-    path: str | os.PathLike[str], topic: str, msgtype: str, *, fast: bool = True
+    path: str | os.PathLike[str], topic: str, msgtype: str, *, fast: bool = True,
+    order: str = "log",
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """(header stamps [ns], first float field, variance) of a FluidPressure/Temperature topic,
-    in log-time order. ``fast=False`` forces the generic (rosbags raw reader) path.
+    in log-time order, or with ``order="write"`` in the order the messages were written
+    (indexed MCAP files; other storage: log-time order). The write order shows what the log
+    order may hide: header stamps that step back while log times (e.g. equal to the stamps)
+    do not tell. ``fast=False`` forces the generic (rosbags raw reader) path.
     """
+    if order not in ("log", "write"):
+        raise ValueError(f"order must be 'log' or 'write', not {order!r}")
     src = resolve_bag(path)
     with open_reader(src) as reader:
         conns = topic_connections(reader, src, topic, msgtype)
@@ -190,11 +198,13 @@ def read_stamped_pairs(
                 parts = []
             else:
                 logs = np.concatenate([p[0] for p in parts])
-                order = np.argsort(logs, kind="stable")
-                t = np.concatenate([p[1] for p in parts])[order]
-                a = np.concatenate([p[2] for p in parts])[order]
-                b = np.concatenate([p[3] for p in parts])[order]
-                return t, a, b
+                t = np.concatenate([p[1] for p in parts])
+                a = np.concatenate([p[2] for p in parts])
+                b = np.concatenate([p[3] for p in parts])
+                if order == "write":
+                    return t, a, b
+                by_log = np.argsort(logs, kind="stable")
+                return t[by_log], a[by_log], b[by_log]
         return _slow_raw_pairs(reader, conns, msgtype)
 
 
@@ -221,22 +231,25 @@ class ValveSeries(NamedTuple):
 
 
 def read_pressure(
-    path: str | os.PathLike[str], *, topic: str = TOPIC_PRESSURE
+    path: str | os.PathLike[str], *, topic: str = TOPIC_PRESSURE, order: str = "log"
 ) -> PressureSeries:
     """Read all pressure samples of a bag (numpy bulk decoding of FluidPressure).
 
     Args:
         path: bag directory or single ``.mcap`` file.
         topic: pressure topic (sensor_msgs/msg/FluidPressure).
+        order: ``"log"`` (log-time order) or ``"write"`` (the order the messages were
+            written, see :func:`read_stamped_pairs`; the analysis uses it, so that a clock
+            stepping back in the header stamps is seen).
 
     Returns:
         ``(t_ns, p)``: header stamps [ns] (int64) and pressures [Pa absolute] (float64), in
-        log-time order.
+        the requested order.
 
     Raises:
         BagNotFoundError, BagFormatError, TopicNotFoundError, WrongMessageTypeError.
     """
-    t, p, _ = read_stamped_pairs(path, topic, MSGTYPE_PRESSURE)
+    t, p, _ = read_stamped_pairs(path, topic, MSGTYPE_PRESSURE, order=order)
     return PressureSeries(t, p)
 
 

@@ -22,7 +22,7 @@ from mcap.records import Message as McapMessage
 from mcap.records import Schema as McapSchema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from rosbags.interfaces import Connection
-from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import StoragePlugin, WriterError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -217,6 +217,8 @@ def recover(path: str | os.PathLike[str], *, keep_original: bool = True) -> Reco
     bag = Path(path)
     if not bag.exists():
         raise BagNotFoundError(f"bag {bag} does not exist")
+    # absolute: "x.mcap" run inside the bag directory has the parent "." (no name)
+    bag = bag.resolve()
     if bag.is_file():
         bag = bag.parent
     if (counts := _bag_is_readable(bag)) is not None:
@@ -233,8 +235,12 @@ def recover(path: str | os.PathLike[str], *, keep_original: bool = True) -> Reco
     dropped = 0
     skipped = 0
     try:
-        writer = Rosbag2Writer(tmp_root / bag.name, version=9, storage_plugin=StoragePlugin.MCAP)
-        writer.open()
+        try:
+            writer = Rosbag2Writer(tmp_root / bag.name, version=9,
+                                   storage_plugin=StoragePlugin.MCAP)
+            writer.open()
+        except WriterError as exc:
+            raise BagFormatError(f"cannot write the recovered bag {bag}: {exc}") from exc
         by_key: dict[tuple[str, str, str], Connection] = {}
         config_text: str | None = None
         try:
@@ -282,9 +288,11 @@ def recover(path: str | os.PathLike[str], *, keep_original: bool = True) -> Reco
             if config_text is not None:
                 writer.set_custom_data(CONFIG_METADATA_KEY, config_text)
             writer.close()
-        except BaseException:
+        except BaseException as exc:
             with contextlib.suppress(Exception):
                 writer.abort()
+            if isinstance(exc, WriterError):
+                raise BagFormatError(f"cannot write the recovered bag {bag}: {exc}") from exc
             raise
 
         kept: list[Path] = []
