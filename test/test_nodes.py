@@ -66,16 +66,21 @@ def _diagnostics(node: Any) -> list[Any]:
     return got
 
 
+@pytest.mark.parametrize("estimator_input", ["sample", "block"])
 def test_simulator_estimator_recorder_end_to_end(tmp_path: Path, ros_node: Any,
-                                                 venv_python: Path) -> None:
-    """Three processes: the estimate matches C, the bag holds every sample, analyze agrees."""
+                                                 venv_python: Path,
+                                                 estimator_input: str) -> None:
+    """Three processes: the estimate matches C, the bag holds every sample, analyze agrees
+    (the estimator fed FluidPressure samples, or the simulator's PressureBlock messages of
+    the same samples while the recorder records the per-sample topic)."""
     node, ex = ros_node
     got = _estimates(node)
     diags = _diagnostics(node)
     bag = tmp_path / "run"
     rec = NodeProcess("recorder", {"output": str(bag)}, tmp_path,
                       extra=["-p", "topics:=['/estimator/settings']"])
-    est = NodeProcess("estimator", {"volume": RIG["volume"], "qos": "reliable"}, tmp_path)
+    est = NodeProcess("estimator", {"volume": RIG["volume"], "qos": "reliable",
+                                    "input": estimator_input}, tmp_path)
 
     def estimator_states() -> list[str]:
         return [st.message.split(":")[0] for d in diags for st in d.status
@@ -85,8 +90,9 @@ def test_simulator_estimator_recorder_end_to_end(tmp_path: Path, ros_node: Any,
     # discovery of a new process can take seconds, so the rig starts once it has
     spin_until(node, ex, lambda: "waiting" in estimator_states(), 30.0)
     # the simulator starts streaming once the estimator and the recorder are subscribed
+    blocks = {"block_size": 100, "per_sample": True} if estimator_input == "block" else {}
     sim = NodeProcess("simulator", {**RIG, "start_delay": 1.5, "wait_for_subscribers": 2,
-                                    "duration": 5.0, "auto_charge": False}, tmp_path)
+                                    "duration": 5.0, "auto_charge": False, **blocks}, tmp_path)
     try:
         assert spin_until(node, ex, lambda: any("curve-fit" in m.method for m in got), 40.0), (
             f"no final estimate; estimator said:\n{est.output()[-2000:]}\n"

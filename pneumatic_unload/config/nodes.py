@@ -111,8 +111,8 @@ def _simulator() -> list[ParameterSpec]:
               "(transducer_zero + transducer_sensitivity * p) instead of Pa: an "
               "uncalibrated rig"),
         _int("wait_for_subscribers", 0, "start streaming only when this many pressure "
-             "subscribers match (of /tank/pressure, or of /tank/pressure_block when "
-             "per_sample is false)", 0, 100),
+             "subscriptions match, counted over the pressure topics published "
+             "(/tank/pressure, /tank/pressure_block)", 0, 100),
     ]
 
 

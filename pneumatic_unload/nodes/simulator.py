@@ -150,9 +150,14 @@ class SimulatorNode(Node):
         rate = self._cfg.rate
         need = int(self._p("wait_for_subscribers"))
         if need:
-            pub = self._pub_p if self._p("per_sample") else self._pub_block
-            self.get_logger().info(f"waiting for {need} subscriber(s) of {pub.topic_name}")
-            while pub.get_subscription_count() < need and not self._stop.is_set():
+            # the pressure topics published: per-sample, blocks, or both
+            pubs = ([self._pub_p] if self._p("per_sample") else []) \
+                + ([self._pub_block] if self._p("block_size") or not self._p("per_sample")
+                   else [])
+            names = " + ".join(p.topic_name for p in pubs)
+            self.get_logger().info(f"waiting for {need} subscriber(s) of {names}")
+            while sum(p.get_subscription_count() for p in pubs) < need \
+                    and not self._stop.is_set():
                 time.sleep(0.01)
             time.sleep(0.2)  # let the matched readers finish discovery of each other too
         self.get_logger().info(f"streaming at {rate:g} Hz")
