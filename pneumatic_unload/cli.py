@@ -32,11 +32,11 @@ from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySett
 from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
-    UnloadResult,
     merge_final,
 )
 from pneumatic_unload.estimation.chunked import ChunkedAnalysis
 from pneumatic_unload.io.csvheader import TEMPERATURE_UNITS, TIME_UNITS
+from pneumatic_unload.output import format_inputs, format_result, json_default, unload_json
 from pneumatic_unload.records import Record, RecordError, analyze_record, open_record
 
 PRESSURE_UNITS = {"Pa": 1.0, "kPa": 1e3, "bar": 1e5, "MPa": 1e6, "psi": 6894.757293168361}
@@ -124,10 +124,43 @@ def settings_from(args: argparse.Namespace, cfg: dict[str, Any]) -> EstimatorSet
         raise CliError(str(exc)) from exc
 
 
-def _unload_json(r: UnloadResult) -> dict[str, Any]:
-    d = r.to_dict()
-    d.pop("extra", None)
-    return d
+def input_sources(args: argparse.Namespace, cfg: dict[str, Any], settings: EstimatorSettings,
+                  t10_column: bool) -> dict[str, Any]:
+    """Every input the analysis used, with where it came from (echoed in the output)."""
+    given = adapters.given_options(args, EstimatorSettings)
+    rig = TankSpec.fields_of(cfg)
+
+    def source(name: str) -> str:
+        if name in given:
+            return "command line"
+        if name in (cfg.get("estimator_settings") or {}):
+            return "bag (the live estimator's settings)"
+        if name in rig:
+            return "bag (rig configuration)"
+        return "default"
+
+    s = settings
+    t10_src = "temperature column at the unload start" if t10_column else \
+        source("initial_temperature")
+    if t10_src == "default" and "measured_initial_temperature" in cfg:
+        t10_src = "temperature column (first row)"
+    return {
+        "volume": {"value": s.volume, "unit": "m^3", "source": source("volume")},
+        "initial_temperature": {"value": s.initial_temperature, "unit": "K",
+                                "source": t10_src},
+        "wall_temperature": {"value": s.wall, "unit": "K",
+                             "source": source("wall_temperature")
+                             if s.wall_temperature is not None else "assumed = T10"},
+        "atmosphere": {"value": s.atmosphere, "unit": "Pa",
+                       "source": source("atmosphere") if s.atmosphere is not None
+                       else "measured: the final plateau (auto)"},
+        "gas": {"gas_constant": s.gas_constant, "gamma": s.gamma},
+        "heat_model": s.heat_model,
+        "uncertainties": {"volume_m3": s.volume_uncertainty, "temperature_K":
+                          s.temperature_uncertainty, "pressure_Pa": s.pressure_uncertainty,
+                          "atmosphere_Pa": s.atmosphere_uncertainty,
+                          "defaults": "volume 0.5 % of V, pressure 0.1 % of p10"},
+    }
 
 
 def open_input(args: argparse.Namespace) -> Record:
@@ -167,6 +200,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     settings = settings_from(args, rec.cfg)
     run = _run(rec, settings)
     unloads = merge_final(run.published)
+    t10_column = False
     if (rec.has_temperature and args.initial_temperature is None and unloads
             and math.isfinite(unloads[0].t_start)):
         # T10 from the temperature column: the gas temperature at the start of the unload
@@ -175,6 +209,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             t10 = rec.temperature_at(unloads[0].t_start)
         except RecordError as exc:
             raise CliError(str(exc)) from exc
+        t10_column = True
         if abs(t10 - settings.initial_temperature) > 1e-3:
             settings = dataclasses.replace(settings, initial_temperature=t10)
             run = _run(rec, settings)
@@ -186,16 +221,18 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         # C from gauge readings taken as absolute is wrong: no unload may say "ok"
         unloads = [dataclasses.replace(r, status="bad_data", status_text=problem)
                    for r in unloads]
+    inputs = input_sources(args, rec.cfg, settings, t10_column)
     if args.json:
         out = {"source": str(args.path), "samples": run.samples,
-               "settings": dict(vars(settings)),
-               "unloads": [_unload_json(r) for r in unloads],
-               "published": [_unload_json(r) for r in published],
+               "settings": dict(vars(settings)), "inputs": inputs,
+               "unloads": [unload_json(r) for r in unloads],
+               "published": [unload_json(r) for r in published],
                "no_unload_reason": why, "input_problem": problem,
                "input_warnings": list(rec.warnings)}
-        print(json.dumps(out, indent=2, allow_nan=False, default=_json_default))
+        print(json.dumps(out, indent=2, allow_nan=False, default=json_default))
     else:
         print(f"{args.path}: {run.samples} samples, {len(unloads)} unload(s)")
+        print(format_inputs(inputs))
         for r in unloads:
             print(format_result(r))
     if why is not None:
@@ -215,34 +252,6 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     return 0 if unloads and problem is None else 1
 
 
-def _json_default(o: object) -> object:
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-
-def format_result(r: UnloadResult) -> str:
-    """Human-readable summary of one unload (trade units alongside SI)."""
-    def dm3(c: float) -> str:
-        return f"{c / 1e-8:.4f} dm^3/(s bar)" if math.isfinite(c) else "n/a"
-
-    lines = [f"unload {r.index}: {r.status} ({r.status_text})"]
-    if math.isfinite(r.tau_exp):
-        lines.append(f"  tau_exp        = {r.tau_exp:.6f} s  (+- {r.tau_exp_std:.2g} s)")
-        lines.append(f"  p10 / p_atm / p* = {r.p10:.0f} / {r.p_atm:.0f} / {r.p_star:.0f} Pa")
-    lines.append(f"  C (eq 39)      = {r.conductance:.5g} m^3/(s Pa) = {dm3(r.conductance)}")
-    if math.isfinite(r.conductance_model):
-        lines.append(
-            f"  C (model)      = {r.conductance_model:.5g} +- {r.conductance_model_std:.2g}"
-            f" m^3/(s Pa) = {dm3(r.conductance_model)}  [{r.method}]")
-        lines.append(f"  eq 39 - model  = {100 * r.bias:+.2f} %")
-    if math.isfinite(r.critical_ratio):
-        lines.append(f"  b              = {r.critical_ratio:.3f} +- {r.critical_ratio_std:.3f}")
-    return "\n".join(lines)
-
-
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Simulate a run and write it as a bag."""
     from pneumatic_unload.io.bag import BagError
@@ -260,7 +269,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         info = write_simulated_bag(cfg, Path(args.out), analyze_live=not args.no_estimate)
     except (BagError, FileExistsError) as exc:
         raise CliError(str(exc)) from exc
-    print(json.dumps(info, indent=2, default=_json_default) if args.json else
+    print(json.dumps(info, indent=2, default=json_default) if args.json else
           f"wrote {info['samples']} samples to {args.out}")
     return 0
 
@@ -351,7 +360,7 @@ def cmd_discrepancy(args: argparse.Namespace) -> int:
                 zip(results, args.paths, strict=True)]
         out_json: dict[str, Any] = docs[0] if len(docs) == 1 else {
             "runs": docs, "geometry_law": law.to_dict() if law else None}
-        print(json.dumps(out_json, indent=2, allow_nan=False, default=_json_default))
+        print(json.dumps(out_json, indent=2, allow_nan=False, default=json_default))
     else:
         for name, res in zip(names, results, strict=True):
             print(f"{name}: {res.verdict}")

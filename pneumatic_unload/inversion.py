@@ -10,6 +10,7 @@ s, Pa absolute, K, m^3, m^3/(s Pa).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -59,11 +60,18 @@ def rig_from_settings(settings: EstimatorSettings, *, conductance: float, p10: f
         Multiplier on the natural-convection correlation [-].
     """
     b = settings.critical_ratio if critical_ratio is None else critical_ratio
-    start = Start(conductance=conductance, critical_ratio=b, t_open=0.0, p10=p10,
-                  p_atm=p_atm, tau=1.0, dt=1e-3, t_first=0.0, t_last=1.0)
-    model = estimator_model(settings, start, p_atm=p_atm)
-    return model.config({"C": conductance, "b": b, "t_open": 0.0, "p10": p10,
-                         "p_atm": p_atm, "heat_scale": heat_scale})
+    return _configuring_model(settings, p_atm).config(
+        {"C": conductance, "b": b, "t_open": 0.0, "p10": p10, "p_atm": p_atm,
+         "heat_scale": heat_scale})
+
+
+@functools.lru_cache(maxsize=16)
+def _configuring_model(settings: EstimatorSettings, p_atm: float) -> ParametricModel:
+    """The estimator's model of one settings and p_atm [Pa], kept: its configurations are
+    then built by checking only the values that change (an inversion builds dozens)."""
+    start = Start(conductance=1e-8, critical_ratio=settings.critical_ratio, t_open=0.0,
+                  p10=5e5, p_atm=p_atm, tau=1.0, dt=1e-3, t_first=0.0, t_last=1.0)
+    return estimator_model(settings, start, p_atm=p_atm)
 
 
 def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float, *,

@@ -9,11 +9,18 @@ import math
 import numpy as np
 import pytest
 
+from pneumatic_unload.budget import EXACT_INPUTS
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import analyze, merge_final
 from pneumatic_unload.model import default_duration, discharge, simulate
 from pneumatic_unload.physics import orifice_conductance
 from pneumatic_unload.runs import settings_for
+
+
+def exact(settings):
+    """The simulation's own tank and gas: inputs exactly known (no type B terms)."""
+    return dataclasses.replace(settings, **EXACT_INPUTS)
+
 
 NOISE = 1000.0  # 0.1 % FS of a 1 MPa transducer [Pa]
 
@@ -35,7 +42,7 @@ def test_model_c_and_b_one_sigma_coverage_with_heat_transfer():
     zc, zb = [], []
     for cfg in _rigs(12, seed=7, heat=True):
         sim = simulate(cfg)
-        r = merge_final(analyze(sim.t, sim.measured, settings_for(cfg)))[0]
+        r = merge_final(analyze(sim.t, sim.measured, exact(settings_for(cfg))))[0]
         assert r.final
         # the final status follows the fitted b: eq 39 assumes choked flow down to p*
         b = cfg.critical_ratio
@@ -82,7 +89,7 @@ def test_start_time_against_cramer_rao_bound(volume, diameter):
                     seed=41, initial_pressure=6e5)
     cfg = cfg.replace(duration=0.35 * default_duration(cfg))
     sim = simulate(cfg)
-    st = dataclasses.replace(settings_for(cfg), heat_model="adiabatic", curve_fit=False)
+    st = dataclasses.replace(exact(settings_for(cfg)), heat_model="adiabatic", curve_fit=False)
     r = analyze(sim.t, sim.measured, st)[0]
     bound = _start_crlb(cfg, sim.t)
     err = abs(r.t_start - sim.t_open)
@@ -105,7 +112,7 @@ def test_curve_fit_reaches_the_least_squares_minimum():
     cfg = RigConfig(volume=12e-3, conductance=orifice_conductance(1.5e-3),
                     initial_pressure=7.5e5, critical_ratio=0.31, noise_std=NOISE,
                     effects=("heat_transfer",))
-    st = settings_for(cfg)
+    st = exact(settings_for(cfg))
     t = np.arange(math.floor(0.6 * (cfg.pre_time + default_duration(cfg)) * cfg.rate)) \
         / cfg.rate
     x_true = np.array([math.log(cfg.conductance), cfg.critical_ratio, cfg.pre_time,
@@ -149,3 +156,34 @@ def test_curve_fit_reaches_the_least_squares_minimum():
     sd = np.sqrt(np.diag(np.linalg.inv((jt * counts[:, None]).T @ jt))) * NOISE
     assert abs((x[0] - x_true[0]) - dx[0]) < 0.1 * sd[0], ((x - x_true - dx) / sd)
     assert abs(fit.conductance_std / fit.conductance / sd[0] - 1.0) < 0.05
+
+
+def test_budget_covers_the_truth_when_the_inputs_are_off_by_their_stated_uncertainty():
+    """The GUM budget (issue #11): 20 trials whose true V, T10 and transducer offset differ
+    from what the operator states by draws of their stated standard uncertainties (0.5 %
+    of V, 1 K, 0.1 % of p10); the combined sigma covers the truth at 1 sigma in 9..19 of
+    20 (68 %, binomial) and at 2 sigma in 17..20 (95 %); the type A part alone would not
+    (the inputs dominate), and the budget names an input as its largest term."""
+    rng = np.random.default_rng(2026)
+    z, z_a, largest = [], [], []
+    for k in range(20):
+        v_true = rng.uniform(2e-3, 8e-3)
+        p10 = rng.uniform(5e5, 7e5)
+        cfg = RigConfig(volume=v_true, conductance=orifice_conductance(rng.uniform(1.5e-3, 2.5e-3)),
+                        initial_pressure=p10, initial_temperature=293.15 + rng.normal(0, 1.0),
+                        wall_temperature=293.15, noise_std=NOISE, seed=500 + k)
+        sim = simulate(cfg)
+        offset = rng.normal(0.0, 1e-3 * p10)  # the transducer's zero error
+        stated = dataclasses.replace(settings_for(cfg), volume=v_true * (1 + rng.normal(0, 0.005)),
+                                     initial_temperature=293.15, heat_model="adiabatic")
+        r = merge_final(analyze(sim.t, sim.measured + offset, stated))[0]
+        err = r.conductance_model - cfg.conductance
+        z.append(err / r.conductance_model_std)
+        z_a.append(err / r.extra["budget"]["type_a_std"])
+        largest.append(r.extra["budget"]["largest"])
+    z, z_a = np.abs(z), np.abs(z_a)
+    assert 9 <= int(np.sum(z < 1.0)) <= 19, z
+    assert int(np.sum(z < 2.0)) >= 17, z
+    assert int(np.sum(z_a < 2.0)) < 10, z_a  # noise alone: the truth far outside
+    assert set(largest) <= {"volume V", "initial temperature T10",
+                            "pressure transducer (offset)"}, largest

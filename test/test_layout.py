@@ -324,11 +324,13 @@ LAYERS: dict[str, int] = {
     "inversion": 4,  # model-based C at the crossing (and its table)
     "fitting": 4,  # model-based C: the curve fit, its heat-law choice
     "recovery": 4,  # SSE: the re-heating after an aborted unload
+    "budget": 4,  # the uncertainty budget of a C (GUM: type A, type B, model form)
     "estimation": 5,  # the streaming estimator and batch analysis
     "discrepancy": 6,
     "runs": 6,
     "plotting": 6,
     "records": 6,  # input records of the offline analysis: CSV in chunks, bags
+    "output": 6,  # text and JSON output of the analysis (results, inputs, budget)
     "cli": 7,
     "demo": 7,
     "nodes": 8,

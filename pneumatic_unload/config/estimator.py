@@ -13,6 +13,7 @@ from pneumatic_unload.config.fields import (
     flag,
     integer,
     number,
+    optional,
     validate,
 )
 from pneumatic_unload.config.tank import TankSpec
@@ -47,6 +48,15 @@ class EstimatorSettings(TankSpec):
         A stamp step larger than this many nominal periods is a gap [-].
     curve_fit : bool
         Run the full-curve least-squares fit (C, b) when the unload ends.
+    volume_uncertainty : float or None
+        Standard uncertainty of V [m^3] (None: 0.5 % of V) for the budget of C.
+    temperature_uncertainty : float
+        Standard uncertainty of T10 and of the wall temperature [K].
+    pressure_uncertainty : float or None
+        Standard uncertainty of the pressure transducer, as an offset common to all its
+        readings [Pa] (None: 0.1 % of p10).
+    atmosphere_uncertainty : float
+        Standard uncertainty of a given p_atm [Pa] (a measured one is type A).
     """
 
     heat_model: str = choice("natural", ("natural", "adiabatic"),
@@ -62,6 +72,15 @@ class EstimatorSettings(TankSpec):
     max_gap_factor: float = number(5.0, "-", 1.0, 1e6,
                                    "a stamp step above this many periods is a gap")
     curve_fit: bool = flag(True, "full-curve fit (C, b) once the unload's tail is recorded")
+    volume_uncertainty: float | None = optional(
+        None, "m^3", 0.0, 10.0, "standard uncertainty of V", "0.5 % of V")
+    temperature_uncertainty: float = number(
+        1.0, "K", 0.0, 100.0, "standard uncertainty of T10 and of the wall temperature")
+    pressure_uncertainty: float | None = optional(
+        None, "Pa", 0.0, 1e7, "standard uncertainty of a pressure reading, an offset "
+        "common to all", "0.1 % of p10")
+    atmosphere_uncertainty: float = number(
+        100.0, "Pa", 0.0, 1e5, "standard uncertainty of a given atmosphere (barometer)")
 
     def __post_init__(self) -> None:
         """Validate every field (raises :class:`EstimationError` with the reason)."""

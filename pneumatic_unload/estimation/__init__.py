@@ -53,6 +53,7 @@ from pneumatic_unload.estimation.types import (
     FloatArray,
     UnloadResult,
     estimate_fields,
+    recommended,
 )
 
 __all__ = [
@@ -76,4 +77,5 @@ __all__ = [
     "gauge_suspicion",
     "hinge_fit",
     "merge_final",
+    "recommended",
 ]

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from pneumatic_unload import physics
+from pneumatic_unload.budget import eq39_budget, model_budget, wall_sensitivity
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 from pneumatic_unload.fitting import fit_curve, fitted_tau_exp
@@ -29,6 +30,83 @@ def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> boo
 
     return settings.heat_model != "adiabatic" or may_turn_subsonic(settings, p_atm, p_star)
 
+
+
+def crossing_budgets(settings: EstimatorSettings, *, c39: float, c_model: float,
+                     c_model_std: float, tau: float, tau_std: float, p10: float,
+                     p_atm: float, p_star: float) -> tuple[float, float, dict[str, Any]]:
+    """Uncertainty budgets of the crossing estimate (closed-form sensitivities: a few
+    microseconds, inside the live crossing latency).
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Inputs and their stated uncertainties.
+    c39, c_model, c_model_std : float
+        eq 39's C, the model-based C and its record-only 1-sigma [m^3/(s Pa)].
+    tau, tau_std : float
+        Unloading time and its 1-sigma [s].
+    p10, p_atm, p_star : float
+        Pressures [Pa absolute].
+
+    Returns
+    -------
+    tuple
+        (eq 39's combined 1-sigma, the model C's combined 1-sigma [m^3/(s Pa)], the
+        ``extra`` entries 'budget' and 'budget_eq39').
+    """
+    measured = settings.atmosphere is None
+    extra: dict[str, Any] = {}
+    c39_std = math.nan
+    if math.isfinite(c39) and c39 > 0 and math.isfinite(tau_std):
+        b39 = eq39_budget(settings, c39, tau=tau, tau_std=tau_std, p10=p10, p_atm=p_atm,
+                          p_star=p_star, atmosphere_measured=measured)
+        c39_std = b39.combined_std
+        extra["budget_eq39"] = b39.to_dict()
+    if math.isfinite(c_model) and c_model > 0 and math.isfinite(c_model_std):
+        bm = model_budget(settings, c_model, type_a_std=c_model_std,
+                          type_a_name="crossing time (noise), b prior, heat correlation",
+                          model_form_std=0.0, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
+                          atmosphere_measured=measured)
+        c_model_std = bm.combined_std
+        extra["budget"] = bm.to_dict()
+    return c39_std, c_model_std, extra
+
+
+def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
+                 type_a_std: float, model_form_std: float, heat_law: str
+                 ) -> dict[str, Any] | None:
+    """Uncertainty budget of the final (curve-fit) C; the wall temperature's term comes
+    from two model inversions at the crossing when a heat law was fitted (about a
+    millisecond). None when C is not finite.
+
+    Parameters
+    ----------
+    res : UnloadResult
+        The crossing result (tau, pressures).
+    settings : EstimatorSettings
+        Inputs and their stated uncertainties.
+    c, type_a_std, model_form_std : float
+        The fitted C, its 1-sigma from the record (noise, AR(1)-corrected, inflated for
+        structured residuals) and the heat laws' spread [m^3/(s Pa)].
+    heat_law : str
+        The heat law chosen ('natural', 'fixed' or 'none').
+    """
+    if not (math.isfinite(c) and c > 0):
+        return None
+    wall_std = math.nan
+    if heat_law in ("natural", "fixed"):
+        wall_std = wall_sensitivity(settings, res.tau_exp, p10=res.p10, p_atm=res.p_atm,
+                                    p_star=res.p_star, c_start=c)
+        wall_std = wall_std * c / res.conductance_model \
+            if math.isfinite(res.conductance_model) and res.conductance_model > 0 \
+            else wall_std
+    return model_budget(settings, c, type_a_std=type_a_std,
+                        type_a_name="curve fit (noise, AR(1), residual structure)",
+                        model_form_std=model_form_std, tau=res.tau_exp, p10=res.p10,
+                        p_atm=res.p_atm, p_star=res.p_star,
+                        atmosphere_measured=settings.atmosphere is None,
+                        wall_std=wall_std).to_dict()
 
 def prepare_inversion(settings: EstimatorSettings, t_mid: float, p_mid: float, p10: float,
                       p_atm: float, p_star: float) -> Any:
@@ -150,11 +228,22 @@ def refine_with_curve_fit(
                         conductance=res.conductance_model)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return dataclasses.replace(res, final=True, extra={"curve_fit_error": str(exc)})
-    c_std = fit.conductance_std
+    mf = fit.model_form_std if math.isfinite(fit.model_form_std) else 0.0
+    c_std = math.sqrt(max(fit.conductance_std**2 - mf**2, 0.0))  # the record's part
     if fit.heat_law == "natural" and not math.isfinite(fit.heat_scale_std):
-        c_std = math.hypot(c_std, res.conductance_model_std)
+        c_std = math.hypot(c_std, res.extra.get("budget", {}).get(
+            "type_a_std", res.conductance_model_std))
     extra = {"curve_fit": dataclasses.asdict(fit), "noise_std": noise_std,
              "conductance_crossing_inversion": res.conductance_model}
+    if "budget_eq39" in res.extra:
+        extra["budget_eq39"] = res.extra["budget_eq39"]
+    budget = final_budget(res, settings, c=fit.conductance, type_a_std=c_std,
+                          model_form_std=mf, heat_law=fit.heat_law)
+    if budget is not None:
+        extra["budget"] = budget
+        c_std = budget["combined_std"]
+    else:
+        c_std = math.hypot(c_std, mf)
     status, text = res.status, res.status_text
     b = fit.critical_ratio
     if math.isfinite(b) and b > 0:

@@ -50,6 +50,7 @@ class UnloadResult:
     conductance: float
     conductance_model: float
     conductance_model_std: float
+    conductance_std: float = math.nan
     critical_ratio: float = math.nan
     critical_ratio_std: float = math.nan
     conductance_isentropic: float = math.nan
@@ -109,6 +110,11 @@ class Diagnostic:
 
 def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
     """UnloadEstimate message fields of a result (stamps in ns, NaN kept)."""
+    budget = r.extra.get("budget", {})
+
+    def num(x: float | None) -> float:
+        return math.nan if x is None else float(x)
+
     return {
         "header_stamp_ns": int(round(r.t_cross * 1e9)) if math.isfinite(r.t_cross)
         else int(round(r.t_complete * 1e9)),
@@ -116,9 +122,30 @@ def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
         "unload_start_ns": int(round(r.t_start * 1e9)) if math.isfinite(r.t_start) else 0,
         "unload_index": r.index, "status": STATUSES.index(r.status),
         "status_text": r.status_text, "method": r.method, "quality": r.quality,
-        "conductance": r.conductance, "conductance_model": r.conductance_model,
+        "conductance": r.conductance, "conductance_std": r.conductance_std,
+        "conductance_model": r.conductance_model,
         "conductance_model_std": r.conductance_model_std,
+        "conductance_model_std_type_a": num(budget.get("type_a_std")),
+        "conductance_model_std_type_b": num(budget.get("type_b_std")),
+        "conductance_model_std_model_form": num(budget.get("model_form_std")),
+        "budget_largest": budget.get("largest", ""),
+        "heat_law": r.extra.get("curve_fit", {}).get("heat_law", "") if r.final else "",
         "critical_ratio": r.critical_ratio, "critical_ratio_std": r.critical_ratio_std,
         "tau_exp": r.tau_exp, "p10": r.p10, "p_atm": r.p_atm, "p_star": r.p_star,
         "initial_temperature": r.initial_temperature, "volume": r.volume,
     }
+
+
+def recommended(r: UnloadResult) -> dict[str, Any]:
+    """The one C to report for a result, with its combined and expanded (k = 2)
+    uncertainty [m^3/(s Pa)] and where it comes from: the model-based C (curve fit or
+    crossing inversion) when known, else eq 39's (biased by design: said so)."""
+    if math.isfinite(r.conductance_model):
+        source = "model-based C, full-curve fit" if r.final else \
+            "model-based C, inversion at the p* crossing"
+        c, sd = r.conductance_model, r.conductance_model_std
+    else:
+        source = "eq 39 (no model-based value; eq 39 is biased by design, see method.md)"
+        c, sd = r.conductance, r.conductance_std
+    return {"conductance": c, "std": sd, "expanded": 2.0 * sd, "coverage_factor": 2.0,
+            "source": source}

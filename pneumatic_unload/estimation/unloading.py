@@ -23,7 +23,12 @@ from pneumatic_unload.estimation.decisions import (
     settled_at_end,
     stalled,
 )
-from pneumatic_unload.estimation.refine import model_inversion, needs_model, prepare_inversion
+from pneumatic_unload.estimation.refine import (
+    crossing_budgets,
+    model_inversion,
+    needs_model,
+    prepare_inversion,
+)
 from pneumatic_unload.estimation.regression import crossing_fit, hinge_fit, rms_sigma
 from pneumatic_unload.estimation.sse import on_abort
 from pneumatic_unload.estimation.state import TAIL, EstimatorState
@@ -274,12 +279,16 @@ def crossing_result(st: EstimatorState, i: int, t_cross: float, t_std: float, ga
         quality = min(quality, 0.5)
     if tau_std / tau > 0.01:
         quality = min(quality, 0.5)
+    c39_std, c_model_std, budgets = crossing_budgets(
+        s, c39=c39, c_model=c_model, c_model_std=c_model_std, tau=tau, tau_std=tau_std,
+        p10=p10, p_atm=p_atm, p_star=p_star)
     shift = st.buf.shift
     res = UnloadResult(
         index=st.n_unloads, status=status, status_text=text, t_start=u.t0,
         t_cross=t_cross, tau_exp=tau, tau_exp_std=tau_std, p10=p10, p_atm=p_atm,
         p_star=p_star, initial_temperature=s.initial_temperature, volume=s.volume,
         conductance=c39, conductance_model=c_model, conductance_model_std=c_model_std,
+        conductance_std=c39_std, extra=budgets,
         conductance_isentropic=c_isen, quality=quality, method=method,
         noise_std=abs(st.sigma * s.signal_gain), i_start=u.i0 + shift,
         i_cross=shift + int(np.searchsorted(st.buf.views(i + 1)[0], t_cross)),

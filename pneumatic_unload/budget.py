@@ -1,0 +1,318 @@
+"""Uncertainty budget of a sonic conductance, in the manner of the GUM (ISO 6358-2's test).
+
+A C from a tank discharge depends on what was measured in the record (type A: the noise,
+AR(1)-corrected, through the crossing time or the curve fit) and on inputs stated by the
+user, each with a standard uncertainty (type B): the tank volume V, the initial gas
+temperature T10 (and the wall's, when a heat law was fitted), the pressure transducer
+(an offset common to every reading) and a barometer's p_atm. A model-form term carries the
+spread of heat laws that fit the record about equally well. The combined standard
+uncertainty is the root sum of squares (the inputs are independent); the expanded one uses
+k = 2 (about 95 %).
+
+Sensitivities are first order and come from the exact isentropic inversion of the choked
+discharge (:func:`pneumatic_unload.physics.conductance_isentropic_inversion`), the law that
+carries the time scale V/(C sqrt(T10)) of every model of the package:
+
+* V: dC/C = dV/V (the solution depends on t C/V);
+* T10: dC/C = -dT10/(2 T10) (and on t C sqrt(T10));
+* a transducer offset d moves p10 and the crossing level together (with p_atm measured by
+  the same transducer or given, the crossing the estimator finds is the physical p* moved by
+  d): dC = (dC/dp_cross + dC/dp10) d;
+* p_atm given by a barometer: it moves p* and so the crossing, which the inversion follows
+  exactly while the flow is choked (dC = 0); eq 39, whose formula holds p* fixed, moves;
+* the wall temperature (fitted heat laws only): the model-based inversion at the crossing
+  with the natural law, the wall moved by its uncertainty (:func:`wall_sensitivity`).
+
+SI units: m^3/(s Pa) for C, m^3, K, Pa, s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.inversion import invert_crossing
+from pneumatic_unload.physics import conductance_eq39, conductance_isentropic_inversion
+
+#: Coverage factor of the expanded uncertainty [-] (about 95 % for a normal distribution).
+COVERAGE_FACTOR = 2.0
+#: Default standard uncertainty of V, relative [-] (volume by water weighing or drawing).
+VOLUME_REL_DEFAULT = 0.005
+#: Default standard uncertainty of a pressure reading, relative to p10 [-] (0.1 % of
+#: reading: an industrial transducer's accuracy class, as a 1-sigma offset).
+PRESSURE_REL_DEFAULT = 0.001
+#: Settings changes that state the inputs as exactly known (a simulation analysed with its
+#: own tank and gas): the budget keeps the record's terms and the model form only.
+EXACT_INPUTS: dict[str, float] = {"volume_uncertainty": 0.0, "temperature_uncertainty": 0.0,
+                                  "pressure_uncertainty": 0.0, "atmosphere_uncertainty": 0.0}
+
+
+@dataclass(frozen=True)
+class BudgetTerm:
+    """One line of the budget.
+
+    Attributes
+    ----------
+    name : str
+        What the term is (e.g. 'volume V').
+    kind : str
+        'A' (from the record), 'B' (a stated input) or 'model' (model form).
+    value : float
+        The input's value used [unit] (NaN for type A and model terms).
+    input_std : float
+        Its standard uncertainty [unit] (NaN for type A and model terms).
+    unit : str
+        Unit of value and input_std.
+    std : float
+        Standard uncertainty it contributes to C [m^3/(s Pa)].
+    note : str
+        Where the input came from, or how the term was computed.
+    """
+
+    name: str
+    kind: str
+    value: float
+    input_std: float
+    unit: str
+    std: float
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Budget:
+    """The uncertainty budget of one C.
+
+    Attributes
+    ----------
+    value : float
+        The C it belongs to [m^3/(s Pa)].
+    terms : tuple of BudgetTerm
+        The lines, in order: type A, type B, model form.
+    """
+
+    value: float
+    terms: tuple[BudgetTerm, ...]
+
+    @property
+    def combined_std(self) -> float:
+        """Combined standard uncertainty [m^3/(s Pa)] (root sum of squares)."""
+        return math.sqrt(sum(t.std**2 for t in self.terms if math.isfinite(t.std)))
+
+    def part_std(self, kind: str) -> float:
+        """Root sum of squares of the terms of one kind ('A', 'B', 'model') [m^3/(s Pa)]."""
+        return math.sqrt(sum(t.std**2 for t in self.terms
+                             if t.kind == kind and math.isfinite(t.std)))
+
+    @property
+    def expanded(self) -> float:
+        """Expanded uncertainty, k = :data:`COVERAGE_FACTOR` [m^3/(s Pa)]."""
+        return COVERAGE_FACTOR * self.combined_std
+
+    @property
+    def largest(self) -> BudgetTerm:
+        """The term contributing most."""
+        return max(self.terms, key=lambda t: t.std if math.isfinite(t.std) else -1.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: value, combined, expanded (k), parts, largest term, the lines."""
+        def clean(d: dict[str, Any]) -> dict[str, Any]:  # NaN (not applicable) -> None
+            return {k: None if isinstance(v, float) and not math.isfinite(v) else v
+                    for k, v in d.items()}
+
+        return clean({"value": self.value, "combined_std": self.combined_std,
+                      "expanded": self.expanded, "coverage_factor": COVERAGE_FACTOR,
+                      "type_a_std": self.part_std("A"), "type_b_std": self.part_std("B"),
+                      "model_form_std": self.part_std("model"),
+                      "largest": self.largest.name,
+                      "terms": [clean(dataclasses.asdict(t)) for t in self.terms]})
+
+
+def format_budget(d: dict[str, Any], unit: float = 1e-9,
+                  unit_name: str = "1e-9 m^3/(s Pa)") -> list[str]:
+    """Text lines of a budget given as :meth:`Budget.to_dict`: one per term (its share of
+    the variance, the input and its uncertainty), then the combined and expanded values."""
+    var = d["combined_std"] ** 2 or 1.0
+    out = []
+    for t in d["terms"]:
+        std = t["std"] if t["std"] is not None and math.isfinite(t["std"]) else 0.0
+        given = "" if t["input_std"] is None or not math.isfinite(t["input_std"]) else \
+            f"; {t['value']:.6g} +- {t['input_std']:.3g} {t['unit']}"
+        note = f" ({t['note']})" if t["note"] else ""
+        out.append(f"    {t['kind']:5s} {t['name']:46s} {std / unit:9.4f}"
+                   f"  {100 * std**2 / var:5.1f} %{given}{note}")
+    rel = 100 * d["combined_std"] / d["value"] if d["value"] else math.nan
+    out.append(f"    combined u(C) = {d['combined_std'] / unit:.4f} {unit_name} ({rel:.2f} %),"
+               f" expanded U (k = {d['coverage_factor']:g}) = {d['expanded'] / unit:.4f};"
+               f" largest: {d['largest']}")
+    return out
+
+
+def input_uncertainties(settings: EstimatorSettings, p10: float) -> dict[str, float]:
+    """The stated (or default) standard uncertainties of the inputs [SI].
+
+    Returns
+    -------
+    dict
+        volume [m^3], temperature [K], pressure [Pa], atmosphere [Pa].
+    """
+    s = settings
+    return {
+        "volume": s.volume_uncertainty if s.volume_uncertainty is not None
+        else VOLUME_REL_DEFAULT * s.volume,
+        "temperature": s.temperature_uncertainty,
+        "pressure": s.pressure_uncertainty if s.pressure_uncertainty is not None
+        else PRESSURE_REL_DEFAULT * p10,
+        "atmosphere": s.atmosphere_uncertainty,
+    }
+
+
+def _isentropic(settings: EstimatorSettings, tau: float, p_cross: float, p10: float,
+                t10: float | None = None, volume: float | None = None) -> float:
+    return conductance_isentropic_inversion(
+        tau, p_cross, p10, settings.volume if volume is None else volume,
+        settings.initial_temperature if t10 is None else t10, settings.gas)
+
+
+def input_terms(settings: EstimatorSettings, c: float, *, tau: float, p10: float,
+                p_atm: float, p_star: float, atmosphere_measured: bool,
+                wall_std: float = math.nan, eq39: bool = False) -> list[BudgetTerm]:
+    """The type B lines of the budget of a C.
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        The inputs (V, T10, wall temperature, p_atm) and their uncertainties.
+    c : float
+        The C whose budget this is [m^3/(s Pa)].
+    tau : float
+        Time from the start to the p* crossing [s].
+    p10, p_atm, p_star : float
+        Initial, atmospheric and crossing pressures [Pa absolute].
+    atmosphere_measured : bool
+        p_atm came from the record (its uncertainty is then type A, already counted).
+    wall_std : float
+        C's standard uncertainty from the wall temperature [m^3/(s Pa)] (see
+        :func:`wall_sensitivity`); NaN: no heat law fitted, no term.
+    eq39 : bool
+        The budget of eq 39's C (its formula's own sensitivities) instead of the model's.
+    """
+    s = settings
+    u = input_uncertainties(s, p10)
+    gas = s.gas
+    terms = [BudgetTerm("volume V", "B", s.volume, u["volume"], "m^3",
+                        abs(c) * u["volume"] / s.volume,
+                        "stated" if s.volume_uncertainty is not None
+                        else f"default {100 * VOLUME_REL_DEFAULT:g} % of V"),
+             BudgetTerm("initial temperature T10", "B", s.initial_temperature,
+                        u["temperature"], "K",
+                        abs(c) * 0.5 * u["temperature"] / s.initial_temperature,
+                        "temperature_uncertainty")]
+    d = u["pressure"]
+    if eq39:
+        def c39(dp10: float, datm: float) -> float:
+            return conductance_eq39(tau, p10 + dp10, p_atm + datm, s.volume,
+                                    s.initial_temperature, gas)
+        # an offset moves p10 and p_atm (measured) alike; a given p_atm stays
+        dm = d if atmosphere_measured else 0.0
+        std_p = abs(c39(d, dm) - c39(-d, -dm)) / 2.0
+    else:
+        std_p = abs(_isentropic(s, tau, p_star + d, p10 + d)
+                    - _isentropic(s, tau, p_star - d, p10 - d)) / 2.0 \
+            * abs(c) / max(_isentropic(s, tau, p_star, p10), 1e-300)
+    terms.append(BudgetTerm("pressure transducer (offset)", "B", p10, d, "Pa", std_p,
+                            "stated" if s.pressure_uncertainty is not None else
+                            f"default {100 * PRESSURE_REL_DEFAULT:g} % of p10"))
+    if not atmosphere_measured:
+        ua = u["atmosphere"]
+        if eq39:
+            # p* moves by 0.632 dp_atm, and the crossing with it: for the same C the
+            # closed form reaches p* + 0.632 dp_atm at tau X(p* + ...)/X(p*)
+            moved = tau * _isentropic(s, tau, p_star + (1.0 - 0.368) * ua, p10) \
+                / _isentropic(s, tau, p_star, p10)
+            std_a = abs(conductance_eq39(moved, p10, p_atm + ua, s.volume,
+                                         s.initial_temperature, gas) - c)
+        else:
+            std_a = 0.0  # the inversion follows the moved crossing exactly (choked)
+        terms.append(BudgetTerm("atmosphere p_atm (given)", "B", p_atm, ua, "Pa", std_a,
+                                "atmosphere_uncertainty"))
+    if math.isfinite(wall_std):
+        wall = s.wall
+        terms.append(BudgetTerm(
+            "wall temperature", "B", wall, u["temperature"], "K", wall_std,
+            "given" if s.wall_temperature is not None else "assumed = T10 (not given)"))
+    return terms
+
+
+def wall_sensitivity(settings: EstimatorSettings, tau: float, *, p10: float, p_atm: float,
+                     p_star: float, c_start: float) -> float:
+    """C's standard uncertainty from the wall temperature [m^3/(s Pa)]: the model-based
+    inversion at the crossing (natural heat law) with the wall moved by +-u(T)
+    (temperature_uncertainty [K]); NaN when it cannot be computed."""
+    u = settings.temperature_uncertainty
+    out = []
+    for sign in (1.0, -1.0):
+        moved = dataclasses.replace(settings, wall_temperature=settings.wall + sign * u,
+                                    heat_model="natural")
+        try:
+            c, _sd = invert_crossing(tau, 0.0, p10=p10, p_atm=p_atm, p_star=p_star,
+                                     settings=moved, c_start=c_start)
+        except (ValueError, ArithmeticError):
+            return math.nan
+        out.append(c)
+    return abs(out[0] - out[1]) / 2.0
+
+
+def model_budget(settings: EstimatorSettings, c: float, *, type_a_std: float,
+                 type_a_name: str, model_form_std: float, tau: float, p10: float,
+                 p_atm: float, p_star: float, atmosphere_measured: bool,
+                 wall_std: float = math.nan) -> Budget:
+    """The budget of a model-based C (crossing inversion or curve fit).
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Inputs and their uncertainties.
+    c : float
+        The model-based C [m^3/(s Pa)].
+    type_a_std : float
+        Its standard uncertainty from the record [m^3/(s Pa)].
+    type_a_name : str
+        What that is (e.g. 'curve fit (noise, AR(1))').
+    model_form_std : float
+        Spread of the heat laws that fit about equally well [m^3/(s Pa)].
+    tau, p10, p_atm, p_star, atmosphere_measured, wall_std
+        See :func:`input_terms`.
+    """
+    terms = [BudgetTerm(type_a_name, "A", math.nan, math.nan, "", type_a_std)]
+    terms += input_terms(settings, c, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
+                         atmosphere_measured=atmosphere_measured, wall_std=wall_std)
+    terms.append(BudgetTerm("model form (heat laws)", "model", math.nan, math.nan, "",
+                            model_form_std))
+    return Budget(c, tuple(terms))
+
+
+def eq39_budget(settings: EstimatorSettings, c: float, *, tau: float, tau_std: float,
+                p10: float, p_atm: float, p_star: float,
+                atmosphere_measured: bool) -> Budget:
+    """The budget of eq 39's C (its bias by design is not an uncertainty: see
+    :func:`pneumatic_unload.physics.eq39_bias_isentropic`).
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Inputs and their uncertainties.
+    c : float
+        eq 39's C [m^3/(s Pa)].
+    tau, tau_std : float
+        Unloading time and its standard deviation from the record [s].
+    p10, p_atm, p_star, atmosphere_measured
+        See :func:`input_terms`.
+    """
+    terms = [BudgetTerm("unloading time (noise)", "A", tau, tau_std, "s",
+                        abs(c) * tau_std / tau if tau > 0 else math.nan)]
+    terms += input_terms(settings, c, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
+                         atmosphere_measured=atmosphere_measured, eq39=True)
+    return Budget(c, tuple(terms))

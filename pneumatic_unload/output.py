@@ -1,0 +1,82 @@
+"""Text and JSON output of the analysis: one result, the inputs used, the budget.
+
+Used by the command line (``analyze``); SI units in JSON, trade units (dm^3/(s bar))
+alongside in the text.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from pneumatic_unload.budget import format_budget
+from pneumatic_unload.estimation import UnloadResult, recommended
+
+
+def unload_json(r: UnloadResult) -> dict[str, Any]:
+    """JSON of one result: its fields, the budgets, the heat law and the C to report."""
+    d = r.to_dict()
+    extra = d.pop("extra", None) or {}
+    for key in ("budget", "budget_eq39"):
+        if key in extra:
+            d[key] = extra[key]
+    d["heat_law"] = extra.get("curve_fit", {}).get("heat_law", "") if r.final else ""
+    d["recommended"] = recommended(r)
+    return d
+
+
+def json_default(o: object) -> object:
+    """``json.dumps`` default: non-finite floats as null, numpy scalars as Python ones."""
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def format_result(r: UnloadResult) -> str:
+    """Human-readable summary of one unload (trade units alongside SI)."""
+    def dm3(c: float) -> str:
+        return f"{c / 1e-8:.4f} dm^3/(s bar)" if math.isfinite(c) else "n/a"
+
+    lines = [f"unload {r.index}: {r.status} ({r.status_text})"]
+    if math.isfinite(r.tau_exp):
+        lines.append(f"  tau_exp        = {r.tau_exp:.6f} s  (+- {r.tau_exp_std:.2g} s)")
+        lines.append(f"  p10 / p_atm / p* = {r.p10:.0f} / {r.p_atm:.0f} / {r.p_star:.0f} Pa")
+    lines.append(f"  C (eq 39)      = {r.conductance:.5g} m^3/(s Pa) = {dm3(r.conductance)}")
+    if math.isfinite(r.conductance_model):
+        lines.append(
+            f"  C (model)      = {r.conductance_model:.5g} +- {r.conductance_model_std:.2g}"
+            f" m^3/(s Pa) = {dm3(r.conductance_model)}  [{r.method}]")
+        lines.append(f"  eq 39 - model  = {100 * r.bias:+.2f} %")
+    if math.isfinite(r.critical_ratio):
+        lines.append(f"  b              = {r.critical_ratio:.3f} +- {r.critical_ratio_std:.3f}")
+    elif r.final:
+        lines.append("  b              = not identifiable from this record (the flow stayed "
+                     "choked, or the subsonic tail is too short or too noisy)")
+    if "budget" in r.extra:
+        law = r.extra.get("curve_fit", {}).get("heat_law", "")
+        lines.append("  uncertainty budget of C (model), 1e-9 m^3/(s Pa), share of variance"
+                     + (f"; heat law: {law}" if law else "") + ":")
+        lines += format_budget(r.extra["budget"])
+    if math.isfinite(r.conductance_std):
+        lines.append(f"  C (eq 39) u    = {r.conductance_std:.2g} m^3/(s Pa) (record and inputs;"
+                     " its bias by design is not an uncertainty)")
+    rec = recommended(r)
+    if math.isfinite(rec["conductance"]):
+        lines.append(f"  REPORT C       = {rec['conductance']:.5g} +- {rec['expanded']:.2g}"
+                     f" m^3/(s Pa) (k = 2) = {dm3(rec['conductance'])}  [{rec['source']}]")
+    return "\n".join(lines)
+
+
+def format_inputs(inputs: dict[str, Any]) -> str:
+    """The inputs used and where they came from, one line each."""
+    out = ["inputs used:"]
+    for name in ("volume", "initial_temperature", "wall_temperature", "atmosphere"):
+        v = inputs[name]
+        val = "auto" if v["value"] is None else f"{v['value']:.6g} {v['unit']}"
+        out.append(f"  {name:20s} = {val}  ({v['source']})")
+    out.append(f"  heat model           = {inputs['heat_model']}")
+    return "\n".join(out)
