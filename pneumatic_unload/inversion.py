@@ -106,6 +106,11 @@ def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float, *,
 
 #: Relative tolerance on C of :func:`invert_crossing` (far below any stated uncertainty).
 INVERSION_RTOL = 1e-6
+#: log of the discharge model's range of C (RigConfig's bounds) [log m^3/(s Pa)]: the
+#: inversion answers NaN when the measured tau_exp needs a C outside it.
+LOG_C_RANGE = tuple(math.log(next(f for f in dataclasses.fields(RigConfig)
+                                  if f.name == "conductance").metadata[k])
+                    for k in ("min", "max"))
 #: Integrator tolerance of the inversion: crossing times to about 1e-6 relative [-].
 INVERSION_ODE_RTOL = 1e-6
 
@@ -137,7 +142,8 @@ def invert_crossing(
     integrations (this runs inside the live estimator, at the sample that completes the
     estimate). The standard deviation combines the timing uncertainty and, for the
     natural-convection model, the uncertainty of the heat-transfer correlation
-    (:data:`HEAT_CORRELATION_REL_STD`).
+    (:data:`HEAT_CORRELATION_REL_STD`). (NaN, NaN) when no C in the model's range
+    (:data:`LOG_C_RANGE`) crosses p_star at tau_exp.
 
     Parameters
     ----------
@@ -160,11 +166,16 @@ def invert_crossing(
         return math.log(tm / tau_exp) if math.isfinite(tm) and tm > 0 else math.nan
 
     x0 = math.log(c_start)
+    lo, hi = LOG_C_RANGE
+    if not lo <= x0 <= hi:
+        return math.nan, math.nan
     f0 = g(x0)
     if not math.isfinite(f0):
         return math.nan, math.nan
     x1 = x0 + f0  # exact for t proportional to 1/C
     for _ in range(8):
+        if not lo <= x1 <= hi:  # the model (which clips C) has no such C
+            return math.nan, math.nan
         f1 = g(x1)
         if not math.isfinite(f1):
             return math.nan, math.nan

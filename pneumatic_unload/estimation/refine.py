@@ -18,6 +18,17 @@ from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 
 
+def pressure_problem(p10: float, p_atm: float, p_star: float) -> str | None:
+    """Why C cannot be computed from these pressures, or None when it can: they must be
+    finite and absolute, p10 > p* > p_atm > 0 [Pa absolute] (a signal in other units needs
+    ``signal_gain``/``signal_offset``; gauge readings need p_atm added)."""
+    if all(math.isfinite(v) for v in (p10, p_atm, p_star)) and p10 > p_star > p_atm > 0:
+        return None
+    return (f"pressures not absolute Pa (p10 = {p10:.6g} Pa, p* = {p_star:.6g} Pa, "
+            f"p_atm = {p_atm:.6g} Pa; C needs p10 > p* > p_atm > 0): gauge readings or a "
+            f"signal without signal_gain/signal_offset?")
+
+
 def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
     """True when the model-based C needs the discharge model (not the closed form): heat
     transfer, or a flow that may turn subsonic before p* (pressures [Pa absolute])."""
@@ -42,6 +53,8 @@ def prepare_inversion(settings: EstimatorSettings, t_mid: float, p_mid: float, p
     """
     from pneumatic_unload.inversion import inversion_table
 
+    if pressure_problem(p10, p_atm, p_star) is not None or not p10 > p_mid > p_star:
+        return None
     c_guess = physics.conductance_isentropic_inversion(
         t_mid, p_mid, p10, settings.volume, settings.initial_temperature, settings.gas)
     try:
