@@ -34,18 +34,17 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # fuzzcases
 
-from hypothesis import HealthCheck, Phase, given, settings  # noqa: E402
-from hypothesis import seed as hypothesis_seed  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
-
-import fuzzcases as fz  # noqa: E402
+import fuzzcases as fz
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import seed as hypothesis_seed
+from hypothesis import strategies as st
 
 #: Time bound of one example [s] per target (a longer one is a hang).
 LIMITS = {"analyze_random": 60.0, "analyze_wild": 60.0, "settings": 10.0, "csv": 90.0,
           "bag": 90.0, "discrepancy": 180.0}
 #: Examples per hypothesis round, per target [-].
 ROUND = {"analyze_random": 200, "analyze_wild": 40, "settings": 300, "csv": 20, "bag": 20,
-         "discrepancy": 4}
+         "discrepancy": 2}
 
 
 def signature(exc: BaseException) -> str:
@@ -158,6 +157,9 @@ def main() -> int:
             rec.run(name, lambda e=exc: (_ for _ in ()).throw(e), {"seed": seed + k})
         spent[name] += time.monotonic() - s0
         k += 1
+        if k % len(chosen) == 0:
+            print(f"  {(time.monotonic() - t0) / 60:5.1f} min: " + ", ".join(
+                f"{c} {rec.examples.get(c, 0)}" for c in chosen), flush=True)
     total = time.monotonic() - t0
     print(f"\n{'target':16s} {'examples':>9s} {'time [s]':>9s} {'failures':>9s}")
     for name in chosen:

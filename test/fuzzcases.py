@@ -363,14 +363,22 @@ def csv_files(draw: st.DrawFn, *, max_samples: int = 3000) -> tuple[str | bytes,
     if draw(st.integers(0, 9)) == 0:  # pure garbage
         return draw(st.one_of(st.binary(max_size=400), st.text(max_size=400))), {}
     t, p, cfg = draw(wild_discharges(max_samples=max_samples))
-    th, ph = draw(st.sampled_from(CSV_TIME_HEADERS)), draw(st.sampled_from(CSV_PRESSURE_HEADERS))
-    temp_h = draw(st.sampled_from(CSV_TEMP_HEADERS))
+    clean = draw(st.integers(0, 3)) > 0  # mostly a well-formed file: reaches the estimator
+    if clean:
+        th, ph = draw(st.sampled_from(CSV_TIME_HEADERS[:4])), draw(st.sampled_from(
+            CSV_PRESSURE_HEADERS[:7]))
+        temp_h = draw(st.sampled_from(CSV_TEMP_HEADERS[:3]))
+    else:
+        th = draw(st.sampled_from(CSV_TIME_HEADERS))
+        ph = draw(st.sampled_from(CSV_PRESSURE_HEADERS))
+        temp_h = draw(st.sampled_from(CSV_TEMP_HEADERS))
     gauge_hdr = " g]" in ph or "psig" in ph
     p_out = (p - P_ATM if gauge_hdr else p) * _unit_scale(ph)
     t_out = t * _unit_scale(th)
-    delim = draw(st.sampled_from([",", ";", "\t", " "]))
-    fmt = draw(st.sampled_from(["{!r}", "{:.3f}", "{:.6g}", "{:.0f}", "{:.2e}"]))
-    decimal_comma = draw(st.integers(0, 7)) == 0
+    delim = draw(st.sampled_from([",", ";", "\t"] if clean else [",", ";", "\t", " "]))
+    fmt = draw(st.sampled_from(["{!r}", "{:.9g}"] if clean else
+                               ["{!r}", "{:.3f}", "{:.6g}", "{:.0f}", "{:.2e}"]))
+    decimal_comma = not clean and draw(st.integers(0, 3)) == 0
     header = [th, ph] + ([temp_h] if temp_h else [])
     if draw(st.booleans()):
         header = header[::-1] if draw(st.booleans()) else header
@@ -386,25 +394,28 @@ def csv_files(draw: st.DrawFn, *, max_samples: int = 3000) -> tuple[str | bytes,
             vals[temp_h] = 20.0 if "[C]" in temp_h else 293.15
         rows.append(delim.join(cell(vals[h]) for h in header))
     lines = ["# logger export"] * draw(st.integers(0, 2)) + [delim.join(header), *rows]
-    for _ in range(draw(st.integers(0, 3))):  # broken lines
+    for _ in range(0 if clean else draw(st.integers(0, 3))):  # broken lines
         k = draw(st.integers(0, len(lines)))
         lines.insert(k, draw(st.sampled_from(["", "nan,nan", "1,2,3,4,5", "abc", ",", "1e999,1",
                                               "\x00", "  ", "1;2", '"1,5",2'])))
     text = "\n".join(lines) + draw(st.sampled_from(["", "\n", "\r\n", "\n\n"]))
     opts: dict[str, Any] = {}
-    if draw(st.integers(0, 3)) == 0:
-        opts["pressure_unit"] = draw(st.sampled_from(["Pa", "kPa", "bar", "psi", "xyz", "kpa"]))
-    if draw(st.integers(0, 3)) == 0:
-        opts["gauge"] = draw(st.booleans())
-    if draw(st.integers(0, 2)) == 0:
-        opts["atmosphere"] = draw(st.sampled_from([P_ATM, 0.0, -1.0, math.nan, math.inf,
-                                                   1e5, 1e300]))
-    if draw(st.integers(0, 5)) == 0:
-        opts["time_column"] = draw(st.sampled_from([th, "time", "nope"]))
-    if draw(st.integers(0, 7)) == 0:
-        opts["delimiter"] = draw(st.sampled_from([",", ";"]))
+    if gauge_hdr and clean:
+        opts["atmosphere"] = P_ATM
+    if not clean:
+        if draw(st.integers(0, 3)) == 0:
+            opts["pressure_unit"] = draw(st.sampled_from(["Pa", "kPa", "bar", "psi", "xyz", "kpa"]))
+        if draw(st.integers(0, 3)) == 0:
+            opts["gauge"] = draw(st.booleans())
+        if draw(st.integers(0, 2)) == 0:
+            opts["atmosphere"] = draw(st.sampled_from([P_ATM, 0.0, -1.0, math.nan, math.inf,
+                                                       1e5, 1e300]))
+        if draw(st.integers(0, 5)) == 0:
+            opts["time_column"] = draw(st.sampled_from([th, "time", "nope"]))
+        if draw(st.integers(0, 7)) == 0:
+            opts["delimiter"] = draw(st.sampled_from([",", ";"]))
     opts["_volume"] = cfg.volume
-    if draw(st.integers(0, 7)) == 0:
+    if not clean and draw(st.integers(0, 3)) == 0:
         return text.encode("utf-16") if draw(st.booleans()) else text.encode("latin-1",
                                                                               "replace"), opts
     return text, opts

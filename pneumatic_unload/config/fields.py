@@ -103,8 +103,8 @@ def check_value(f: dataclasses.Field[Any], v: Any) -> Any:
         raise ConfigError(f"{f.name} must be a number, got {v!r}")
     unit = f" {md['unit']}" if md.get("unit") and md["unit"] != "-" else ""
     if isinstance(v, int) and not -1e300 < v < 1e300:  # would overflow a float
-        raise ConfigError(f"{f.name} ({len(str(abs(v)))} digits){unit} is outside [{md['min']:g}, {md['max']:g}]"
-                          f" ({md['doc']})")
+        raise ConfigError(f"{f.name} (an integer of {v.bit_length()} bits){unit} is outside "
+                          f"[{md['min']:g}, {md['max']:g}] ({md['doc']})")
     if not math.isfinite(v):
         raise ConfigError(f"{f.name}={v!r}{unit} is not a finite number (range "
                           f"[{md['min']:g}, {md['max']:g}]; {md['doc']})")

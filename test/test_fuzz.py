@@ -1,0 +1,142 @@
+"""Property-based fuzzing, short profile (issue #13): the long run is bench/bench_fuzz.py.
+
+Each property is that of ``fuzzcases``: only the package's typed errors, each example within
+its time bound, never status "ok" with a non-finite or non-positive C, tau_exp or sigma.
+The profile is derandomized (the same examples on every run) and small (about 30 s in
+all); the regression tests below pin every failure signature the long run found.
+"""
+
+import math
+
+import fuzzcases as fz
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from pneumatic_unload.config import ConfigError, RigConfig
+from pneumatic_unload.config.fields import parse_names
+from pneumatic_unload.discrepancy import DiscrepancyError, DiscrepancySettings
+from pneumatic_unload.estimation import EstimationError, EstimatorSettings, analyze
+from pneumatic_unload.estimation.regression import crossing_fit
+from pneumatic_unload.inversion import invert_crossing
+from pneumatic_unload.model import simulate
+from pneumatic_unload.physics import (
+    conductance_isentropic_inversion,
+    isentropic_crossing_time,
+    orifice_conductance,
+    p_star,
+)
+
+settings.register_profile(
+    "make-test", deadline=None, derandomize=True, database=None, print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
+                           HealthCheck.filter_too_much])
+settings.load_profile("make-test")
+
+#: Time bound of one example [s] (a hang fails the test).
+LIMIT_S = 60.0
+
+
+@settings(max_examples=60)
+@given(fz.random_traces(), fz.estimator_settings())
+def test_analyze_random_arrays(trace, est):
+    with fz.time_limit(LIMIT_S):
+        fz.run_analyze(trace[0], trace[1], est)
+
+
+@settings(max_examples=12)
+@given(fz.wild_discharges(max_samples=3000).flatmap(
+    lambda w: st.tuples(st.just(w), fz.estimator_settings(
+        near=EstimatorSettings(**w[2].tank_fields())))))
+def test_analyze_wild_discharges(case):
+    (t, p, _cfg), est = case
+    with fz.time_limit(LIMIT_S):
+        fz.run_analyze(t, p, est)
+
+
+@settings(max_examples=150)
+@given(fz.settings_keywords())
+def test_settings_refuse_junk_with_typed_errors(kw):
+    fz.prop_settings(kw)
+
+
+@settings(max_examples=6)
+@given(fz.csv_files(max_samples=1500))
+def test_csv_reader_and_cli(tmp_path_factory, case):
+    with fz.time_limit(LIMIT_S):
+        fz.prop_csv(tmp_path_factory.mktemp("csv"), case[0], case[1])
+
+
+@settings(max_examples=5)
+@given(fz.bag_cases(max_samples=1500))
+def test_bag_reader_and_cli(tmp_path_factory, case):
+    with fz.time_limit(LIMIT_S):
+        fz.prop_bag(tmp_path_factory.mktemp("bag"), case)
+
+
+@settings(max_examples=2)
+@given(fz.discrepancy_cases())
+def test_discrepancy_workflow(case):
+    with fz.time_limit(2 * LIMIT_S):
+        fz.prop_discrepancy(*case)
+
+
+# ------------------------------------------------------------ regressions (one a signature)
+def _discharge(**kw):
+    base = {"volume": 1e-3, "conductance": orifice_conductance(2e-3), "noise_std": 300.0,
+            "seed": 5, "duration": 5.0}
+    base.update(kw)
+    cfg = RigConfig(**base)
+    sim = simulate(cfg)
+    return sim.t, sim.measured, EstimatorSettings(**cfg.tank_fields())
+
+
+def test_pressures_below_zero_are_bad_data_with_the_reason_not_a_complex_c():
+    # p_atm from the final plateau, everything shifted below zero: p10/p* < 0 made eq 22's
+    # power complex (TypeError in the inversion table and at the crossing)
+    t, p, est = _discharge()
+    est = EstimatorSettings(**{**est.tank_fields(), "atmosphere": None})
+    res = analyze(t, p - 8e5, est)
+    assert res and all(r.status == "bad_data" for r in res)
+    assert "not absolute Pa" in res[0].status_text
+    assert math.isfinite(res[0].tau_exp)  # the unloading time is still measured
+
+
+def test_isentropic_closed_forms_are_nan_for_non_absolute_pressures():
+    assert math.isnan(conductance_isentropic_inversion(1.0, -2e5, 7e5, 1e-3))
+    assert math.isnan(isentropic_crossing_time(2e5, -7e5, 1e-3, 1e-8))
+    assert conductance_isentropic_inversion(1.0, 2e5, 7e5, 1e-3) > 0
+
+
+def test_model_inversion_outside_the_models_range_is_nan_not_an_overflow():
+    # p10 = 1.2e106 Pa (a huge-valued record): the model clips p10 to its range, its
+    # crossing time never matches and the secant ran off to exp(> 709)
+    p10 = 1.2104654743339604e106
+    est = EstimatorSettings(volume=0.0079, initial_temperature=161.0)
+    c, std = invert_crossing(42.7, 0.21, p10=p10, p_atm=101325.0,
+                             p_star=p_star(p10, 101325.0), settings=est, c_start=1.9e-9)
+    assert math.isnan(c) and math.isnan(std)
+
+
+def test_crossing_fit_without_a_slope_has_no_crossing():
+    # stamps 1e-27 s apart: the regression's slope and curvature are exactly 0
+    # (ZeroDivisionError); the caller reports bad_data
+    t = np.arange(8.0) * 1e-27
+    c = crossing_fit(t, 1.2e5 - 30.0 * np.arange(8.0), 1.19e5)
+    assert math.isnan(c[0]) and c[1] == math.inf
+
+
+@pytest.mark.parametrize("kw", [{"min_plateau": math.inf}, {"min_plateau": 10**400},
+                                {"volume": 10**400}, {"min_plateau": math.nan}])
+def test_estimator_settings_refuse_inf_and_huge_integers_with_estimation_error(kw):
+    with pytest.raises(EstimationError):
+        EstimatorSettings(**kw)
+
+
+@pytest.mark.parametrize("value", [None, 3, 2.5, True])
+def test_names_that_are_not_a_list_are_a_config_error(value):
+    with pytest.raises(ConfigError, match="comma-separated"):
+        parse_names(value)
+    with pytest.raises(DiscrepancyError):
+        DiscrepancySettings(candidates=value)
