@@ -35,6 +35,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # fuzzcases
 
 import fuzzcases as fz
+import fuzzio as fio
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import seed as hypothesis_seed
 from hypothesis import strategies as st
@@ -116,11 +117,11 @@ def make_targets(rec: Recorder) -> dict[str, Callable[[int, int], None]]:
                     near=fz.EstimatorSettings(**w[2].tank_fields())))),
             lambda d: fz.run_analyze(d[0][0], d[0][1], d[1])),
         "settings": runner("settings", fz.settings_keywords(), fz.prop_settings),
-        "csv": runner("csv", fz.csv_files(),
-                      in_tmp(lambda folder, d: fz.prop_csv(folder, d[0], d[1]))),
-        "bag": runner("bag", fz.bag_cases(), in_tmp(fz.prop_bag)),
-        "discrepancy": runner("discrepancy", fz.discrepancy_cases(),
-                              lambda d: fz.prop_discrepancy(*d)),
+        "csv": runner("csv", fio.csv_files(),
+                      in_tmp(lambda folder, d: fio.prop_csv(folder, d[0], d[1]))),
+        "bag": runner("bag", fio.bag_cases(), in_tmp(fio.prop_bag)),
+        "discrepancy": runner("discrepancy", fio.discrepancy_cases(),
+                              lambda d: fio.prop_discrepancy(*d)),
     }
 
 
