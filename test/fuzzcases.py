@@ -35,6 +35,7 @@ from pneumatic_unload.estimation import (
     EstimatorSettings,
     UnloadResult,
     analyze,
+    estimate_fields,
     explain_no_unload,
     gauge_suspicion,
     merge_final,
@@ -77,6 +78,7 @@ def check_results(results: list[UnloadResult], where: str = "analyze") -> None:
         d = r.to_dict()
         d.pop("extra", None)
         json.dumps(d, allow_nan=False)
+        estimate_fields(r)  # what the estimator node publishes
         if r.status != "ok":
             continue
         must = {"conductance": r.conductance, "tau_exp": r.tau_exp, "p10": r.p10,
@@ -272,7 +274,7 @@ def random_traces(draw: st.DrawFn, *, max_samples: int = 400
     n = draw(st.integers(0, max_samples))
     kind = draw(st.sampled_from(["regular", "jitter", "random", "constant"]))
     if kind == "regular":
-        dt = draw(st.floats(1e-12, 1e6))
+        dt = 10 ** draw(st.floats(-12.0, 300.0))
         t = draw(st.floats(-1e12, 1e12)) + dt * np.arange(n, dtype=float)
     elif kind == "jitter":
         t = np.cumsum(np.abs(np.asarray(draw(st.lists(st.floats(-1.0, 10.0), min_size=n,

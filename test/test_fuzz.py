@@ -18,7 +18,13 @@ from hypothesis import strategies as st
 from pneumatic_unload.config import ConfigError, RigConfig
 from pneumatic_unload.config.fields import parse_names
 from pneumatic_unload.discrepancy import DiscrepancyError, DiscrepancySettings
-from pneumatic_unload.estimation import EstimationError, EstimatorSettings, analyze
+from pneumatic_unload.estimation import (
+    EstimationError,
+    EstimatorSettings,
+    StreamingEstimator,
+    analyze,
+    explain_no_unload,
+)
 from pneumatic_unload.estimation.regression import crossing_fit
 from pneumatic_unload.inversion import invert_crossing
 from pneumatic_unload.model import simulate
@@ -147,3 +153,22 @@ def test_names_that_are_not_a_list_are_a_config_error(value):
         parse_names(value)
     with pytest.raises(DiscrepancyError):
         DiscrepancySettings(candidates=value)
+
+
+@pytest.mark.parametrize("scale", [1e155, 1e-200, 1e100])
+def test_stamps_that_overflow_the_arithmetic_are_ignored_with_a_reason(scale):
+    # t in units 1e155 s: squares of stamps overflowed (LinAlgError: SVD did not converge);
+    # 1e-200 s steps: rates 1/dt overflowed (OverflowError: float infinity to integer);
+    # 1e100: NaN from inf - inf (ValueError)
+    t, p, est = _discharge()
+    est_ = StreamingEstimator(est)
+    assert est_.push_block(t * scale, p) + est_.finish() == []
+    msgs = " | ".join(d.message for d in est_.diagnostics)
+    assert "ignored" in msgs
+    assert explain_no_unload(t * scale, p, est)
+
+
+def test_unix_stamps_in_seconds_still_analyse():
+    t, p, est = _discharge()
+    res = analyze(t + 1.7e9, p, est)
+    assert res and res[0].status == "ok"
