@@ -172,3 +172,40 @@ def test_unix_stamps_in_seconds_still_analyse():
     t, p, est = _discharge()
     res = analyze(t + 1.7e9, p, est)
     assert res and res[0].status == "ok"
+
+
+def test_degenerate_curve_fit_never_gives_an_ok_negative_tau_or_infinite_sigma():
+    # found by the long run: a 1.8e-7 L tank setting, a record x 1e30 with 317 samples
+    # dropped; the final fit said ok with tau_exp_model = -9.2e14 s and sigma(C) = inf
+    cfg = RigConfig(volume=0.01, length_diameter_ratio=9.80665,
+                    initial_temperature=314.91565820101926,
+                    conductance=7.548254740169921e-09, critical_ratio=1 / 3,
+                    initial_pressure=7e5, rate=27.68496135425815, pre_time=0.0,
+                    duration=216.72316021188183, noise_std=300.0, seed=1954)
+    sim = simulate(cfg)
+    keep = np.ones(sim.t.size, bool)
+    keep[1815:2132] = False
+    est = EstimatorSettings(volume=1e-7, length_diameter_ratio=0.1, initial_temperature=150.0,
+                            heat_model="adiabatic", critical_ratio=0.0,
+                            signal_gain=1.0947270656484223)
+    res = analyze(sim.t[keep], sim.measured[keep] * 1e30, est)
+    fz.check_results(res)
+    assert res and all(r.status == "bad_data" and "outside" in r.status_text for r in res)
+
+
+def test_a_start_without_a_falling_slope_is_bad_data_not_ok_with_infinite_sigma():
+    # found by the long run: trigger at 1 sigma on a quantised 1.5 bar record; the start fit
+    # found no falling slope and the crossing said ok with tau_exp_std = inf
+    cfg = RigConfig(volume=0.00015307551471425903, length_diameter_ratio=5.129163202345661,
+                    initial_temperature=334.345931419483, conductance=3.088196370390503e-09,
+                    critical_ratio=0.398121086588501, initial_pressure=1.5e5,
+                    effects=("heat_transfer", "sensor_lag", "pipe_volume"),
+                    rate=647.8072469000354, pre_time=0.3, duration=8.961014324032213,
+                    noise_std=1000.0, quantization=100.0, seed=173436)
+    sim = simulate(cfg)
+    est = EstimatorSettings(volume=cfg.volume, length_diameter_ratio=11.100503865203748,
+                            initial_temperature=cfg.initial_temperature, gas_constant=100.0,
+                            gamma=1.01, critical_ratio=0.0, trigger_sigma=1.0)
+    res = analyze(sim.t, sim.measured, est)
+    fz.check_results(res)
+    assert any("no falling slope" in r.status_text for r in res)

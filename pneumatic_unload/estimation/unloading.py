@@ -249,6 +249,9 @@ def crossing_result(st: EstimatorState, i: int, t_cross: float, t_std: float, ga
     problem = pressure_problem(p10, p_atm, p_star)
     if problem is None and not math.isfinite(tau):
         problem = "no p* crossing time: the samples around p* are flat or degenerate"
+    elif problem is None and not math.isfinite(tau_std):
+        problem = ("tau_exp has no uncertainty (the start fit found no falling slope): the "
+                   "start of the unload is undetermined")
     elif problem is None and not tau > 0:
         problem = (f"p* crossed {tau:.6g} s after the start: time runs backwards in the "
                    f"unload (a clock step or unsorted stamps?)")
