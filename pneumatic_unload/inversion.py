@@ -114,6 +114,25 @@ def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float, *,
 
 #: Relative tolerance on C of :func:`invert_crossing` (far below any stated uncertainty).
 INVERSION_RTOL = 1e-6
+
+
+def model_range(name: str) -> tuple[float, float]:
+    """Bounds of a :class:`RigConfig` field: the discharge model's range [its unit]."""
+    md = next(f for f in dataclasses.fields(RigConfig) if f.name == name).metadata
+    return float(md["min"]), float(md["max"])
+
+
+#: log of the discharge model's range of C [log m^3/(s Pa)]: the inversion answers NaN
+#: when the measured tau_exp needs a C outside it.
+LOG_C_RANGE = tuple(math.log(v) for v in model_range("conductance"))
+
+
+def in_model_range(p10: float, p_atm: float) -> bool:
+    """True when the discharge model covers p10 and p_atm [Pa absolute] (it would clip
+    them to its range, and answer for other pressures than those measured)."""
+    lo, hi = model_range("initial_pressure")
+    a_lo, a_hi = model_range("atmosphere")
+    return lo <= p10 <= hi and a_lo <= p_atm <= a_hi
 #: Integrator tolerance of the inversion: crossing times to about 1e-6 relative [-].
 INVERSION_ODE_RTOL = 1e-6
 
@@ -145,7 +164,9 @@ def invert_crossing(
     integrations (this runs inside the live estimator, at the sample that completes the
     estimate). The standard deviation combines the timing uncertainty and, for the
     natural-convection model, the uncertainty of the heat-transfer correlation
-    (:data:`HEAT_CORRELATION_REL_STD`).
+    (:data:`HEAT_CORRELATION_REL_STD`). (NaN, NaN) when the model does not cover p10 and
+    p_atm (:func:`in_model_range`) or no C in its range (:data:`LOG_C_RANGE`) crosses
+    p_star at tau_exp.
 
     Parameters
     ----------
@@ -158,7 +179,8 @@ def invert_crossing(
     c_start : float
         Starting value, e.g. the isentropic inversion [m^3/(s Pa)].
     """
-    if not (math.isfinite(tau_exp) and tau_exp > 0 and math.isfinite(c_start) and c_start > 0):
+    if not (math.isfinite(tau_exp) and tau_exp > 0 and math.isfinite(c_start) and c_start > 0
+            and in_model_range(p10, p_atm)):
         return math.nan, math.nan
 
     def g(log_c: float) -> float:
@@ -168,11 +190,16 @@ def invert_crossing(
         return math.log(tm / tau_exp) if math.isfinite(tm) and tm > 0 else math.nan
 
     x0 = math.log(c_start)
+    lo, hi = LOG_C_RANGE
+    if not lo <= x0 <= hi:
+        return math.nan, math.nan
     f0 = g(x0)
     if not math.isfinite(f0):
         return math.nan, math.nan
     x1 = x0 + f0  # exact for t proportional to 1/C
     for _ in range(8):
+        if not lo <= x1 <= hi:  # the model (which clips C) has no such C
+            return math.nan, math.nan
         f1 = g(x1)
         if not math.isfinite(f1):
             return math.nan, math.nan
@@ -283,9 +310,10 @@ def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_
     Returns
     -------
     InversionTable or None
-        None when a crossing time cannot be computed (the model never reaches p*).
+        None when a crossing time cannot be computed (the model never reaches p*, or does
+        not cover p10 and p_atm).
     """
-    if not (math.isfinite(c_guess) and c_guess > 0):
+    if not (math.isfinite(c_guess) and c_guess > 0 and in_model_range(p10, p_atm)):
         return None
     gas, vol, t10 = settings.gas, settings.volume, settings.initial_temperature
     log_c = math.log(c_guess) + np.linspace(-TABLE_SPAN, TABLE_SPAN, TABLE_POINTS)

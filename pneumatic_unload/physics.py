@@ -331,12 +331,15 @@ def isentropic_crossing_time(
     p_cross : float
         Pressure reached [Pa absolute], above p_atm / b for the result to be exact.
     p10 : float
-        Initial pressure [Pa absolute].
+        Initial pressure [Pa absolute] (NaN is returned unless p10 / p_cross > 0).
     volume, conductance, t10, gas, paper_form
         As in :func:`choked_time_constant` [m^3], [m^3/(s Pa)], [K].
     """
+    ratio = p10 / p_cross
+    if not ratio > 0:  # not absolute pressures: a real power would be complex
+        return math.nan
     theta = choked_time_constant(volume, conductance, t10, gas, paper_form)
-    return theta * ((p10 / p_cross) ** ((gas.gamma - 1.0) / (2.0 * gas.gamma)) - 1.0)
+    return theta * (ratio ** ((gas.gamma - 1.0) / (2.0 * gas.gamma)) - 1.0)
 
 
 def conductance_isentropic_inversion(
@@ -355,7 +358,7 @@ def conductance_isentropic_inversion(
     p_cross : float
         Pressure at the crossing [Pa absolute].
     p10 : float
-        Initial pressure [Pa absolute].
+        Initial pressure [Pa absolute] (NaN is returned unless p10 / p_cross > 0).
     volume : float
         V [m^3].
     t10 : float
@@ -366,8 +369,11 @@ def conductance_isentropic_inversion(
         See :func:`choked_time_constant`.
     """
     # t = Theta(C) * X with Theta proportional to 1/C
+    ratio = p10 / p_cross
+    if not ratio > 0:  # not absolute pressures: a real power would be complex
+        return math.nan
     theta_1 = choked_time_constant(volume, 1.0, t10, gas, paper_form)
-    x = (p10 / p_cross) ** ((gas.gamma - 1.0) / (2.0 * gas.gamma)) - 1.0
+    x = ratio ** ((gas.gamma - 1.0) / (2.0 * gas.gamma)) - 1.0
     return theta_1 * x / t_cross
 
 

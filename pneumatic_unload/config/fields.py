@@ -64,7 +64,11 @@ def parse_names(value: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
     if isinstance(value, str):
         items = [v.strip() for v in value.split(",")]
     else:
-        items = [str(v).strip() for v in value]
+        try:
+            items = [str(v).strip() for v in value]
+        except TypeError:
+            raise ConfigError(f"expected names as a comma-separated string or a list, got "
+                              f"{value!r}") from None
     return tuple(v for v in items if v and v != "none")
 
 
@@ -98,12 +102,15 @@ def check_value(f: dataclasses.Field[Any], v: Any) -> Any:
         return None
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ConfigError(f"{f.name} must be a number, got {v!r}")
-    if kind == "integer" and int(v) != v:
-        raise ConfigError(f"{f.name} must be an integer, got {v!r}")
     unit = f" {md['unit']}" if md.get("unit") and md["unit"] != "-" else ""
+    if isinstance(v, int) and not -1e300 < v < 1e300:  # would overflow a float
+        raise ConfigError(f"{f.name} (an integer of {v.bit_length()} bits){unit} is outside "
+                          f"[{md['min']:g}, {md['max']:g}] ({md['doc']})")
     if not math.isfinite(v):
         raise ConfigError(f"{f.name}={v!r}{unit} is not a finite number (range "
                           f"[{md['min']:g}, {md['max']:g}]; {md['doc']})")
+    if kind == "integer" and int(v) != v:
+        raise ConfigError(f"{f.name} must be an integer, got {v!r}")
     if not md["min"] <= v <= md["max"]:
         raise ConfigError(f"{f.name}={v!r}{unit} is outside [{md['min']:g}, {md['max']:g}]"
                           f" ({md['doc']})")

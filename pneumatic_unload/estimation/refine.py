@@ -18,10 +18,30 @@ import numpy as np
 from pneumatic_unload import physics
 from pneumatic_unload.budget import eq39_budget, model_budget, wall_sensitivity
 from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.config.rig import RigConfig
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 from pneumatic_unload.fitting import fit_curve, fitted_tau_exp
 from pneumatic_unload.inversion import inversion_table, invert_crossing, may_turn_subsonic
 from pneumatic_unload.recovery import fit_recovery
+
+#: Initial pressures the discharge model covers [Pa absolute] (RigConfig's bounds).
+P10_RANGE: tuple[float, float] = next(
+    (float(f.metadata["min"]), float(f.metadata["max"])) for f in dataclasses.fields(RigConfig)
+    if f.name == "initial_pressure")
+
+
+def pressure_problem(p10: float, p_atm: float, p_star: float) -> str | None:
+    """Why C cannot be computed from these pressures, or None when it can: they must be
+    finite and absolute, p10 > p* > p_atm > 0 [Pa absolute] (a signal in other units needs
+    ``signal_gain``/``signal_offset``; gauge readings need p_atm added)."""
+    if all(math.isfinite(v) for v in (p10, p_atm, p_star)) and p10 > p_star > p_atm > 0:
+        if P10_RANGE[0] <= p10 <= P10_RANGE[1]:
+            return None
+        return (f"p10 = {p10:.6g} Pa is outside [{P10_RANGE[0]:g}, {P10_RANGE[1]:g}] Pa, the "
+                f"range of the discharge model: wrong units or signal_gain?")
+    return (f"pressures not absolute Pa (p10 = {p10:.6g} Pa, p* = {p_star:.6g} Pa, "
+            f"p_atm = {p_atm:.6g} Pa; C needs p10 > p* > p_atm > 0): gauge readings or a "
+            f"signal without signal_gain/signal_offset?")
 
 
 def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
@@ -123,6 +143,8 @@ def prepare_inversion(settings: EstimatorSettings, t_mid: float, p_mid: float, p
         Half-way, initial, atmospheric and crossing pressures [Pa absolute].
     """
 
+    if pressure_problem(p10, p_atm, p_star) is not None or not p10 > p_mid > p_star:
+        return None
     c_guess = physics.conductance_isentropic_inversion(
         t_mid, p_mid, p10, settings.volume, settings.initial_temperature, settings.gas)
     try:
@@ -233,6 +255,14 @@ def refine_with_curve_fit(
     if fit.heat_law == "natural" and not math.isfinite(fit.heat_scale_std):
         c_std = math.hypot(c_std, res.extra.get("budget", {}).get(
             "type_a_std", res.conductance_model_std))
+    if not (math.isfinite(fit.conductance) and fit.conductance > 0 and math.isfinite(c_std)):
+        # a fit that does not determine C (flat or degenerate trace): the crossing stands
+        return dataclasses.replace(res, final=True, extra={
+            **res.extra, "curve_fit_error": f"the fit did not determine C ({fit.conductance:.3g}"
+                                            f" +- {c_std:.3g} m^3/(s Pa))"})
+    tau_model = fitted_tau_exp(fit, settings, res.tau_exp)
+    if not (math.isfinite(tau_model) and tau_model > 0):
+        tau_model = math.nan
     extra = {"curve_fit": dataclasses.asdict(fit), "noise_std": noise_std,
              "conductance_crossing_inversion": res.conductance_model}
     if "budget_eq39" in res.extra:
@@ -259,7 +289,7 @@ def refine_with_curve_fit(
     return dataclasses.replace(
         res, final=True, status=status, status_text=text, conductance_model=fit.conductance,
         conductance_model_std=c_std,
-        t_start_model=fit.t_start, tau_exp_model=fitted_tau_exp(fit, settings, res.tau_exp),
+        t_start_model=fit.t_start, tau_exp_model=tau_model,
         critical_ratio=fit.critical_ratio, critical_ratio_std=fit.critical_ratio_std,
         method=res.method + "+curve-fit", extra=extra,
         quality=res.quality if fit.success else min(res.quality, 0.5))

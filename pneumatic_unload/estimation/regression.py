@@ -128,7 +128,8 @@ def crossing_fit(t: FloatArray, p: FloatArray, level: float
     Returns
     -------
     tuple
-        (crossing time [s], its standard deviation [s], slope at the crossing [Pa/s]).
+        (crossing time [s], its standard deviation [s], slope at the crossing [Pa/s]);
+        (NaN, inf, 0) when the fit is flat (no crossing).
     """
     tm = float(np.mean(t))
     x = t - tm
@@ -139,12 +140,14 @@ def crossing_fit(t: FloatArray, p: FloatArray, level: float
     s2 = float(r @ r) / dof
     c0, c1, c2 = (float(v) for v in coef)
     # root of c2 x^2 + c1 x + (c0 - level) nearest the window centre
+    if c1 == 0.0 and c2 == 0.0:  # flat (stuck or degenerate samples): no crossing
+        return math.nan, math.inf, 0.0
     if abs(c2) < 1e-30 or abs(c2 * (x[-1] - x[0]) ** 2) < 1e-12 * abs(c1 * (x[-1] - x[0])):
-        xr = (level - c0) / c1
+        xr = (level - c0) / c1 if c1 != 0.0 else math.nan
     else:
         disc = c1 * c1 - 4.0 * c2 * (c0 - level)
         if disc < 0:
-            xr = (level - c0) / c1
+            xr = (level - c0) / c1 if c1 != 0.0 else math.nan
         else:
             sq = math.sqrt(disc)
             r1, r2 = (-c1 + sq) / (2 * c2), (-c1 - sq) / (2 * c2)

@@ -32,6 +32,13 @@ from pneumatic_unload.estimation.state import (
 )
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 
+#: Largest stamp magnitude accepted [s]: a stamp must fit ROS's int64 nanoseconds (year
+#: 2262); larger ones (a clock in ns or us read as s, garbage) are ignored with a diagnostic.
+MAX_ABS_STAMP = 9.2e9
+#: Smallest stamp step accepted [s] (ROS stamps are whole nanoseconds): a closer stamp is
+#: a duplicate (and the estimator's rates 1/dt stay finite).
+MIN_STAMP_STEP = 0.5e-9
+
 #: Decision step of each phase at one buffer index.
 STEPS: dict[str, Callable[[EstimatorState, int], list[UnloadResult]]] = {
     WAITING: detector.step_waiting,
@@ -116,7 +123,7 @@ class StreamingEstimator:
             Results completed by this sample (usually empty).
         """
         st = self._st
-        if not t > st.last_t:  # also catches NaN stamps
+        if not (t - st.last_t >= MIN_STAMP_STEP and abs(t) <= MAX_ABS_STAMP):  # and NaN
             return self._reject(t, p)
         if p != p or p in (math.inf, -math.inf):
             st.diag("warn", f"non-finite pressure sample {p!r} at t={t:.6f} s ignored", t)
@@ -158,7 +165,7 @@ class StreamingEstimator:
         # vectorised validity: finite, strictly increasing against the last accepted stamp
         fin_p = np.isfinite(p)
         prev_max = np.maximum.accumulate(np.concatenate(([st.last_t], t[:-1])))
-        ok_t = (t > prev_max) & np.isfinite(t)
+        ok_t = (t - prev_max >= MIN_STAMP_STEP) & (np.abs(t) <= MAX_ABS_STAMP)
         if not (ok_t.all() and fin_p.all()):
             return self._push_slow(t, p)
         out: list[UnloadResult] = []
@@ -278,7 +285,10 @@ class StreamingEstimator:
         st = self._st
         if t != t:
             st.diag("warn", "sample with a NaN stamp ignored", t)
-        elif t == st.last_t:
+        elif not abs(t) <= MAX_ABS_STAMP:
+            st.diag("warn", f"stamp t={t!r} s beyond +-{MAX_ABS_STAMP:g} s ignored (a clock "
+                    "in ns or us read as s?)", math.nan)
+        elif abs(t - st.last_t) < MIN_STAMP_STEP:
             st.diag("warn", f"duplicate stamp t={t:.9f} s ignored", t)
         else:
             st.diag("warn", f"stamp going backwards ({t:.9f} s after {st.last_t:.9f} s)"

@@ -28,6 +28,7 @@ from pneumatic_unload.estimation.refine import (
     model_inversion,
     needs_model,
     prepare_inversion,
+    pressure_problem,
 )
 from pneumatic_unload.estimation.regression import crossing_fit, hinge_fit, rms_sigma
 from pneumatic_unload.estimation.sse import on_abort
@@ -265,19 +266,34 @@ def crossing_result(st: EstimatorState, i: int, t_cross: float, t_std: float, ga
     tau_std = math.hypot(t_std, u.t0_std)
     status, text, quality = "ok", "p* crossing found", 1.0
     c39 = physics.conductance_eq39(tau, p10, p_atm, s.volume, s.initial_temperature, gas)
-    c_isen = physics.conductance_isentropic_inversion(
-        tau, p_star, p10, s.volume, s.initial_temperature, gas)
-    if s.critical_ratio > 0 and p_star < p_atm / s.critical_ratio:
-        status, text = "not_choked", (
-            f"flow subsonic before p* (p* = {p_star:.0f} Pa < p_atm/b = "
-            f"{p_atm / s.critical_ratio:.0f} Pa): eq 39 assumes choked flow")
-        quality = 0.5
-    c_model, c_model_std, method = model_inversion(s, tau, tau_std, p10, p_atm, p_star, c_isen,
-                                                   table=u.table)
+    problem = pressure_problem(p10, p_atm, p_star)
+    if problem is None and not math.isfinite(tau):
+        problem = "no p* crossing time: the samples around p* are flat or degenerate"
+    elif problem is None and not math.isfinite(tau_std):
+        problem = ("tau_exp has no uncertainty (the start fit found no falling slope): the "
+                   "start of the unload is undetermined")
+    elif problem is None and not tau > 0:
+        problem = (f"p* crossed {tau:.6g} s after the start: time runs backwards in the "
+                   f"unload (a clock step or unsorted stamps?)")
+    if problem is not None:
+        # no model of C from such numbers: eq 39 as it is, with the reason
+        st.diag("error", problem, t_cross)
+        status, text, quality = "bad_data", problem, 0.0
+        c_isen, c_model, c_model_std, method = math.nan, math.nan, math.nan, "eq39"
+    else:
+        c_isen = physics.conductance_isentropic_inversion(
+            tau, p_star, p10, s.volume, s.initial_temperature, gas)
+        if s.critical_ratio > 0 and p_star < p_atm / s.critical_ratio:
+            status, text = "not_choked", (
+                f"flow subsonic before p* (p* = {p_star:.0f} Pa < p_atm/b = "
+                f"{p_atm / s.critical_ratio:.0f} Pa): eq 39 assumes choked flow")
+            quality = 0.5
+        c_model, c_model_std, method = model_inversion(s, tau, tau_std, p10, p_atm, p_star,
+                                                       c_isen, table=u.table)
     if gap or st.gap_in_unload:
         text += "; gap in the samples during the unload"
         quality = min(quality, 0.5)
-    if tau_std / tau > 0.01:
+    if problem is None and not tau_std <= 0.01 * tau:
         quality = min(quality, 0.5)
     c39_std, c_model_std, budgets = crossing_budgets(
         s, c39=c39, c_model=c_model, c_model_std=c_model_std, tau=tau, tau_std=tau_std,
