@@ -5,7 +5,9 @@ AR(1)-corrected, through the crossing time or the curve fit) and on inputs state
 user, each with a standard uncertainty (type B): the tank volume V, the initial gas
 temperature T10 (and the wall's, when a heat law was fitted), the pressure transducer
 (an offset common to every reading) and a barometer's p_atm. A model-form term carries the
-spread of heat laws that fit the record about equally well. The combined standard
+spread of heat laws that fit the record about equally well, and a model-limits term the
+model's own simplifications (ideal gas, uniform state; calibrated against the HydDown peer
+simulator, ``model_uncertainty``). The combined standard
 uncertainty is the root sum of squares (the inputs are independent); the expanded one uses
 k = 2 (about 95 %).
 
@@ -44,10 +46,15 @@ VOLUME_REL_DEFAULT = 0.005
 #: Default standard uncertainty of a pressure reading, relative to p10 [-] (0.1 % of
 #: reading: an industrial transducer's accuracy class, as a 1-sigma offset).
 PRESSURE_REL_DEFAULT = 0.001
-#: Settings changes that state the inputs as exactly known (a simulation analysed with its
-#: own tank and gas): the budget keeps the record's terms and the model form only.
+#: Settings changes that state the inputs as exactly known and the data as made by the
+#: package's own model (a simulation analysed with its own tank and gas): the budget keeps
+#: the record's terms and the heat laws' spread only.
 EXACT_INPUTS: dict[str, float] = {"volume_uncertainty": 0.0, "temperature_uncertainty": 0.0,
-                                  "pressure_uncertainty": 0.0, "atmosphere_uncertainty": 0.0}
+                                  "pressure_uncertainty": 0.0, "atmosphere_uncertainty": 0.0,
+                                  "model_uncertainty": 0.0}
+#: The stated inputs exact, the model's limits kept: a peer simulation (HydDown) analysed
+#: with its own tank and gas.
+EXACT_INPUTS_FOREIGN_MODEL: dict[str, float] = {**EXACT_INPUTS, "model_uncertainty": 0.003}
 
 
 @dataclass(frozen=True)
@@ -291,6 +298,9 @@ def model_budget(settings: EstimatorSettings, c: float, *, type_a_std: float,
                          atmosphere_measured=atmosphere_measured, wall_std=wall_std)
     terms.append(BudgetTerm("model form (heat laws)", "model", math.nan, math.nan, "",
                             model_form_std))
+    terms.append(BudgetTerm("model limits (ideal gas, uniform state)", "model", math.nan,
+                            math.nan, "", abs(c) * settings.model_uncertainty,
+                            f"model_uncertainty {100 * settings.model_uncertainty:g} %"))
     return Budget(c, tuple(terms))
 
 

@@ -24,7 +24,18 @@ def unload_json(r: UnloadResult) -> dict[str, Any]:
             d[key] = extra[key]
     d["heat_law"] = extra.get("curve_fit", {}).get("heat_law", "") if r.final else ""
     d["recommended"] = recommended(r)
-    return d
+    return finite_or_none(d)
+
+
+def finite_or_none(x: Any) -> Any:
+    """x with every non-finite float (NaN: unknown) replaced by None, recursively."""
+    if isinstance(x, dict):
+        return {k: finite_or_none(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [finite_or_none(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
 
 
 def json_default(o: object) -> object:

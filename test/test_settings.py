@@ -101,8 +101,13 @@ def test_a_bag_of_another_gas_is_analysed_with_its_gas(tmp_path, capsys):
 
 
 def test_estimator_node_declares_the_gas(repo_root):
+    from pneumatic_unload.config.nodes import node_parameters
+
+    params = node_parameters("estimator")
+    assert {"gas_constant", "gamma"} <= set(params)
+    assert set(adapters.parameter_specs(EstimatorSettings)) <= set(params)
     src = (repo_root / "pneumatic_unload/nodes/estimator.py").read_text()
-    assert "settings_parameters(EstimatorSettings)" in src
+    assert 'node_parameters("estimator")' in src
     assert "runs" not in {line.split()[1].split(".")[-1] for line in src.splitlines()
                           if line.startswith("from pneumatic_unload")}
 

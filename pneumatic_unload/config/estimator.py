@@ -57,6 +57,12 @@ class EstimatorSettings(TankSpec):
         readings [Pa] (None: 0.1 % of p10).
     atmosphere_uncertainty : float
         Standard uncertainty of a given p_atm [Pa] (a measured one is type A).
+    model_uncertainty : float
+        Relative standard uncertainty of the model-based C from the discharge model's own
+        limits [-]: ideal gas (real air, Z = 0.997 at 8 bar), a uniform gas state, a heat
+        law from the package's family. Default 0.3 %: the RMS error of the model C against
+        the HydDown peer simulator (real-gas air, its own heat transfer) over the committed
+        validation cases (0.33 %). 0 only for data made by the package's own model.
     """
 
     heat_model: str = choice("natural", ("natural", "adiabatic"),
@@ -81,6 +87,9 @@ class EstimatorSettings(TankSpec):
         "common to all", "0.1 % of p10")
     atmosphere_uncertainty: float = number(
         100.0, "Pa", 0.0, 1e5, "standard uncertainty of a given atmosphere (barometer)")
+    model_uncertainty: float = number(
+        0.003, "-", 0.0, 0.5, "relative standard uncertainty of the model-based C from the "
+        "model's own limits (ideal gas, uniform state, heat-law family)")
 
     def __post_init__(self) -> None:
         """Validate every field (raises :class:`EstimationError` with the reason)."""

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySettings, Fit
 from pneumatic_unload.estimation import (
+    SENSOR_FAULT_TEXTS,
     STUCK_TEXT,
     EstimationError,
     EstimatorSettings,
@@ -60,7 +61,13 @@ class Problem:
         est = EstimatorSettings(**settings.tank_fields(), heat_model="adiabatic",
                                 curve_fit=False)
         every = _unloads(t, y, est)
-        results = [r for r in every if r.status in ("ok", "not_choked")]
+        # the estimator's results locate the unload and give the fit its starting values;
+        # one it called bad data for a reason of its own timing (e.g. a start it could not
+        # time on a leaking plateau), not a sensor fault, still locates it
+        results = [r for r in every if r.status in ("ok", "not_choked") or (
+            r.status == "bad_data" and not r.status_text.startswith(SENSOR_FAULT_TEXTS)
+            and all(math.isfinite(x) and x > 0 for x in (
+                r.tau_exp, r.p10, r.p_atm, r.conductance)) and math.isfinite(r.t_start))]
         if not results:
             _refuse_bad_data(every, math.inf)
             raise DiscrepancyError("no complete unload found in the trace (the pressure "
@@ -156,9 +163,12 @@ def _unloads(t: FloatArray, y: FloatArray, est: EstimatorSettings) -> list[Unloa
 
 
 def _refuse_bad_data(results: list[UnloadResult], t_cut: float) -> None:
-    """Raise when the kept part of the trace (before t_cut [s]) holds bad data (a stuck or
-    saturated transducer...): the finding is the bad data, not a model effect to fit."""
-    bad = [r for r in results if r.status == "bad_data" and r.t_complete < t_cut]
+    """Raise when the kept part of the trace (before t_cut [s]) holds a sensor fault (a
+    stuck or saturated transducer, a clock step): the finding is the bad data, not a model
+    effect to fit. Other 'bad_data' verdicts of the estimator (e.g. a start it could not
+    time on a leaking plateau) are left to the workflow's own fit."""
+    bad = [r for r in results if r.status == "bad_data" and r.t_complete < t_cut
+           and r.status_text.startswith(SENSOR_FAULT_TEXTS)]
     if bad:
         raise DiscrepancyError(f"bad data, not fitted: {bad[0].status_text} (at t = "
                                f"{bad[0].t_complete:.6g} s)")

@@ -47,6 +47,7 @@ from pneumatic_unload.estimation.regression import corner_fit, crossing_fit, hin
 from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
 from pneumatic_unload.estimation.streaming import StreamingEstimator
 from pneumatic_unload.estimation.types import (
+    SENSOR_FAULT_TEXTS,
     STATUSES,
     STUCK_TEXT,
     Diagnostic,
@@ -57,6 +58,7 @@ from pneumatic_unload.estimation.types import (
 )
 
 __all__ = [
+    "SENSOR_FAULT_TEXTS",
     "SSE_MODEL_REL_STD",
     "STATUSES",
     "STUCK_TEXT",

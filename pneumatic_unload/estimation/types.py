@@ -20,6 +20,9 @@ FloatArray = NDArray[np.float64]
 
 #: Opening of every message about a transducer stuck during an unload (its value follows).
 STUCK_TEXT = "sensor stuck at"
+#: Openings of the 'bad_data' texts that are faults of the transducer or its clock (not of
+#: the physics): a model must not be fitted through them.
+SENSOR_FAULT_TEXTS = (STUCK_TEXT, "sensor saturated", "clock stepped")
 
 #: Statuses of an :class:`UnloadResult` (same order as the message's STATUS_* constants).
 STATUSES = ("ok", "aborted_sse", "aborted", "not_choked", "bad_data")
