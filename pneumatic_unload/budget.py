@@ -137,6 +137,14 @@ class Budget:
                       "terms": [clean(dataclasses.asdict(t)) for t in self.terms]})
 
 
+def with_terms(d: dict[str, Any], terms: list[BudgetTerm]) -> dict[str, Any]:
+    """A budget given as :meth:`Budget.to_dict` with further lines (e.g. one known only
+    after the fit that produced it), its combined values recomputed."""
+    old = [BudgetTerm(**{k: (math.nan if v is None and k in ("value", "input_std", "std")
+                             else v) for k, v in t.items()}) for t in d["terms"]]
+    return Budget(d["value"], tuple(old + list(terms))).to_dict()
+
+
 def format_budget(d: dict[str, Any], unit: float = 1e-9,
                   unit_name: str = "1e-9 m^3/(s Pa)") -> list[str]:
     """Text lines of a budget given as :meth:`Budget.to_dict`: one per term (its share of
@@ -275,7 +283,8 @@ def wall_sensitivity(settings: EstimatorSettings, tau: float, *, p10: float, p_a
 def model_budget(settings: EstimatorSettings, c: float, *, type_a_std: float,
                  type_a_name: str, model_form_std: float, tau: float, p10: float,
                  p_atm: float, p_star: float, atmosphere_measured: bool,
-                 wall_std: float = math.nan) -> Budget:
+                 wall_std: float = math.nan,
+                 extra_terms: tuple[BudgetTerm, ...] = ()) -> Budget:
     """The budget of a model-based C (crossing inversion or curve fit).
 
     Parameters
@@ -292,10 +301,13 @@ def model_budget(settings: EstimatorSettings, c: float, *, type_a_std: float,
         Spread of the heat laws that fit about equally well [m^3/(s Pa)].
     tau, p10, p_atm, p_star, atmosphere_measured, wall_std
         See :func:`input_terms`.
+    extra_terms : tuple of BudgetTerm
+        Further type B lines (e.g. a given initial pressure's).
     """
     terms = [BudgetTerm(type_a_name, "A", math.nan, math.nan, "", type_a_std)]
     terms += input_terms(settings, c, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
                          atmosphere_measured=atmosphere_measured, wall_std=wall_std)
+    terms += list(extra_terms)
     terms.append(BudgetTerm("model form (heat laws)", "model", math.nan, math.nan, "",
                             model_form_std))
     terms.append(BudgetTerm("model limits (ideal gas, uniform state)", "model", math.nan,

@@ -141,6 +141,7 @@ def fit_curve(
     t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_start: float,
     p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
     profile_heat: bool = True, laws: tuple[str, ...] | None = None,
+    hold: tuple[str, ...] = (),
 ) -> CurveFit:
     """Least-squares fit of the discharge model to a recorded unload, with the heat law
     chosen by the data.
@@ -168,6 +169,10 @@ def fit_curve(
         where its likelihood is not quadratic.
     laws : tuple of str, optional
         Heat laws to try (see above).
+    hold : tuple of str
+        Values held at what was given instead of fitted: 't_open' (the valve opening at
+        t_start: a record that begins at the opening) and/or 'p10' (a given initial
+        pressure).
 
     Returns
     -------
@@ -187,7 +192,7 @@ def fit_curve(
         fits[law] = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
                              profile_heat=profile_heat, law=law, start=start,
-                             max_nfev=200 if not fits else 32, trace=trace)
+                             max_nfev=200 if not fits else 32, trace=trace, hold=hold)
         first = fits[law][0]
         if start is None and first.inflation < 2.0 and math.isfinite(first.conductance):
             # the next law starts from this fit when it is close (white residuals), its heat
@@ -209,7 +214,7 @@ def fit_curve(
             again = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
                              profile_heat=profile_heat, law=law, explore=True,
-                             trace=trace)
+                             trace=trace, hold=hold)
             if again[1] < fits[law][1]:
                 fits[law] = again
     # information criterion on residuals normalised by the best law's residual variance
@@ -241,6 +246,7 @@ def _fit_law(
     p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
     profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
     max_nfev: int = 200, explore: bool = False, trace: Trace | None = None,
+    hold: tuple[str, ...] = (),
 ) -> tuple[CurveFit, float, int]:
     """One law's fit for :func:`fit_curve`; returns (fit, chi^2 [Pa^2: residuals are bin
     sums over sqrt(count)], free parameters [-]).
@@ -272,6 +278,8 @@ def _fit_law(
         Screen starts of strong and weak heat exchange too.
     trace : Trace, optional
         :func:`curve_fit_trace` of the same samples (shared by the laws of one fit).
+    hold : tuple of str
+        See :func:`fit_curve`.
     """
     t_abs = np.asarray(t, dtype=float)
     t_ref = float(t_abs[0])
@@ -288,6 +296,10 @@ def _fit_law(
                   tau=tau, dt=dt, t_first=float(t[0]), t_last=float(t[-1]))
     model = estimator_model(settings, neutral, heat_law=law)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
+    if "t_open" in hold:
+        fixed["t_open"] = float(t_start)
+    if "p10" in hold:
+        fixed["p10"] = float(p10)
     starts = [{"tau_heat": 5.0 * tau}] if law == "fixed" and start is None else None
     if explore and natural and fit_heat:
         starts = ([{"heat_scale": 30.0}, {"heat_scale": 0.1}] if law == "natural" else

@@ -57,6 +57,14 @@ class EstimatorSettings(TankSpec):
         readings [Pa] (None: 0.1 % of p10).
     atmosphere_uncertainty : float
         Standard uncertainty of a given p_atm [Pa] (a measured one is type A).
+    start_time : float or None
+        Valve opening instant in the record's clock [s] for a record that begins at the
+        opening (a digitised curve, a 1 Hz logger started with the valve): the offline
+        analysis then skips detection (:mod:`pneumatic_unload.estimation.sparse`); not for
+        the live estimator.
+    initial_pressure, initial_pressure_std : float or None
+        p10 [Pa absolute] and its standard uncertainty [Pa] when the record does not show
+        it (with ``start_time``).
     model_uncertainty : float
         Relative standard uncertainty of the model-based C from the discharge model's own
         limits [-]: ideal gas (real air, Z = 0.997 at 8 bar), a uniform gas state, a heat
@@ -87,6 +95,14 @@ class EstimatorSettings(TankSpec):
         "common to all", "0.1 % of p10")
     atmosphere_uncertainty: float = number(
         100.0, "Pa", 0.0, 1e5, "standard uncertainty of a given atmosphere (barometer)")
+    start_time: float | None = optional(
+        None, "s", -1e10, 1e10, "valve opening instant in the record's clock, for records "
+        "that begin at the opening (no plateau): the start is not detected", "detected")
+    initial_pressure: float | None = optional(
+        None, "Pa", 1e3, 1e8, "initial tank pressure p10 (absolute) when the record does not "
+        "show it (with start_time)", "the first sample at start_time")
+    initial_pressure_std: float | None = optional(
+        None, "Pa", 0.0, 1e7, "standard uncertainty of initial_pressure", "0.1 % of it")
     model_uncertainty: float = number(
         0.003, "-", 0.0, 0.5, "relative standard uncertainty of the model-based C from the "
         "model's own limits (ideal gas, uniform state, heat-law family)")

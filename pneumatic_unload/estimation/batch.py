@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.estimation.sparse import analyze_from_start
 from pneumatic_unload.estimation.streaming import StreamingEstimator
 from pneumatic_unload.estimation.types import Diagnostic, UnloadResult
 from pneumatic_unload.physics import p_star
@@ -33,7 +34,9 @@ def analyze(
     -------
     list of UnloadResult
         Results as the streaming estimator emits them (crossing estimates, then the
-        curve-fit refinement with ``final=True`` when the unload's end was recorded).
+        curve-fit refinement with ``final=True`` when the unload's end was recorded). With
+        ``settings.start_time`` the record begins at the opening: see
+        :func:`~pneumatic_unload.estimation.sparse.analyze_from_start`.
 
     Raises
     ------
@@ -45,8 +48,12 @@ def analyze(
     if t.shape != p.shape or t.ndim != 1:
         raise EstimationError(f"t and p must be 1-D arrays of equal length, got {t.shape} "
                               f"and {p.shape}")
+    if settings is not None and settings.start_time is not None:
+        return analyze_from_start(t, p, settings)  # a record that begins at the opening
     if t.size < 16:
-        raise EstimationError(f"too few samples ({t.size}); need at least 16")
+        raise EstimationError(f"too few samples ({t.size}); need at least 16 (a record that "
+                              "begins at the valve opening, without a plateau: give "
+                              "start_time and atmosphere)")
     est = StreamingEstimator(settings)
     out = est.push_block(t, p)
     out += est.finish()

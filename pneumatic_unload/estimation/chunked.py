@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike
 
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.batch import explain_no_unload, gauge_evidence
+from pneumatic_unload.estimation.sparse import analyze_from_start
 from pneumatic_unload.estimation.streaming import StreamingEstimator
 from pneumatic_unload.estimation.types import Diagnostic, FloatArray, UnloadResult
 
@@ -147,11 +148,13 @@ def analyze_chunks(chunks: Iterable[tuple[ArrayLike, ArrayLike]],
         Mismatched arrays in a chunk, or fewer than 16 samples in all.
     """
     s = settings or EstimatorSettings()
-    est = StreamingEstimator(s)
+    sparse = s.start_time is not None  # begins at the opening: small, analysed whole
+    est = None if sparse else StreamingEstimator(s)
     run = ChunkedAnalysis(published=[], samples=0, settings=s,
                           overview=Overview(overview_samples))
     tail = np.empty(0)
     keep = s.min_plateau
+    held: list[tuple[np.ndarray, np.ndarray]] = []
     for t_in, p_in in chunks:
         t = np.asarray(t_in, dtype=float)
         p = np.asarray(p_in, dtype=float)
@@ -160,7 +163,10 @@ def analyze_chunks(chunks: Iterable[tuple[ArrayLike, ArrayLike]],
                                   f"{t.shape} and {p.shape}")
         if t.size == 0:
             continue
-        run.published += est.push_block(t, p)
+        if sparse:
+            held.append((t, p))
+        elif est is not None:
+            run.published += est.push_block(t, p)
         run.overview.add(t, p)
         run.samples += t.size
         ok = np.isfinite(t) & np.isfinite(p)
@@ -168,8 +174,16 @@ def analyze_chunks(chunks: Iterable[tuple[ArrayLike, ArrayLike]],
         run.n_finite += pp.size
         run.n_low += int(np.count_nonzero(pp <= 0.0))
         tail = np.concatenate((tail, pp[-keep:]))[-keep:]
-    if run.samples < 16:
-        raise EstimationError(f"too few samples ({run.samples}); need at least 16")
+    if sparse:
+        run.published = analyze_from_start(np.concatenate([h[0] for h in held] or [[]]),
+                                           np.concatenate([h[1] for h in held] or [[]]), s)
+        if tail.size:
+            run.final_level = float(np.median(tail))
+        return run
+    if run.samples < 16 or est is None:
+        raise EstimationError(f"too few samples ({run.samples}); need at least 16 (a record "
+                              "that begins at the valve opening, without a plateau: pass "
+                              "--start-time S and --atmosphere PA)")
     run.published += est.finish()
     run.diagnostics = est.diagnostics
     if tail.size:

@@ -94,8 +94,8 @@ def crossing_budgets(settings: EstimatorSettings, *, c39: float, c_model: float,
 
 
 def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
-                 type_a_std: float, model_form_std: float, heat_law: str
-                 ) -> dict[str, Any] | None:
+                 type_a_std: float, model_form_std: float, heat_law: str,
+                 extra_terms: tuple[Any, ...] = ()) -> dict[str, Any] | None:
     """Uncertainty budget of the final (curve-fit) C; the wall temperature's term comes
     from two model inversions at the crossing when a heat law was fitted (about a
     millisecond). None when C is not finite.
@@ -126,7 +126,7 @@ def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
                         model_form_std=model_form_std, tau=res.tau_exp, p10=res.p10,
                         p_atm=res.p_atm, p_star=res.p_star,
                         atmosphere_measured=settings.atmosphere is None,
-                        wall_std=wall_std).to_dict()
+                        wall_std=wall_std, extra_terms=extra_terms).to_dict()
 
 def prepare_inversion(settings: EstimatorSettings, t_mid: float, p_mid: float, p10: float,
                       p_atm: float, p_star: float) -> Any:
@@ -222,9 +222,12 @@ def recovery_fit(t: FloatArray, p: FloatArray, t_close: float) -> Any:
 
 def refine_with_curve_fit(
     res: UnloadResult, t: FloatArray, p: FloatArray, settings: EstimatorSettings,
-    *, noise_std: float,
+    *, noise_std: float, hold: tuple[str, ...] = (), extra_terms: tuple[Any, ...] = (),
+    fit_heat: bool | None = None,
 ) -> UnloadResult | None:
-    """Final result of an unload: the crossing result refined by :func:`fit_curve`.
+    """Final result of an unload: the crossing result refined by :func:`fit_curve`
+    (``hold``: values held, and ``fit_heat``, see there; ``extra_terms``: further lines of
+    the budget, :class:`~pneumatic_unload.budget.BudgetTerm`, e.g. a given p10's).
 
     Parameters
     ----------
@@ -247,7 +250,7 @@ def refine_with_curve_fit(
 
     try:
         fit = fit_curve(t, p, settings, t_start=res.t_start, p10=res.p10, p_atm=res.p_atm,
-                        conductance=res.conductance_model)
+                        conductance=res.conductance_model, hold=hold, fit_heat=fit_heat)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return dataclasses.replace(res, final=True, extra={"curve_fit_error": str(exc)})
     mf = fit.model_form_std if math.isfinite(fit.model_form_std) else 0.0
@@ -268,7 +271,7 @@ def refine_with_curve_fit(
     if "budget_eq39" in res.extra:
         extra["budget_eq39"] = res.extra["budget_eq39"]
     budget = final_budget(res, settings, c=fit.conductance, type_a_std=c_std,
-                          model_form_std=mf, heat_law=fit.heat_law)
+                          model_form_std=mf, heat_law=fit.heat_law, extra_terms=extra_terms)
     if budget is not None:
         extra["budget"] = budget
         c_std = budget["combined_std"]

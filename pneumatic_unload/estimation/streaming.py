@@ -84,6 +84,10 @@ class StreamingEstimator:
 
     def __init__(self, settings: EstimatorSettings | None = None) -> None:
         self.settings = settings or EstimatorSettings()
+        if self.settings.start_time is not None:
+            raise EstimationError(
+                "start_time is for offline records that begin at the valve opening "
+                "(analyze, --start-time); the streaming estimator detects each start")
         self._st = EstimatorState(self.settings)
         self.diagnostics = self._st.diagnostics
         self.results: list[UnloadResult] = []
