@@ -81,6 +81,9 @@ class CurveFit:
         give another C [m^3/(s Pa)] (included in ``conductance_std``).
     laws : dict
         Per law tried: C [m^3/(s Pa)], chi2 and BIC [-].
+    wall_temperature : float
+        The wall temperature fitted by a hot-start variant ('natural+wall', 'fixed+wall':
+        the gas starts at T10, the wall is elsewhere) [K]; NaN when the wall was not fitted.
     """
 
     conductance: float
@@ -100,6 +103,7 @@ class CurveFit:
     tau_heat: float = math.nan
     model_form_std: float = 0.0
     laws: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
+    wall_temperature: float = math.nan
 
     def config(self, settings: EstimatorSettings) -> RigConfig:
         """The fitted model's configuration (valve opening at t = 0) [SI]."""
@@ -107,7 +111,9 @@ class CurveFit:
         cfg = rig_from_settings(settings, conductance=self.conductance, p10=self.p10,
                                 p_atm=self.p_atm, critical_ratio=b,
                                 heat_scale=self.heat_scale)
-        if self.heat_law == "fixed" and math.isfinite(self.tau_heat):
+        if math.isfinite(self.wall_temperature):
+            cfg = cfg.replace(wall_temperature=float(self.wall_temperature))
+        if self.heat_law.startswith("fixed") and math.isfinite(self.tau_heat):
             g = settings.gas
             h_a = self.p10 * settings.volume / ((g.gamma - 1.0) * settings.initial_temperature
                                                 * self.tau_heat)
@@ -133,6 +139,9 @@ def curve_fit_trace(t: FloatArray, p: FloatArray, t_start: float) -> Trace:
 
 #: Laws fitted in turn by :func:`fit_curve` when the natural model is on (the data choose).
 CURVE_FIT_LAWS: tuple[str, ...] = ("natural", "fixed")
+#: Residual inflation above which, with the wall assumed at T10, the hot-start variants
+#: (wall temperature fitted) are tried too [-].
+HOT_START_INFLATION = 1.5
 #: Delta-BIC below which another law counts as fitting about as well [-].
 LAW_BIC_THRESHOLD = 10.0
 
@@ -217,6 +226,30 @@ def fit_curve(
                              trace=trace, hold=hold)
             if again[1] < fits[law][1]:
                 fits[law] = again
+    if (natural and fit_heat and settings.wall_temperature is None
+            and min(f[0].inflation for f in fits.values()) > HOT_START_INFLATION):
+        # the wall was assumed at T10 and every law leaves structure: a gas hot (or cold)
+        # after charging is a model of its own, the wall temperature fitted, from each law's
+        # fit; the information criterion below decides whether the record carries it
+        for law in tried:
+            base = fits[law][0]
+            if not math.isfinite(base.conductance):
+                continue
+            start_w = {"C": base.conductance, "t_open": base.t_start - float(t[0]),
+                       "p10": base.p10, "heat_scale": base.heat_scale,
+                       "tau_heat": base.tau_heat, "b": base.critical_ratio}
+            hot = _fit_law(
+                t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
+                conductance=conductance, fit_heat=True, profile_heat=False, law=law,
+                start={k: v for k, v in start_w.items() if math.isfinite(v)},
+                max_nfev=120, trace=trace, hold=hold, fit_wall=True)
+            # a hot start is a claim about the rig: only a wall clearly away from T10
+            # (3 of the temperature's uncertainties, at least 3 K) makes it; a wall found
+            # within that only absorbs other model error (measured on HydDown: a wall
+            # 2.4 K off the truth moved C by +0.25 %)
+            gap = abs(hot[0].wall_temperature - settings.initial_temperature)
+            if gap > 3.0 * max(settings.temperature_uncertainty, 1.0):
+                fits[f"{law}+wall"] = hot
     # information criterion on residuals normalised by the best law's residual variance
     # (inflated when structured: correlated residuals carry less information)
     lowest = min(fits, key=lambda k: fits[k][1])
@@ -246,7 +279,7 @@ def _fit_law(
     p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
     profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
     max_nfev: int = 200, explore: bool = False, trace: Trace | None = None,
-    hold: tuple[str, ...] = (),
+    hold: tuple[str, ...] = (), fit_wall: bool = False,
 ) -> tuple[CurveFit, float, int]:
     """One law's fit for :func:`fit_curve`; returns (fit, chi^2 [Pa^2: residuals are bin
     sums over sqrt(count)], free parameters [-]).
@@ -280,6 +313,9 @@ def _fit_law(
         :func:`curve_fit_trace` of the same samples (shared by the laws of one fit).
     hold : tuple of str
         See :func:`fit_curve`.
+    fit_wall : bool
+        Fit the wall temperature too (hot-start variant; starts screened 10 and 30 K below
+        T10).
     """
     t_abs = np.asarray(t, dtype=float)
     t_ref = float(t_abs[0])
@@ -294,13 +330,16 @@ def _fit_law(
     neutral = Start(conductance=conductance, critical_ratio=settings.critical_ratio,
                   t_open=float(np.clip(t_start, t[0], t[-1])), p10=p10, p_atm=p_atm,
                   tau=tau, dt=dt, t_first=float(t[0]), t_last=float(t[-1]))
-    model = estimator_model(settings, neutral, heat_law=law)
+    model = estimator_model(settings, neutral, heat_law=law, fit_wall=fit_wall)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
     if "t_open" in hold:
         fixed["t_open"] = float(t_start)
     if "p10" in hold:
         fixed["p10"] = float(p10)
     starts = [{"tau_heat": 5.0 * tau}] if law == "fixed" and start is None else None
+    if fit_wall:
+        t10 = settings.initial_temperature
+        starts = [{"t_wall": t10 - 10.0}, {"t_wall": t10 - 30.0}]
     if explore and natural and fit_heat:
         starts = ([{"heat_scale": 30.0}, {"heat_scale": 0.1}] if law == "natural" else
                   [{"tau_heat": 0.05 * tau}, {"tau_heat": 20.0 * tau}])
@@ -353,7 +392,9 @@ def _fit_law(
         critical_ratio_std=b_std, t_start=v["t_open"] + t_ref, p10=v["p10"],
         p_atm=v.get("p_atm", p_atm) if settings.atmosphere is None else p_atm,
         heat_scale=h, heat_scale_std=h_std, rms=math.sqrt(s2), n=int(t.size),
-        success=bool(fit.success), inflation=inflation, heat_law=law,
+        success=bool(fit.success), inflation=inflation,
+        heat_law=f"{law}+wall" if fit_wall else law,
+        wall_temperature=v.get("t_wall", math.nan),
         tau_heat=v.get("tau_heat", math.nan))
     return cf, fit.chi2, fit.k
 

@@ -32,13 +32,15 @@ HEAT_CORRELATION_REL_STD = 0.3
 CRITICAL_RATIO_PRIOR_STD = 0.1
 
 def estimator_model(settings: EstimatorSettings, start: Start, *,
-                    p_atm: float | None = None, heat_law: str = "natural"
-                    ) -> ParametricModel:
-    """The parametric model of the estimator: heat transfer (``heat_law``) or none."""
+                    p_atm: float | None = None, heat_law: str = "natural",
+                    fit_wall: bool = False) -> ParametricModel:
+    """The parametric model of the estimator: heat transfer (``heat_law``, and the wall
+    temperature as a parameter with ``fit_wall``) or none."""
     effects = ("heat_transfer",) if settings.heat_model == "natural" else ()
     tank = settings.tank if p_atm is None else dataclasses.replace(settings.tank,
                                                                   atmosphere=p_atm)
-    return ParametricModel(effects, tank, start, heat_law=heat_law)
+    return ParametricModel(effects, tank, start, heat_law=heat_law,
+                           fit_wall_temperature=fit_wall and bool(effects))
 
 
 def rig_from_settings(settings: EstimatorSettings, *, conductance: float, p10: float,
