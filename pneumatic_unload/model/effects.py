@@ -167,6 +167,14 @@ def laminar_coefficient(fraction: float, v: Values, tank: TankSpec) -> float:
     return clamp(fraction * g0 / max(v["p10"] - p_atm, 1.0), 0.0, 1e-5)
 
 
+def parallel_starts(s: Start, name: str, sizes: tuple[float, ...],
+                    extra: Values | None = None) -> list[Values]:
+    """Starts of a leak in parallel with the component: the leak takes ``sizes`` [-] of
+    the flow the baseline gave C, so C starts at C_start/(1 + size) [m^3/(s Pa)] (the
+    total flow, which the trace fixes, stays where it was)."""
+    return [{name: f, "C": s.conductance / (1.0 + f), **(extra or {})} for f in sizes]
+
+
 def _leak(v: Values, tank: TankSpec) -> dict[str, object]:
     return {"leak_coefficient": laminar_coefficient(v["leak_fraction"], v, tank)}
 
@@ -193,7 +201,8 @@ def _orifice_record(name: str, where: str, ratio: str, b: str) -> Effect:
          EffectParam(b, "-", False, 0.02, 0.95, lambda s: 0.3, 0.1,
                      "critical pressure ratio b_leak of the leak")),
         lambda s: {ratio: 1e-5, b: 0.3},
-        lambda s: [{ratio: 0.03, b: 0.3}, {ratio: 0.2, b: 0.5}],
+        (lambda s: [{ratio: 0.03, b: 0.3}, *parallel_starts(s, ratio, (0.2, 0.6), {b: 0.4})])
+        if name in DOWNSTREAM_LEAKS else lambda s: [{ratio: 0.03, b: 0.3}, {ratio: 0.2, b: 0.5}],
         _orifice(name, ratio, b))
 
 
@@ -254,7 +263,7 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
                         "leak flow at p10 relative to the component's choked flow at p10"),),
            lambda s: {"leak_downstream_fraction": 1e-4},
            lambda s: [{"leak_downstream_fraction": 0.03},
-                      {"leak_downstream_fraction": 0.2}],
+                      *parallel_starts(s, "leak_downstream_fraction", (0.2, 0.6))],
            _leak_down),
     _orifice_record(
         "orifice_leak",
