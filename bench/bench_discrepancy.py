@@ -28,8 +28,12 @@ from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.model import simulate
 
 ONE_PARAM = {"heat_transfer": "tau_heat", "valve_opening": "t_ramp",
-             "sensor_lag": "tau_sensor", "leak": "leak_fraction", "sensor_offset": "offset",
+             "sensor_lag": "tau_sensor", "leak": "leak_fraction",
+             "leak_downstream": "leak_downstream_fraction", "sensor_offset": "offset",
              "sensor_gain": "gain"}
+#: Candidates of issue 12 (leaks in both places): named right, or an ambiguity whose C
+#: range holds the true C.
+LEAKS = ("leak", "leak_downstream", "orifice_leak", "orifice_leak_downstream")
 
 
 def noise_free_misfit(case, settings) -> float:
@@ -63,7 +67,9 @@ def trial(job: tuple[str, int, float]) -> dict:
     out = {"effect": effect, "seed": seed, "rho": rho, "claimed": res.effect,
            "amb": list(res.ambiguous_with), "delta": res.delta_bic, "n": sim.t.size,
            "nrms_after": res.after.nrms, "white_after": res.after.white,
-           "nrms_before": res.before.nrms, "elapsed": el, "error": None}
+           "nrms_before": res.before.nrms, "elapsed": el, "error": None,
+           "effects": list(res.effects), "c": res.conductance, "c_std": res.conductance_std(),
+           "c_true": cfg.conductance, "c_range": getattr(res, "conductance_range", None)}
     if effect != "none":
         out["misfit"] = noise_free_misfit(case, s)
         par = ONE_PARAM.get(effect)
@@ -150,6 +156,25 @@ def main(argv: list[str] | None = None) -> int:
                 lines.append(f"| - {par} ({e}, n = {len(ee)}) | median "
                              f"{100 * float(np.median(ee)):.2f} %, p90 "
                              f"{100 * float(np.percentile(ee, 90)):.2f} % | | |")
+    def c_in_range(r: dict) -> bool:
+        return r["c_range"] is not None and r["c_range"][0] <= r["c_true"] <= r["c_range"][1]
+
+    for e in (e for e in LEAKS if e in EFFECTS):
+        sel = [r for r in big if r["effect"] == e]
+        line(f"named right alone, or ambiguity with C range holding the truth: {e}", sum(
+            (r["claimed"] == e and not r["amb"] and abs(r["c"] - r["c_true"])
+             <= 3 * r["c_std"]) or (e in [r["claimed"], *r["amb"]] and c_in_range(r))
+            for r in sel), len(sel), 0.9)
+    allr = ok
+    line("confident wrong C (|C - truth| > 3 sigma, no ambiguity, no C range), all trials",
+         sum(abs(r["c"] - r["c_true"]) > 3 * r["c_std"] and not r["amb"]
+             and r["c_range"] is None for r in allr), len(allr), 0.02, geq=False)
+    line("C range reported but missing the truth, all trials",
+         sum(r["c_range"] is not None and not c_in_range(r) for r in allr), len(allr),
+         0.02, geq=False)
+    line("an effect claimed that was not simulated, all trials", sum(
+        any(x not in ((r["effect"],) if r["effect"] != "none" else ()) for x in r["effects"])
+        for r in allr), len(allr), 0.02, geq=False)
     claimed_ok = [r for r in big if r["claimed"] != "none"]
     line("after the effect: nrms <= 1.02 and white (claimed trials)", sum(
         r["nrms_after"] <= 1.02 and r["white_after"] for r in claimed_ok), len(claimed_ok),
@@ -177,6 +202,13 @@ def main(argv: list[str] | None = None) -> int:
               f"set {sum(e in [r['claimed'], *r['amb']] for r in sel)}, detectable "
               f"{sum(r['misfit'] >= 50 for r in sel)}; wrong names: "
               f"{sorted({r['claimed'] for r in sel} - {e, 'none'})}")
+    print("\nconfident wrong C by effect (|C - truth| > 3 sigma, no ambiguity, no C range):")
+    for e in (*EFFECTS, "none"):
+        sel = [r for r in ok if r["effect"] == e]
+        bad = [r for r in sel if abs(r["c"] - r["c_true"]) > 3 * r["c_std"] and not r["amb"]
+               and r["c_range"] is None]
+        print(f"- {e}: {len(bad)}/{len(sel)}" + (" (C errors " + ", ".join(
+            f"{100 * (r['c'] / r['c_true'] - 1):+.1f} %" for r in bad) + ")" if bad else ""))
     for r in errors:
         print(f"- crashed: {r['effect']} seed {r['seed']} rho {r['rho']}: {r['error']}")
     return 0

@@ -319,7 +319,9 @@ def test_cli_json_fields_and_report_files(tmp_path, capsys):
         assert key in d
     assert d["effect"] == "sensor_offset"
     assert set(d["delta_bic"]) == {"heat_transfer", "valve_opening", "sensor_lag", "leak",
-                                   "pipe_volume", "sensor_offset", "sensor_gain"}
+                                   "leak_downstream", "orifice_leak",
+                                   "orifice_leak_downstream", "pipe_volume", "sensor_offset",
+                                   "sensor_gain"}
     assert d["noise"]["sigma"] == pytest.approx(1000.0, rel=0.1) and "rho" in d["noise"]
     off = d["parameters"]["offset"]
     assert off["ci_low"] <= 5000.0 <= off["ci_high"] or abs(off["value"] - 5000) < 150

@@ -34,6 +34,9 @@ EFFECTS: tuple[str, ...] = (
     "valve_opening",
     "sensor_lag",
     "leak",
+    "leak_downstream",
+    "orifice_leak",
+    "orifice_leak_downstream",
     "pipe_volume",
     "sensor_offset",
     "sensor_gain",
@@ -69,7 +72,24 @@ class RigConfig(TankSpec):
         0.02, "s", 0.0, 10.0, "valve opening: linear ramp of the effective area")
     sensor_lag: float = number(0.01, "s", 0.0, 10.0, "first-order time constant of the sensor")
     leak_coefficient: float = number(
-        2e-10, "kg/(s Pa)", 0.0, 1e-5, "laminar leak to atmosphere: G = K (p - p_atm)")
+        2e-10, "kg/(s Pa)", 0.0, 1e-5,
+        "upstream laminar leak (tank side, always open): G = K (p - p_atm)")
+    leak_downstream_coefficient: float = number(
+        2e-10, "kg/(s Pa)", 0.0, 1e-5,
+        "downstream laminar leak (parallel to the component, opens with the valve): "
+        "G = a(t) K (p - p_atm)")
+    orifice_leak_conductance: float = number(
+        5e-10, "m^3/(s Pa)", 1e-13, 1e-5,
+        "upstream orifice-law leak (always open): its sonic conductance C_leak")
+    orifice_leak_critical_ratio: float = number(
+        0.3, "-", 0.0, 0.99, "upstream orifice-law leak: its critical pressure ratio b_leak")
+    orifice_leak_downstream_conductance: float = number(
+        5e-10, "m^3/(s Pa)", 1e-13, 1e-5,
+        "downstream orifice-law leak (parallel to the component, opens with the valve): "
+        "its sonic conductance C_leak")
+    orifice_leak_downstream_critical_ratio: float = number(
+        0.3, "-", 0.0, 0.99,
+        "downstream orifice-law leak: its critical pressure ratio b_leak")
     pipe_volume: float = number(5e-4, "m^3", 0.0, 10.0, "volume between tank and component")
     pipe_conductance: float = number(
         1e-8, "m^3/(s Pa)", 1e-13, 1e-5, "sonic conductance of the pipe/fittings in series")

@@ -7,11 +7,14 @@ pre-step samples, record length the simulator's automatic 6 tau_exp. Effect size
 * heat_transfer: thermal time constant tau_heat = m0 c_v/(h A) 0.5-5 s (fixed h A);
 * valve_opening: 10-100 ms; sensor_lag: 5-50 ms;
 * leak: 2-20 % of the choked flow at p10 (K (p10 - p_atm) = f G_choked(p10));
+* leak_downstream (opens with the valve): 5-50 % of the choked flow at p10;
+* orifice_leak: C_leak 2-20 % of C, b_leak 0.2-0.5; orifice_leak_downstream: C_leak
+  5-50 % of C, b_leak 0.2-0.5;
 * pipe_volume: 5-30 % of V, pipe conductance 2-10 times C;
 * sensor_offset: 1-10 kPa, sensor_gain: 0.2-2 % (random sign).
 
 The parameter names and mappings are those of
-:mod:`pneumatic_unload.discrepancy.candidates`, so a fitted value compares directly with
+:mod:`pneumatic_unload.model.effects`, so a fitted value compares directly with
 the truth. SI units.
 """
 
@@ -39,7 +42,8 @@ class Case:
     effect : str
         Hidden effect ('none' for effect-free data).
     truth : dict
-        True values of the effect's parameters [SI units, see candidates].
+        True values of the effect's parameters [SI units, see
+        :data:`pneumatic_unload.model.effects.REGISTRY`].
     config : RigConfig
         Configuration simulated (noise included).
     seed : int
@@ -101,6 +105,17 @@ def draw_case(effect: str, seed: int, *, rho: float = 0.0, noise_std: float = NO
         truth["leak_fraction"] = f
         g0 = c * RHO_N * p10 * math.sqrt(T_N / t10)
         kw["leak_coefficient"] = f * g0 / (p10 - 101325.0)
+    elif effect == "leak_downstream":
+        f = rng.uniform(0.05, 0.5)
+        truth["leak_downstream_fraction"] = f
+        g0 = c * RHO_N * p10 * math.sqrt(T_N / t10)
+        kw["leak_downstream_coefficient"] = f * g0 / (p10 - 101325.0)
+    elif effect in ("orifice_leak", "orifice_leak_downstream"):
+        ratio = rng.uniform(0.02, 0.2) if effect == "orifice_leak" else rng.uniform(0.05, 0.5)
+        truth[f"{effect}_ratio"] = ratio
+        truth[f"{effect}_b"] = rng.uniform(0.2, 0.5)
+        kw[f"{effect}_conductance"] = ratio * c
+        kw[f"{effect}_critical_ratio"] = truth[f"{effect}_b"]
     elif effect == "pipe_volume":
         truth["pipe_volume_ratio"] = rng.uniform(0.05, 0.3)
         truth["pipe_conductance_ratio"] = rng.uniform(2.0, 10.0)

@@ -249,6 +249,16 @@ class DiscrepancyResult:
     temperature: FloatArray | None = None
     settings: DiscrepancySettings | None = None
     notes: list[str] = field(default_factory=list)
+    #: Models that fit about equally with different C (None: C is not ambiguous); a
+    #: :class:`~pneumatic_unload.discrepancy.ambiguity.ConductanceAmbiguity`.
+    conductance_ambiguity: Any = None
+
+    @property
+    def conductance_range(self) -> tuple[float, float] | None:
+        """C range across the models that fit about equally [m^3/(s Pa)] (None: C is
+        not ambiguous)."""
+        a = self.conductance_ambiguity
+        return None if a is None else (a.low, a.high)
 
     @property
     def rms_before(self) -> float:
@@ -294,6 +304,8 @@ class DiscrepancyResult:
             "noise": self.noise.to_dict(),
             "baseline": theta(self.baseline), "final_model": theta(self.final),
             "conductance": self.conductance, "conductance_std": self.conductance_std(),
+            "conductance_range": None if self.conductance_ambiguity is None
+            else self.conductance_ambiguity.to_dict(),
             "diagnostics_before": self.before.to_dict(),
             "diagnostics_after": self.after.to_dict(),
             "extra_data": self.extra_data, "geometry_factor": self.geometry_factor,

@@ -18,7 +18,10 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
 3. **Decision** by BIC = chi^2 + k ln(n): an effect is claimed only if it beats the
    current model by more than ``bic_threshold`` (10); it is named alone only if the
    runner-up is more than 10 behind, otherwise the ambiguity set is reported with the
-   extra data that would separate its members.
+   extra data that would separate its members. Models that fit about equally but give
+   different C (or a leak in parallel with the component, which C is confounded with) are
+   reported as a C ambiguity with the C range (:mod:`~pneumatic_unload.discrepancy.
+   ambiguity`).
 4. **Gap.** RMS before and after, the effect's parameters with 95 % intervals (linear from
    the Jacobian, replaced by the profile likelihood when the linear one is unreliable); an
    interval that does not close within the parameter range means "not identifiable".
@@ -37,6 +40,7 @@ import time
 import numpy as np
 from numpy.typing import NDArray
 
+from pneumatic_unload.discrepancy.ambiguity import C_MEANING, conductance_ambiguity, describe
 from pneumatic_unload.discrepancy.intervals import (
     geometry_factor_check,
     intervals,
@@ -124,18 +128,22 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
     params.update(intervals(prob, current, ["C"], profile=False))
     extra = separating_data([first_effect, *first_amb]) if first_amb else []
     geo = geometry_factor_check(prob, current)
-    notes = []
+    notes = [C_MEANING]
     if prob.noise.source == "differences":
         notes.append("no plateau long enough for the noise model: sigma from second "
                      "differences of the whole trace, rho assumed 0")
     verdict = _verdict(first_effect, first_amb, claimed, before, after, params)
+    c_amb = conductance_ambiguity(base, rounds, current, thr)
+    if c_amb.ambiguous:
+        verdict += "; " + describe(c_amb)
+        extra += [x for x in c_amb.separating if x not in extra]
     res = DiscrepancyResult(
         effect=first_effect, ambiguous_with=first_amb, effects=claimed, verdict=verdict,
         parameters=params, noise=prob.noise, baseline=base, final=current, rounds=rounds,
         before=before, after=after, extra_data=extra, geometry_factor=geo, t=prob.t,
         y=prob.y, model_before=m_before, model_after=m_after, t_ref=prob.t_ref,
         n_samples=prob.lik.n, n_bins=prob.lik.n_bins, elapsed=0.0, settings=settings,
-        notes=notes)
+        notes=notes, conductance_ambiguity=c_amb if c_amb.ambiguous else None)
     if temperature is not None:
         res.t_temperature = np.asarray(temperature[0], dtype=float) - prob.t_ref
         res.temperature = np.asarray(temperature[1], dtype=float)

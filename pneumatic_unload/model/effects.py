@@ -28,9 +28,18 @@ from pneumatic_unload.config.fields import with_changes
 from pneumatic_unload.fit.params import Parameter, Parameters
 from pneumatic_unload.model.ode import integrate, valve_events
 from pneumatic_unload.model.sensor import sensor_response
+from pneumatic_unload.model.separation import (  # re-exported: the advice on look-alikes
+    DOWNSTREAM_LEAKS,
+    PLUGGED_RUN,
+    SEPARATING_DATA,
+    separating_data,
+)
 from pneumatic_unload.physics import RHO_N, T_N
 
 FloatArray = NDArray[np.float64]
+
+__all__ = ["DOWNSTREAM_LEAKS", "PLUGGED_RUN", "REGISTRY", "SEPARATING_DATA", "Effect",
+           "EffectParam", "ParametricModel", "Start", "separating_data"]
 
 #: Integrator tolerance of every fit of the parametric model [-]: the model error (~1e-8
 #: p10, well under a Pa) stays far below the noise and below the finite-difference steps of
@@ -150,11 +159,51 @@ def _heat_fixed(v: Values, tank: TankSpec) -> dict[str, object]:
             "heat_transfer_coefficient": clamp(h_a, 0.0, 1e4)}
 
 
-def _leak(v: Values, tank: TankSpec) -> dict[str, object]:
+def laminar_coefficient(fraction: float, v: Values, tank: TankSpec) -> float:
+    """Laminar leak coefficient K [kg/(s Pa)] whose flow K (p10 - p_atm) at p10 is
+    ``fraction`` [-] of the component's choked flow C rho_n p10 sqrt(T_N/T10) [kg/s]."""
     p_atm = v.get("p_atm", tank.atmosphere or 101325.0)
     g0 = v["C"] * RHO_N * v["p10"] * math.sqrt(T_N / tank.initial_temperature)
-    k = v["leak_fraction"] * g0 / max(v["p10"] - p_atm, 1.0)
-    return {"leak_coefficient": clamp(k, 0.0, 1e-5)}
+    return clamp(fraction * g0 / max(v["p10"] - p_atm, 1.0), 0.0, 1e-5)
+
+
+def parallel_starts(s: Start, name: str, sizes: tuple[float, ...],
+                    extra: Values | None = None) -> list[Values]:
+    """Starts of a leak in parallel with the component: the leak takes ``sizes`` [-] of
+    the flow the baseline gave C, so C starts at C_start/(1 + size) [m^3/(s Pa)] (the
+    total flow, which the trace fixes, stays where it was)."""
+    return [{name: f, "C": s.conductance / (1.0 + f), **(extra or {})} for f in sizes]
+
+
+def _leak(v: Values, tank: TankSpec) -> dict[str, object]:
+    return {"leak_coefficient": laminar_coefficient(v["leak_fraction"], v, tank)}
+
+
+def _leak_down(v: Values, tank: TankSpec) -> dict[str, object]:
+    return {"leak_downstream_coefficient":
+            laminar_coefficient(v["leak_downstream_fraction"], v, tank)}
+
+
+def _orifice(prefix: str, ratio: str, b: str) -> Callable[[Values, TankSpec],
+                                                          dict[str, object]]:
+    def apply(v: Values, tank: TankSpec) -> dict[str, object]:
+        return {f"{prefix}_conductance": clamp(v[ratio] * v["C"], 1e-13, 1e-5),
+                f"{prefix}_critical_ratio": clamp(v[b], 0.0, 0.99)}
+    return apply
+
+
+def _orifice_record(name: str, where: str, ratio: str, b: str) -> Effect:
+    return Effect(
+        name, where,
+        (EffectParam(ratio, "-", True, 1e-5, 10.0, lambda s: 0.05, 1.0,
+                     "sonic conductance of the leak C_leak relative to C (its choked flow "
+                     "relative to the component's at the same pressure)"),
+         EffectParam(b, "-", False, 0.02, 0.95, lambda s: 0.3, 0.1,
+                     "critical pressure ratio b_leak of the leak")),
+        lambda s: {ratio: 1e-5, b: 0.3},
+        (lambda s: [{ratio: 0.03, b: 0.3}, *parallel_starts(s, ratio, (0.2, 0.6), {b: 0.4})])
+        if name in DOWNSTREAM_LEAKS else lambda s: [{ratio: 0.03, b: 0.3}, {ratio: 0.2, b: 0.5}],
+        _orifice(name, ratio, b))
 
 
 HEAT_NATURAL = Effect(
@@ -204,6 +253,31 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
            lambda s: {"leak_fraction": 1e-4},
            lambda s: [{"leak_fraction": 0.03}, {"leak_fraction": 0.2}],
            _leak),
+    Effect("leak_downstream",
+           "downstream of the shut-off valve, in parallel with the component (a leaky "
+           "fixture seal): a laminar leak to atmosphere G = a(t) K (p - p_atm) that opens "
+           "and closes with the valve (the plateau stays flat); its flow adds to the "
+           "component's, so C is confounded with it",
+           (EffectParam("leak_downstream_fraction", "-", True, 1e-5, 10.0,
+                        lambda s: 0.05, 1.0,
+                        "leak flow at p10 relative to the component's choked flow at p10"),),
+           lambda s: {"leak_downstream_fraction": 1e-4},
+           lambda s: [{"leak_downstream_fraction": 0.03},
+                      *parallel_starts(s, "leak_downstream_fraction", (0.2, 0.6))],
+           _leak_down),
+    _orifice_record(
+        "orifice_leak",
+        "the tank and its fittings, upstream of the valve: a leak through a small orifice "
+        "(ISO 6358 law, own C_leak and b_leak, m = 0.5; often sonic), active whenever the "
+        "tank is above p_atm (the plateau decays)",
+        "orifice_leak_ratio", "orifice_leak_b"),
+    _orifice_record(
+        "orifice_leak_downstream",
+        "downstream of the shut-off valve, in parallel with the component: a leak through "
+        "a small orifice (ISO 6358 law, own C_leak and b_leak, m = 0.5) that opens with "
+        "the valve; C of the component and C_leak are nearly indistinguishable from one "
+        "trace (both choked until p_atm/b)",
+        "orifice_leak_downstream_ratio", "orifice_leak_downstream_b"),
     Effect("pipe_volume",
            "between the tank and the component: a pipe volume and the series conductance "
            "of the fittings (a system C is measured)",
@@ -239,37 +313,7 @@ HEAT_VARIANTS: dict[str, Effect] = {"natural": HEAT_NATURAL, "fixed": HEAT_FIXED
 WALL_TEMPERATURE = EffectParam("t_wall", "K", False, 150.0, 600.0, lambda s: math.nan, 5.0,
                                "wall temperature")
 
-#: Which extra measurement separates two confusable effects.
-SEPARATING_DATA: dict[frozenset[str], str] = {
-    frozenset({"valve_opening", "sensor_lag"}):
-        "a valve position signal (or a faster discharge: a bigger component or a smaller "
-        "tank makes the valve ramp and the sensor lag distort different parts of the curve)",
-    frozenset({"sensor_offset", "sensor_gain"}):
-        "a zero reading at atmosphere and a reference reading at a known pressure (a "
-        "calibrated manometer at p10)",
-    frozenset({"heat_transfer", "pipe_volume"}):
-        "a gas temperature measurement, or a run with the pipe shortened",
-    frozenset({"heat_transfer", "leak"}):
-        "a leak test: hold the charged tank closed and watch the pressure",
-    frozenset({"leak", "pipe_volume"}):
-        "a leak test (closed tank held at p10) or a run with the pipe shortened",
-    frozenset({"sensor_offset", "leak"}):
-        "a zero reading at atmosphere, or a leak test (closed tank held at p10)",
-    frozenset({"sensor_gain", "leak"}):
-        "a leak test (closed tank held at p10) and a calibration of the transducer",
-}
 assert set(REGISTRY) == set(EFFECTS), "every effect of the configuration needs a record"
-
-
-def separating_data(names: list[str]) -> list[str]:
-    """Advice: which extra data would separate each pair of confusable effects."""
-    out: list[str] = []
-    for i, a in enumerate(names):
-        for b in names[i + 1:]:
-            hint = SEPARATING_DATA.get(frozenset({a, b}))
-            out.append(f"{a} vs {b}: " + (hint or "a second run with a different tank "
-                                           "volume or initial pressure"))
-    return out
 
 
 class ParametricModel:

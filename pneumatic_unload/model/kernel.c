@@ -12,8 +12,12 @@
 enum {
     GAMMA, R_GAS, CP, VOLUME, P_ATM, T_WALL, B_RATIO, M_INDEX, C_RHO, LEAK,
     HEAT_MODE, HEAT_A, HEAT_RA, PIPE, PIPE_VOLUME, PIPE_C_RHO,
-    T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN, N_PARAMETERS
+    T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN,
+    LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B, N_PARAMETERS
 };
+
+/* Subsonic index of the orifice-law leaks [-] (a sharp-edged orifice). */
+#define LEAK_M_INDEX 0.5
 
 enum { HEAT_NONE = 0, HEAT_NATURAL = 1, HEAT_FIXED = 2 };
 enum { OK = 0, TOO_MANY_STEPS = 1, STEP_TOO_SMALL = 2, NOT_FINITE = 3 };
@@ -58,7 +62,28 @@ double pu_opening(double t, double t_open, double ramp, double t_close)
     return 1.0;
 }
 
-/* dy/dt of y = (p [Pa], T [K][, p_pipe [Pa]]) at t [s]. */
+/* Mass flow [kg/s] through the valve's branch from a node at p [Pa], T [K] to p_atm: the
+ * component (C rho_n, b, m) and the downstream leaks in parallel with it (laminar
+ * k_down (p - p_atm); orifice law C_leak rho_n, b_leak), all times the opening a [-]. */
+static double valve_branch(double a, double p, double t_node, const double *prm)
+{
+    if (a <= 0.0) return 0.0;
+    double p_atm = prm[P_ATM], r_lin = prm[R_LIN], sq_tn = prm[SQRT_TN];
+    /* the component's term in the order of the original formula (bit-identical results
+     * without leaks) */
+    double g = a * prm[C_RHO] * p * sq_tn / sqrt(t_node)
+               * pu_flow_phi(p_atm / p, prm[B_RATIO], prm[M_INDEX], r_lin);
+    if (prm[LEAK_DOWN] != 0.0) g += a * prm[LEAK_DOWN] * (p - p_atm);
+    if (prm[OLEAK_DOWN_C_RHO] > 0.0)
+        g += a * prm[OLEAK_DOWN_C_RHO] * p * sq_tn / sqrt(t_node)
+             * pu_flow_phi(p_atm / p, prm[OLEAK_DOWN_B], LEAK_M_INDEX, r_lin);
+    return g;
+}
+
+/* dy/dt of y = (p [Pa], T [K][, p_pipe [Pa]]) at t [s].
+ * Flows out of the tank: the valve branch (through the pipe when there is one), the
+ * upstream laminar leak LEAK (p - p_atm) and the upstream orifice-law leak (C_leak rho_n,
+ * b_leak), both active whether the valve is open or not. */
 void pu_rhs(double t, const double *y, const double *prm, double *dy)
 {
     double p1 = y[0], t1 = y[1];
@@ -69,16 +94,15 @@ void pu_rhs(double t, const double *y, const double *prm, double *dy)
     if (prm[PIPE] > 0.0) {
         double p2 = y[2];
         g1 = prm[PIPE_C_RHO] * p1 * sq_tn / sqrt(t1) * pu_flow_phi(p2 / p1, 0.5, 0.5, r_lin);
-        double g2 = 0.0;
-        if (a > 0.0)
-            g2 = a * prm[C_RHO] * p2 * sq_tn / sqrt(t_wall)
-                 * pu_flow_phi(p_atm / p2, prm[B_RATIO], prm[M_INDEX], r_lin);
+        double g2 = valve_branch(a, p2, t_wall, prm);
         dy[2] = prm[R_GAS] * t_wall / prm[PIPE_VOLUME] * (g1 - g2);
-    } else if (a > 0.0) {
-        g1 = a * prm[C_RHO] * p1 * sq_tn / sqrt(t1)
-             * pu_flow_phi(p_atm / p1, prm[B_RATIO], prm[M_INDEX], r_lin);
+    } else {
+        g1 = valve_branch(a, p1, t1, prm);
     }
     double g_out = g1 + prm[LEAK] * (p1 - p_atm);
+    if (prm[OLEAK_C_RHO] > 0.0)
+        g_out += prm[OLEAK_C_RHO] * p1 * sq_tn / sqrt(t1)
+                 * pu_flow_phi(p_atm / p1, prm[OLEAK_B], LEAK_M_INDEX, r_lin);
     double q = pu_heat_flow(prm[HEAT_MODE], prm[HEAT_A], prm[HEAT_RA], t_wall, p1, t1);
     /* The gas leaving (or, for g < 0, entering) is taken at the tank gas temperature.
      * Reverse flow through the component happens in these models only as the numerical

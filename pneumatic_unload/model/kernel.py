@@ -51,7 +51,13 @@ B_RATIO, M_INDEX, C_RHO, LEAK = 6, 7, 8, 9
 HEAT_MODE, HEAT_A, HEAT_RA = 10, 11, 12
 PIPE, PIPE_VOLUME, PIPE_C_RHO = 13, 14, 15
 T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN = 16, 17, 18, 19, 20
-N_PARAMETERS = 21
+# leaks: downstream laminar k [kg/(s Pa)]; orifice-law leaks C rho_n [kg/(s Pa)] and b [-],
+# upstream (always open) and downstream (opens with the valve, parallel to the component)
+LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B = 21, 22, 23, 24, 25
+N_PARAMETERS = 26
+
+#: Subsonic index m of the orifice-law leaks [-] (LEAK_M_INDEX of kernel.c).
+LEAK_M_INDEX = 0.5
 
 #: Heat-law codes of the HEAT_MODE slot.
 HEAT_NONE, HEAT_NATURAL, HEAT_FIXED = 0.0, 1.0, 2.0

@@ -5,7 +5,9 @@ The gas in the tank obeys a mass and an energy balance (ideal gas, uniform state
     dm/dt = -G_out,      d(m c_v T)/dt = -G_out c_p T_up + Q,   p = m R T / V
 
 where G_out is the ISO 6358 flow through the component (times the valve opening fraction)
-plus an optional laminar leak, and Q the wall heat flow of :mod:`pneumatic_unload.model.heat`.
+plus the optional leaks (upstream of the valve: always open; downstream, in parallel with
+the component: times the opening fraction; each laminar or orifice-law), and Q the wall
+heat flow of :mod:`pneumatic_unload.model.heat`.
 With ``pipe_volume`` an isothermal volume and a series conductance sit between the tank and
 the component (a third state, the pipe pressure). Without effects the model is the paper's
 isentropic discharge (eq 19-24).
@@ -120,6 +122,14 @@ def kernel_parameters(cfg: RigConfig, t_open: float) -> FloatArray:
     prm[kernel.M_INDEX] = cfg.subsonic_index
     prm[kernel.C_RHO] = cfg.conductance * RHO_N
     prm[kernel.LEAK] = cfg.leak_coefficient if cfg.has("leak") else 0.0
+    if cfg.has("leak_downstream"):
+        prm[kernel.LEAK_DOWN] = cfg.leak_downstream_coefficient
+    if cfg.has("orifice_leak"):
+        prm[kernel.OLEAK_C_RHO] = cfg.orifice_leak_conductance * RHO_N
+        prm[kernel.OLEAK_B] = cfg.orifice_leak_critical_ratio
+    if cfg.has("orifice_leak_downstream"):
+        prm[kernel.OLEAK_DOWN_C_RHO] = cfg.orifice_leak_downstream_conductance * RHO_N
+        prm[kernel.OLEAK_DOWN_B] = cfg.orifice_leak_downstream_critical_ratio
     prm[kernel.HEAT_MODE], prm[kernel.HEAT_A], prm[kernel.HEAT_RA] = heat_parameters(cfg)
     if cfg.has("pipe_volume"):
         prm[kernel.PIPE] = 1.0
