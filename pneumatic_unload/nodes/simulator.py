@@ -190,7 +190,15 @@ class SimulatorNode(Node):
                 if volts:
                     values = self._cfg.transducer_zero + self._cfg.transducer_sensitivity * values
                 for k, y in zip(block.index.tolist(), values.tolist(), strict=True):
-                    ns = wall0 + round(k * 1e9 / rate)
+                    if block_size:
+                        # the stamp a PressureBlock receiver reconstructs (block header +
+                        # round(j T 1e9)): both pressure topics carry the same stamps, so a
+                        # block-fed estimator and the recorded per-sample topic agree exactly
+                        kb = k - k % block_size
+                        ns = wall0 + round(kb * 1e9 / rate) + round((k - kb) * (1.0 / rate)
+                                                                    * 1e9)
+                    else:
+                        ns = wall0 + round(k * 1e9 / rate)
                     if per_sample:
                         common.ns_to_stamp(ns, msg.header.stamp)
                         msg.fluid_pressure = y
