@@ -93,7 +93,7 @@ class StreamingEstimator:
     @property
     def state(self) -> str:
         """'waiting', 'confirming', 'unloading', 'tail', 'recovery' or 'skipping' (the
-        rest of an unload reported as bad data)."""
+        rest of an unload reported as bad data, or joined mid-way: no pre-step plateau)."""
         return self._st.mode
 
     @property

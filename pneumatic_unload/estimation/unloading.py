@@ -34,7 +34,7 @@ from pneumatic_unload.estimation.regression import crossing_fit, hinge_fit, rms_
 from pneumatic_unload.estimation.sse import on_abort
 from pneumatic_unload.estimation.state import TAIL, EstimatorState
 from pneumatic_unload.estimation.tail import finish_tail
-from pneumatic_unload.estimation.types import STUCK_TEXT, UnloadResult
+from pneumatic_unload.estimation.types import STUCK_TEXT, FloatArray, UnloadResult
 
 
 def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
@@ -61,6 +61,44 @@ def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
     return []
 
 
+#: Fall rate of the samples before the start, as a fraction of the initial fall rate, that
+#: makes them no plateau (a continuing unload, not a step) [-].
+PLATEAU_FALL_FRACTION = 0.25
+
+
+def no_plateau(t: FloatArray, p: FloatArray, min_plateau: int, slope0: float, *,
+               started: bool) -> str:
+    """Why the samples before a fitted start are no pre-step plateau, or '' when they are.
+
+    They are none when fewer than ``min_plateau`` [-] (the documented plateau the method
+    needs, so p10 is unknown), or when their straight-line fall rate is both significant
+    (more than 4 standard errors, the noise from first differences) and more than
+    PLATEAU_FALL_FRACTION of the initial fall rate ``slope0`` [signal units/s]: the stream
+    joined an unload under way (an estimator started or restarted mid-unload), and the
+    "step" is the rest of that unload. ``t`` [s] and ``p`` [signal units]: the samples from
+    the plateau's first one up to the start; ``started``: that first sample is the stream's
+    first one (worded as a mid-unload start).
+    """
+    n = p.size
+    where = ("the stream started during an unload (estimator started or restarted "
+             "mid-unload?)" if started else "no settled pressure before the valve opened")
+    tail = "no estimate for this unload; waiting for a plateau before the next one"
+    if n < min_plateau:
+        return (f"no plateau before the drop: {n} samples before the start, fewer than "
+                f"min_plateau={min_plateau}; {where}: {tail}")
+    tc = t - t.mean()
+    sxx = float(tc @ tc)
+    if not (sxx > 0.0 and slope0 > 0.0):
+        return ""
+    fall = -float(tc @ (p - p.mean())) / sxx
+    se = rms_sigma(p) / math.sqrt(sxx)
+    if fall > 4.0 * se and fall > PLATEAU_FALL_FRACTION * slope0:
+        return (f"no plateau before the drop: the {n} samples before the start fall at "
+                f"{fall:.4g} /s ({100.0 * fall / slope0:.0f} % of the initial fall rate); "
+                f"{where}: {tail}")
+    return ""
+
+
 def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     """Hinge fit of the valve-opening instant, p10 and the initial slope (index i: first
     sample 10 % down); sets p* when p_atm is given."""
@@ -84,6 +122,13 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
                 i, f"sensor saturated on the pre-step plateau at {vmax!r}: p10 unknown")
     u.t0 = t0
     u.i0 = int(np.searchsorted(tv, t0))
+    why = no_plateau(tv[lo:u.i0], pv[lo:u.i0], st.settings.min_plateau, slope,
+                     started=st.arm_index == 0 and st.n_unloads == 0)
+    if why:
+        # no result: this is not an unload the method can time (see :func:`no_plateau`)
+        st.diag("warn", why, float(tv[i]))
+        st.to_skip(i)
+        return []
     n_pre, n_post = max(u.i0 - lo, 1), max(n - u.i0, 1)
     # noise over the initial slope, with the plateau (p10) and post-start samples
     u.t0_std = (rms / slope * math.sqrt(1.0 / n_pre + 4.0 / n_post)

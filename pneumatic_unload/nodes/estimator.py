@@ -281,6 +281,13 @@ class EstimatorNode(Node):
     def _on_state(self, core_state: str) -> None:
         if core_state == "waiting":
             return
+        if core_state == "skipping":
+            # no result for this unload (e.g. the node started mid-unload): say why
+            why = next((d.message for d in reversed(self._est.diagnostics)
+                        if d.level != "ok"), "no estimate for the unload under way")
+            self._state, self._why = "waiting", f"skipping the unload under way: {why}"
+            self._report()
+            return
         self._state, self._why = "unloading", f"unload in progress ({core_state})"
         self._report()
 
