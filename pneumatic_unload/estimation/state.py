@@ -115,10 +115,14 @@ class EstimatorState:
     ----------
     settings : EstimatorSettings
         Tank, gas and detection settings.
+    live : bool
+        The stream may join an unload under way (see
+        :func:`~.unloading.first_unload_check`).
     """
 
-    def __init__(self, settings: EstimatorSettings) -> None:
+    def __init__(self, settings: EstimatorSettings, *, live: bool = False) -> None:
         self.settings = settings
+        self.live = live
         self.buf = SampleBuffer()
         self.diagnostics: list[Diagnostic] = []
         self.n_unloads = 0
@@ -129,11 +133,14 @@ class EstimatorState:
         self.clock_step_at = -1  # samples accepted when the last clock step was handled
         self.unload = UnloadState(trigger=-1)
         self.to_waiting(0)
+        #: The current plateau began with the stream's first sample (no re-arm yet).
+        self.stream_start = True
 
     # -------------------------------------------------------------- transitions
     def to_waiting(self, n: int) -> None:
         """Re-arm: wait for a new plateau starting at index n [-]."""
         self.mode = WAITING
+        self.stream_start = False
         self.level = -math.inf  # a sample below this level calls the step [signal units]
         self.next_check = n + self.settings.min_plateau - 1  # next periodic check [-]
         self.arm_index = n  # first sample of the current plateau [-]

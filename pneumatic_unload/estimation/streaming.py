@@ -57,6 +57,11 @@ class StreamingEstimator:
     ----------
     settings : EstimatorSettings
         Tank, gas and detection settings.
+    live : bool
+        A live stream, which may join an unload under way (a node started or restarted at
+        any time): the first unload, when it has no pre-step plateau, gets no result, a
+        warning and is skipped until a plateau. Offline (default) a record is taken to
+        start where its author chose: that unload is analysed, with a warning.
 
     Examples
     --------
@@ -82,9 +87,10 @@ class StreamingEstimator:
     #: Samples looked ahead per vectorised scan [-].
     SCAN_HORIZON = decisions.SCAN_HORIZON
 
-    def __init__(self, settings: EstimatorSettings | None = None) -> None:
+    def __init__(self, settings: EstimatorSettings | None = None, *, live: bool = False
+                 ) -> None:
         self.settings = settings or EstimatorSettings()
-        self._st = EstimatorState(self.settings)
+        self._st = EstimatorState(self.settings, live=live)
         self.diagnostics = self._st.diagnostics
         self.results: list[UnloadResult] = []
         self._append = self._st.buf.append  # hot path (trimming keeps the buffer object)
