@@ -216,6 +216,8 @@ def main() -> int:
     ap.add_argument("--block-size", type=int, default=100, help="samples per PressureBlock")
     ap.add_argument("--rate", type=float, default=10000.0, help="sample rate [Hz]")
     ap.add_argument("--every", type=float, default=5.0, help="RSS sampling period [s]")
+    ap.add_argument("--keep", type=Path, default=None,
+                    help="keep the node logs and the bag in this folder (default: deleted)")
     args = ap.parse_args()
     minutes = 1.0 if args.quick else args.minutes
     baseline = 60.0 if minutes > 1.5 else 20.0
@@ -227,8 +229,9 @@ def main() -> int:
           f"(ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']}, {os.cpu_count()} cores, load "
           f"average at start {os.getloadavg()[0]:.2f})")
     with tempfile.TemporaryDirectory(prefix="bench_soak_") as d:
+        folder = args.keep or Path(d)
         for block in blocks:
-            report(soak(minutes, args.rate, block, Path(d), args.every, baseline))
+            report(soak(minutes, args.rate, block, folder, args.every, baseline))
             sys.stdout.flush()
     return 0
 
