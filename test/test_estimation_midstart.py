@@ -91,3 +91,49 @@ def test_offline_record_starting_at_the_opening_is_analysed_with_a_warning():
     assert got[0].conductance_model == pytest.approx(C_TRUE, rel=0.02)
     assert not [d for d in est.diagnostics if d.level == "warn"]
     assert [r.to_dict() for r in analyze(t[k:], p[k:], st)] == [r.to_dict() for r in got]
+
+
+def _cycling_with_abort(rate: float, abort_at: int, unloads: int):
+    """A cycling rig with heat transfer whose unload ``abort_at`` is stopped 30 ms after
+    the opening (valve closed), then cycles on: (t [s], p [Pa])."""
+    from pneumatic_unload.rig import RigStream
+
+    cfg = RigConfig(rate=rate, seed=1, effects=("heat_transfer",), **RIG)
+    rs = RigStream(cfg, charge_time=CYCLE["charge_time"])
+    ts, ps, since, last, done = [], [], 0.0, rs.phase, 0
+    while done < unloads:
+        b = rs.next_block(100)
+        ts.append(b.t)
+        ps.append(b.measured)
+        now, phase = float(b.t[-1]), rs.phase
+        if phase != last:
+            done += phase == "vented"
+            last, since = phase, now
+        if phase == "charged" and now - since >= CYCLE["settle_time"]:
+            rs.reconfigure(cfg.replace(valve_close_time=0.03) if done == abort_at else cfg)
+            rs.open_valve()
+        elif phase == "vented" and now - since >= CYCLE["vent_time"]:
+            rs.charge()
+    return np.concatenate(ts), np.concatenate(ps)
+
+
+def test_a_recovery_no_fit_describes_ends_and_the_next_unloads_are_estimated(monkeypatch):
+    """An aborted unload on a cycling rig whose recovery never fits (as happened live in a
+    soak: the estimator then followed one endless recovery, no estimate any more and the
+    buffer growing 18 MiB/min): the recovery ends without SSE, the next unloads come."""
+    from pneumatic_unload.estimation import sse
+
+    t, p = _cycling_with_abort(1000.0, abort_at=2, unloads=8)
+    monkeypatch.setattr(sse, "fit_recovery_to", lambda st, i: None)
+    st = EstimatorSettings(volume=RIG["volume"], curve_fit=False)
+    est = StreamingEstimator(st, live=True)
+    out = []
+    for k in range(0, t.size, 100):
+        out += est.push_block(t[k:k + 100], p[k:k + 100])
+        assert len(est.buffer) < 20_000  # bounded (a few unloads at most)
+    status = [(r.index, r.status, r.final) for r in out]
+    assert status[:2] == [(0, "ok", False), (1, "ok", False)]
+    assert (2, "aborted", True) in status  # the recovery ended
+    # the unload whose opening ends the recovery (the pressure falls again) is skipped
+    assert [s for i, s, _ in status if i > 2] == ["ok"] * 4
+    assert any("fell again" in d.message for d in est.diagnostics)

@@ -81,6 +81,8 @@ class UnloadState:
     skip_rise : float
         Rise of the block mean over its lowest value that ends the skip (a new charge)
         [signal units].
+    rec_high : float
+        Highest PERIOD-sample mean of the recovery so far [signal units].
     """
 
     trigger: int
@@ -106,6 +108,7 @@ class UnloadState:
     noisy: bool = False
     skip_since: int = -1
     skip_rise: float = math.nan
+    rec_high: float = -math.inf
 
 
 class EstimatorState:
