@@ -9,7 +9,8 @@ recorder nodes subscribe, each node in its own process. Reported, per input path
   analysed by the estimator (its ``stats`` line at shutdown); target: none lost;
 * RSS of each node (``VmRSS`` of /proc/PID/status every ``--every`` seconds): at the end of
   the first minute, at the end, the highest, and the growth after the first minute
-  (highest later value over the value at one minute); target: at most 5 %;
+  (highest later value over the value at one minute; target: at most 5 %), and the median
+  trend (median of the last half minute over that of the second half of the first one);
 * the estimator's latencies (arrival of the sample completing an estimate to its
   publication), p50/p99/max for the first and last third of the estimates; target: steady;
 * the unloads estimated and their model C (the rig's C is 8e-9 m^3/(s Pa)).
@@ -177,10 +178,17 @@ def report(r: dict[str, object]) -> None:
         j = min(j, vals.size - 1)
         later = vals[j:]
         growth = (later.max() - vals[j]) / vals[j] * 100.0
+        # medians of the baseline's window and of the last one (the same length): the
+        # trend without the sawtooth of a buffer filled and trimmed every unload
+        first = vals[(times >= base_t / 2) & (times <= base_t)]
+        last = vals[times >= times[-1] - base_t / 2]
+        trend = (np.median(last) - np.median(first)) / np.median(first) * 100.0 \
+            if first.size and last.size else float("nan")
         rows.append({"node": name, "start": _mib(vals[0]), f"at {base_t:g} s": _mib(vals[j]),
                      "end": _mib(vals[-1]), "max": _mib(vals.max()),
                      "growth after baseline [%]": f"{growth:.1f}",
                      "end vs baseline [%]": f"{(vals[-1] - vals[j]) / vals[j] * 100.0:+.1f}",
+                     "median trend [%]": f"{trend:+.1f}",
                      "": "met" if growth <= 5.0 else "NOT met"})
     print(_table(rows))
     step = max(1, len(series) // 10)
