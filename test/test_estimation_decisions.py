@@ -14,11 +14,12 @@ from pneumatic_unload.estimation import decisions as dec
 from pneumatic_unload.estimation.buffer import SampleBuffer
 from pneumatic_unload.model import default_duration, simulate
 from pneumatic_unload.physics import orifice_conductance
+from pneumatic_unload.rig import run_cycles
 from pneumatic_unload.runs import settings_for
 
 FS_NOISE = 1000.0  # 0.1 % of a 1 MPa full-scale transducer [Pa]
 KINDS = ("clean", "heat", "aborted", "two_unloads", "auto_atm", "volts", "bad_stamps",
-         "spike_and_stuck", "stuck_in_unload", "saturated", "clock_step")
+         "spike_and_stuck", "stuck_in_unload", "saturated", "clock_step", "mid_unload")
 
 
 def _rig(rng, seed, **kw):
@@ -69,6 +70,14 @@ def _trace(kind, seed):
         p = np.concatenate([p, ramp + rng.normal(0.0, FS_NOISE, 300), b.measured])
         st = dataclasses.replace(settings_for(cfg), curve_fit=seed % 2 == 0)
         return (dataclasses.replace(st, atmosphere=None) if seed == 13 else st), t, p
+    if kind == "mid_unload":
+        # a stream that joins a cycling rig part way into an unload (an estimator restarted
+        # mid-unload): the skip of that unload, then the next ones
+        cfg = _rig(rng, seed, pre_time=0.5, duration=1.2)
+        b = run_cycles(cfg, 2, settle_time=0.6, vent_time=0.3, charge_time=0.3)
+        k = int(np.flatnonzero(b.opening > 0)[0]) + int(rng.integers(5, 800))
+        return dataclasses.replace(settings_for(cfg), curve_fit=seed % 2 == 0), b.t[k:], \
+            b.measured[k:]
     if kind == "saturated":
         cfg = _rig(rng, seed, full_scale=0.9 * rng.uniform(4e5, 8e5), initial_pressure=8e5)
         sim = simulate(cfg)

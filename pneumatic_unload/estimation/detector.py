@@ -58,6 +58,7 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
         if c.rise:
             # the signal rose (the tank is being charged): the plateau starts again
             st.arm_index = n - PERIOD
+            st.stream_start = False
             st.level = -math.inf
             return []
         if not c.trigger:

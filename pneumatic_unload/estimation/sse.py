@@ -18,13 +18,14 @@ from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation.decisions import (
     PERIOD,
     PLATEAU,
+    block_mean,
     check_indices,
     recovery_due,
     stall_window,
 )
 from pneumatic_unload.estimation.refine import model_inversion, recovery_fit
 from pneumatic_unload.estimation.regression import corner_fit
-from pneumatic_unload.estimation.state import RECOVERY, EstimatorState
+from pneumatic_unload.estimation.state import RECOVERY, SKIP, EstimatorState
 from pneumatic_unload.estimation.types import STUCK_TEXT, UnloadResult
 from pneumatic_unload.model.heat import thermal_time_constant
 
@@ -59,6 +60,7 @@ def on_abort(st: EstimatorState, i: int) -> list[UnloadResult]:
     u.t_close, u.p_close = t_c, p_c
     u.i_close = min(int(np.searchsorted(tv, u.t_close)), i)
     u.rec_span = 0
+    u.rec_high = -math.inf
     u.rec_fit = None
     st.mode = RECOVERY
     st.level = -math.inf
@@ -116,6 +118,41 @@ def recovery_significant(fit: Any, sigma: float) -> bool:
     return bool(abs(seen) > 8.0 * sigma / math.sqrt(max(fit.n / 4, 1)))
 
 
+def recovery_events(st: EstimatorState, k: Any, high: Any) -> tuple[Any, Any, Any]:
+    """(fell, charged, m) at check index (or indices) k of the recovery [-]: the block mean
+    m [signal units] fell more than a rise threshold below the highest earlier one
+    ``high`` (the valve is open again: a re-heating never falls; e.g. a stall taken for a
+    closing), or rose more than two above p10 (the tank is being charged again: a
+    re-heating stays below p10). Either ends the recovery without an SSE value, so that a
+    cycling rig is never followed as one endless recovery."""
+    u = st.unload
+    m = block_mean(st.buf.sums()[0], k)
+    dp = u.dp_guess if math.isfinite(u.dp_guess) else 0.0
+    thr = max(10.0 * st.sigma / math.sqrt(PERIOD), 0.02 * dp)
+    fell = m < high - thr
+    charged = (m > u.p10 + 2.0 * thr) if u.refined else np.zeros_like(fell)
+    return fell, charged, m
+
+
+def interrupt_recovery(st: EstimatorState, i: int, fell: bool) -> list[UnloadResult]:
+    """End the recovery at index i [-] without an SSE value: the pressure fell again
+    (``fell``: skip the rest of that unload) or the tank is being charged (re-arm)."""
+    u = st.unload
+    why = ("the pressure fell again (valve open again, or the stall was no closing)"
+           if fell else "the tank is being charged again")
+    text = f"valve closed before p*; {why} during the recovery: no SSE value"
+    st.diag("warn", text, float(st.buf.t[i]))
+    st.mode = SKIP  # abort_result: no recovery fit over the interrupted record
+    res = abort_result(st, i, recovered=False, text=text)
+    res.final = True
+    if fell:
+        st.to_skip(i)
+    else:
+        st.to_waiting(max(i - 2 * PERIOD, u.i_close) + 1)
+        st.next_check = i + PERIOD
+    return [res]
+
+
 def step_recovery(st: EstimatorState, i: int) -> list[UnloadResult]:
     """Periodic recovery check: refit as the record grows (each 25 % longer); the
     recovery is over when the fitted remaining rise is below 5 % of the total (the
@@ -125,13 +162,26 @@ def step_recovery(st: EstimatorState, i: int) -> list[UnloadResult]:
         return []
     st.next_check = i + PERIOD
     u = st.unload
+    fell, charged, m = recovery_events(st, i, u.rec_high)
+    u.rec_high = max(u.rec_high, float(m))
+    if fell or charged:
+        return interrupt_recovery(st, i, bool(fell))
     if not recovery_due(i, u.i_close, u.rec_span):
         return []
     span = i - u.i_close
     fit = fit_recovery_to(st, i)
-    if fit is None:
-        return []
     dt = st.dt
+    if fit is None:
+        if span * dt > max(20.0 * (u.t_close - u.t0), 2.0) and span >= 4 * PLATEAU:
+            # a recovery no fit describes must not be followed for ever (the buffer grows)
+            st.mode = SKIP  # abort_result: no further recovery fit
+            res = abort_result(st, i, recovered=False, text=(
+                "valve closed before p*; the pressure after the closing fits no recovery: "
+                "no SSE value"))
+            res.final = True
+            st.to_waiting(i + 1)
+            return [res]
+        return []
     if (recovery_significant(fit, st.sigma) and fit.remaining <= 0.05 * fit.rise
             and fit.p_inf_std < 0.02 * fit.rise
             and span * dt >= 3.0 * expected_recovery_time(st)
@@ -158,9 +208,13 @@ def scan_recovery(st: EstimatorState, i: int, end: int) -> int:
     if ks.size == 0:
         return end
     u = st.unload
-    hit = np.flatnonzero(recovery_due(ks, u.i_close, u.rec_span))
+    m = block_mean(st.buf.sums()[0], ks)
+    high_prev = np.maximum.accumulate(np.concatenate(([u.rec_high], m)))[:-1]
+    fell, charged, _m = recovery_events(st, ks, high_prev)
+    hit = np.flatnonzero(recovery_due(ks, u.i_close, u.rec_span) | fell | charged)
     k = int(hit[0]) if hit.size else ks.size
     if k > 0:
+        u.rec_high = float(max(high_prev[k - 1], m[k - 1]))
         st.next_check = int(ks[k - 1]) + PERIOD
     return int(ks[k]) if k < ks.size else end
 

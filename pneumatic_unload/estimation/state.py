@@ -81,6 +81,8 @@ class UnloadState:
     skip_rise : float
         Rise of the block mean over its lowest value that ends the skip (a new charge)
         [signal units].
+    rec_high : float
+        Highest PERIOD-sample mean of the recovery so far [signal units].
     """
 
     trigger: int
@@ -106,6 +108,7 @@ class UnloadState:
     noisy: bool = False
     skip_since: int = -1
     skip_rise: float = math.nan
+    rec_high: float = -math.inf
 
 
 class EstimatorState:
@@ -115,10 +118,14 @@ class EstimatorState:
     ----------
     settings : EstimatorSettings
         Tank, gas and detection settings.
+    live : bool
+        The stream may join an unload under way (see
+        :func:`~.unloading.first_unload_check`).
     """
 
-    def __init__(self, settings: EstimatorSettings) -> None:
+    def __init__(self, settings: EstimatorSettings, *, live: bool = False) -> None:
         self.settings = settings
+        self.live = live
         self.buf = SampleBuffer()
         self.diagnostics: list[Diagnostic] = []
         self.n_unloads = 0
@@ -129,11 +136,14 @@ class EstimatorState:
         self.clock_step_at = -1  # samples accepted when the last clock step was handled
         self.unload = UnloadState(trigger=-1)
         self.to_waiting(0)
+        #: The current plateau began with the stream's first sample (no re-arm yet).
+        self.stream_start = True
 
     # -------------------------------------------------------------- transitions
     def to_waiting(self, n: int) -> None:
         """Re-arm: wait for a new plateau starting at index n [-]."""
         self.mode = WAITING
+        self.stream_start = False
         self.level = -math.inf  # a sample below this level calls the step [signal units]
         self.next_check = n + self.settings.min_plateau - 1  # next periodic check [-]
         self.arm_index = n  # first sample of the current plateau [-]

@@ -57,6 +57,11 @@ class StreamingEstimator:
     ----------
     settings : EstimatorSettings
         Tank, gas and detection settings.
+    live : bool
+        A live stream, which may join an unload under way (a node started or restarted at
+        any time): the first unload, when it has no pre-step plateau, gets no result, a
+        warning and is skipped until a plateau. Offline (default) a record is taken to
+        start where its author chose: that unload is analysed, with a warning.
 
     Examples
     --------
@@ -82,13 +87,14 @@ class StreamingEstimator:
     #: Samples looked ahead per vectorised scan [-].
     SCAN_HORIZON = decisions.SCAN_HORIZON
 
-    def __init__(self, settings: EstimatorSettings | None = None) -> None:
+    def __init__(self, settings: EstimatorSettings | None = None, *, live: bool = False
+                 ) -> None:
         self.settings = settings or EstimatorSettings()
         if self.settings.start_time is not None:
             raise EstimationError(
                 "start_time is for offline records that begin at the valve opening "
                 "(analyze, --start-time); the streaming estimator detects each start")
-        self._st = EstimatorState(self.settings)
+        self._st = EstimatorState(self.settings, live=live)
         self.diagnostics = self._st.diagnostics
         self.results: list[UnloadResult] = []
         self._append = self._st.buf.append  # hot path (trimming keeps the buffer object)
@@ -97,7 +103,7 @@ class StreamingEstimator:
     @property
     def state(self) -> str:
         """'waiting', 'confirming', 'unloading', 'tail', 'recovery' or 'skipping' (the
-        rest of an unload reported as bad data)."""
+        rest of an unload reported as bad data, or joined mid-way: no pre-step plateau)."""
         return self._st.mode
 
     @property

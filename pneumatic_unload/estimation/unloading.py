@@ -34,7 +34,7 @@ from pneumatic_unload.estimation.regression import crossing_fit, hinge_fit, rms_
 from pneumatic_unload.estimation.sse import on_abort
 from pneumatic_unload.estimation.state import TAIL, EstimatorState
 from pneumatic_unload.estimation.tail import finish_tail
-from pneumatic_unload.estimation.types import STUCK_TEXT, UnloadResult
+from pneumatic_unload.estimation.types import STUCK_TEXT, FloatArray, UnloadResult
 
 
 def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
@@ -61,6 +61,64 @@ def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
     return []
 
 
+#: Fall rate of the samples before the start, as a fraction of the initial fall rate, that
+#: makes them no plateau (a continuing unload, not a step) [-].
+PLATEAU_FALL_FRACTION = 0.25
+
+
+def no_plateau(t: FloatArray, p: FloatArray, min_plateau: int, slope0: float) -> str:
+    """Why the samples before a fitted start are no pre-step plateau, or '' when they are.
+
+    They are none when fewer than ``min_plateau`` [-] (p10 is not measured), or when their
+    straight-line fall rate is both significant (more than 4 standard errors, the noise
+    from first differences) and more than PLATEAU_FALL_FRACTION of the initial fall rate
+    ``slope0`` [signal units/s] (the "step" continues a fall already under way). ``t`` [s]
+    and ``p`` [signal units]: the samples from the plateau's first one up to the start.
+    """
+    n = p.size
+    if n < min_plateau:
+        return (f"no plateau before the drop ({n} samples before the start, fewer than "
+                f"min_plateau={min_plateau})")
+    tc = t - t.mean()
+    sxx = float(tc @ tc)
+    if not (sxx > 0.0 and slope0 > 0.0):
+        return ""
+    fall = -float(tc @ (p - p.mean())) / sxx
+    se = rms_sigma(p) / math.sqrt(sxx)
+    if fall > 4.0 * se and fall > PLATEAU_FALL_FRACTION * slope0:
+        return (f"no plateau before the drop (the {n} samples before the start fall at "
+                f"{fall:.4g} /s, {100.0 * fall / slope0:.0f} % of the initial fall rate)")
+    return ""
+
+
+def first_unload_check(st: EstimatorState, i: int, t: FloatArray, p: FloatArray,
+                       slope0: float) -> bool:
+    """The first unload of a stream, whose plateau began with the stream's first sample:
+    True when it is to be skipped (decided at index i [-]; t [s], p [signal units]: the
+    samples before its start; slope0: initial fall rate [signal units/s]).
+
+    Without a pre-step plateau (:func:`no_plateau`) a live stream (``live``: a node that
+    may start or restart at any time) joined an unload under way: no result for it, a
+    warning, and the rest of it is skipped until a plateau. Offline, a record is taken to
+    start where its author chose (e.g. at the valve opening): the unload is analysed, with
+    a warning that p10 and its start come from its first samples.
+    """
+    st.stream_start = False
+    why = no_plateau(t, p, st.settings.min_plateau, slope0)
+    if not why:
+        return False
+    if st.live:
+        st.diag("warn", f"{why}: the stream started during an unload (estimator started or "
+                        f"restarted mid-unload): no estimate for this unload; waiting for a "
+                        f"plateau before the next one", float(st.buf.t[i]))
+        st.to_skip(i)
+        return True
+    st.diag("warn", f"{why}: the record starts at or after the valve opening; p10 and the "
+                    f"start come from its first samples (the estimate may be biased)",
+            float(st.buf.t[i]))
+    return False
+
+
 def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     """Hinge fit of the valve-opening instant, p10 and the initial slope (index i: first
     sample 10 % down); sets p* when p_atm is given."""
@@ -84,6 +142,8 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
                 i, f"sensor saturated on the pre-step plateau at {vmax!r}: p10 unknown")
     u.t0 = t0
     u.i0 = int(np.searchsorted(tv, t0))
+    if st.stream_start and first_unload_check(st, i, tv[lo:u.i0], pv[lo:u.i0], slope):
+        return []
     n_pre, n_post = max(u.i0 - lo, 1), max(n - u.i0, 1)
     # noise over the initial slope, with the plateau (p10) and post-start samples
     u.t0_std = (rms / slope * math.sqrt(1.0 / n_pre + 4.0 / n_post)

@@ -110,7 +110,8 @@ class EstimatorNode(Node):
                     "estimator", f"{name} must be one of {allowed}, got {self._p(name)!r}")
         self.add_on_set_parameters_callback(common.validating_callback(self._check))
         _warm_up(self._settings)
-        self._est = StreamingEstimator(self._settings)
+        # live: a node (re)started mid-unload skips that unload (no bogus estimate)
+        self._est = StreamingEstimator(self._settings, live=True)
         self._lock = threading.Lock()
         self._queue: deque[tuple[int, float, float]] = deque()
         self._wake = threading.Event()
@@ -280,6 +281,13 @@ class EstimatorNode(Node):
 
     def _on_state(self, core_state: str) -> None:
         if core_state == "waiting":
+            return
+        if core_state == "skipping":
+            # no result for this unload (e.g. the node started mid-unload): say why
+            why = next((d.message for d in reversed(self._est.diagnostics)
+                        if d.level != "ok"), "no estimate for the unload under way")
+            self._state, self._why = "waiting", f"skipping the unload under way: {why}"
+            self._report()
             return
         self._state, self._why = "unloading", f"unload in progress ({core_state})"
         self._report()
