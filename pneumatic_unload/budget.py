@@ -134,7 +134,10 @@ class Budget:
                       "type_a_std": self.part_std("A"), "type_b_std": self.part_std("B"),
                       "model_form_std": self.part_std("model"),
                       "largest": self.largest.name,
-                      "terms": [clean(dataclasses.asdict(t)) for t in self.terms]})
+                      "terms": [clean({"name": t.name, "kind": t.kind, "value": t.value,
+                                       "input_std": t.input_std, "unit": t.unit,
+                                       "std": t.std, "note": t.note})
+                                for t in self.terms]})
 
 
 def with_terms(d: dict[str, Any], terms: list[BudgetTerm]) -> dict[str, Any]:

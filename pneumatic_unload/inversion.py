@@ -279,16 +279,15 @@ class InversionTable:
         y = math.log(tau)
         k = int(np.searchsorted(-self.log_t, -y))
         j = min(max(k - 2, 0), self.log_t.size - 4)
-        ys, xs = self.log_t[j:j + 4], self.log_c[j:j + 4]
+        ys = self.log_t[j:j + 4].tolist()
+        xs = self.log_c[j:j + 4].tolist()
         x, dxdy = 0.0, 0.0
         for a in range(4):  # Lagrange cubic x(y) and its derivative
             others = [ys[b] for b in range(4) if b != a]
-            den = float(np.prod([ys[a] - o for o in others]))
-            num = float(np.prod([y - o for o in others]))
-            dnum = sum(float(np.prod([y - o for o in others if o is not skip]))
-                       for skip in others)
-            x += xs[a] * num / den
-            dxdy += xs[a] * dnum / den
+            den = (ys[a] - others[0]) * (ys[a] - others[1]) * (ys[a] - others[2])
+            d0, d1, d2 = y - others[0], y - others[1], y - others[2]
+            x += xs[a] * (d0 * d1 * d2) / den
+            dxdy += xs[a] * (d1 * d2 + d0 * d2 + d0 * d1) / den
         c = math.exp(x)
         ends = self.log_c[[0, self.log_c.size // 2, -1]]
         rel_heat = float(np.interp(x, ends, self.rel_heat))

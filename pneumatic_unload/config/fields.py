@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import math
 from dataclasses import field
 from typing import Any
@@ -132,6 +133,12 @@ def validate(obj: Any) -> None:
             object.__setattr__(obj, f.name, nv)
 
 
+@functools.lru_cache(maxsize=None)
+def _fields_by_name(cls: type) -> dict[str, dataclasses.Field[Any]]:
+    """The dataclass fields of ``cls`` by name (computed once per class)."""
+    return {f.name: f for f in dataclasses.fields(cls)}
+
+
 def with_changes(obj: Any, changes: dict[str, Any]) -> Any:
     """A copy of a validated frozen dataclass with ``changes``, checking only those fields.
 
@@ -146,7 +153,7 @@ def with_changes(obj: Any, changes: dict[str, Any]) -> Any:
     ConfigError
         A changed value out of range, of the wrong type, or an unknown field.
     """
-    fields = {f.name: f for f in dataclasses.fields(obj)}
+    fields = _fields_by_name(type(obj))
     new = copy.copy(obj)
     for name, v in changes.items():
         f = fields.get(name)

@@ -352,22 +352,28 @@ int pu_dopri5(int n, const double *y0, double t0, double t1, int n_out, const do
             rejected = 1;
             continue;
         }
-        /* accepted: the continuous extension for the outputs in (t, t_new] */
-        while (j < n_out && t_out[j] <= t_new) {
-            double th = (t_out[j] - t) / h, th1 = 1.0 - th;
+        /* accepted: the continuous extension for the outputs in (t, t_new]; its
+         * coefficients once per step (the same expressions as per output: bit-identical) */
+        if (j < n_out && t_out[j] <= t_new) {
+            double r2[MAX_STATES], r3[MAX_STATES], r4[MAX_STATES], r5[MAX_STATES];
             for (i = 0; i < n; i++) {
-                double r2 = yn[i] - y[i];
-                double r3 = h * k1[i] - r2;
-                double r4 = r2 - h * k7[i] - r3;
-                double r5 = h * (-12715105075.0 / 11282082432.0 * k1[i]
-                                 + 87487479700.0 / 32700410799.0 * k3[i]
-                                 - 10690763975.0 / 1880347072.0 * k4[i]
-                                 + 701980252875.0 / 199316789632.0 * k5[i]
-                                 - 1453857185.0 / 822651844.0 * k6[i]
-                                 + 69997945.0 / 29380423.0 * k7[i]);
-                out[j * n + i] = y[i] + th * (r2 + th1 * (r3 + th * (r4 + th1 * r5)));
+                r2[i] = yn[i] - y[i];
+                r3[i] = h * k1[i] - r2[i];
+                r4[i] = r2[i] - h * k7[i] - r3[i];
+                r5[i] = h * (-12715105075.0 / 11282082432.0 * k1[i]
+                             + 87487479700.0 / 32700410799.0 * k3[i]
+                             - 10690763975.0 / 1880347072.0 * k4[i]
+                             + 701980252875.0 / 199316789632.0 * k5[i]
+                             - 1453857185.0 / 822651844.0 * k6[i]
+                             + 69997945.0 / 29380423.0 * k7[i]);
             }
-            j++;
+            while (j < n_out && t_out[j] <= t_new) {
+                double th = (t_out[j] - t) / h, th1 = 1.0 - th;
+                for (i = 0; i < n; i++)
+                    out[j * n + i] = y[i] + th * (r2[i] + th1 * (r3[i] + th * (r4[i]
+                                                                 + th1 * r5[i])));
+                j++;
+            }
         }
         *n_done = j;
         /* stiffness test (Hairer & Wanner, dopri5): h |lambda| from the last two stages */
