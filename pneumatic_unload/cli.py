@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from pneumatic_unload import batch_cli
 from pneumatic_unload.config import TANK_FIELDS, ConfigError, RigConfig, TankSpec, adapters
 from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySettings
 from pneumatic_unload.estimation import (
@@ -37,7 +38,13 @@ from pneumatic_unload.estimation import (
 from pneumatic_unload.estimation.chunked import ChunkedAnalysis
 from pneumatic_unload.io.csvheader import TEMPERATURE_UNITS, TIME_UNITS
 from pneumatic_unload.output import format_inputs, format_result, json_default, unload_json
-from pneumatic_unload.records import Record, RecordError, analyze_record, open_record
+from pneumatic_unload.records import (
+    Record,
+    RecordError,
+    analyze_record,
+    open_record,
+    settings_for,
+)
 
 PRESSURE_UNITS = {"Pa": 1.0, "kPa": 1e3, "bar": 1e5, "MPa": 1e6, "psi": 6894.757293168361}
 
@@ -103,24 +110,9 @@ def settings_from(args: argparse.Namespace, cfg: dict[str, Any]) -> EstimatorSet
     given = adapters.given_options(args, EstimatorSettings)
     if getattr(args, "atmosphere_auto", False):
         given["atmosphere"] = None
-    live = cfg.get("estimator_settings")
     try:
-        if live is not None:
-            try:
-                base = EstimatorSettings(**adapters.from_mapping(EstimatorSettings, live,
-                                                                 strict=False))
-            except (TypeError, ConfigError, EstimationError) as exc:
-                raise CliError(f"the estimator settings stored in the bag are invalid: {exc}"
-                               ) from exc
-            return dataclasses.replace(base, **given)
-        kw = TankSpec.fields_of(cfg)  # the bag's rig: tank and gas
-        if "initial_temperature" not in kw and "measured_initial_temperature" in cfg:
-            kw["initial_temperature"] = cfg["measured_initial_temperature"]
-        kw.update(given)
-        if "volume" not in kw:
-            raise CliError("--volume M3 is required (the input carries no rig configuration)")
-        return EstimatorSettings(**kw)
-    except (EstimationError, ConfigError) as exc:
+        return settings_for(cfg, given)
+    except (RecordError, EstimationError, ConfigError) as exc:
         raise CliError(str(exc)) from exc
 
 
@@ -456,6 +448,7 @@ def build_parser() -> argparse.ArgumentParser:
     rc.set_defaults(func=cmd_recover)
 
     add_discrepancy_parser(sub)
+    batch_cli.add_parsers(sub, add_input_options)
     return ap
 
 
@@ -472,7 +465,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args))
-    except CliError as exc:
+    except (CliError, batch_cli.BatchCliError) as exc:
         print(f"pneumatic-unload: error: {exc}", file=sys.stderr)
         return 2
 

@@ -10,6 +10,7 @@ whole); :func:`analyze_record` runs the estimator over them
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from pneumatic_unload.config import ConfigError, TankSpec, adapters
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
 from pneumatic_unload.estimation.types import FloatArray
@@ -146,6 +148,38 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
         cfg = {**cfg, "estimator_settings": live}
     t = np.asarray(series[0], dtype=np.int64) * 1e-9
     return Record(path=p, cfg=cfg, arrays=(t, np.asarray(series[1], float)))
+
+
+def settings_for(cfg: dict[str, Any], given: dict[str, Any]) -> EstimatorSettings:
+    """Estimator settings of a record: the values ``given`` first [SI], then the live
+    estimator's settings recorded in a bag (so that the analysis reproduces what it
+    published), then the bag's rig configuration (tank and gas; a CSV's temperature column
+    for T10), then the defaults of :class:`~pneumatic_unload.config.estimator.
+    EstimatorSettings`.
+
+    Raises
+    ------
+    RecordError
+        The settings stored in a bag are invalid, or the volume is neither given nor stored.
+    EstimationError, ConfigError
+        A value out of range.
+    """
+    live = cfg.get("estimator_settings")
+    if live is not None:
+        try:
+            base = EstimatorSettings(**adapters.from_mapping(EstimatorSettings, live,
+                                                             strict=False))
+        except (TypeError, ConfigError, EstimationError) as exc:
+            raise RecordError(f"the estimator settings stored in the bag are invalid: {exc}"
+                              ) from exc
+        return dataclasses.replace(base, **given)
+    kw = TankSpec.fields_of(cfg)  # the bag's rig: tank and gas
+    if "initial_temperature" not in kw and "measured_initial_temperature" in cfg:
+        kw["initial_temperature"] = cfg["measured_initial_temperature"]
+    kw.update(given)
+    if "volume" not in kw:
+        raise RecordError("--volume M3 is required (the input carries no rig configuration)")
+    return EstimatorSettings(**kw)
 
 
 def analyze_record(record: Record, settings: EstimatorSettings) -> ChunkedAnalysis:

@@ -331,7 +331,9 @@ LAYERS: dict[str, int] = {
     "plotting": 6,
     "records": 6,  # input records of the offline analysis: CSV in chunks, bags
     "output": 6,  # text and JSON output of the analysis (results, inputs, budget)
+    "testline": 6,  # batch on Dask, the results database, part specifications
     "cli": 7,
+    "batch_cli": 7,  # the test-line commands of the CLI (batch, results)
     "demo": 7,
     "nodes": 8,
 }
