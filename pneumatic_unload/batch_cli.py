@@ -5,6 +5,7 @@ batch PATH...        analyse many bags and CSV logs (on Dask), keep every result
                      against a specification
 results export       the database's unloads (or parts) as CSV or Parquet
 results parts        the parts table of the database
+report               one self-contained HTML page of the database for a quality engineer
 
 Exit status of ``batch``: 0 when every input gave a C and no part failed its
 specification; 1 when an input gave no C or a part failed (each row says why); 2 on bad
@@ -41,6 +42,7 @@ from pneumatic_unload.testline import (
 )
 from pneumatic_unload.testline.batch import PART_COLUMNS
 from pneumatic_unload.testline.db import EXPORT_COLUMNS, file_rows
+from pneumatic_unload.testline.report import html_report
 from pneumatic_unload.testline.spec import DM3_PER_S_BAR
 
 CSV_OPTIONS = ("time_column", "pressure_column", "pressure_unit", "time_unit",
@@ -197,6 +199,21 @@ def cmd_results(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_report(args: argparse.Namespace) -> int:
+    """``report``: the database as one self-contained HTML page."""
+    if not Path(args.db).is_file():
+        raise BatchCliError(f"--db {args.db}: no such database")
+    if not Path(args.out).parent.is_dir():
+        raise BatchCliError(f"--out {args.out}: folder {Path(args.out).parent} does not exist")
+    try:
+        n = html_report(args.db, args.out, title=args.title or "")
+    except (ResultsDBError, OSError) as exc:
+        raise BatchCliError(str(exc)) from exc
+    print(f"{args.out}: {n['parts']} part(s) ({n['failing_parts']} failing), "
+          f"{n['unloads']} unload(s) from {n['files']} input(s)")
+    return 0
+
+
 def add_parsers(sub: Any, add_input_options: Callable[[argparse.ArgumentParser], None]
                 ) -> None:
     """Add ``batch`` and ``results`` to the subcommands ``sub`` (``add_input_options``:
@@ -238,3 +255,9 @@ def add_parsers(sub: Any, add_input_options: Callable[[argparse.ArgumentParser],
     rs.add_argument("--parts", action="store_true", help="export the parts table instead")
     rs.add_argument("--json", action="store_true", help="parts: print JSON")
     rs.set_defaults(func=cmd_results)
+
+    rp = sub.add_parser("report", help="the results database as one self-contained HTML page")
+    rp.add_argument("--db", default="results.sqlite", help="results database")
+    rp.add_argument("--out", default="report.html", help="HTML file to write")
+    rp.add_argument("--title", help="title of the page")
+    rp.set_defaults(func=cmd_report)

@@ -228,3 +228,42 @@ def test_batch_and_results_commands(inputs: Path, tmp_path: Path):
         r = subprocess.run([*run, *bad], capture_output=True, text=True, timeout=120)
         assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
         assert r.stderr.startswith("pneumatic-unload: error:")
+
+
+def _chromium() -> str | None:
+    import shutil
+
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def test_report_is_one_self_contained_page_that_a_browser_opens(inputs: Path,
+                                                                  tmp_path: Path):
+    from pneumatic_unload.testline.report import html_report
+
+    db = tmp_path / "rep.sqlite"
+    run_batch(discover([inputs]), _options(), db_path=db)
+    out = tmp_path / "report.html"
+    counts = html_report(db, out, title="line 3")
+    assert counts == {"files": 5, "unloads": 4, "parts": 3, "failing_parts": 1}
+    text = out.read_text()
+    for needed in ("id='parts'", "id='unloads'", "class=\"chart\"", "Repeatability",
+                   "broken.csv: error", "outside [0.45, 0.55]"):
+        assert needed in text, needed
+    # self-contained: nothing fetched from anywhere (no src/href to files or the network)
+    assert "http://" not in text and "https://" not in text
+    assert " src=" not in text and "href=" not in text
+    browser = _chromium()
+    if browser is None:
+        pytest.skip("no chromium (CI installs Debian's chromium; apt install chromium)")
+    for frag, want in (("", 'data-ready="4"'), ("#unload=2", 'id="curve-svg"')):
+        r = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu",
+                            "--enable-logging=stderr", "--v=0",
+                            f"--user-data-dir={tmp_path / 'chromium'}", "--dump-dom",
+                            out.as_uri() + frag],
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr[-2000:]
+        assert want in r.stdout, (frag, r.stdout[:500])
+        assert "V14-002" in r.stdout
+        errors = [ln for ln in r.stderr.splitlines() if "Uncaught" in ln
+                  or ("CONSOLE" in ln and "error" in ln.lower())]
+        assert errors == [], errors

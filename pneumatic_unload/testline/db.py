@@ -72,6 +72,7 @@ CREATE TABLE unloads (
     verdict TEXT,
     verdict_reason TEXT,
     budget_json TEXT,
+    curve_json TEXT,
     result_json TEXT NOT NULL,
     UNIQUE (file_id, unload_index)
 );
@@ -248,13 +249,15 @@ def write_file(con: sqlite3.Connection, rec: FileRecord, *, replace: bool = Fals
         fid = cur.lastrowid
         names = [n for n, _t in UNLOAD_COLUMNS]
         sql = (f"INSERT INTO unloads (file_id, unload_index, part_id, {', '.join(names)}, "
-               "verdict, verdict_reason, budget_json, result_json) VALUES "
-               f"({', '.join('?' * (len(names) + 7))})")
+               "verdict, verdict_reason, budget_json, curve_json, result_json) VALUES "
+               f"({', '.join('?' * (len(names) + 8))})")
         for k, u in enumerate(rec.unloads):
+            result = {key: v for key, v in u.items() if key != "curve"}
             c.execute(sql, (fid, k, rec.part_id, *[_num(u.get(n)) for n in names],
                             u.get("verdict"), u.get("verdict_reason"),
                             json.dumps(u.get("budget")) if u.get("budget") else None,
-                            json.dumps(u, sort_keys=True)))
+                            json.dumps(u["curve"]) if u.get("curve") else None,
+                            json.dumps(result, sort_keys=True)))
         return True
 
     try:

@@ -107,6 +107,26 @@ def _settings_json(s: EstimatorSettings) -> dict[str, Any]:
             for k, v in dataclasses.asdict(s).items()}
 
 
+#: Points of the pressure curve kept with each unload for the report [-].
+CURVE_POINTS = 200
+
+
+def unload_curve(t: Any, p: Any, t_start: float, t_end: float) -> dict[str, list[float]]:
+    """The unload's pressure curve for the report: at most :data:`CURVE_POINTS` samples
+    from 10 % of the unload's length before its start to its end; times relative to the
+    start [s], pressures [Pa absolute] (empty when unknown)."""
+    import numpy as np
+
+    if not (math.isfinite(t_start) and math.isfinite(t_end) and t_end > t_start):
+        return {"t": [], "p": []}
+    lo = t_start - 0.1 * (t_end - t_start)
+    k = np.flatnonzero((t >= lo) & (t <= t_end))
+    if k.size > CURVE_POINTS:
+        k = k[np.linspace(0, k.size - 1, CURVE_POINTS).astype(int)]
+    return {"t": [round(float(x - t_start), 6) for x in t[k]],
+            "p": [round(float(x), 1) for x in p[k]]}
+
+
 def no_estimate(unloads: list[dict[str, Any]]) -> str:
     """Why a record whose unloads were found gives no C ('' when one does)."""
     if any(u["status"] in ESTIMATE_STATUSES and u["recommended"]["conductance"] is not None
@@ -157,6 +177,10 @@ def analyze_input(path: str, options: InputOptions, chash: str | None = None
         results = [dataclasses.replace(r, status="bad_data", status_text=problem)
                    for r in results]
     unloads = [unload_json(r) for r in results]
+    t_all, p_all = run.overview.arrays()
+    for u, r in zip(unloads, results, strict=True):
+        u["curve"] = unload_curve(t_all, p_all, r.t_start, r.t_end if math.isfinite(r.t_end)
+                                  else r.t_start + 4.0 * r.tau_exp)
     for u in unloads:
         u["recommended_conductance"] = u["recommended"]["conductance"]
         u["recommended_std"] = u["recommended"]["std"]
