@@ -267,3 +267,38 @@ def test_report_is_one_self_contained_page_that_a_browser_opens(inputs: Path,
         errors = [ln for ln in r.stderr.splitlines() if "Uncaught" in ln
                   or ("CONSOLE" in ln and "error" in ln.lower())]
         assert errors == [], errors
+
+
+def _msg_fields(path: Path) -> set[str]:
+    """Field names of a .msg file (constants and comments left out)."""
+    out = set()
+    for line in path.read_text().splitlines():
+        line = line.split("#")[0].strip()
+        if line and "=" not in line:
+            out.add(line.split()[1])
+    return out
+
+
+def test_foxglove_layout_plots_fields_the_nodes_publish():
+    """Every path of the installed Foxglove layout names a topic the nodes publish and a
+    field of its message; every panel of the layout tree is configured."""
+    repo = Path(__file__).resolve().parents[1]
+    layout = json.loads((repo / "foxglove" / "pneumatic_unload.json").read_text())
+    fields = {"/tank/pressure": {"header", "fluid_pressure", "variance"},
+              "/estimator/estimate": _msg_fields(repo / "msg_defs" / "msg" /
+                                                 "UnloadEstimate.msg")}
+    assert {"p_star", "conductance_model", "tau_exp"} <= fields["/estimator/estimate"]
+    plotted = []
+    for pid, cfg in layout["configById"].items():
+        for path in cfg.get("paths", []):
+            topic, _, field = path["value"].partition(".")
+            assert field in fields[topic], (pid, path["value"])
+            plotted.append(path["value"])
+    assert "/tank/pressure.fluid_pressure" in plotted
+    assert "/estimator/estimate.p_star" in plotted  # at its header stamp: the crossing
+
+    def leaves(node):
+        return [node] if isinstance(node, str) else leaves(node["first"]) + \
+            leaves(node["second"])
+
+    assert sorted(leaves(layout["layout"])) == sorted(layout["configById"])
