@@ -103,9 +103,9 @@ def main(argv: list[str] | None = None) -> int:
     with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
                       dashboard_address=None, silence_logs=40) as cluster, \
             Client(cluster) as client:
-        from pneumatic_unload.testline.job import analyze_input
+        from pneumatic_unload.testline.job import analyze_file
 
-        client.gather([client.submit(analyze_input, p, opts, pure=False)
+        client.gather([client.submit(analyze_file, p, opts, pure=False)
                        for p in paths[: min(len(paths), 100)]])
         rss = client.run(peak_rss_mib)
     report = tmp / "report.html"

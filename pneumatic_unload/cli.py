@@ -15,10 +15,8 @@ status 1 and says why on stderr (and in ``--json``).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import difflib
 import json
-import math
 import re
 import sys
 from collections.abc import Sequence
@@ -33,15 +31,13 @@ from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySett
 from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
-    merge_final,
 )
-from pneumatic_unload.estimation.chunked import ChunkedAnalysis
 from pneumatic_unload.io.csvheader import TEMPERATURE_UNITS, TIME_UNITS
 from pneumatic_unload.output import format_inputs, format_result, json_default, unload_json
 from pneumatic_unload.records import (
     Record,
     RecordError,
-    analyze_record,
+    analyze_input,
     open_record,
     settings_for,
 )
@@ -171,13 +167,6 @@ def open_input(args: argparse.Namespace) -> Record:
     return rec
 
 
-def _run(rec: Record, settings: EstimatorSettings) -> ChunkedAnalysis:
-    try:
-        return analyze_record(rec, settings)
-    except RecordError as exc:
-        raise CliError(str(exc)) from exc
-
-
 def cmd_analyze(args: argparse.Namespace) -> int:
     """Run the unloading-time analysis and print the estimates (exit status 1 when no unload
     was found, with the reason, or when the readings look like gauge pressures). A CSV log
@@ -189,30 +178,15 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         if not folder.is_dir():
             raise CliError(f"--plot {args.plot}: folder {folder} does not exist")
     rec = open_input(args)
-    settings = settings_from(args, rec.cfg)
-    run = _run(rec, settings)
-    unloads = merge_final(run.published)
-    t10_column = False
-    if (rec.has_temperature and args.initial_temperature is None and unloads
-            and math.isfinite(unloads[0].t_start)):
-        # T10 from the temperature column: the gas temperature at the start of the unload
-        # (the first row may be logged long before, during the charge)
-        try:
-            t10 = rec.temperature_at(unloads[0].t_start)
-        except RecordError as exc:
-            raise CliError(str(exc)) from exc
-        t10_column = True
-        if abs(t10 - settings.initial_temperature) > 1e-3:
-            settings = dataclasses.replace(settings, initial_temperature=t10)
-            run = _run(rec, settings)
-            unloads = merge_final(run.published)
-    published = run.published
-    why = None if unloads else run.explain_no_unload()
-    problem = run.gauge_suspicion()
-    if problem is not None:
-        # C from gauge readings taken as absolute is wrong: no unload may say "ok"
-        unloads = [dataclasses.replace(r, status="bad_data", status_text=problem)
-                   for r in unloads]
+    given = adapters.given_options(args, EstimatorSettings)
+    if getattr(args, "atmosphere_auto", False):
+        given["atmosphere"] = None
+    try:
+        ana = analyze_input(rec, given)
+    except (RecordError, EstimationError, ConfigError) as exc:
+        raise CliError(str(exc)) from exc
+    run, settings, unloads, t10_column = ana.run, ana.settings, ana.unloads, ana.t10_column
+    published, why, problem = run.published, ana.no_unload, ana.input_problem
     inputs = input_sources(args, rec.cfg, settings, t10_column)
     if args.json:
         out = {"source": str(args.path), "samples": run.samples,

@@ -26,10 +26,10 @@ from pneumatic_unload.testline.db import (
     write_file,
     write_table,
 )
-from pneumatic_unload.testline.job import InputOptions, analyze_input
+from pneumatic_unload.testline.job import InputOptions, analyze_file
 from pneumatic_unload.testline.spec import Spec, SpecError, load_spec, parse_spec
 
 __all__ = ["BatchError", "BatchResult", "FileRecord", "InputOptions", "ResultsDBError",
-           "Spec", "SpecError", "analyze_input", "discover", "export", "load_spec",
+           "Spec", "SpecError", "analyze_file", "discover", "export", "load_spec",
            "open_db", "parse_spec", "part_summary", "progress_bar", "run_batch",
            "unload_rows", "write_file", "write_table"]

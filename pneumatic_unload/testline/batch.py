@@ -2,7 +2,7 @@
 
 :func:`run_batch` hashes each input, skips those already in the database with the same
 content and options (unless ``force``), analyses the rest with
-:func:`~.job.analyze_input` - in this process, on a local cluster of worker processes
+:func:`~.job.analyze_file` - in this process, on a local cluster of worker processes
 (``dask.distributed.LocalCluster``, the default with ``workers`` > 1) or on a running
 ``dask.distributed`` scheduler (``scheduler`` address) - and writes each input's rows in
 one transaction as it completes. The result lists the inputs in the order given, whatever
@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from pneumatic_unload.testline.db import FileRecord, has_file, open_db, write_file
-from pneumatic_unload.testline.job import InputOptions, analyze_input, content_hash, options_hash
+from pneumatic_unload.testline.job import InputOptions, analyze_file, content_hash, options_hash
 
 #: Suffixes of the inputs a batch picks up in a folder (plus bag folders).
 INPUT_SUFFIXES = (".mcap", ".csv", ".txt")
@@ -161,14 +161,14 @@ def run_batch(paths: Sequence[str], options: InputOptions, *, db_path: str | Pat
     try:
         if (workers <= 1 and not scheduler) or not todo:
             for k, path, chash in todo:
-                keep(k, analyze_input(path, options, chash))
+                keep(k, analyze_file(path, options, chash))
         else:
             from distributed import as_completed
 
             client, cluster = _client(workers, scheduler)
             res.workers = len(client.scheduler_info().get("workers", {}))
             try:
-                futs = {client.submit(analyze_input, path, options, chash, pure=False,
+                futs = {client.submit(analyze_file, path, options, chash, pure=False,
                                       key=f"analyze-{k}-{ohash[:8]}-{chash or k}"): k
                         for k, path, chash in todo}
                 for fut in as_completed(futs):

@@ -1,6 +1,6 @@
 """One input of a batch: read it, analyse it, judge it against the part's specification.
 
-:func:`analyze_input` is what a batch worker runs (a plain function of picklable values,
+:func:`analyze_file` is what a batch worker runs (a plain function of picklable values,
 so it runs the same in this process or on any Dask worker): it never raises for a bad
 input; an unreadable file or one without an estimate is a :class:`~.db.FileRecord` with
 the reason. SI units: m^3/(s Pa), s, Pa.
@@ -20,9 +20,8 @@ from typing import Any
 from pneumatic_unload import __version__
 from pneumatic_unload.config import ConfigError
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.estimation import merge_final
 from pneumatic_unload.output import unload_json
-from pneumatic_unload.records import RecordError, analyze_record, open_record, settings_for
+from pneumatic_unload.records import RecordError, analyze_input, open_record
 from pneumatic_unload.testline.db import FileRecord
 from pneumatic_unload.testline.spec import Spec
 
@@ -136,8 +135,8 @@ def no_estimate(unloads: list[dict[str, Any]]) -> str:
                      for k, u in enumerate(unloads)) or "no unload"
 
 
-def analyze_input(path: str, options: InputOptions, chash: str | None = None
-                  ) -> FileRecord:
+def analyze_file(path: str, options: InputOptions, chash: str | None = None
+                 ) -> FileRecord:
     """Analyse one input (a bag or a CSV log) as ``pneumatic-unload analyze`` does, and
     judge its unloads against the specification of its part type.
 
@@ -166,16 +165,11 @@ def analyze_input(path: str, options: InputOptions, chash: str | None = None
                               reason=f"{path}: {exc}", **base)
     try:
         rec = open_record(path, topic=options.topic, **options.csv)
-        settings = settings_for(rec.cfg, dict(options.settings))
-        run = analyze_record(rec, settings)
+        ana = analyze_input(rec, dict(options.settings))
     except (RecordError, EstimationError, ConfigError) as exc:
         return FileRecord(content_hash=chash, status="error", reason=str(exc), **base)
-    sj = _settings_json(settings)
-    results = merge_final(run.published)
-    problem = run.gauge_suspicion()
-    if problem is not None:  # C from gauge readings taken as absolute is wrong
-        results = [dataclasses.replace(r, status="bad_data", status_text=problem)
-                   for r in results]
+    sj = _settings_json(ana.settings)
+    run, results, problem = ana.run, ana.unloads, ana.input_problem
     unloads = [unload_json(r) for r in results]
     t_all, p_all = run.overview.arrays()
     for u, r in zip(unloads, results, strict=True):
@@ -186,8 +180,8 @@ def analyze_input(path: str, options: InputOptions, chash: str | None = None
         u["recommended_std"] = u["recommended"]["std"]
         verdict = options.spec.judge(pid, u) if options.spec is not None else None
         u["verdict"], u["verdict_reason"] = verdict if verdict is not None else (None, None)
-    if not unloads:
-        status, reason = "no_estimate", run.explain_no_unload()
+    if ana.no_unload is not None:
+        status, reason = "no_estimate", ana.no_unload
     elif problem is not None:
         status, reason = "no_estimate", problem
     else:
