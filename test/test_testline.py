@@ -302,3 +302,30 @@ def test_foxglove_layout_plots_fields_the_nodes_publish():
             leaves(node["second"])
 
     assert sorted(leaves(layout["layout"])) == sorted(layout["configById"])
+
+
+def test_live_results_write_each_final_estimate_once_with_its_verdict(tmp_path: Path):
+    from pneumatic_unload.estimation import EstimatorSettings, analyze
+    from pneumatic_unload.model import simulate
+    from pneumatic_unload.testline.live import LiveResults
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("part_types:\n  g14:\n    match: '^V14-'\n"
+                    "    conductance: [4.5e-9, 5.5e-9]\n")
+    cfg = RigConfig(volume=1e-3, conductance=5e-9, duration=2.5, pre_time=0.3,
+                    noise_std=500.0, seed=3)
+    sim = simulate(cfg)
+    settings = EstimatorSettings(volume=1e-3)
+    final = next(r for r in analyze(sim.t, sim.measured, settings) if r.final)
+    live = LiveResults(tmp_path / "live.sqlite", "estimator", spec)
+    assert live.write(final, settings, "V14-9") == ("pass", "within specification")
+    assert live.write(final, settings, "V14-9") == ("pass", "within specification")
+    assert live.write(final, settings, "X-1") is None  # no part type: no verdict
+    con = open_db(tmp_path / "live.sqlite")
+    rows = unload_rows(con)
+    con.close()
+    assert [(r["part_id"], r["verdict"], r["writer"]) for r in rows] == \
+        [("V14-9", "pass", "estimator")]  # the same unload is one row
+    assert rows[0]["recommended_conductance"] == pytest.approx(5e-9, rel=0.02)
+    with pytest.raises(SpecError):
+        LiveResults(tmp_path / "l2.sqlite", "estimator", tmp_path / "missing.yaml")

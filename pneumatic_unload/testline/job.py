@@ -106,6 +106,16 @@ def _settings_json(s: EstimatorSettings) -> dict[str, Any]:
             for k, v in dataclasses.asdict(s).items()}
 
 
+def result_row(r: Any) -> dict[str, Any]:
+    """A result as a row of the results database: its JSON (:func:`~pneumatic_unload.
+    output.unload_json`) with the recommended C and its standard uncertainty as columns
+    [m^3/(s Pa)]."""
+    u = unload_json(r)
+    u["recommended_conductance"] = u["recommended"]["conductance"]
+    u["recommended_std"] = u["recommended"]["std"]
+    return u
+
+
 #: Points of the pressure curve kept with each unload for the report [-].
 CURVE_POINTS = 200
 
@@ -170,14 +180,12 @@ def analyze_file(path: str, options: InputOptions, chash: str | None = None
         return FileRecord(content_hash=chash, status="error", reason=str(exc), **base)
     sj = _settings_json(ana.settings)
     run, results, problem = ana.run, ana.unloads, ana.input_problem
-    unloads = [unload_json(r) for r in results]
+    unloads = [result_row(r) for r in results]
     t_all, p_all = run.overview.arrays()
     for u, r in zip(unloads, results, strict=True):
         u["curve"] = unload_curve(t_all, p_all, r.t_start, r.t_end if math.isfinite(r.t_end)
                                   else r.t_start + 4.0 * r.tau_exp)
     for u in unloads:
-        u["recommended_conductance"] = u["recommended"]["conductance"]
-        u["recommended_std"] = u["recommended"]["std"]
         verdict = options.spec.judge(pid, u) if options.spec is not None else None
         u["verdict"], u["verdict_reason"] = verdict if verdict is not None else (None, None)
     if ana.no_unload is not None:
