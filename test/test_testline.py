@@ -22,6 +22,7 @@ from pneumatic_unload.testline import (
     ResultsDBError,
     SpecError,
     discover,
+    load_spec,
     open_db,
     parse_spec,
     part_summary,
@@ -304,7 +305,7 @@ def test_foxglove_layout_plots_fields_the_nodes_publish():
     assert sorted(leaves(layout["layout"])) == sorted(layout["configById"])
 
 
-def test_live_results_write_each_final_estimate_once_with_its_verdict(tmp_path: Path):
+def test_live_results_keep_one_row_per_unload_with_its_verdict(tmp_path: Path):
     from pneumatic_unload.estimation import EstimatorSettings, analyze
     from pneumatic_unload.model import simulate
     from pneumatic_unload.testline.live import LiveResults
@@ -317,7 +318,7 @@ def test_live_results_write_each_final_estimate_once_with_its_verdict(tmp_path: 
     sim = simulate(cfg)
     settings = EstimatorSettings(volume=1e-3)
     final = next(r for r in analyze(sim.t, sim.measured, settings) if r.final)
-    live = LiveResults(tmp_path / "live.sqlite", "estimator", spec)
+    live = LiveResults(tmp_path / "live.sqlite", "estimator", load_spec(spec))
     assert live.write(final, settings, "V14-9") == ("pass", "within specification")
     assert live.write(final, settings, "V14-9") == ("pass", "within specification")
     assert live.write(final, settings, "X-1") is None  # no part type: no verdict
@@ -328,4 +329,6 @@ def test_live_results_write_each_final_estimate_once_with_its_verdict(tmp_path: 
         [("V14-9", "pass", "estimator")]  # the same unload is one row
     assert rows[0]["recommended_conductance"] == pytest.approx(5e-9, rel=0.02)
     with pytest.raises(SpecError):
-        LiveResults(tmp_path / "l2.sqlite", "estimator", tmp_path / "missing.yaml")
+        load_spec(tmp_path / "missing.yaml")
+    with pytest.raises(ResultsDBError):
+        LiveResults(tmp_path / "no" / "l2.sqlite", "estimator")

@@ -2,7 +2,8 @@
 
 :class:`LiveResults` is what the estimator node holds when its ``results_db`` parameter is
 set: each final estimate becomes one row of ``files`` (path ``live:<node>``, a content
-hash made of the node, the unload's start and index: written once) and one of ``unloads``,
+hash made of the node, the unload's start and index: a later estimate of the same unload
+replaces the earlier) and one of ``unloads``,
 with the part id of the running ``measure`` goal or of the node's ``part_id`` parameter,
 and the verdict of the part's type in the specification. The database is shared: batches
 and other nodes may write at the same time (see :mod:`~.db`). SI units.
@@ -21,7 +22,7 @@ from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.types import UnloadResult
 from pneumatic_unload.testline.db import FileRecord, open_db, write_file
 from pneumatic_unload.testline.job import result_row
-from pneumatic_unload.testline.spec import Spec, load_spec
+from pneumatic_unload.testline.spec import Spec
 
 
 class LiveResults:
@@ -33,20 +34,19 @@ class LiveResults:
         The results database (created when missing).
     writer : str
         Who writes (the node's name).
-    spec_path : str or Path, optional
-        Specification of the part types ('' or None: no verdicts).
+    spec : Spec, optional
+        Specification of the part types (None: no verdicts).
 
     Raises
     ------
-    ResultsDBError, SpecError
-        The database or the specification cannot be used.
+    ResultsDBError
+        The database cannot be used.
     """
 
-    def __init__(self, db_path: str | Path, writer: str,
-                 spec_path: str | Path | None = None) -> None:
+    def __init__(self, db_path: str | Path, writer: str, spec: Spec | None = None) -> None:
         self.db_path = Path(db_path)
         self.writer = writer
-        self.spec: Spec | None = load_spec(spec_path) if spec_path else None
+        self.spec = spec
         open_db(self.db_path).close()  # created (or migrated) now: errors at start-up
 
     def judge(self, r: UnloadResult, part_id: str) -> tuple[str, str] | None:
@@ -85,7 +85,7 @@ class LiveResults:
             unloads=[u], settings=sj, writer=self.writer, package_version=__version__)
         con = open_db(self.db_path)
         try:
-            write_file(con, rec)
+            write_file(con, rec, replace=True)  # a later estimate of the unload replaces it
         finally:
             con.close()
         return verdict
