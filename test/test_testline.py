@@ -321,12 +321,16 @@ def test_live_results_keep_one_row_per_unload_with_its_verdict(tmp_path: Path):
     live = LiveResults(tmp_path / "live.sqlite", "estimator", load_spec(spec))
     assert live.write(final, settings, "V14-9") == ("pass", "within specification")
     assert live.write(final, settings, "V14-9") == ("pass", "within specification")
-    assert live.write(final, settings, "X-1") is None  # no part type: no verdict
     con = open_db(tmp_path / "live.sqlite")
     rows = unload_rows(con)
     con.close()
     assert [(r["part_id"], r["verdict"], r["writer"]) for r in rows] == \
         [("V14-9", "pass", "estimator")]  # the same unload is one row
+    assert live.write(final, settings, "X-1") is None  # no part type: no verdict
+    con = open_db(tmp_path / "live.sqlite")
+    rows = unload_rows(con)
+    con.close()
+    assert [(r["part_id"], r["verdict"]) for r in rows] == [("X-1", None)]  # replaced
     assert rows[0]["recommended_conductance"] == pytest.approx(5e-9, rel=0.02)
     with pytest.raises(SpecError):
         load_spec(tmp_path / "missing.yaml")
