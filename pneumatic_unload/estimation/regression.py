@@ -140,7 +140,9 @@ def crossing_fit(t: FloatArray, p: FloatArray, level: float
     # at the sample that completes it, so no LAPACK call overhead here)
     w = float(np.abs(x).max())
     p_ref = float(p.sum()) / p.size
-    if not (w > 0.0 and math.isfinite(w) and math.isfinite(p_ref)):
+    if not (w > 1e-12 * max(1.0, abs(tm)) and math.isfinite(w) and math.isfinite(p_ref)):
+        # a window of no duration (stamps closer than a picosecond, or than the float
+        # resolution of the stamps): no slope, no crossing
         return math.nan, math.inf, 0.0
     u = x / w
     q = p - p_ref
