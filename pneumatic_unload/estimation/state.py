@@ -19,12 +19,13 @@ from pneumatic_unload.estimation.buffer import SampleBuffer
 from pneumatic_unload.estimation.decisions import (
     DT_DEFAULT,
     PERIOD,
-    TRIM_MIN,
     effective_sigma,
     idle_keep,
     stuck_run,
+    trim_due,
     trim_keep,
 )
+from pneumatic_unload.estimation.history import DiagnosticLog
 from pneumatic_unload.estimation.types import Diagnostic, FloatArray, UnloadResult
 from pneumatic_unload.physics import P_STAR_FRACTION
 
@@ -127,7 +128,8 @@ class EstimatorState:
         self.settings = settings
         self.live = live
         self.buf = SampleBuffer()
-        self.diagnostics: list[Diagnostic] = []
+        #: The first and the last diagnostics (bounded, see :mod:`.history`).
+        self.diagnostics = DiagnosticLog()
         self.n_unloads = 0
         self.last_t = -math.inf  # last accepted stamp [s]
         self.dt_nominal = math.nan  # nominal sample period [s]
@@ -166,7 +168,7 @@ class EstimatorState:
         waiting, see :data:`~.decisions.IDLE_KEEP`); n: samples held [-]. A plateau trimmed
         from its start begins at the buffer's first sample."""
         keep = int(trim_keep(n, self.arm_index, idle_keep(self.settings.min_plateau)))
-        if keep > TRIM_MIN and self.mode == WAITING:
+        if trim_due(keep, n) and self.mode == WAITING:
             self.buf.trim(keep)
             self.next_check -= keep
             self.arm_index = max(self.arm_index - keep, 0)
