@@ -210,7 +210,75 @@ def test_cli_bag_whose_clock_steps_back_mid_unload_is_bad_data(tmp_path, log_tim
     proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path),
                            "--volume", str(cfg.volume), "--json"], capture_output=True,
                           text=True, timeout=120)
-    assert proc.returncode in (0, 1), proc.stderr
-    unloads = json.loads(proc.stdout)["unloads"]
+    assert proc.returncode == 1, proc.stderr  # no estimate: not a success
+    data = json.loads(proc.stdout)
+    unloads = data["unloads"]
     assert unloads and all(u["status"] == "bad_data" for u in unloads), unloads
     assert "clock stepped back 10" in unloads[0]["status_text"]
+    assert "clock stepped back 10" in data["no_estimate_reason"] and data["exit_status"] == 1
+
+
+def _csv(path, t, p):
+    np.savetxt(path, np.column_stack((t, p)), delimiter=",", header="time_s,pressure_Pa",
+               comments="", fmt="%.9g")
+
+
+@pytest.mark.parametrize("json_out", [False, True])
+def test_cli_record_with_only_bad_data_exits_1_with_the_reason(tmp_path, json_out):
+    """A saturated transducer (clipped at 6.5 bar during the plateau): its one unload is
+    bad_data, so the record gives no C: exit 1, the reason on stderr and in --json; a record
+    with one good unload exits 0."""
+    import json
+    import subprocess
+    import sys
+
+    cfg, sim, _st = _rig(full_scale=6.5e5)
+    bad = tmp_path / "clipped.csv"
+    _csv(bad, sim.t, sim.measured)
+    _cfg, good_sim, _ = _rig()
+    good = tmp_path / "good.csv"
+    _csv(good, good_sim.t, good_sim.measured)
+    codes = {}
+    for path in (bad, good):
+        proc = subprocess.run(
+            [sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path), "--volume",
+             str(cfg.volume), "--no-curve-fit", *(["--json"] if json_out else [])],
+            capture_output=True, text=True, timeout=120)
+        assert "Traceback" not in proc.stderr, proc.stderr
+        codes[path.stem] = proc.returncode
+        if path is bad:
+            assert "no estimate: none of the 1 unload(s) found gives C" in proc.stderr
+            assert "saturated" in proc.stderr
+            if json_out:
+                data = json.loads(proc.stdout)
+                assert [u["status"] for u in data["unloads"]] == ["bad_data"]
+                assert "saturated" in data["no_estimate_reason"]
+                assert data["exit_status"] == 1 and data["no_unload_reason"] is None
+            else:
+                assert "bad_data" in proc.stdout
+    assert codes == {"clipped": 1, "good": 0}
+
+
+@pytest.mark.parametrize("command", ["simulate", "recover", "discrepancy"])
+def test_every_command_help_exits_0(command):
+    """(A '%' in an option's help once made ``analyze --help`` a traceback.)"""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", command, "--help"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert "usage:" in proc.stdout
+
+
+def test_analyze_help_documents_the_exit_statuses():
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", "--help"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert "0.5 % of V" in proc.stdout
+    text = " ".join(proc.stdout.split())
+    assert "exit status: 0: at least one unload gives C" in text
+    assert "1: no estimate" in text and "2: unreadable input or bad options" in text
