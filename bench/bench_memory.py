@@ -12,7 +12,10 @@ Cases (``--case``, default all):
   after it, both with the rig's sensor noise, as a logger left running gives;
 * ``bag``: the same record as a rosbag2/MCAP bag (``/tank/pressure``, FluidPressure);
 * ``long``: ONE unload that lasts the whole record (a slow discharge through a tiny orifice:
-  the rig's conductance scaled so that the discharge takes about 90 % of the rows), CSV.
+  the rig's conductance scaled so that the discharge takes about 90 % of the rows), CSV; the
+  sensor noise is 20 Pa (not 1 kPa): the detector looks for the step over a few hundred
+  samples, and at 10 kHz a discharge of 2000 s falls about 0.3 Pa per sample at its start
+  (with 1 kPa of noise the 20 M-row one is not detected: "no unload", with the reason).
 
 The files are written under a temporary directory (``--dir`` keeps them, and re-uses files
 already there).
@@ -67,7 +70,7 @@ def rig_for(case: str, rows: int, seed: int = 1) -> RigConfig:
 
         want = 0.9 * rows / RATE - cfg.pre_time  # [s]
         cfg = dataclasses.replace(cfg, conductance=cfg.conductance
-                                  * default_duration(cfg) / want)
+                                  * default_duration(cfg) / want, noise_std=20.0)
     return cfg
 
 

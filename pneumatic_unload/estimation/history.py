@@ -6,7 +6,8 @@ returned by the call that completed it (and published by the node, recorded in t
 every diagnostic is seen by whoever polls :meth:`DiagnosticLog.since`; the histories only
 keep enough for a late reader and for explaining a record without unload: the first
 :data:`FIRST_DIAGNOSTICS` diagnostics (the first problems of a record are usually its
-cause) and the last :data:`LAST_DIAGNOSTICS`, and the last :data:`RESULTS_KEPT` results (a crossing and a final result per unload).
+cause) and the last :data:`LAST_DIAGNOSTICS`, and the last :data:`RESULTS_KEPT` results (a
+crossing and a final result per unload).
 """
 
 from __future__ import annotations
