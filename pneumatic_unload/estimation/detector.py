@@ -60,6 +60,7 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
             st.arm_index = n - PERIOD
             st.stream_start = False
             st.level = -math.inf
+            st.rearm_floor = -math.inf
             return []
         if not c.trigger:
             st.trim(n)
@@ -69,6 +70,16 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
     # trigger
     if i - st.arm_index < s.min_plateau:
         return []
+    if st.plateau_level < st.rearm_floor:
+        # the tank was not charged since the last unload's final plateau: a slow fall that
+        # goes on (a slow discharge whose tail counted as level) is no new unload
+        if not st.rearm_noted:
+            st.rearm_noted = True
+            st.diag("ok", "pressure still falling after the unload's final plateau, no "
+                    "charge since: not a new unload", float(buf.t[i]))
+        st.level = -math.inf
+        return []
+    st.rearm_floor = -math.inf
     st.unload = UnloadState(trigger=i)
     st.mode = CONFIRM
     st.next_check = i + PERIOD

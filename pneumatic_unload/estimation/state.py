@@ -136,6 +136,10 @@ class EstimatorState:
         self.gap_limit = math.inf  # stamp step that counts as a gap [s]
         self.stuck_reported = False
         self.clock_step_at = -1  # samples accepted when the last clock step was handled
+        #: After an unload whose tail ended on a level plateau: the plateau level a trigger
+        #: needs (a charge since), else it is the same discharge going on [signal units].
+        self.rearm_floor = -math.inf
+        self.rearm_noted = False  # said once that a trigger below the floor was ignored
         self.unload = UnloadState(trigger=-1)
         self.to_waiting(0)
         #: The current plateau began with the stream's first sample (no re-arm yet).
