@@ -97,5 +97,6 @@ def test_diagnostic_log_reads_like_a_list():
         log.append(x)  # type: ignore[arg-type]
     assert list(log) == ["d0", "d3", "d4"] and log == ["d0", "d3", "d4"]
     assert log[-1] == "d4" and log[:2] == ["d0", "d3"] and len(log) == 3
+    assert list(reversed(log)) == ["d4", "d3", "d0"]
     assert log.since(0) == ["d0", "d3", "d4"] and log.since(3) == ["d3", "d4"]
     assert log.since(4) == ["d4"] and log.since(5) == [] and log.dropped == 2

@@ -83,6 +83,10 @@ class DiagnosticLog(Sequence[Diagnostic]):
         yield from self._first
         yield from self._last
 
+    def __reversed__(self) -> Iterator[Diagnostic]:
+        yield from reversed(self._last)
+        yield from reversed(self._first)
+
     @overload
     def __getitem__(self, i: int) -> Diagnostic: ...
 
