@@ -299,3 +299,23 @@ def test_slow_low_noise_discharge_is_one_unload_not_two():
     assert [(r.index, r.status) for r in res] == [(0, "ok")], [
         (r.index, r.status, r.status_text) for r in res]
     assert "not a new unload" in msgs
+
+
+def test_valve_closed_after_the_crossing_then_opened_again_is_a_second_unload():
+    """The re-arm floor of a tail ended on a level does not hide a real second opening: the
+    valve closed below p*, the pressure held for 3 s (a level plateau, not a creep), then
+    opened again from there: two unloads, the second from that level."""
+    cfg = RigConfig(volume=1e-3, noise_std=FS_NOISE, seed=21, duration=6.0, rate=1000.0)
+    a = simulate(cfg)
+    level = cfg.atmosphere + 0.2 * (a.pressure[0] - cfg.atmosphere)  # below p*
+    cut = int(np.searchsorted(-a.pressure, -level))
+    dt = 1.0 / cfg.rate
+    hold = a.pressure[cut] + np.random.default_rng(3).normal(0.0, FS_NOISE, 3000)
+    b = simulate(dataclasses.replace(cfg, initial_pressure=float(a.pressure[cut]), seed=22))
+    t = np.concatenate([a.t[:cut], a.t[cut - 1] + dt * np.arange(1, hold.size + 1)])
+    t = np.concatenate([t, t[-1] + dt + b.t])
+    st = dataclasses.replace(settings_for(cfg), curve_fit=False)
+    res, msgs = _run(t, np.concatenate([a.measured[:cut], hold, b.measured]), st)
+    assert [r.index for r in res] == [0, 1] and "not a new unload" not in msgs
+    assert res[1].p10 == pytest.approx(a.pressure[cut], rel=0.01)
+    assert res[1].conductance_model == pytest.approx(res[0].conductance_model, rel=0.05)

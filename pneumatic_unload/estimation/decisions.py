@@ -154,6 +154,20 @@ def trim_due(keep: Index, n: Index) -> Flag:
     return (keep > TRIM_MIN) | ((keep > TRIM_FLOOR) & (2 * keep >= n))
 
 
+def creeping(cs: FloatArray, k: int, sigma: float) -> bool:
+    """The PLATEAU samples ending LAG before a trigger at index k (the current plateau and
+    what precedes it in the buffer) fall: the mean of their first half exceeds that of their
+    second by more than 3 standard errors (sigma: noise deviation [signal units])."""
+    hi = k + 1 - LAG
+    lo = max(0, hi - PLATEAU)
+    h = (hi - lo) // 2
+    if h < PERIOD or not sigma > 0.0:
+        return False
+    first = (cs[lo + h] - cs[lo]) / h
+    second = (cs[hi] - cs[hi - h]) / h
+    return bool(first - second > 3.0 * sigma * math.sqrt(2.0 / h))
+
+
 def plateau_check(cs: FloatArray, cq: FloatArray, pv: FloatArray, k: Index, *, arm: int,
                   min_plateau: int, trigger_sigma: float, stuck_reported: bool
                   ) -> PlateauCheck:

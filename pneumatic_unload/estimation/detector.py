@@ -17,6 +17,7 @@ from pneumatic_unload.estimation.decisions import (
     below,
     check_indices,
     confirmed,
+    creeping,
     first_below,
     nominal_period,
     plateau_check,
@@ -70,9 +71,10 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
     # trigger
     if i - st.arm_index < s.min_plateau:
         return []
-    if st.plateau_level < st.rearm_floor:
-        # the tank was not charged since the last unload's final plateau: a slow fall that
-        # goes on (a slow discharge whose tail counted as level) is no new unload
+    if st.plateau_level < st.rearm_floor and creeping(buf.cs, i, st.sigma):
+        # not charged since the last unload's tail ended on a level, and falling before
+        # the trigger: the same slow discharge creeping on (its tail counted as level), not
+        # a new unload (a valve opened again from a level plateau is one)
         if not st.rearm_noted:
             st.rearm_noted = True
             st.diag("ok", "pressure still falling after the unload's final plateau, no "

@@ -28,10 +28,6 @@ from pneumatic_unload.estimation.refine import final_curve_fit
 from pneumatic_unload.estimation.state import EstimatorState
 from pneumatic_unload.estimation.types import STUCK_TEXT, UnloadResult
 
-#: A tail that ends this close to p_atm (fraction of the drop p10 - p_atm) [-] ended the
-#: discharge: a slow fall after it is the same discharge, not a new unload.
-NEAR_ATM = 0.1
-
 
 def _flat_tail(st: EstimatorState, cs: np.ndarray, k: int | np.ndarray, tau: float
                ) -> np.bool_ | np.ndarray:
@@ -64,13 +60,11 @@ def step_tail(st: EstimatorState, i: int) -> list[UnloadResult]:
     if st.stuck(i):
         return on_tail_stuck(st, i)
     if res is not None and _flat_tail(st, np.frombuffer(cs, dtype=float), i, res.tau_exp):
-        # level to the flat test near p_atm, maybe still falling slowly: the next unload
-        # needs a charge (a tail that ended well above p_atm, the valve closed, does not)
-        near_atm = abs(u.tail_low - u.atm) < NEAR_ATM * abs(u.p10 - u.atm)
+        # level to the flat test, maybe still falling slowly: a next unload needs a charge
+        # or a level plateau (the valve closed, then opened again), see step_waiting
         floor = u.tail_low + rise_threshold(st.sigma, u.p10, u.atm)
         out = finish_tail(st, i, ended=False)
-        if near_atm:
-            st.rearm_floor, st.rearm_noted = floor, False
+        st.rearm_floor, st.rearm_noted = floor, False
         return out
     return []
 
