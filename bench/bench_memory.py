@@ -1,13 +1,24 @@
-"""Memory and speed of ``analyze`` on long CSV logs (issue 13). A script, not a timed test.
+"""Memory and speed of ``analyze`` on long records (issue 13). A script, not a timed test.
 
-    python bench/bench_memory.py            # 1, 5 and 20 million rows
-    python bench/bench_memory.py --quick    # 1 million rows only
+    python bench/bench_memory.py                       # 1, 5 and 20 million rows, all cases
+    python bench/bench_memory.py --quick               # 1 million rows only
+    python bench/bench_memory.py --case long --rows 5  # one case, one length
 
-Each CSV is one simulated discharge (:func:`pneumatic_unload.model.simulate`, 10 kHz, the
-default rig of :class:`~pneumatic_unload.config.RigConfig`) inside a long record: an idle
-pre-step plateau (30 % of the rows) before it and the final plateau after it, both with the
-rig's sensor noise, as a logger left running gives. The files are written under a temporary
-directory (``--dir`` keeps them, and re-uses files already there).
+Cases (``--case``, default all):
+
+* ``csv``: one simulated discharge (:func:`pneumatic_unload.model.simulate`, 10 kHz, the
+  default rig of :class:`~pneumatic_unload.config.RigConfig`, about 0.65 M samples) inside a
+  long record: an idle pre-step plateau (30 % of the rows) before it and the final plateau
+  after it, both with the rig's sensor noise, as a logger left running gives;
+* ``bag``: the same record as a rosbag2/MCAP bag (``/tank/pressure``, FluidPressure);
+* ``long``: ONE unload that lasts the whole record (a slow discharge through a tiny orifice:
+  the rig's conductance scaled so that the discharge takes about 90 % of the rows), CSV; the
+  sensor noise is 20 Pa (not 1 kPa): the detector looks for the step over a few hundred
+  samples, and at 10 kHz a discharge of 2000 s falls about 0.3 Pa per sample at its start
+  (with 1 kPa of noise the 20 M-row one is not detected: "no unload", with the reason).
+
+The files are written under a temporary directory (``--dir`` keeps them, and re-uses files
+already there).
 
 For each file, ``python -m pneumatic_unload.cli analyze FILE --json`` runs as a subprocess;
 wall time, rows per second and the child's peak RSS (``ru_maxrss`` of
@@ -19,11 +30,13 @@ before a change), so that before and after are measured on the same files.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -48,32 +61,69 @@ def _write_rows(fh: object, t: np.ndarray, p: np.ndarray) -> None:
                                                                 strict=True)))
 
 
-def make_csv(path: Path, rows: int, seed: int = 1) -> RigConfig:
-    """Write a record of ``rows`` samples holding one simulated discharge; returns its rig."""
+def rig_for(case: str, rows: int, seed: int = 1) -> RigConfig:
+    """The rig of a case: the default one, or (``long``) one whose discharge takes about
+    90 % of ``rows`` samples (its conductance scaled down) [-]."""
     cfg = RigConfig(rate=RATE, pre_time=1.0, seed=seed)
+    if case == "long":
+        from pneumatic_unload.rig import default_duration
+
+        want = 0.9 * rows / RATE - cfg.pre_time  # [s]
+        cfg = dataclasses.replace(cfg, conductance=cfg.conductance
+                                  * default_duration(cfg) / want, noise_std=20.0)
+    return cfg
+
+
+def record_blocks(cfg: RigConfig, rows: int, pre_fraction: float,
+                  seed: int = 1) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """The record in blocks (t [s], p [Pa]): ``pre_fraction`` of the rows of idle plateau,
+    the simulated discharge, then the final plateau up to ``rows`` samples."""
     sim = simulate(cfg)
     n_sim = sim.t.size
-    if rows < n_sim + 20_000:
+    n_pre = int(pre_fraction * rows)
+    if rows < n_pre + n_sim + 10_000:
         raise SystemExit(f"{rows} rows is shorter than the simulated discharge ({n_sim})")
-    n_pre = int(0.3 * rows)
     n_post = rows - n_pre - n_sim
     rng = np.random.default_rng(seed)
     dt = 1.0 / RATE
     p_first = float(np.median(sim.measured[:1000]))
     p_last = float(np.median(sim.measured[-1000:]))
+    for k0 in range(0, n_pre, WRITE_BLOCK):
+        k1 = min(n_pre, k0 + WRITE_BLOCK)
+        yield np.arange(k0, k1) * dt, p_first + cfg.noise_std * rng.standard_normal(k1 - k0)
+    for k0 in range(0, n_sim, WRITE_BLOCK):
+        yield n_pre * dt + sim.t[k0:k0 + WRITE_BLOCK], sim.measured[k0:k0 + WRITE_BLOCK]
+    t_end = n_pre * dt + float(sim.t[-1])
+    del sim
+    for k0 in range(0, n_post, WRITE_BLOCK):
+        k1 = min(n_post, k0 + WRITE_BLOCK)
+        yield (t_end + np.arange(k0 + 1, k1 + 1) * dt,
+               p_last + cfg.noise_std * rng.standard_normal(k1 - k0))
+
+
+def make_record(case: str, path: Path, rows: int, seed: int = 1) -> RigConfig:
+    """Write the record of a case (see the module docstring); returns its rig."""
+    cfg = rig_for(case, rows, seed)
+    blocks = record_blocks(cfg, rows, 0.0 if case == "long" else 0.3, seed)
+    if case == "bag":
+        from pneumatic_unload.io.bag import BagRecorder
+
+        with BagRecorder(path) as rec:
+            for t, p in blocks:
+                rec.write_pressures(np.round((1.7e9 + t) * 1e9).astype(np.int64), p)
+        return cfg
     with path.open("w") as fh:
         fh.write("time [s],pressure [Pa]\n")
-        for k0 in range(0, n_pre, WRITE_BLOCK):
-            k1 = min(n_pre, k0 + WRITE_BLOCK)
-            _write_rows(fh, np.arange(k0, k1) * dt,
-                        p_first + cfg.noise_std * rng.standard_normal(k1 - k0))
-        _write_rows(fh, n_pre * dt + sim.t, sim.measured)
-        t_end = n_pre * dt + float(sim.t[-1])
-        for k0 in range(0, n_post, WRITE_BLOCK):
-            k1 = min(n_post, k0 + WRITE_BLOCK)
-            _write_rows(fh, t_end + np.arange(k0 + 1, k1 + 1) * dt,
-                        p_last + cfg.noise_std * rng.standard_normal(k1 - k0))
+        for t, p in blocks:
+            _write_rows(fh, t, p)
     return cfg
+
+
+def file_size(path: Path) -> int:
+    """Size of a file or of a directory's files [B]."""
+    if path.is_dir():
+        return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
+    return path.stat().st_size
 
 
 _CHILD = """
@@ -109,32 +159,39 @@ def main() -> int:
                     help="keep the CSV files here (default: a temporary directory)")
     ap.add_argument("--code", type=Path, default=ROOT,
                     help="checkout of the package to analyse with (default: this one)")
+    ap.add_argument("--case", choices=("csv", "bag", "long"), nargs="+",
+                    default=["csv", "bag", "long"], help="records to analyse (default all)")
     args = ap.parse_args()
     millions = [1.0] if args.quick else (args.rows or [1.0, 5.0, 20.0])
     tmp = None if args.dir else tempfile.TemporaryDirectory(prefix="bench_memory_")
     folder = args.dir or Path(tmp.name)  # type: ignore[union-attr]
     folder.mkdir(parents=True, exist_ok=True)
-    print(f"code: {args.code}\n")
-    print("| rows | file [MiB] | wall [s] | rows/s | peak RSS [MiB] | unloads | C [m^3/(s Pa)] |")
-    print("|---:|---:|---:|---:|---:|---:|---|")
+    print(f"code: {args.code}, load average at start {os.getloadavg()[0]:.2f} "
+          f"({os.cpu_count()} cores)\n")
+    print("| case | rows | file [MiB] | wall [s] | rows/s | peak RSS [MiB] | unloads | "
+          "C model [m^3/(s Pa)] | rig C |")
+    print("|---|---:|---:|---:|---:|---:|---:|---|---|")
     try:
-        for m in millions:
-            rows = int(m * 1e6)
-            path = folder / f"discharge_{rows}.csv"
-            cfg = RigConfig(rate=RATE, pre_time=1.0, seed=1)
-            if not path.exists():
-                cfg = make_csv(path, rows)
-            res = measure(path, cfg, args.code)
-            if res["code"] not in (0, 1):
-                print(f"| {rows:,} | analyze failed (exit {res['code']}): "
-                      f"{str(res['stderr']).strip().splitlines()[-1:]} |")
-                continue
-            doc = json.loads(str(res["stdout"]))
-            cs = ", ".join(f"{u['conductance_model']:.5g}" for u in doc["unloads"])
-            wall = float(res["wall"])  # type: ignore[arg-type]
-            print(f"| {rows:,} | {path.stat().st_size / 2**20:.0f} | {wall:.1f} | "
-                  f"{rows / wall:,.0f} | {int(res['rss']) / 2**20:.0f} | "  # type: ignore[call-overload]
-                  f"{len(doc['unloads'])} | {cs} |", flush=True)
+        for case in args.case:
+            for m in millions:
+                rows = int(m * 1e6)
+                name = {"csv": "discharge", "bag": "discharge", "long": "long"}[case]
+                path = folder / f"{name}_{rows}{'' if case == 'bag' else '.csv'}"
+                cfg = rig_for(case, rows)
+                if not path.exists():
+                    cfg = make_record(case, path, rows)
+                res = measure(path, cfg, args.code)
+                if res["code"] not in (0, 1):
+                    print(f"| {case} | {rows:,} | analyze failed (exit {res['code']}): "
+                          f"{str(res['stderr']).strip().splitlines()[-1:]} |", flush=True)
+                    continue
+                doc = json.loads(str(res["stdout"]))
+                cs = ", ".join(f"{u['conductance_model']:.5g}" if u["conductance_model"]
+                               else str(u["status"]) for u in doc["unloads"])
+                wall = float(res["wall"])  # type: ignore[arg-type]
+                print(f"| {case} | {rows:,} | {file_size(path) / 2**20:.0f} | {wall:.1f} | "
+                      f"{rows / wall:,.0f} | {int(res['rss']) / 2**20:.0f} | "  # type: ignore[call-overload]
+                      f"{len(doc['unloads'])} | {cs} | {cfg.conductance:.5g} |", flush=True)
     finally:
         if tmp is not None:
             tmp.cleanup()

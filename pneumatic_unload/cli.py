@@ -6,10 +6,15 @@ analyze PATH     unloading-time analysis of a bag (directory or .mcap) or a CSV 
 simulate --out   write a simulated run as a rosbag2/MCAP bag, no ROS needed
 recover BAG      make a bag whose writer was killed readable again
 
-Errors on unreadable input or bad options exit with status 2 and one line on stderr (no
-prefix matching of options: an unknown one is answered with the nearest known one). A run
-with no unload, or whose readings look like gauge pressures taken as absolute, exits with
-status 1 and says why on stderr (and in ``--json``).
+Exit status of ``analyze`` (:data:`pneumatic_unload.output.EXIT_STATUS`): 0 when at
+least one unload gives C (a finite recommended C and a status other than 'bad_data': 'ok',
+'aborted_sse', 'not_choked' with its curve-fit C; other unloads of the record may have
+failed, each says why); 1 when the record gives no estimate: no unload
+found, every unload failed (e.g. all 'bad_data': a stuck or saturated sensor, a clock step),
+or the readings look like gauge pressures taken as absolute; the reason is on stderr and in
+``--json`` (``no_unload_reason``, ``no_estimate_reason``, ``input_problem``); 2 on unreadable
+input or bad options, with one line on stderr (no prefix matching of options: an unknown one is
+answered with the nearest known one).
 """
 
 from __future__ import annotations
@@ -33,7 +38,15 @@ from pneumatic_unload.estimation import (
     EstimatorSettings,
 )
 from pneumatic_unload.io.csvheader import TEMPERATURE_UNITS, TIME_UNITS
-from pneumatic_unload.output import format_inputs, format_result, json_default, unload_json
+from pneumatic_unload.output import (
+    EXIT_STATUS,
+    exit_status,
+    format_inputs,
+    format_result,
+    json_default,
+    no_estimate_reason,
+    unload_json,
+)
 from pneumatic_unload.records import (
     Record,
     RecordError,
@@ -187,13 +200,15 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from exc
     run, settings, unloads, t10_column = ana.run, ana.settings, ana.unloads, ana.t10_column
     published, why, problem = run.published, ana.no_unload, ana.input_problem
+    no_estimate = None if problem is not None else no_estimate_reason(unloads)
     inputs = input_sources(args, rec.cfg, settings, t10_column)
     if args.json:
         out = {"source": str(args.path), "samples": run.samples,
                "settings": dict(vars(settings)), "inputs": inputs,
                "unloads": [unload_json(r) for r in unloads],
                "published": [unload_json(r) for r in published],
-               "no_unload_reason": why, "input_problem": problem,
+               "no_unload_reason": why, "no_estimate_reason": no_estimate,
+               "input_problem": problem, "exit_status": exit_status(unloads, problem),
                "input_warnings": list(rec.warnings)}
         print(json.dumps(out, indent=2, allow_nan=False, default=json_default))
     else:
@@ -205,6 +220,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         print(f"pneumatic-unload: no unload: {why}", file=sys.stderr)
     elif problem is not None:
         print(f"pneumatic-unload: {problem}", file=sys.stderr)
+    elif no_estimate is not None:
+        print(f"pneumatic-unload: {no_estimate}", file=sys.stderr)
     if args.plot:
         from pneumatic_unload.plotting import plot_analysis
 
@@ -215,7 +232,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             raise CliError(f"--plot {args.plot}: {exc}") from exc
         if not args.json:
             print(f"plot written to {args.plot}")
-    return 0 if unloads and problem is None else 1
+    return exit_status(unloads, problem)
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -402,7 +419,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "(unloading-time method with model-based bias correction).")
     sub = ap.add_subparsers(dest="command", required=True)
 
-    an = sub.add_parser("analyze", help="estimate C, b and tau_exp from a bag or a CSV log")
+    an = sub.add_parser(
+        "analyze", help="estimate C, b and tau_exp from a bag or a CSV log",
+        epilog="exit status: " + "; ".join(f"{k}: {v}" for k, v in EXIT_STATUS.items()))
     an.add_argument("path", help="rosbag2 directory, .mcap file or .csv log")
     adapters.add_options(an, EstimatorSettings)
     add_input_options(an)

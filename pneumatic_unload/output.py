@@ -7,12 +7,27 @@ alongside in the text.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from pneumatic_unload.budget import format_budget
 from pneumatic_unload.estimation import UnloadResult, recommended
+
+#: Exit statuses of ``analyze`` (also in its --help and the README).
+EXIT_STATUS = {0: "at least one unload gives C (a finite recommended C, status not bad_data)",
+               1: "no estimate: no unload found, every unload failed (e.g. all bad_data), "
+                  "or gauge readings taken as absolute; the reason on stderr and in --json",
+               2: "unreadable input or bad options (one line on stderr)"}
+
+
+def gives_c(r: UnloadResult) -> bool:
+    """The result carries an estimate of C: its recommended C (:func:`recommended`) is
+    finite and positive and its status is not 'bad_data' (e.g. 'ok', 'aborted_sse', or
+    'not_choked' with its curve-fit C)."""
+    c = recommended(r)["conductance"]
+    return r.status != "bad_data" and math.isfinite(c) and c > 0
 
 
 def unload_json(r: UnloadResult) -> dict[str, Any]:
@@ -91,3 +106,20 @@ def format_inputs(inputs: dict[str, Any]) -> str:
         out.append(f"  {name:20s} = {val}  ({v['source']})")
     out.append(f"  heat model           = {inputs['heat_model']}")
     return "\n".join(out)
+
+
+def no_estimate_reason(unloads: Sequence[UnloadResult]) -> str | None:
+    """Why unloads were found but none gives an estimate of C (None when one does, or
+    when there is no unload: that has its own reason)."""
+    if not unloads or any(gives_c(r) for r in unloads):
+        return None
+    each = [f"unload {r.index}: {r.status}: {r.status_text}" for r in unloads[:3]]
+    more = f" (and {len(unloads) - 3} more)" if len(unloads) > 3 else ""
+    return (f"no estimate: none of the {len(unloads)} unload(s) found gives C; "
+            + "; ".join(each) + more)
+
+
+def exit_status(unloads: Sequence[UnloadResult], problem: str | None) -> int:
+    """Exit status of ``analyze`` (:data:`EXIT_STATUS`)."""
+    ok = problem is None and any(gives_c(r) for r in unloads)
+    return 0 if ok else 1

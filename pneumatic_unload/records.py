@@ -47,15 +47,16 @@ class Record:
         What was assumed about the input (e.g. a CSV unit not stated).
     stream : CsvStream or None
         The CSV reader (None for a bag).
-    arrays : tuple of ndarray or None
-        A bag's stamps [s] and pressures [Pa] (None for a CSV).
+    bag_topic : str or None
+        A bag's pressure topic, read in pieces (:func:`pneumatic_unload.io.bag.iter_pressure`)
+        by :meth:`chunks` (None for a CSV).
     """
 
     path: Path
     cfg: dict[str, Any] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     stream: CsvStream | None = None
-    arrays: tuple[FloatArray, FloatArray] | None = None
+    bag_topic: str | None = None
 
     @property
     def has_temperature(self) -> bool:
@@ -64,8 +65,14 @@ class Record:
 
     def chunks(self) -> Iterator[tuple[FloatArray, FloatArray]]:
         """The samples in file order: (t [s], p [Pa absolute]) pieces."""
-        if self.arrays is not None:
-            yield self.arrays
+        if self.bag_topic is not None:
+            from pneumatic_unload.io.bag import BagError, iter_pressure
+
+            try:
+                for t_ns, p in iter_pressure(self.path, topic=self.bag_topic):
+                    yield np.asarray(t_ns, dtype=np.int64) * 1e-9, np.asarray(p, float)
+            except BagError as exc:
+                raise RecordError(str(exc)) from exc
             return
         assert self.stream is not None
         try:
@@ -96,7 +103,8 @@ class Record:
 def open_record(path: str | Path, *, topic: str = "/tank/pressure",
                 chunk_bytes: int = CHUNK_BYTES, **csv_options: Any) -> Record:
     """Open an input: a ``.csv``/``.txt`` log (header checked now, rows read in chunks
-    later) or a bag (directory or ``.mcap``, read whole).
+    later) or a bag (directory or ``.mcap``, its pressure topic read in pieces later: checked
+    now).
 
     Parameters
     ----------
@@ -133,23 +141,23 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
     from pneumatic_unload.io.bag import (
         TOPIC_SETTINGS,
         BagError,
+        iter_pressure,
         read_config,
         read_json_topic,
-        read_pressure,
     )
 
     try:
-        # write order: a clock that steps back in the header stamps stays visible to the
-        # estimator (log-time order may sort it away when log times are the stamps)
-        series = read_pressure(p, topic=topic, order="write")
+        # write order (iter_pressure): a clock that steps back in the header stamps stays
+        # visible to the estimator (log-time order may sort it away when log times are the
+        # stamps); the topic is checked here, read in pieces by Record.chunks
+        iter_pressure(p, topic=topic)
         cfg = read_config(p) or {}
         live = read_json_topic(p, TOPIC_SETTINGS)
     except BagError as exc:
         raise RecordError(str(exc)) from exc
     if live is not None:
         cfg = {**cfg, "estimator_settings": live}
-    t = np.asarray(series[0], dtype=np.int64) * 1e-9
-    return Record(path=p, cfg=cfg, arrays=(t, np.asarray(series[1], float)))
+    return Record(path=p, cfg=cfg, bag_topic=topic)
 
 
 def settings_for(cfg: dict[str, Any], given: dict[str, Any]) -> EstimatorSettings:

@@ -636,3 +636,31 @@ def test_kill_9_loses_at_most_about_one_second(tmp_path):
     assert read_config(bag) == {"test": "kill -9"}
     with AnyReader([bag]) as reader:
         assert reader.message_count == n + 1
+
+
+def test_iter_pressure_pieces_are_read_pressure_in_write_order(tmp_path, monkeypatch):
+    """The bag read in pieces (one MCAP chunk each; the generic path in batches) is
+    read_pressure(order="write"), with a stamp stepping back kept where it was written; the
+    analysis reads bags this way (memory bounded by a chunk)."""
+    from pneumatic_unload.io.bag import iter_pressure, stream
+
+    path = tmp_path / "pieces"
+    rng = np.random.default_rng(3)
+    with BagRecorder(path, chunk_size=4096) as rec:
+        stamps = T0 + np.arange(3000, dtype=np.int64) * 1000
+        stamps[2000:] -= 5_000_000  # the clock steps back 5 ms
+        rec.write_pressures(stamps, rng.normal(3e5, 1e4, stamps.size))
+    whole = read_pressure(path, order="write")
+    pieces = list(iter_pressure(path))
+    assert len(pieces) > 5 and max(p.t_ns.size for p in pieces) < stamps.size / 5
+    np.testing.assert_array_equal(np.concatenate([p.t_ns for p in pieces]), whole.t_ns)
+    np.testing.assert_array_equal(np.concatenate([p.p for p in pieces]), whole.p)
+    np.testing.assert_array_equal(whole.t_ns, stamps)
+    # the generic path (rosbags' reader, log-time order) in batches of 700 messages
+    monkeypatch.setattr(stream, "BATCH_MESSAGES", 700)
+    generic = list(iter_pressure(path, fast=False))
+    assert [p.t_ns.size for p in generic] == [700] * 4 + [200]
+    log_order = read_pressure(path)
+    np.testing.assert_array_equal(np.concatenate([p.t_ns for p in generic]), log_order.t_ns)
+    with pytest.raises(TopicNotFoundError):
+        iter_pressure(path, topic="/nope")

@@ -179,3 +179,11 @@ def test_time_must_increase_and_units_must_be_known(tmp_path):
         read_csv_trace(_write(tmp_path, "time,pressure\n0,1\n", "v.csv"), pressure_unit="torr")
     with pytest.raises(CsvFormatError, match="wrong temperature_unit"):
         read_csv_trace(_write(tmp_path, "time,pressure,temp [K]\n0,1e5,-3\n", "k.csv"))
+
+
+def test_header_with_a_lone_carriage_return_is_a_format_error(tmp_path):
+    """(bench_fuzz: the csv module's own Error escaped from the header line.)"""
+    path = tmp_path / "cr.csv"
+    path.write_bytes(b"\x00\x93\xean;\rv\xc6\xc9")
+    with pytest.raises(CsvFormatError, match=r"header \(line 1\) cannot be split"):
+        read_csv_trace(path)

@@ -139,7 +139,7 @@ def test_push_blocks_and_batch_bit_identical_on_seeded_traces(kind):
         blk = _blocks(blk_est, t, p, rng, int(rng.choice([50, 700, 20000])))
         assert [r.to_dict() for r in per] == [r.to_dict() for r in batch], (kind, seed)
         assert [r.to_dict() for r in blk] == [r.to_dict() for r in batch], (kind, seed)
-        assert per_est.results == per and blk_est.results == blk
+        assert list(per_est.results) == per and list(blk_est.results) == blk
         assert per_est.diagnostics == blk_est.diagnostics
         assert per_est.buffer.cs == blk_est.buffer.cs and per_est.buffer.cq == blk_est.buffer.cq
         assert per_est.state == blk_est.state

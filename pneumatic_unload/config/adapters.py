@@ -197,6 +197,11 @@ def _fields(cls: type, only: tuple[str, ...] | None, exclude: tuple[str, ...]
 
 
 def _help(f: dataclasses.Field[Any]) -> str:
+    """argparse help of a field (its '%' escaped: argparse %-formats help strings)."""
+    return _help_text(f).replace("%", "%%")
+
+
+def _help_text(f: dataclasses.Field[Any]) -> str:
     md = f.metadata
     unit = f" [{md['unit']}]" if md.get("unit") and md["unit"] != "-" else ""
     if md["kind"] in ("number", "optional", "integer"):

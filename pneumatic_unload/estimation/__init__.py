@@ -24,7 +24,8 @@ Only relative values matter for tau_exp: the input may be any linear signal (vol
 T10 must be absolute for C. SI units: s, Pa absolute, K, m^3, m^3/(s Pa).
 
 Modules (each one role): :mod:`.types` (settings, results, statuses, errors),
-:mod:`.buffer` (samples and prefix sums), :mod:`.decisions` (each per-sample decision, once,
+:mod:`.buffer` (samples and prefix sums), :mod:`.history` (the bounded diagnostics and
+results kept), :mod:`.decisions` (each per-sample decision, once,
 vectorised over check indices), :mod:`.state` (detector and per-unload state),
 :mod:`.detector` (plateau, trigger, confirmation), :mod:`.unloading` (start fit, stall,
 crossing), :mod:`.tail` (final plateau, curve fit), :mod:`.sse` (aborted unload, recovery,
@@ -43,6 +44,7 @@ from pneumatic_unload.estimation.batch import (
     merge_final,
 )
 from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
+from pneumatic_unload.estimation.history import RESULTS_KEPT, DiagnosticLog
 from pneumatic_unload.estimation.regression import corner_fit, crossing_fit, hinge_fit
 from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
 from pneumatic_unload.estimation.streaming import StreamingEstimator
@@ -58,12 +60,14 @@ from pneumatic_unload.estimation.types import (
 )
 
 __all__ = [
+    "RESULTS_KEPT",
     "SENSOR_FAULT_TEXTS",
     "SSE_MODEL_REL_STD",
     "STATUSES",
     "STUCK_TEXT",
     "ChunkedAnalysis",
     "Diagnostic",
+    "DiagnosticLog",
     "EstimationError",
     "EstimatorSettings",
     "FloatArray",

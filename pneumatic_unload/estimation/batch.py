@@ -4,12 +4,14 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.estimation.decisions import LAG, PERIOD, PLATEAU, block_threshold
 from pneumatic_unload.estimation.sparse import analyze_from_start
 from pneumatic_unload.estimation.streaming import StreamingEstimator
 from pneumatic_unload.estimation.types import Diagnostic, UnloadResult
@@ -174,14 +176,16 @@ def gauge_evidence(final: float, n_low: int, n_finite: int,
 
 
 def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | None = None,
-                      *, diagnostics: Sequence[Diagnostic] | None = None) -> str:
+                      *, diagnostics: Sequence[Diagnostic] | None = None,
+                      stride: int = 1) -> str:
     """Why :func:`analyze` found no unload in a trace, in one line.
 
     Checked in this order: no finite sample; too few samples; time stamps not increasing (a
     reversed record); readings at or below zero or below p_atm throughout, or a final
     plateau far below p_atm (gauge readings taken as absolute); a constant signal; no drop;
     no plateau of ``min_plateau`` samples before the drop (a record that starts at the valve
-    opening); a drop that never reaches p* (eq 40); else the estimator's own diagnostics.
+    opening); a drop that never reaches p* (eq 40); a fall too slow for the detector at the
+    sample rate (:func:`too_slow_to_detect`); else the estimator's own diagnostics.
 
     Parameters
     ----------
@@ -194,6 +198,8 @@ def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | 
     diagnostics : sequence of Diagnostic, optional
         The estimator's diagnostics on this trace with these settings, when known (else
         the estimator runs again on t and p).
+    stride : int
+        Samples of the record per element of t and p (a decimated overview) [-].
 
     Returns
     -------
@@ -253,7 +259,54 @@ def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | 
         return (f"the pressure never fell to p* = {ps:.0f} Pa (p10 = {p10:.0f} Pa, p_atm = "
                 f"{p_atm:.0f} Pa, lowest reading {low:.0f} Pa): the valve closed early or "
                 f"the record ends too soon")
+    if diagnostics is None or not any(d.level != "ok" for d in diagnostics):
+        slow = too_slow_to_detect(pp, sigma, stride, p10=p10, low=low)
+        if slow is not None:
+            return slow
     return estimator_reason(t, p, s, diagnostics)
+
+
+#: Samples between the centres of the detector's reference window and its newest block [-]
+#: (a fall slower than a block threshold over this many samples is never seen).
+DETECTOR_SPAN = LAG + PLATEAU // 2 + PERIOD // 2
+
+
+def too_slow_to_detect(pp: np.ndarray, sigma: float, stride: int = 1, *, p10: float,
+                       low: float) -> str | None:
+    """Why a record whose pressure does fall to p* gave no unload, when its fall is too slow
+    for the detector at its sample rate (None otherwise): the steepest fall over
+    :data:`DETECTOR_SPAN` samples (from means over 1/200 of the record, so that the noise
+    does not count) is below the block threshold (6 noise std / sqrt(PERIOD)).
+
+    Parameters
+    ----------
+    pp : ndarray
+        Finite pressures [Pa], every ``stride``-th sample of the record.
+    sigma : float
+        Noise standard deviation of a sample [Pa].
+    stride : int
+        Samples of the record per element of pp [-].
+    p10, low : float
+        Initial and lowest pressure [Pa] (for the message).
+    """
+    n = pp.size
+    w = max(1, n // 200)
+    if n < 4 * w or sigma <= 0.0:
+        return None
+    c = np.cumsum(np.concatenate(([0.0], pp)))
+    means = (c[w:] - c[:-w]) / w
+    rate = float(np.max(means[:-w] - means[w:])) / (w * stride)  # [Pa per sample]
+    need = float(block_threshold(sigma))  # [Pa over DETECTOR_SPAN samples]
+    fall = rate * DETECTOR_SPAN
+    if not (0.0 < fall < need):
+        return None
+    # averaging k samples: noise / sqrt(k), fall per sample x k, so the ratio gains k^1.5
+    k = max(2, math.ceil((need / fall) ** (2.0 / 3.0) * 1.5))
+    return (f"the pressure falls from {p10:.0f} to {low:.0f} Pa, but too slowly for the "
+            f"detector at this sample rate: {rate:.3g} Pa per sample at most, "
+            f"{fall:.3g} Pa over the {DETECTOR_SPAN} samples it compares, where a step must "
+            f"fall {need:.3g} Pa (6 noise std of {sigma:.3g} Pa / sqrt({PERIOD})): average "
+            f"the record over about {k} samples (a {k} times lower rate) and analyse again")
 
 
 def _pa_settings(s: EstimatorSettings) -> EstimatorSettings:

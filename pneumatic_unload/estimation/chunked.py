@@ -114,7 +114,8 @@ class ChunkedAnalysis:
         """:func:`~pneumatic_unload.estimation.explain_no_unload` of the record (from the
         overview when it is decimated: its counts are then the overview's, as said)."""
         t, p = self.overview.arrays()
-        why = explain_no_unload(t, p, self.settings, diagnostics=self.diagnostics)
+        why = explain_no_unload(t, p, self.settings, diagnostics=self.diagnostics,
+                                stride=self.overview.stride)
         if self.overview.stride == 1 or why.startswith("no unload detected"):
             return why  # exact, or the estimator's own diagnostics on the whole record
         return (f"{why} [checked on every {self.overview.stride}th of the "

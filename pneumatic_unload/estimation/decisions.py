@@ -39,8 +39,13 @@ HINGE_PLATEAU = 16384
 RECOVERY_MIN = 256
 #: Samples looked ahead per vectorised scan [-].
 SCAN_HORIZON = 16384
-#: Idle samples that may be dropped before the buffer is trimmed [-].
+#: Idle samples that may be dropped before the buffer is trimmed, whatever it holds [-].
 TRIM_MIN = 65536
+#: Fewest droppable samples for which the buffer is trimmed when they are at least half
+#: of it [-] (the copy of the rest then costs no more than what is dropped; e.g. the
+#: previous unload, when waiting on the next plateau): the buffer holds about one unload,
+#: not TRIM_MIN samples more (a sawtooth of 2 MiB per minute on a 10 kHz cycling rig).
+TRIM_FLOOR = 8 * PLATEAU
 #: Samples of a long plateau kept while waiting [-] (at least; see :func:`idle_keep`): a
 #: plateau longer than twice this is trimmed to it, so that an idle record of any length
 #: holds a bounded buffer (about 32 B per sample kept). No decision of the waiting phase
@@ -143,6 +148,26 @@ def trim_keep(n: Index, arm: int, keep_idle: int = IDLE_KEEP) -> Index:
     return np.maximum(np.minimum(n - 4 * PLATEAU, arm), long)
 
 
+def trim_due(keep: Index, n: Index) -> Flag:
+    """The buffer of n samples is trimmed when ``keep`` [-] of them may be dropped
+    (:func:`trim_keep`): more than TRIM_MIN, or more than TRIM_FLOOR and at least half."""
+    return (keep > TRIM_MIN) | ((keep > TRIM_FLOOR) & (2 * keep >= n))
+
+
+def creeping(cs: FloatArray, k: int, sigma: float) -> bool:
+    """The PLATEAU samples ending LAG before a trigger at index k (the current plateau and
+    what precedes it in the buffer) fall: the mean of their first half exceeds that of their
+    second by more than 3 standard errors (sigma: noise deviation [signal units])."""
+    hi = k + 1 - LAG
+    lo = max(0, hi - PLATEAU)
+    h = (hi - lo) // 2
+    if h < PERIOD or not sigma > 0.0:
+        return False
+    first = (cs[lo + h] - cs[lo]) / h
+    second = (cs[hi] - cs[hi - h]) / h
+    return bool(first - second > 3.0 * sigma * math.sqrt(2.0 / h))
+
+
 def plateau_check(cs: FloatArray, cq: FloatArray, pv: FloatArray, k: Index, *, arm: int,
                   min_plateau: int, trigger_sigma: float, stuck_reported: bool
                   ) -> PlateauCheck:
@@ -170,7 +195,7 @@ def plateau_check(cs: FloatArray, cq: FloatArray, pv: FloatArray, k: Index, *, a
     trigger = mean_low | below(pv[k], level)
     stuck = (sig == 0.0) & (hi - lo >= 2 * min_plateau)
     stuck_change = (sig > 0.0) if stuck_reported else stuck
-    trim = trim_keep(n, arm, idle_keep(min_plateau)) > TRIM_MIN
+    trim = trim_due(trim_keep(n, arm, idle_keep(min_plateau)), n)
     event = rise | trigger | stuck_change | trim
     return PlateauCheck(plat, sig, level, lo, hi, rise, trigger, stuck, stuck_change, trim,
                         event)

@@ -17,6 +17,7 @@ from pneumatic_unload.estimation.decisions import (
     below,
     check_indices,
     confirmed,
+    creeping,
     first_below,
     nominal_period,
     plateau_check,
@@ -60,6 +61,7 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
             st.arm_index = n - PERIOD
             st.stream_start = False
             st.level = -math.inf
+            st.rearm_floor = -math.inf
             return []
         if not c.trigger:
             st.trim(n)
@@ -69,6 +71,17 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
     # trigger
     if i - st.arm_index < s.min_plateau:
         return []
+    if st.plateau_level < st.rearm_floor and creeping(buf.cs, i, st.sigma):
+        # not charged since the last unload's tail ended on a level, and falling before
+        # the trigger: the same slow discharge creeping on (its tail counted as level), not
+        # a new unload (a valve opened again from a level plateau is one)
+        if not st.rearm_noted:
+            st.rearm_noted = True
+            st.diag("ok", "pressure still falling after the unload's final plateau, no "
+                    "charge since: not a new unload", float(buf.t[i]))
+        st.level = -math.inf
+        return []
+    st.rearm_floor = -math.inf
     st.unload = UnloadState(trigger=i)
     st.mode = CONFIRM
     st.next_check = i + PERIOD

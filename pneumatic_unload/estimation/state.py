@@ -19,12 +19,13 @@ from pneumatic_unload.estimation.buffer import SampleBuffer
 from pneumatic_unload.estimation.decisions import (
     DT_DEFAULT,
     PERIOD,
-    TRIM_MIN,
     effective_sigma,
     idle_keep,
     stuck_run,
+    trim_due,
     trim_keep,
 )
+from pneumatic_unload.estimation.history import DiagnosticLog
 from pneumatic_unload.estimation.types import Diagnostic, FloatArray, UnloadResult
 from pneumatic_unload.physics import P_STAR_FRACTION
 
@@ -127,13 +128,18 @@ class EstimatorState:
         self.settings = settings
         self.live = live
         self.buf = SampleBuffer()
-        self.diagnostics: list[Diagnostic] = []
+        #: The first and the last diagnostics (bounded, see :mod:`.history`).
+        self.diagnostics = DiagnosticLog()
         self.n_unloads = 0
         self.last_t = -math.inf  # last accepted stamp [s]
         self.dt_nominal = math.nan  # nominal sample period [s]
         self.gap_limit = math.inf  # stamp step that counts as a gap [s]
         self.stuck_reported = False
         self.clock_step_at = -1  # samples accepted when the last clock step was handled
+        #: After an unload whose tail ended on a level plateau: the plateau level a trigger
+        #: needs (a charge since), else it is the same discharge going on [signal units].
+        self.rearm_floor = -math.inf
+        self.rearm_noted = False  # said once that a trigger below the floor was ignored
         self.unload = UnloadState(trigger=-1)
         self.to_waiting(0)
         #: The current plateau began with the stream's first sample (no re-arm yet).
@@ -166,7 +172,7 @@ class EstimatorState:
         waiting, see :data:`~.decisions.IDLE_KEEP`); n: samples held [-]. A plateau trimmed
         from its start begins at the buffer's first sample."""
         keep = int(trim_keep(n, self.arm_index, idle_keep(self.settings.min_plateau)))
-        if keep > TRIM_MIN and self.mode == WAITING:
+        if trim_due(keep, n) and self.mode == WAITING:
             self.buf.trim(keep)
             self.next_check -= keep
             self.arm_index = max(self.arm_index - keep, 0)

@@ -21,6 +21,7 @@ from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation import decisions, detector, sse, tail, unloading
 from pneumatic_unload.estimation.buffer import SampleBuffer
 from pneumatic_unload.estimation.decisions import SCAN_HORIZON, first_below
+from pneumatic_unload.estimation.history import recent_results
 from pneumatic_unload.estimation.state import (
     CONFIRM,
     RECOVERY,
@@ -95,8 +96,12 @@ class StreamingEstimator:
                 "start_time is for offline records that begin at the valve opening "
                 "(analyze, --start-time); the streaming estimator detects each start")
         self._st = EstimatorState(self.settings, live=live)
+        #: The first and the last diagnostics (a bounded
+        #: :class:`~.history.DiagnosticLog`; ``diagnostics.total`` counts all).
         self.diagnostics = self._st.diagnostics
-        self.results: list[UnloadResult] = []
+        #: The last :data:`~.history.RESULTS_KEPT` results (each was returned by the call
+        #: that completed it): memory stays bounded on an endless stream.
+        self.results = recent_results()
         self._append = self._st.buf.append  # hot path (trimming keeps the buffer object)
 
     # ------------------------------------------------------------------ public API

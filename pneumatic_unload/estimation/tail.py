@@ -60,7 +60,12 @@ def step_tail(st: EstimatorState, i: int) -> list[UnloadResult]:
     if st.stuck(i):
         return on_tail_stuck(st, i)
     if res is not None and _flat_tail(st, np.frombuffer(cs, dtype=float), i, res.tau_exp):
-        return finish_tail(st, i, ended=False)
+        # level to the flat test, maybe still falling slowly: a next unload needs a charge
+        # or a level plateau (the valve closed, then opened again), see step_waiting
+        floor = u.tail_low + rise_threshold(st.sigma, u.p10, u.atm)
+        out = finish_tail(st, i, ended=False)
+        st.rearm_floor, st.rearm_noted = floor, False
+        return out
     return []
 
 

@@ -146,7 +146,11 @@ class CsvStream:
             self._data_offset = fh.tell()
         self._header_line = line_no  # 1-based line number of the header
         delim = delimiter if delimiter is not None else sniff_delimiter(text)
-        header = [cell.strip() for cell in next(csv.reader([text], delimiter=delim))]
+        try:
+            header = [cell.strip() for cell in next(csv.reader([text], delimiter=delim))]
+        except csv.Error as err:  # e.g. a lone carriage return inside the line
+            raise CsvFormatError(f"CSV file {self.path}: header (line {line_no}) cannot be "
+                                 f"split into columns: {err}") from err
         self.header = header
         self.layout: CsvLayout = resolve_layout(self.path, header, delim,
                                                 **options)  # type: ignore[arg-type]

@@ -47,6 +47,7 @@ from std_srvs.srv import Trigger
 from pneumatic_unload.config import adapters
 from pneumatic_unload.config import nodes as config_nodes
 from pneumatic_unload.estimation import (
+    RESULTS_KEPT,
     EstimationError,
     EstimatorSettings,
     StreamingEstimator,
@@ -141,7 +142,11 @@ class EstimatorNode(Node):
         self.latencies: deque[float] = deque(maxlen=100_000)
         self.final_latencies: deque[float] = deque(maxlen=100_000)
         self.received = 0
-        self.results: list[UnloadResult] = []
+        #: The last RESULTS_KEPT results published (all are in ~/estimate and the bag):
+        #: bounded, a node runs for days.
+        self.results: deque[UnloadResult] = deque(maxlen=RESULTS_KEPT)
+        self.n_results = 0  # results published [-]
+        self._n_unloads = 0  # distinct unload indices published [-]
         qos = common.SENSOR_QOS if self._p("qos") == "sensor_data" \
             else common.LOSSLESS_INPUT_QOS
         if self._p("input") == "block":
@@ -283,13 +288,13 @@ class EstimatorNode(Node):
                     self._publish_result(r, arrived)
             elif state != prev:
                 self._on_state(state)
-            if len(est.diagnostics) > self._n_diag:
-                for dg in est.diagnostics[self._n_diag:]:
+            if est.diagnostics.total > self._n_diag:
+                for dg in est.diagnostics.since(self._n_diag):
                     level = {"ok": _OK, "warn": _WARN}.get(dg.level, _ERROR)
                     if level != _OK:
                         self._rejected += 1
                     self._diagnose(level, dg.message)
-                self._n_diag = len(est.diagnostics)
+                self._n_diag = est.diagnostics.total
 
     def _on_state(self, core_state: str) -> None:
         if core_state == "waiting":
@@ -313,7 +318,10 @@ class EstimatorNode(Node):
         (self.final_latencies if r.final else self.latencies).append(
             time.monotonic() - arrived)
         self._keep(r)
+        if self._last is None or r.index != self._last.index:
+            self._n_unloads += 1
         self.results.append(r)
+        self.n_results += 1
         self._last = r
         if r.status in ("ok", "aborted_sse"):
             self._state = "done" if self._est.state == "waiting" else "unloading"
@@ -362,7 +370,7 @@ class EstimatorNode(Node):
             "state": self._state, "core_state": self._est.state,
             "samples": str(self.received), "queued": str(len(self._queue)),
             "rejected": str(self._rejected),
-            "unloads": str(len({r.index for r in self.results})),
+            "unloads": str(self._n_unloads),
             "latency_p50_ms": f"{np.percentile(lat, 50):.3f}" if lat.size else "",
             "latency_p99_ms": f"{np.percentile(lat, 99):.3f}" if lat.size else "",
         }
@@ -424,7 +432,7 @@ class EstimatorNode(Node):
     async def _measure_part(self, goal_handle: Any, result: Any) -> Any:
         goal = goal_handle.request
         timeout = goal.timeout if goal.timeout > 0 else self._p("measure_timeout")
-        n_before = len(self.results)
+        n_before = self.n_results
         unloads_before = {r.index for r in self.results}
         t0 = time.monotonic()
         fb = self._Measure.Feedback()
@@ -450,7 +458,8 @@ class EstimatorNode(Node):
                 return result
         while True:
             elapsed = time.monotonic() - t0
-            new = [r for r in self.results[n_before:] if r.index not in unloads_before]
+            fresh = list(self.results)[len(self.results) - (self.n_results - n_before):]
+            new = [r for r in fresh if r.index not in unloads_before]
             if new:
                 r = new[0]
                 if goal.part_id:  # its final estimate comes after the goal has returned
@@ -496,7 +505,7 @@ class EstimatorNode(Node):
         self._wake.set()
         self._worker.join(timeout=2.0)
         stats = {"received": self.received, "rejected": self._rejected,
-                 "results": len(self.results),
+                 "results": self.n_results,
                  "latencies_ms": [round(x * 1e3, 4) for x in self.latencies],
                  "final_latencies_ms": [round(x * 1e3, 4) for x in self.final_latencies]}
         self.get_logger().info(f"stats {json.dumps(stats)}")

@@ -31,6 +31,7 @@ Modules, each importing only those above it:
 - :mod:`.source`: opening a bag for reading (path checks, rosbags' Reader, error mapping).
 - :mod:`.reader`: ``read_pressure``, ``read_temperature``, ``read_valve``,
   ``read_estimates``, ``read_config``, ``read_json_topic``, ``read_raw_messages``.
+- :mod:`.stream`: :func:`iter_pressure` (the pressure topic in pieces: bounded memory).
 - :mod:`.summary`: :func:`bag_summary`.
 - :mod:`.messages`: rig configuration JSON, Header and UnloadEstimate built for writing.
 - :mod:`.recorder`: :class:`BagRecorder`.
@@ -84,6 +85,7 @@ from .schema import (
     make_typestore,
 )
 from .schema import TOPIC_SETTINGS as TOPIC_SETTINGS
+from .stream import iter_pressure
 from .summary import BagSummary, TopicSummary, bag_summary
 from .writer import DEFAULT_CHUNK_SIZE
 
@@ -124,6 +126,7 @@ __all__ = [
     "cdr_header_stamp_ns",
     "find_msg_definition",
     "find_msg_dir",
+    "iter_pressure",
     "make_typestore",
     "read_config",
     "read_estimates",

@@ -50,6 +50,8 @@ __all__ = [
     "RawMessage",
     "TemperatureSeries",
     "ValveSeries",
+    "decode_pairs",
+    "fast_chunk_pairs",
     "fast_raw_pairs",
     "read_config",
     "read_estimates",
@@ -76,17 +78,18 @@ def _decompressor(compression: str) -> Callable[[bytes, int], bytes]:
     raise NotFastDecodable
 
 
-def fast_raw_pairs(
+def fast_chunk_pairs(
     mcap_file: Path, topic: str, msgtype: str
-) -> tuple[npt.NDArray[np.uint64], npt.NDArray[np.int64], npt.NDArray[np.float64],
-           npt.NDArray[np.float64]]:
-    """Log times and decoded fields of one topic of an indexed MCAP file (numpy, no per-message
-    Python work): uses the summary's chunk indexes and the per-chunk message indexes.
-    Messages come in the order they were written (chunks and messages by file offset).
+) -> Iterator[tuple[npt.NDArray[np.uint64], npt.NDArray[np.int64], npt.NDArray[np.float64],
+                    npt.NDArray[np.float64]]]:
+    """:func:`fast_raw_pairs` one MCAP chunk at a time (memory: one chunk), in the order the
+    messages were written. Whether the file can take this path (a summary with chunk indexes,
+    message indexes that count every message of the topic) is checked before the first chunk
+    is yielded (NotFastDecodable then, so that a caller can read the file another way);
+    NotFastDecodable later means a chunk that does not decode.
     """
     from mcap.reader import make_reader
 
-    logs, stamps, avals, bvals = [], [], [], []
     with mcap_file.open("rb") as f:
         try:
             summary = make_reader(f).get_summary()
@@ -103,10 +106,25 @@ def fast_raw_pairs(
             and summary.schemas[ch.schema_id].name == msgtype
         }
         expected = sum(summary.statistics.channel_message_counts.get(c, 0) for c in cids)
-        for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
-            wanted = [c for c in index.message_index_offsets if c in cids]
-            if not wanted:
-                continue
+        indexes = [(index, [c for c in index.message_index_offsets if c in cids])
+                   for index in sorted(summary.chunk_indexes,
+                                       key=lambda c: c.chunk_start_offset)]
+        indexes = [(index, wanted) for index, wanted in indexes if wanted]
+        counted = 0
+        for index, wanted in indexes:  # message index headers only: a few bytes per chunk
+            for cid in wanted:
+                f.seek(index.message_index_offsets[cid])
+                head = f.read(15)
+                if len(head) < 15:
+                    raise NotFastDecodable
+                op, _length = RECORD_HEAD.unpack_from(head, 0)
+                mcid, nbytes = struct.unpack_from("<HI", head, 9)
+                if op != OP_MESSAGE_INDEX or mcid != cid:
+                    raise NotFastDecodable
+                counted += nbytes // 16
+        if counted != expected:
+            raise NotFastDecodable  # message indexes incomplete: let the generic path read it
+        for index, wanted in indexes:
             f.seek(index.chunk_start_offset)
             blob = f.read(index.chunk_length + index.message_index_length)
             op, _length = RECORD_HEAD.unpack_from(blob, 0)
@@ -137,20 +155,21 @@ def fast_raw_pairs(
                     raise NotFastDecodable
                 lengths = gather(buf, off + 1, "<u8").astype(np.int64) - 22
                 t, a, b = decode_stamped_pairs(buf, off + MSG_HEAD_SIZE, lengths)
-                logs.append(log_t.astype(np.uint64))
-                stamps.append(t)
-                avals.append(a)
-                bvals.append(b)
-    if sum(x.size for x in logs) != expected:
-        raise NotFastDecodable  # message indexes incomplete: let the generic path read it
-    if not logs:
+                yield log_t.astype(np.uint64), t, a, b
+
+
+def fast_raw_pairs(
+    mcap_file: Path, topic: str, msgtype: str
+) -> tuple[npt.NDArray[np.uint64], npt.NDArray[np.int64], npt.NDArray[np.float64],
+           npt.NDArray[np.float64]]:
+    """Log times and decoded fields of one topic of an indexed MCAP file (numpy, no per-message
+    Python work): uses the summary's chunk indexes and the per-chunk message indexes.
+    Messages come in the order they were written (chunks and messages by file offset).
+    """
+    parts = list(fast_chunk_pairs(mcap_file, topic, msgtype))
+    if not parts:
         return (np.empty(0, np.uint64), np.empty(0, np.int64), np.empty(0), np.empty(0))
-    return (
-        np.concatenate(logs),
-        np.concatenate(stamps),
-        np.concatenate(avals),
-        np.concatenate(bvals),
-    )
+    return tuple(np.concatenate([p[k] for p in parts]) for k in range(4))  # type: ignore[return-value]
 
 
 def _slow_raw_pairs(
@@ -158,6 +177,14 @@ def _slow_raw_pairs(
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Header stamps and the two float fields via rosbags' raw reader + numpy decoding."""
     datas = [data for _, _, data in reader.messages(connections=conns)]
+    return decode_pairs(datas, conns, msgtype)
+
+
+def decode_pairs(
+    datas: list[bytes], conns: list[Connection], msgtype: str
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Header stamps [ns] and the two float fields of serialised messages of ``msgtype``
+    (numpy decoding, or the bag's typestore when that does not apply)."""
     if not datas:
         return np.empty(0, np.int64), np.empty(0), np.empty(0)
     lengths = np.fromiter((len(d) for d in datas), np.int64, len(datas))
