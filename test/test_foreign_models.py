@@ -34,3 +34,27 @@ def test_model_c_and_b_on_an_independent_newton_cooling_model(tau_heat, volume, 
     fit = r.extra["curve_fit"]
     assert fit["heat_law"] == "fixed" or fit["laws"]["fixed"]["bic"] - \
         fit["laws"][fit["heat_law"]]["bic"] < 10.0
+
+
+@pytest.mark.parametrize("exponent,tau_heat,volume,conductance,seed", [
+    (0.8, 1.5, 4e-3, 5e-9, 11), (0.5, 3.0, 6e-3, 8e-9, 12)])
+def test_density_exponent_law_recovered_from_an_independent_model(exponent, tau_heat, volume,
+                                                                  conductance, seed):
+    """An hA ~ rho^n made by the independent model (not the package's kernel): the curve
+    fit offers the density law, the data choose it (or a law within delta-BIC 10 that gives
+    the same C), n comes back within 3 sigma and C within 2 %."""
+    p10, p_atm, b = 8e5, 101325.0, 0.4
+    tau0 = volume / (1.4 * 1e5 * conductance)  # eq 28 [s]
+    t = np.arange(0.0, 0.2 + 8.0 * tau0, 1e-3)
+    p = discharge(t, volume=volume, conductance=conductance, b=b, p10=p10, t10=293.15,
+                  p_atm=p_atm, tau_heat=tau_heat, t_open=0.2, density_exponent=exponent)
+    y = p + np.random.default_rng(seed).normal(0.0, 1000.0, t.size)
+    (r,) = merge_final(analyze(t, y, EstimatorSettings(volume=volume)))
+    fit = r.extra["curve_fit"]
+    assert "density" in fit["laws"], fit["not_offered"]
+    assert fit["heat_law"] == "density" or \
+        fit["laws"]["density"]["bic"] - fit["laws"][fit["heat_law"]]["bic"] < 10.0
+    assert abs(r.conductance_model / conductance - 1.0) < 0.02
+    if fit["heat_law"] == "density":
+        assert abs(fit["heat_exponent"] - exponent) < 3.0 * fit["heat_exponent_std"] + 0.02
+        assert abs(fit["tau_heat"] / tau_heat - 1.0) < 0.1
