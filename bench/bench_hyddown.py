@@ -32,7 +32,7 @@ Measured on the full grid (24 cases, hyddown 0.50.0):
   regimes (the subsonic tail took up the misfit: b 0.38-0.40). With the turbulent branch
   fitted apart: +0.82 %, b 0.499. The 'calc' cases that cross Ra = 1e9 are reported
   "model inadequate" (Ljung-Box p 1e-7 ... 1e-250: HydDown's Nusselt number jumps by 19 % at
-  Ra = 1e9), as is full11.
+  Ra = 1e9): full02, 06, 08, 10, 16, 18, 6 of the 12 'calc' cases; none of the others.
 """
 
 from __future__ import annotations
