@@ -16,13 +16,23 @@ from pneumatic_unload.estimation import UnloadResult, recommended
 
 
 def unload_json(r: UnloadResult) -> dict[str, Any]:
-    """JSON of one result: its fields, the budgets, the heat law and the C to report."""
+    """JSON of one result: its fields, the budgets, the heat law (with the laws offered,
+    their C and BIC, and those not offered with the reason), whether the model describes
+    the record ('model_inadequate': the reason, or '') and the C to report."""
     d = r.to_dict()
     extra = d.pop("extra", None) or {}
     for key in ("budget", "budget_eq39"):
         if key in extra:
             d[key] = extra[key]
-    d["heat_law"] = extra.get("curve_fit", {}).get("heat_law", "") if r.final else ""
+    cf = extra.get("curve_fit", {}) if r.final else {}
+    d["heat_law"] = cf.get("heat_law", "")
+    if cf:
+        d["heat_laws"] = {"offered": cf.get("laws", {}), "not_offered": cf.get("not_offered", {}),
+                          "heat_scale": cf.get("heat_scale"), "tau_heat": cf.get("tau_heat"),
+                          "heat_exponent": cf.get("heat_exponent"),
+                          "heat_turbulent": cf.get("heat_turbulent"),
+                          "wall_temperature": cf.get("wall_temperature")}
+    d["model_inadequate"] = extra.get("model_inadequate", "")
     d["recommended"] = recommended(r)
     return finite_or_none(d)
 
