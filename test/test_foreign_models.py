@@ -4,6 +4,11 @@ imports nothing from the package's model).
 
 Before the heat-law family (natural-convection scale only) the model C was 22 % low at a
 thermal time constant of 0.5-2 s and 3-4 % at 4 s, with a sigma that excluded the truth.
+With hA ~ rho^n in the same independent model (n 0.8, 0.5, 0.67; tau_h 1.5, 3, 10 s), the
+family without the density law gave C +1.10 %, -0.43 %, +2.88 % (z 4.2), each through a
+spurious hot start ('natural+wall'); with it: +0.05 %, -0.01 %, +0.01 %, n 0.790 +- 0.009,
+0.499 +- 0.005, 0.674 +- 0.010 (and n = 0, a constant hA, keeps the 'fixed' law: the density
+law 9.7 behind in BIC).
 """
 
 import math
