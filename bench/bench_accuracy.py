@@ -206,7 +206,8 @@ def crlb(cfg: RigConfig, t: np.ndarray) -> tuple[float, float]:
 def start(n: int, seed: int = 300, pre_times: tuple[float, ...] = (0.2, 5.0)) -> None:
     """Start-time and tau_exp errors against their Cramer-Rao bounds; the start from the
     hinge fit (streaming estimator) and from a full-curve fit of the discharge model."""
-    from pneumatic_unload.fitting import fit_curve, fitted_tau_exp
+    from pneumatic_unload.fitting import fit_curve
+    from pneumatic_unload.inversion import fitted_tau_exp
 
     for pre in pre_times:
         rng = np.random.default_rng(seed)
@@ -221,7 +222,7 @@ def start(n: int, seed: int = 300, pre_times: tuple[float, ...] = (0.2, 5.0)) ->
             fit = fit_curve(sim.t, sim.measured, st, t_start=r.t_start, p10=r.p10,
                             p_atm=r.p_atm, conductance=r.conductance_model)
             sd_t0, sd_tau = crlb(cfg, sim.t)
-            tau_fit = fitted_tau_exp(fit, st, r.tau_exp)
+            tau_fit = fitted_tau_exp(fit.config(st), r.tau_exp)
             tau_true = true_crossing(sim, cfg.atmosphere)
             rows.append(((r.t_start - sim.t_open) * cfg.rate,
                          (fit.t_start - sim.t_open) * cfg.rate, sd_t0 * cfg.rate,

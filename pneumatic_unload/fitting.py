@@ -24,19 +24,27 @@ from numpy.typing import NDArray
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.fit.likelihood import make_bins
-from pneumatic_unload.fit.noise import NoiseModel
+from pneumatic_unload.fit.noise import NoiseModel, ljung_box
 from pneumatic_unload.fit.profile import valley_std
 from pneumatic_unload.fit.trace import Trace
-from pneumatic_unload.fit.uncertainty import residual_inflation
+from pneumatic_unload.fit.uncertainty import (
+    WHITENESS_P,
+    residual_inflation,
+    structure_inflation,
+)
+from pneumatic_unload.heat_law_offer import (
+    DENSITY_LAW_MAX_EXPONENT_SD,
+    TURBULENT_MAX_LOG_SD,
+    density_law_problem,
+    turbulent_law_problem,
+)
 from pneumatic_unload.inversion import (
     estimator_model,
-    model_crossing_time,
     rig_from_settings,
 )
-from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import Start
 from pneumatic_unload.model.heat import thermal_time_constant
-from pneumatic_unload.physics import P_STAR_FRACTION, tau_exp_eq38
+from pneumatic_unload.physics import tau_exp_eq38
 
 FloatArray = NDArray[np.float64]
 
@@ -73,14 +81,27 @@ class CurveFit:
         Variance inflation applied for serially correlated residuals [-]
         (:func:`residual_inflation`).
     heat_law : str
-        Heat-transfer law the data chose ('natural', 'fixed'; 'none' when adiabatic).
-    tau_heat : float
-        Thermal time constant m0 c_v/(hA) of the 'fixed' law [s] (NaN otherwise).
+        Heat-transfer law the data chose ('natural', 'fixed', 'density', each possibly
+        with '+wall'; 'none' when adiabatic).
+    tau_heat, tau_heat_std : float
+        Thermal time constant m0 c_v/(hA) of the 'fixed' law (of hA_0, at the initial
+        density, for 'density') and its 1-sigma [s] (NaN otherwise).
+    heat_exponent, heat_exponent_std : float
+        Exponent n of the 'density' law, hA ~ rho^n, and its 1-sigma [-] (NaN otherwise).
+    heat_turbulent, heat_turbulent_std : float
+        Multiplier on the natural law's turbulent branch and its 1-sigma [-] (1 and NaN
+        unless 'natural+turbulent').
     model_form_std : float
         Model-form 1-sigma of C from the laws that fit about as well (delta-BIC < 10) but
         give another C [m^3/(s Pa)] (included in ``conductance_std``).
     laws : dict
-        Per law tried: C [m^3/(s Pa)], chi2 and BIC [-].
+        Per law offered: C [m^3/(s Pa)], chi2 and BIC [-].
+    whiteness_p : float
+        Ljung-Box p-value of the chosen law's residuals (binned, in time order) [-]: small
+        means structure the model does not describe.
+    not_offered : dict
+        Laws fitted but not offered to the choice, with the reason (the record does not
+        carry their extra parameter).
     wall_temperature : float
         The wall temperature fitted by a hot-start variant ('natural+wall', 'fixed+wall':
         the gas starts at T10, the wall is elsewhere) [K]; NaN when the wall was not fitted.
@@ -101,9 +122,16 @@ class CurveFit:
     inflation: float = 1.0
     heat_law: str = "natural"
     tau_heat: float = math.nan
+    tau_heat_std: float = math.nan
+    heat_exponent: float = math.nan
+    heat_exponent_std: float = math.nan
+    heat_turbulent: float = 1.0
+    heat_turbulent_std: float = math.nan
     model_form_std: float = 0.0
     laws: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
     wall_temperature: float = math.nan
+    whiteness_p: float = math.nan
+    not_offered: dict[str, str] = dataclasses.field(default_factory=dict)
 
     def config(self, settings: EstimatorSettings) -> RigConfig:
         """The fitted model's configuration (valve opening at t = 0) [SI]."""
@@ -111,14 +139,20 @@ class CurveFit:
         cfg = rig_from_settings(settings, conductance=self.conductance, p10=self.p10,
                                 p_atm=self.p_atm, critical_ratio=b,
                                 heat_scale=self.heat_scale)
+        if self.heat_law.startswith("natural") and self.heat_turbulent != 1.0:
+            cfg = cfg.replace(heat_transfer_turbulent_ratio=float(
+                np.clip(self.heat_turbulent, 0.0, 10.0)))
         if math.isfinite(self.wall_temperature):
             cfg = cfg.replace(wall_temperature=float(self.wall_temperature))
-        if self.heat_law.startswith("fixed") and math.isfinite(self.tau_heat):
+        if self.heat_law.startswith(("fixed", "density")) and math.isfinite(self.tau_heat):
             g = settings.gas
             h_a = self.p10 * settings.volume / ((g.gamma - 1.0) * settings.initial_temperature
                                                 * self.tau_heat)
             cfg = cfg.replace(heat_transfer_mode="fixed",
                               heat_transfer_coefficient=float(np.clip(h_a, 0.0, 1e4)))
+            if self.heat_law.startswith("density"):
+                cfg = cfg.replace(heat_transfer_mode="density", heat_transfer_exponent=float(
+                    np.clip(self.heat_exponent, -2.0, 4.0)))
         return cfg
 
 
@@ -138,7 +172,7 @@ def curve_fit_trace(t: FloatArray, p: FloatArray, t_start: float) -> Trace:
 
 
 #: Laws fitted in turn by :func:`fit_curve` when the natural model is on (the data choose).
-CURVE_FIT_LAWS: tuple[str, ...] = ("natural", "fixed")
+CURVE_FIT_LAWS: tuple[str, ...] = ("natural", "fixed", "density", "natural+turbulent")
 #: Residual inflation above which, with the wall assumed at T10, the hot-start variants
 #: (wall temperature fitted) are tried too [-].
 HOT_START_INFLATION = 1.5
@@ -197,11 +231,52 @@ def fit_curve(
     t = np.asarray(t, dtype=float)
     p = np.asarray(p, dtype=float)
     trace = curve_fit_trace(t - t[0], p, t_start - float(t[0]))  # the same for every law
+    not_offered: dict[str, str] = {}
     for law in tried:
+        law_start, nfev = start, (200 if not fits else 32)
+        if law == "density":
+            why = density_law_problem(fits.get("fixed", (None,))[0])
+            if why is not None:
+                not_offered[law] = why
+                continue
+            # from the constant-hA fit (n = 0), the exponent moved towards convection's
+            fx = fits["fixed"][0]
+            law_start = {k: v for k, v in {
+                "C": fx.conductance, "t_open": fx.t_start - float(t[0]), "p10": fx.p10,
+                "tau_heat": fx.tau_heat, "b": fx.critical_ratio, "p_atm": fx.p_atm,
+                "heat_exponent": 0.3}.items() if math.isfinite(v)}
+            nfev = 80
+        if law == "natural+turbulent":
+            why = turbulent_law_problem(fits.get("natural", (None,))[0], settings, t)
+            if why is not None:
+                not_offered[law] = why
+                continue
+            nt = fits["natural"][0]
+            law_start = {k: v for k, v in {
+                "C": nt.conductance, "t_open": nt.t_start - float(t[0]), "p10": nt.p10,
+                "heat_scale": nt.heat_scale, "b": nt.critical_ratio, "p_atm": nt.p_atm,
+                "heat_turbulent": 1.0}.items() if math.isfinite(v)}
+            nfev = 80
         fits[law] = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
-                             profile_heat=profile_heat, law=law, start=start,
-                             max_nfev=200 if not fits else 32, trace=trace, hold=hold)
+                             profile_heat=profile_heat, law=law, start=law_start,
+                             max_nfev=nfev, trace=trace, hold=hold)
+        if law == "density":
+            sd = fits[law][0].heat_exponent_std
+            if not (math.isfinite(sd) and sd <= DENSITY_LAW_MAX_EXPONENT_SD):
+                del fits[law]
+                not_offered[law] = (f"the record does not determine the exponent n "
+                                    f"(1-sigma {sd:.2g} > {DENSITY_LAW_MAX_EXPONENT_SD:g})")
+                continue
+        if law == "natural+turbulent":
+            tf = fits[law][0]
+            sd = tf.heat_turbulent_std / tf.heat_turbulent if tf.heat_turbulent > 0 \
+                else math.nan
+            if not (math.isfinite(sd) and sd <= TURBULENT_MAX_LOG_SD):
+                del fits[law]
+                not_offered[law] = (f"the record does not determine the turbulent branch "
+                                    f"(relative 1-sigma {sd:.2g} > {TURBULENT_MAX_LOG_SD:g})")
+                continue
         first = fits[law][0]
         if start is None and first.inflation < 2.0 and math.isfinite(first.conductance):
             # the next law starts from this fit when it is close (white residuals), its heat
@@ -219,7 +294,7 @@ def fit_curve(
         # structured residuals under every law: a basin may have been missed (e.g. a
         # nearly isothermal discharge fitted from the weak-exchange side); explore strong
         # and weak heat exchange from the neutral values and keep what fits better
-        for law in tried:
+        for law in list(fits):
             again = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
                              profile_heat=profile_heat, law=law, explore=True,
@@ -230,8 +305,10 @@ def fit_curve(
             and min(f[0].inflation for f in fits.values()) > HOT_START_INFLATION):
         # the wall was assumed at T10 and every law leaves structure: a gas hot (or cold)
         # after charging is a model of its own, the wall temperature fitted, from each law's
-        # fit; the information criterion below decides whether the record carries it
-        for law in tried:
+        # fit; the information criterion below decides whether the record carries it (the
+        # one-parameter laws only: a wall and an exponent both fitted are not told apart
+        # on one discharge)
+        for law in [k for k in ("natural", "fixed") if k in fits]:
             base = fits[law][0]
             if not math.isfinite(base.conductance):
                 continue
@@ -271,7 +348,7 @@ def fit_curve(
                    "chi2": f[1] / unit} for law, f in fits.items()}
     return dataclasses.replace(
         cf, conductance_std=math.hypot(cf.conductance_std, mf), model_form_std=mf,
-        laws=table, heat_law=best if natural else "none")
+        laws=table, heat_law=best if natural else "none", not_offered=not_offered)
 
 
 def _fit_law(
@@ -300,7 +377,7 @@ def _fit_law(
         them for this non-linear, strongly correlated parameter.
 
     law : str
-        Heat-transfer law ('natural' or 'fixed').
+        Heat-transfer law ('natural', 'fixed' or 'density').
     start : dict, optional
         Starting values [SI] (e.g. another law's fit); without it the fixed law also
         screens a slow-exchange start.
@@ -336,12 +413,12 @@ def _fit_law(
         fixed["t_open"] = float(t_start)
     if "p10" in hold:
         fixed["p10"] = float(p10)
-    starts = [{"tau_heat": 5.0 * tau}] if law == "fixed" and start is None else None
+    starts = [{"tau_heat": 5.0 * tau}] if law != "natural" and start is None else None
     if fit_wall:
         t10 = settings.initial_temperature
         starts = [{"t_wall": t10 - 10.0}, {"t_wall": t10 - 30.0}]
     if explore and natural and fit_heat:
-        starts = ([{"heat_scale": 30.0}, {"heat_scale": 0.1}] if law == "natural" else
+        starts = ([{"heat_scale": 30.0}, {"heat_scale": 0.1}] if law.startswith("natural") else
                   [{"tau_heat": 0.05 * tau}, {"tau_heat": 20.0 * tau}])
     if trace is None:
         trace = curve_fit_trace(t, p, t_start)
@@ -357,6 +434,9 @@ def _fit_law(
     # residuals are bin sums / sqrt(count): their variance is the per-sample variance
     s2 = fit.chi2 / fit.dof
     inflation = residual_inflation(fit.fun)
+    whiteness_p = ljung_box(fit.fun)[1]
+    if whiteness_p < WHITENESS_P:  # structure beyond lag 1 too
+        inflation = max(inflation, structure_inflation(fit.fun))
     cov = fit.covariance(s2 * inflation)
     free = list(fit.params.free)
     sd_x = {k: math.sqrt(cov[i, i]) if cov[i, i] >= 0 else math.nan
@@ -395,41 +475,12 @@ def _fit_law(
         success=bool(fit.success), inflation=inflation,
         heat_law=f"{law}+wall" if fit_wall else law,
         wall_temperature=v.get("t_wall", math.nan),
-        tau_heat=v.get("tau_heat", math.nan))
+        tau_heat=v.get("tau_heat", math.nan),
+        tau_heat_std=float(std["tau_heat"]) if "tau_heat" in free else math.nan,
+        heat_exponent=v.get("heat_exponent", math.nan),
+        heat_exponent_std=float(std["heat_exponent"]) if "heat_exponent" in free
+        else math.nan,
+        whiteness_p=whiteness_p, heat_turbulent=v.get("heat_turbulent", 1.0),
+        heat_turbulent_std=float(std["heat_turbulent"]) if "heat_turbulent" in free
+        else math.nan)
     return cf, fit.chi2, fit.k
-
-
-def fitted_tau_exp(fit: CurveFit, settings: EstimatorSettings, t_guess: float) -> float:
-    """tau_exp of the fitted model: its p* crossing (eq 40 with the fitted p10) [s].
-
-    Uses the whole recorded curve rather than the samples near p* and the start, so it is
-    less noisy than the measured tau_exp (reported beside it, never instead of it).
-
-    Parameters
-    ----------
-    fit : CurveFit
-        Result of :func:`fit_curve`.
-    settings : EstimatorSettings
-        Settings of the fit.
-    t_guess : float
-        Expected crossing time [s] (e.g. the measured tau_exp).
-    """
-    if not (math.isfinite(t_guess) and t_guess > 0):
-        return math.nan
-    try:
-        cfg = fit.config(settings)
-        ps = fit.p_atm + P_STAR_FRACTION * (fit.p10 - fit.p_atm)
-        tc = model_crossing_time(cfg, ps, t_guess)
-        if not math.isfinite(tc):
-            return math.nan
-        # refine on a fine grid around the first estimate (cubic interpolation error of
-        # the coarse grid is ~1e-5 relative)
-        tt = np.concatenate(([0.0], np.linspace(0.98 * tc, 1.02 * tc, 801)))
-        pp, _ = discharge(cfg, tt, 0.0, rtol=1e-10)
-        k = np.flatnonzero(pp[1:] < ps)
-        if k.size == 0 or k[0] == 0:
-            return tc
-        j = int(k[0]) + 1
-        return float(tt[j - 1] + (pp[j - 1] - ps) / (pp[j - 1] - pp[j]) * (tt[j] - tt[j - 1]))
-    except ValueError:
-        return math.nan

@@ -21,7 +21,7 @@ from pneumatic_unload.config import RigConfig
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import ParametricModel, Start
-from pneumatic_unload.physics import isentropic_crossing_time
+from pneumatic_unload.physics import P_STAR_FRACTION, isentropic_crossing_time
 
 FloatArray = NDArray[np.float64]
 
@@ -382,3 +382,38 @@ def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_
             rel_wall = abs(tw[0] - tw[1]) / (2.0 * t_mid)
     return InversionTable(log_c=np.asarray(log_c), log_t=log_t, rel_heat=rel_heat,
                           rel_b=rel_b, rel_wall=rel_wall)
+
+
+def fitted_tau_exp(cfg: RigConfig, t_guess: float) -> float:
+    """tau_exp of a fitted model: its p* crossing (eq 40 with its p10, p_atm) [s].
+
+    Uses the whole recorded curve rather than the samples near p* and the start, so it is
+    less noisy than the measured tau_exp (reported beside it, never instead of it).
+
+    Parameters
+    ----------
+    cfg : RigConfig
+        The fitted model (valve opening at t = 0), e.g.
+        :meth:`pneumatic_unload.fitting.CurveFit.config`.
+    t_guess : float
+        Expected crossing time [s] (e.g. the measured tau_exp).
+    """
+    if not (math.isfinite(t_guess) and t_guess > 0):
+        return math.nan
+    try:
+        p10, p_atm = cfg.initial_pressure, cfg.atmosphere
+        ps = p_atm + P_STAR_FRACTION * (p10 - p_atm)
+        tc = model_crossing_time(cfg, ps, t_guess)
+        if not math.isfinite(tc):
+            return math.nan
+        # refine on a fine grid around the first estimate (cubic interpolation error of
+        # the coarse grid is ~1e-5 relative)
+        tt = np.concatenate(([0.0], np.linspace(0.98 * tc, 1.02 * tc, 801)))
+        pp, _ = discharge(cfg, tt, 0.0, rtol=1e-10)
+        k = np.flatnonzero(pp[1:] < ps)
+        if k.size == 0 or k[0] == 0:
+            return tc
+        j = int(k[0]) + 1
+        return float(tt[j - 1] + (pp[j - 1] - ps) / (pp[j - 1] - pp[j]) * (tt[j] - tt[j - 1]))
+    except ValueError:
+        return math.nan

@@ -31,13 +31,23 @@ def gives_c(r: UnloadResult) -> bool:
 
 
 def unload_json(r: UnloadResult) -> dict[str, Any]:
-    """JSON of one result: its fields, the budgets, the heat law and the C to report."""
+    """JSON of one result: its fields, the budgets, the heat law (with the laws offered,
+    their C and BIC, and those not offered with the reason), whether the model describes
+    the record ('model_inadequate': the reason, or '') and the C to report."""
     d = r.to_dict()
     extra = d.pop("extra", None) or {}
     for key in ("budget", "budget_eq39"):
         if key in extra:
             d[key] = extra[key]
-    d["heat_law"] = extra.get("curve_fit", {}).get("heat_law", "") if r.final else ""
+    cf = extra.get("curve_fit", {}) if r.final else {}
+    d["heat_law"] = cf.get("heat_law", "")
+    if cf:
+        d["heat_laws"] = {"offered": cf.get("laws", {}), "not_offered": cf.get("not_offered", {}),
+                          "heat_scale": cf.get("heat_scale"), "tau_heat": cf.get("tau_heat"),
+                          "heat_exponent": cf.get("heat_exponent"),
+                          "heat_turbulent": cf.get("heat_turbulent"),
+                          "wall_temperature": cf.get("wall_temperature")}
+    d["model_inadequate"] = extra.get("model_inadequate", "")
     d["recommended"] = recommended(r)
     return finite_or_none(d)
 
@@ -82,19 +92,31 @@ def format_result(r: UnloadResult) -> str:
     elif r.final:
         lines.append("  b              = not identifiable from this record (the flow stayed "
                      "choked, or the subsonic tail is too short or too noisy)")
-    if "budget" in r.extra:
-        law = r.extra.get("curve_fit", {}).get("heat_law", "")
-        lines.append("  uncertainty budget of C (model), 1e-9 m^3/(s Pa), share of variance"
-                     + (f"; heat law: {law}" if law else "") + ":")
-        lines += format_budget(r.extra["budget"])
+    lines += budget_lines(r)
     if math.isfinite(r.conductance_std):
         lines.append(f"  C (eq 39) u    = {r.conductance_std:.2g} m^3/(s Pa) (record and inputs;"
                      " its bias by design is not an uncertainty)")
-    rec = recommended(r)
-    if math.isfinite(rec["conductance"]):
-        lines.append(f"  REPORT C       = {rec['conductance']:.5g} +- {rec['expanded']:.2g}"
-                     f" m^3/(s Pa) (k = 2) = {dm3(rec['conductance'])}  [{rec['source']}]")
+    lines += report_line(r)
     return "\n".join(lines)
+
+
+def budget_lines(r: UnloadResult) -> list[str]:
+    """The budget of the model-based C, line by line (none when it has no budget)."""
+    if "budget" not in r.extra:
+        return []
+    law = r.extra.get("curve_fit", {}).get("heat_law", "")
+    return ["  uncertainty budget of C (model), 1e-9 m^3/(s Pa), share of variance"
+            + (f"; heat law: {law}" if law else "") + ":", *format_budget(r.extra["budget"])]
+
+
+def report_line(r: UnloadResult) -> list[str]:
+    """The one C to report with its expanded uncertainty (none when no C is known)."""
+    rec = recommended(r)
+    if not math.isfinite(rec["conductance"]):
+        return []
+    dm3 = rec["conductance"] / 1e-8
+    return [f"  REPORT C       = {rec['conductance']:.5g} +- {rec['expanded']:.2g}"
+            f" m^3/(s Pa) (k = 2) = {dm3:.4f} dm^3/(s bar)  [{rec['source']}]"]
 
 
 def format_inputs(inputs: dict[str, Any]) -> str:

@@ -7,6 +7,7 @@ Uses matplotlib's non-interactive Agg backend; no display needed. SI units on th
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.estimation import EstimatorSettings, UnloadResult
+from pneumatic_unload.output import budget_lines, report_line
 
 
 def _model_curve(t: NDArray[np.float64], r: UnloadResult, settings: EstimatorSettings
@@ -49,11 +51,31 @@ def _model_curve(t: NDArray[np.float64], r: UnloadResult, settings: EstimatorSet
 def plot_analysis(t: NDArray[np.float64], p: NDArray[np.float64],
                   results: list[UnloadResult], settings: EstimatorSettings,
                   path: str | Path) -> None:
-    """Write a PNG of a trace with each unload's analysis.
+    """Write the PNG of :func:`analysis_figure` to ``path`` (str or Path)."""
+    import matplotlib.pyplot as plt
+
+    fig = analysis_figure(t, p, results, settings)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def figure_text(fig: Any) -> str:
+    """Every text a figure shows (its own and its axes'), one per line."""
+    out = [t.get_text() for t in fig.texts]
+    for ax in fig.axes:
+        out += [t.get_text() for t in ax.texts]
+    return "\n".join(out)
+
+
+def analysis_figure(t: NDArray[np.float64], p: NDArray[np.float64],
+                    results: list[UnloadResult], settings: EstimatorSettings) -> Any:
+    """The matplotlib figure of a trace with each unload's analysis (close it after use).
 
     Top: the measured trace, p10 and p* (dashed), the start of the unload (green), the p*
     crossing (red dot) with the tau_exp arrow, and the fitted discharge model (purple);
     each unload's eq 39 and model-based C in a box. Bottom: measured minus model [kPa].
+    Right: each unload's uncertainty budget line by line and the C to report (as the text
+    output gives them), and "model inadequate" when the status says so.
 
     Parameters
     ----------
@@ -63,8 +85,6 @@ def plot_analysis(t: NDArray[np.float64], p: NDArray[np.float64],
         One per unload (e.g. :func:`~pneumatic_unload.estimation.merge_final`).
     settings : EstimatorSettings
         The settings used (for the model curve).
-    path : str or Path
-        Output PNG file.
     """
     import matplotlib
 
@@ -73,8 +93,9 @@ def plot_analysis(t: NDArray[np.float64], p: NDArray[np.float64],
 
     t = np.asarray(t, dtype=float)
     p = np.asarray(p, dtype=float)
-    fig, (ax, axr) = plt.subplots(2, 1, figsize=(11, 7), dpi=100, sharex=True,
+    fig, (ax, axr) = plt.subplots(2, 1, figsize=(19, 7), dpi=100, sharex=True,
                                   gridspec_kw={"height_ratios": [3, 1]})
+    budget: list[str] = []
     t0 = float(t[0])
     ax.plot(t - t0, p / 1e5, lw=0.7, color="0.45", label="measured")
     lines = []
@@ -111,6 +132,9 @@ def plot_analysis(t: NDArray[np.float64], p: NDArray[np.float64],
                 and math.isfinite(r.conductance_model) else "")
         lines.append(f"unload {r.index} [{r.status}]: C eq39 = {c39}{diff}, "
                      f"model = {cm} dm^3/(s bar){b}")
+        why = r.extra.get("model_inadequate", "") if r.extra else ""
+        budget += [f"unload {r.index}" + (f": model inadequate: {why}" if why else ""),
+                   *budget_lines(r), *report_line(r), ""]
     if lines:
         ax.text(0.99, 0.80, "\n".join(lines), transform=ax.transAxes, ha="right", va="top",
                 fontsize=9, bbox={"boxstyle": "round", "fc": "white", "ec": "0.7",
@@ -122,6 +146,9 @@ def plot_analysis(t: NDArray[np.float64], p: NDArray[np.float64],
     axr.set_ylabel("measured - model\n[kPa]")
     axr.set_xlabel(f"time since {t0:.3f} s [s]")
     axr.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    fig.tight_layout(rect=(0.0, 0.0, 0.56, 1.0))
+    if budget:
+        fig.text(0.57, 0.98, "\n".join(textwrap.fill(s, 112, subsequent_indent="      ")
+                                        for s in budget),
+                 ha="left", va="top", fontsize=7, family="monospace")
+    return fig

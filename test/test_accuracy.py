@@ -13,7 +13,7 @@ from pneumatic_unload.budget import EXACT_INPUTS
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import analyze, merge_final
 from pneumatic_unload.model import default_duration, discharge, simulate
-from pneumatic_unload.physics import orifice_conductance
+from pneumatic_unload.physics import P_STAR_FRACTION, orifice_conductance
 from pneumatic_unload.runs import settings_for
 
 
@@ -60,8 +60,9 @@ def test_model_c_and_b_one_sigma_coverage_with_heat_transfer():
     assert zc.max() < 3.5 and zb.max() < 3.5
 
 
-def _start_crlb(cfg, t):
-    """Cramer-Rao 1-sigma of the start time [s]: (t0, p10, log C, b) unknown."""
+def _start_crlb(cfg, t, noise=NOISE):
+    """Cramer-Rao 1-sigma of the start time [s]: (t0, p10, log C, b) unknown, white noise
+    of sigma ``noise`` [Pa]."""
     def signal(x):
         c = cfg.replace(initial_pressure=x[1], conductance=float(np.exp(x[2])),
                         critical_ratio=x[3])
@@ -76,7 +77,43 @@ def _start_crlb(cfg, t):
         e[k] = steps[k]
         cols.append((signal(x0 + e) - signal(x0 - e)) / (2 * steps[k]))
     j = np.array(cols).T
-    return float(np.sqrt(np.linalg.inv(j.T @ j)[0, 0])) * NOISE
+    return float(np.sqrt(np.linalg.inv(j.T @ j)[0, 0])) * noise
+
+
+def _true_tau_exp(cfg):
+    """tau_exp of the noise-free discharge [s]: from the opening to the p* crossing."""
+    p_star = cfg.atmosphere + P_STAR_FRACTION * (cfg.initial_pressure - cfg.atmosphere)
+    t = np.linspace(0.0, default_duration(cfg), 200_001)
+    p = discharge(cfg, t, 0.0, rtol=1e-11)[0]
+    k = int(np.flatnonzero(p < p_star)[0])
+    return float(t[k - 1] + (p[k - 1] - p_star) / (p[k - 1] - p[k]) * (t[k] - t[k - 1]))
+
+
+@pytest.mark.parametrize(("volume", "diameter", "p10", "rate", "noise"), [
+    (1e-3, 3e-3, 7e5, 1000.0, 1000.0), (20e-3, 1e-3, 6e5, 1000.0, 1000.0),
+    (5e-3, 2e-3, 8e5, 100.0, 300.0), (2e-3, 1.5e-3, 4e5, 2000.0, 3000.0),
+    (10e-3, 2.5e-3, 5e5, 250.0, 1000.0), (15e-3, 1.2e-3, 7e5, 500.0, 200.0)])
+def test_start_within_twice_its_cramer_rao_bound_and_tau_exp_within_3_sigma(
+        volume, diameter, p10, rate, noise):
+    """The issue's core target over its ranges (V 1-20 L, d 1-3 mm, p10 4-8 bar) and
+    several sample rates (100 Hz-2 kHz) and noise levels (200-3000 Pa): the start of the
+    final result (the curve fit's, t_start_model) within max(1 sample, 2 x its Cramer-Rao
+    bound), and the measured tau_exp within 3 of its stated sigma of the noise-free
+    discharge's. The curve fit's start is efficient: over 16 and 30 seeds of two of these
+    rigs its RMS error was 1.05 and 1.07 x the bound (so 2 x the bound is a ~95 % limit);
+    the crossing detector's start (which tau_exp uses) 1.3-1.7 x."""
+    cfg = RigConfig(volume=volume, conductance=orifice_conductance(diameter), rate=rate,
+                    noise_std=noise, seed=43, initial_pressure=p10, critical_ratio=0.4)
+    cfg = cfg.replace(duration=0.35 * default_duration(cfg))
+    sim = simulate(cfg)
+    st = dataclasses.replace(exact(settings_for(cfg)), heat_model="adiabatic")
+    (r,) = merge_final(analyze(sim.t, sim.measured, st))
+    bound = _start_crlb(cfg, sim.t, noise)
+    err = abs(r.t_start_model - sim.t_open)
+    assert err <= max(1.0 / rate, 2.0 * bound), (err * rate, bound * rate)
+    z_tau = (r.tau_exp - _true_tau_exp(cfg)) / r.tau_exp_std
+    print(f"start {err * rate:.2f} samples, bound {bound * rate:.2f}, z_tau {z_tau:+.2f}")
+    assert abs(z_tau) <= 3.0, z_tau
 
 
 @pytest.mark.parametrize(("volume", "diameter"), [(1e-3, 3e-3), (5e-3, 2e-3), (20e-3, 1e-3)])

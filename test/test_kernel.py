@@ -20,6 +20,12 @@ CASES = {
         volume=1e-3, conductance=3e-9, effects=("heat_transfer", "leak", "valve_opening"),
         heat_transfer_mode="fixed", heat_transfer_coefficient=0.5, leak_coefficient=2e-11,
         valve_opening_time=0.02, pre_time=0.2),
+    "heat density": RigConfig(volume=3e-3, conductance=6e-9, effects=("heat_transfer",),
+                              heat_transfer_mode="density", heat_transfer_coefficient=0.4,
+                              heat_transfer_exponent=0.7, pre_time=0.2),
+    "heat natural, turbulent branch": RigConfig(
+        volume=20e-3, conductance=2e-8, effects=("heat_transfer",), pre_time=0.2,
+        heat_transfer_turbulent_ratio=1.3),
     "pipe, closing": RigConfig(volume=2e-3, conductance=6e-9, effects=("pipe_volume",),
                                pipe_volume=2e-4, pipe_conductance=1.2e-8, pre_time=0.2,
                                valve_close_time=1.0),
@@ -192,3 +198,26 @@ def test_leaks_agree_with_an_independent_reference(name):
     pre = t < t_open
     upstream = any(e in cfg.effects for e in ("leak", "orifice_leak"))
     assert (ours[pre, 0][-1] < cfg.initial_pressure - 1e3) == upstream
+
+
+def test_heat_laws_against_their_formulae():
+    """The density law hA_0 (rho/rho_0)^n and the natural law's turbulent branch, written
+    out here from their definitions (model/heat.py)."""
+    from pneumatic_unload.model.heat import RA_TURBULENT, heat_flow_function, rayleigh
+
+    cfg = RigConfig(volume=3e-3, effects=("heat_transfer",), heat_transfer_mode="density",
+                    heat_transfer_coefficient=0.4, heat_transfer_exponent=0.7,
+                    initial_pressure=7e5, initial_temperature=293.15)
+    q = heat_flow_function(cfg)
+    rho0 = 7e5 / (cfg.gas.gas_constant * 293.15)
+    for p, t in ((7e5, 293.15 - 1e-6), (3e5, 250.0), (1.2e5, 270.0)):
+        rho = p / (cfg.gas.gas_constant * t)
+        assert q(p, t) == pytest.approx(0.4 * (rho / rho0) ** 0.7 * (293.15 - t), rel=1e-12)
+    base = RigConfig(volume=20e-3, effects=("heat_transfer",), initial_pressure=7e5)
+    q1 = heat_flow_function(base)
+    q13 = heat_flow_function(base.replace(heat_transfer_turbulent_ratio=1.3))
+    for p, t in ((7e5, 250.0), (1.1e5, 285.0)):
+        ra = float(rayleigh(base, np.array([p]), np.array([t]))[0])
+        assert q13(p, t) / q1(p, t) == pytest.approx(1.3 if ra >= RA_TURBULENT else 1.0)
+    assert rayleigh(base, np.array([7e5]), np.array([250.0]))[0] >= RA_TURBULENT
+    assert rayleigh(base, np.array([1.1e5]), np.array([285.0]))[0] < RA_TURBULENT

@@ -62,12 +62,20 @@ class RigConfig(TankSpec):
     # --- switchable effects
     effects: tuple[str, ...] = names((), EFFECTS, "real-rig effects switched on (names)")
     heat_transfer_mode: str = choice(
-        "natural", ("natural", "fixed"),
-        "wall heat transfer: natural-convection correlation or fixed h*A")
+        "natural", ("natural", "fixed", "density"),
+        "wall heat transfer: natural-convection correlation, fixed h*A, or h*A varying as "
+        "the gas density to the power heat_transfer_exponent")
     heat_transfer_coefficient: float = number(
-        1.0, "W/K", 0.0, 1e4, "wall conductance h*A when heat_transfer_mode is fixed")
+        1.0, "W/K", 0.0, 1e4, "wall conductance h*A when heat_transfer_mode is fixed (at the "
+        "initial gas density p10/(R T10) when it is density)")
+    heat_transfer_exponent: float = number(
+        0.5, "-", -2.0, 4.0, "exponent n of h*A = h*A_0 (rho/rho_0)^n when "
+        "heat_transfer_mode is density")
     heat_transfer_scale: float = number(
         1.0, "-", 0.0, 100.0, "multiplier on the natural-convection correlation")
+    heat_transfer_turbulent_ratio: float = number(
+        1.0, "-", 0.0, 10.0, "further multiplier on the turbulent branch (Ra >= 1e9) of the "
+        "natural-convection correlation, Nu = 0.10 Ra^(1/3) (1.3: McAdams' 0.13)")
     valve_opening_time: float = number(
         0.02, "s", 0.0, 10.0, "valve opening: linear ramp of the effective area")
     sensor_lag: float = number(0.01, "s", 0.0, 10.0, "first-order time constant of the sensor")

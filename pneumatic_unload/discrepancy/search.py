@@ -78,11 +78,12 @@ def fit_candidate(prob: Problem, base: Fit, neutral: list[Values], cand: str) ->
     Starts: the current fit and the neutral baseline values, each with a small and a large
     effect, and the nested start (the current fit with the effect almost off), so that the
     extended fit never ends worse than the model it extends. Heat transfer is fitted with
-    each law of :data:`~pneumatic_unload.model.effects.HEAT_VARIANTS` (same number of
-    parameters) and the better one kept.
+    each one-parameter law of :data:`~pneumatic_unload.model.effects.HEAT_VARIANTS` (the
+    same number of parameters, so chi^2 compares them) and the better one kept.
     """
     effects = (*base.effects, cand)
-    laws = [base.model.heat_law] if cand != "heat_transfer" else list(HEAT_VARIANTS)
+    laws = [base.model.heat_law] if cand != "heat_transfer" else \
+        [k for k, e in HEAT_VARIANTS.items() if len(e.params) == 1]
     best: Fit | None = None
     for law in laws:
         model = prob.model(effects, heat_law=law)

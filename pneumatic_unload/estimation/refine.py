@@ -26,10 +26,19 @@ from pneumatic_unload.budget import (
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.config.rig import RigConfig
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
-from pneumatic_unload.fitting import fit_curve, fitted_tau_exp
-from pneumatic_unload.inversion import inversion_table, invert_crossing, may_turn_subsonic
+from pneumatic_unload.fit.uncertainty import inadequacy
+from pneumatic_unload.fitting import fit_curve
+from pneumatic_unload.inversion import (
+    fitted_tau_exp,
+    inversion_table,
+    invert_crossing,
+    may_turn_subsonic,
+)
 from pneumatic_unload.recovery import fit_recovery
 
+#: Quality figure [0, 1] at most of a result whose model does not describe the record at
+#: its noise level ("model inadequate" in its status text).
+INADEQUATE_QUALITY = 0.7
 #: Initial pressures the discharge model covers [Pa absolute] (RigConfig's bounds).
 P10_RANGE: tuple[float, float] = next(
     (float(f.metadata["min"]), float(f.metadata["max"])) for f in dataclasses.fields(RigConfig)
@@ -126,7 +135,7 @@ def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
     if not (math.isfinite(c) and c > 0):
         return None
     wall_std = math.nan
-    if heat_law in ("natural", "fixed"):
+    if heat_law in ("natural", "fixed", "density"):
         wall_std = term_std(res.extra.get("budget"), WALL_TERM)
         if not math.isfinite(wall_std):
             wall_std = wall_sensitivity(settings, res.tau_exp, p10=res.p10, p_atm=res.p_atm,
@@ -302,7 +311,7 @@ def refine_with_curve_fit(
         return dataclasses.replace(res, final=True, extra={
             **res.extra, "curve_fit_error": f"the fit did not determine C ({fit.conductance:.3g}"
                                             f" +- {c_std:.3g} m^3/(s Pa))"})
-    tau_model = fitted_tau_exp(fit, settings, res.tau_exp)
+    tau_model = fitted_tau_exp(fit.config(settings), res.tau_exp)
     if not (math.isfinite(tau_model) and tau_model > 0):
         tau_model = math.nan
     extra = {"curve_fit": dataclasses.asdict(fit), "noise_std": noise_std,
@@ -317,6 +326,10 @@ def refine_with_curve_fit(
     else:
         c_std = math.hypot(c_std, mf)
     status, text = res.status, res.status_text
+    quality = res.quality if fit.success else min(res.quality, 0.5)
+    nrms = fit.rms / noise_std if math.isfinite(noise_std) and noise_std > 0 else math.nan
+    why = inadequacy(nrms, fit.whiteness_p, fit.inflation)
+    extra["model_inadequate"] = why or ""
     b = fit.critical_ratio
     if math.isfinite(b) and b > 0:
         # the fit measured b: whether the flow stayed choked down to p* is now known
@@ -328,10 +341,13 @@ def refine_with_curve_fit(
             status, text = "not_choked", (
                 f"flow subsonic before p* with the fitted b = {b:.3f} (p* = {res.p_star:.0f}"
                 f" Pa < p_atm/b = {limit:.0f} Pa): eq 39 assumes choked flow")
+    if why is not None:  # never silent: the status text carries it to every output
+        text = f"{text}; model inadequate: {why}"
+
     return dataclasses.replace(
         res, final=True, status=status, status_text=text, conductance_model=fit.conductance,
         conductance_model_std=c_std,
         t_start_model=fit.t_start, tau_exp_model=tau_model,
         critical_ratio=fit.critical_ratio, critical_ratio_std=fit.critical_ratio_std,
         method=res.method + "+curve-fit", extra=extra,
-        quality=res.quality if fit.success else min(res.quality, 0.5))
+        quality=quality if why is None else min(quality, INADEQUATE_QUALITY))

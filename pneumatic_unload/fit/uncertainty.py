@@ -82,3 +82,57 @@ def residual_inflation(r: FloatArray) -> float:
         return 1.0
     rho = min(rho, 0.99)
     return (1.0 + rho) / (1.0 - rho)
+
+
+#: Ljung-Box p-value below which residuals count as structured (not white) [-]: white
+#: residuals fall below it once in a thousand records.
+WHITENESS_P = 1e-3
+#: Residual RMS over the noise's above which the model misses more than the noise [-]
+#: (white residuals of a few hundred bins stay within a few per cent of 1).
+ADEQUATE_NRMS = 1.1
+
+
+def structure_inflation(r: FloatArray, lags: int = 20) -> float:
+    """Variance inflation for residuals with structure at any lag [-] (>= 1): the
+    effective-sample-size factor 1 + 2 sum_k rho_k over the first ``lags`` autocorrelations
+    (Bartlett). Noisy for white residuals (sum of ``lags`` estimates): apply it only where
+    a whiteness test rejected them (:data:`WHITENESS_P`).
+
+    Parameters
+    ----------
+    r : ndarray
+        Residuals in time order [any unit], already weighted to equal variance.
+    lags : int
+        Autocorrelation lags summed [-].
+    """
+    r = np.asarray(r, dtype=float)
+    r = r - float(np.mean(r)) if r.size else r
+    den = float(r @ r)
+    h = int(min(lags, max(r.size // 5, 1)))
+    if r.size < 8 or den <= 0:
+        return 1.0
+    rho = np.array([float(r[k:] @ r[:-k]) / den for k in range(1, h + 1)])
+    return float(min(max(1.0 + 2.0 * float(np.sum(rho)), 1.0), 1e4))
+
+
+def inadequacy(nrms: float, whiteness_p: float, inflation: float) -> str | None:
+    """Why a fitted model does not describe a record at its noise level, or None.
+
+    Parameters
+    ----------
+    nrms : float
+        Residual RMS over the noise standard deviation [-] (NaN: noise unknown).
+    whiteness_p : float
+        Ljung-Box p-value of the residuals in time order [-].
+    inflation : float
+        Variance inflation applied to the fit's covariance for the structure [-].
+    """
+    why = []
+    if math.isfinite(whiteness_p) and whiteness_p < WHITENESS_P:
+        why.append(f"residual not white (Ljung-Box p = {whiteness_p:.2g})")
+    if math.isfinite(nrms) and nrms > ADEQUATE_NRMS:
+        why.append(f"residual RMS {nrms:.2f} x the noise")
+    if not why:
+        return None
+    return (", ".join(why) + f"; sigma(C) from the record inflated (variance x {inflation:.2f}"
+            f", residual scale x {max(nrms, 1.0) ** 2 if math.isfinite(nrms) else 1.0:.2f})")

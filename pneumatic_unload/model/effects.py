@@ -8,10 +8,13 @@ look-alikes. :class:`ParametricModel` (the baseline: C, b, t_open, p10 [, p_atm]
 effects) turns named parameter values into a configuration and the model's signal; the
 estimator's curve fit, its model inversion and the discrepancy workflow all fit it.
 
-Heat transfer has two laws (:mod:`pneumatic_unload.model.heat`): ``natural`` fits the
+Heat transfer has three laws (:mod:`pneumatic_unload.model.heat`): ``natural`` fits the
 multiplier ``heat_scale`` [-] on the natural-convection correlation; ``fixed`` fits the
 thermal time constant ``tau_heat`` = m0 c_v/(hA) [s] of a constant hA,
-m0 = p10 V/(R T10).
+m0 = p10 V/(R T10); ``density`` fits that time constant at the initial density and the
+exponent ``heat_exponent`` [-] of hA ~ rho^n; ``natural+turbulent`` fits the scale and, on
+the correlation's turbulent branch alone, ``heat_turbulent`` [-] (the published
+coefficients differ by 30 %).
 """
 
 from __future__ import annotations
@@ -159,6 +162,11 @@ def _heat_fixed(v: Values, tank: TankSpec) -> dict[str, object]:
             "heat_transfer_coefficient": clamp(h_a, 0.0, 1e4)}
 
 
+def _heat_density(v: Values, tank: TankSpec) -> dict[str, object]:
+    return {**_heat_fixed(v, tank), "heat_transfer_mode": "density",
+            "heat_transfer_exponent": clamp(v["heat_exponent"], -2.0, 4.0)}
+
+
 def laminar_coefficient(fraction: float, v: Values, tank: TankSpec) -> float:
     """Laminar leak coefficient K [kg/(s Pa)] whose flow K (p10 - p_atm) at p10 is
     ``fraction`` [-] of the component's choked flow C rho_n p10 sqrt(T_N/T10) [kg/s]."""
@@ -226,6 +234,36 @@ HEAT_FIXED = Effect(
     lambda s: {"tau_heat": 1e3 * s.tau},
     lambda s: [{"tau_heat": 0.7 * s.tau}, {"tau_heat": 7.0 * s.tau}],
     _heat_fixed,
+)
+
+HEAT_NATURAL_TURBULENT = Effect(
+    "heat_transfer",
+    "the tank wall: natural convection as in 'natural', the correlation's turbulent branch "
+    "(Ra >= 1e9) scaled by heat_turbulent on its own",
+    (HEAT_NATURAL.params[0],
+     EffectParam("heat_turbulent", "-", True, 0.2, 5.0, lambda s: 1.0, 0.3,
+                 "multiplier on the turbulent branch, Nu = 0.10 Ra^(1/3), of the "
+                 "correlation (1.3: McAdams' 0.13)")),
+    lambda s: {"heat_scale": 1e-4, "heat_turbulent": 1.0},
+    lambda s: [{"heat_scale": 0.3, "heat_turbulent": 1.0},
+               {"heat_scale": 3.0, "heat_turbulent": 1.0}],
+    lambda v, tank: {"heat_transfer_mode": "natural",
+                     "heat_transfer_scale": float(min(v["heat_scale"], 100.0)),
+                     "heat_transfer_turbulent_ratio": clamp(v["heat_turbulent"], 0.0, 10.0)},
+)
+HEAT_DENSITY = Effect(
+    "heat_transfer",
+    "the tank wall: heat flows from the wall into the gas through an hA that varies as the "
+    "gas density to a power n (hA ~ rho^n); tau_heat = m0 c_v/(hA_0) is the gas's thermal "
+    "time constant at the start",
+    (HEAT_FIXED.params[0],
+     EffectParam("heat_exponent", "-", False, -1.0, 3.0, lambda s: 0.5, 0.1,
+                 "exponent n of hA ~ rho^n (0: constant hA; 1/2 laminar, 2/3 turbulent "
+                 "natural convection)")),
+    lambda s: {"tau_heat": 1e3 * s.tau, "heat_exponent": 0.5},
+    lambda s: [{"tau_heat": 0.7 * s.tau, "heat_exponent": 0.5},
+               {"tau_heat": 7.0 * s.tau, "heat_exponent": 0.5}],
+    _heat_density,
 )
 
 #: Every effect by name (heat transfer with its default law, natural convection).
@@ -308,7 +346,9 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
            lambda v, tank: {"sensor_gain": clamp(v["gain"], -0.5, 0.5)}),
 )}
 #: The heat-transfer laws a fit can choose from.
-HEAT_VARIANTS: dict[str, Effect] = {"natural": HEAT_NATURAL, "fixed": HEAT_FIXED}
+HEAT_VARIANTS: dict[str, Effect] = {"natural": HEAT_NATURAL, "fixed": HEAT_FIXED,
+                                     "density": HEAT_DENSITY,
+                                     "natural+turbulent": HEAT_NATURAL_TURBULENT}
 
 WALL_TEMPERATURE = EffectParam("t_wall", "K", False, 150.0, 600.0, lambda s: math.nan, 5.0,
                                "wall temperature")
@@ -328,7 +368,8 @@ class ParametricModel:
     start : Start
         Neutral values (centres of the fitted coordinates, bounds of t_open).
     heat_law : str
-        Law of the heat-transfer effect: 'natural' or 'fixed' (:data:`HEAT_VARIANTS`).
+        Law of the heat-transfer effect: 'natural', 'fixed', 'density' or
+        'natural+turbulent' (:data:`HEAT_VARIANTS`).
     fit_wall_temperature : bool
         Fit the wall temperature with the heat-transfer effect (start: ``tank.wall``).
     """

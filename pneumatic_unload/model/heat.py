@@ -7,8 +7,15 @@ The gas exchanges heat with the wall, Q = hA (T_wall - T) [W]. The wall conducta
   Nu = 0.59 Ra^0.25 (laminar) or 0.10 Ra^(1/3) (turbulent, Ra >= 1e9), Nu >= 1, and
   Ra = g |T_w - T|/T L^3 rho^2 c_p/(mu k); times a dimensionless ``heat_transfer_scale``
   (1: the correlation as published). The scale is what the estimator and the discrepancy
-  workflow fit, and what the simulator sets.
+  workflow fit, and what the simulator sets. The turbulent branch's coefficient differs
+  between the published correlations (0.10 in Churchill's and Incropera's tables, 0.13 in
+  McAdams' and Geankoplis', which HydDown uses): ``heat_transfer_turbulent_ratio`` [-]
+  multiplies it alone, fitted where a record spans both regimes (:func:`rayleigh`).
 * ``fixed`` - a constant hA = ``heat_transfer_coefficient`` [W/K] (Newton cooling).
+* ``density`` - hA = hA_0 (rho/rho_0)^n: ``heat_transfer_coefficient`` hA_0 [W/K] at the
+  initial density rho_0 = p10/(R T10), the exponent n = ``heat_transfer_exponent`` [-]
+  (convection whose h follows the gas density: n = 0 is ``fixed``; laminar natural
+  convection, Nu ~ Ra^(1/4), has n = 1/2, turbulent, Nu ~ Ra^(1/3), n = 2/3).
 
 The formulae are compiled with the right-hand side
 (:func:`pneumatic_unload.model.kernel.heat_flow`); this module maps the fields of
@@ -21,16 +28,32 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+import numpy as np
+from numpy.typing import NDArray
+
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.model.kernel import HEAT_FIXED, HEAT_NATURAL, HEAT_NONE, heat_flow
+from pneumatic_unload.model.kernel import (
+    HEAT_DENSITY,
+    HEAT_FIXED,
+    HEAT_NATURAL,
+    HEAT_NONE,
+    heat_flow,
+)
 from pneumatic_unload.physics import G_ACCEL, tank_geometry
 
+FloatArray = NDArray[np.float64]
+
 #: Heat laws (values of ``RigConfig.heat_transfer_mode``).
-HEAT_LAWS: tuple[str, ...] = ("natural", "fixed")
+HEAT_LAWS: tuple[str, ...] = ("natural", "fixed", "density")
 
 
-def heat_parameters(cfg: RigConfig) -> tuple[float, float, float]:
-    """The heat law of a configuration as the kernel's (mode, coefficient, Ra constant).
+#: Rayleigh number where the natural-convection correlation turns turbulent [-].
+RA_TURBULENT = 1e9
+
+
+def heat_parameters(cfg: RigConfig) -> tuple[float, float, float, float]:
+    """The heat law of a configuration as the kernel's (mode, coefficient, shape constant,
+    turbulent ratio).
 
     Parameters
     ----------
@@ -41,23 +64,47 @@ def heat_parameters(cfg: RigConfig) -> tuple[float, float, float]:
     Returns
     -------
     tuple of float
-        (mode: :data:`~pneumatic_unload.model.kernel.HEAT_NONE`, ``HEAT_NATURAL`` or
-        ``HEAT_FIXED``; coefficient [W/K]: A_w k/L x scale for the natural law, hA for the
-        fixed one; Ra constant g L^3 c_p/(mu k R^2) [K^3/Pa^2 ... such that Ra is
-        dimensionless], 0 unless natural), as :func:`~pneumatic_unload.model.kernel.heat_flow`
+        (mode: :data:`~pneumatic_unload.model.kernel.HEAT_NONE`, ``HEAT_NATURAL``,
+        ``HEAT_FIXED`` or ``HEAT_DENSITY``; coefficient: A_w k/L x scale for the natural law
+        [W/K], hA for the fixed one [W/K], hA_0 (T10/p10)^n for the density law
+        [W/K / (Pa/K)^n]; shape constant: for the natural law the Ra constant
+        g L^3 c_p/(mu k R^2) [K^3/Pa^2, such that Ra is dimensionless], for the density law
+        the exponent n [-], else 0; the multiplier on the natural law's turbulent branch
+        [-], 1 for the other laws), as :func:`~pneumatic_unload.model.kernel.heat_flow`
         takes them.
     """
     if not cfg.has("heat_transfer"):
-        return HEAT_NONE, 0.0, 0.0
+        return HEAT_NONE, 0.0, 0.0, 1.0
     if cfg.heat_transfer_mode == "fixed":
-        return HEAT_FIXED, float(cfg.heat_transfer_coefficient), 0.0
+        return HEAT_FIXED, float(cfg.heat_transfer_coefficient), 0.0, 1.0
+    if cfg.heat_transfer_mode == "density":
+        n = float(cfg.heat_transfer_exponent)
+        # (rho/rho_0)^n = ((p/T)/(p10/T10))^n: the reference folded into the coefficient
+        ref = cfg.initial_temperature / cfg.initial_pressure
+        return HEAT_DENSITY, float(cfg.heat_transfer_coefficient) * ref**n, n, 1.0
     gas = cfg.gas
     length, _d, area = tank_geometry(cfg.volume, cfg.length_diameter_ratio)
-    # Ra = g |dT|/T L^3 rho^2 c_p / (mu k), rho = p/(R T)
-    ra_const = G_ACCEL * length**3 * gas.cp / (gas.viscosity * gas.conductivity
-                                                * gas.gas_constant**2)
+    ra_const = _rayleigh_constant(cfg)
     hk = area * gas.conductivity / length * cfg.heat_transfer_scale
-    return HEAT_NATURAL, hk, ra_const
+    return HEAT_NATURAL, hk, ra_const, float(cfg.heat_transfer_turbulent_ratio)
+
+
+def _rayleigh_constant(cfg: RigConfig) -> float:
+    # Ra = g |dT|/T L^3 rho^2 c_p / (mu k), rho = p/(R T): the factor of |dT|/T (p/T)^2
+    gas = cfg.gas
+    length, _d, _area = tank_geometry(cfg.volume, cfg.length_diameter_ratio)
+    return G_ACCEL * length**3 * gas.cp / (gas.viscosity * gas.conductivity
+                                           * gas.gas_constant**2)
+
+
+def rayleigh(cfg: RigConfig, p: FloatArray, t_gas: FloatArray) -> FloatArray:
+    """Rayleigh number of the natural-convection law [-] at gas pressures p [Pa absolute]
+    and temperatures t_gas [K] (the wall at ``cfg.wall``; |T_w - T| at least 1 K: the
+    exchange a discharge drives), whatever law ``cfg`` selects."""
+    ra_const = _rayleigh_constant(cfg)
+    t = np.asarray(t_gas, dtype=float)
+    dt = np.maximum(np.abs(cfg.wall - t), 1.0)
+    return ra_const * dt / t * (np.asarray(p, dtype=float) / t) ** 2
 
 
 def heat_flow_function(cfg: RigConfig) -> Callable[[float, float], float] | None:
@@ -75,13 +122,13 @@ def heat_flow_function(cfg: RigConfig) -> Callable[[float, float], float] | None
         ``q(p, t_gas)``: heat flow into the gas [W] at gas pressure p [Pa absolute] and
         mean gas temperature t_gas [K] (the compiled law the integrator uses).
     """
-    mode, coeff, ra_const = heat_parameters(cfg)
+    mode, coeff, ra_const, turb = heat_parameters(cfg)
     if mode == HEAT_NONE:
         return None
     t_wall = cfg.wall
 
     def q(p: float, t_gas: float) -> float:
-        return float(heat_flow(mode, coeff, ra_const, t_wall, p, t_gas))
+        return float(heat_flow(mode, coeff, ra_const, t_wall, p, t_gas, turb))
 
     return q
 

@@ -14,13 +14,13 @@ enum {
     GAMMA, R_GAS, CP, VOLUME, P_ATM, T_WALL, B_RATIO, M_INDEX, C_RHO, LEAK,
     HEAT_MODE, HEAT_A, HEAT_RA, PIPE, PIPE_VOLUME, PIPE_C_RHO,
     T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN,
-    LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B, N_PARAMETERS
+    LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B, HEAT_TURB, N_PARAMETERS
 };
 
 /* Subsonic index of the orifice-law leaks [-] (a sharp-edged orifice). */
 #define LEAK_M_INDEX 0.5
 
-enum { HEAT_NONE = 0, HEAT_NATURAL = 1, HEAT_FIXED = 2 };
+enum { HEAT_NONE = 0, HEAT_NATURAL = 1, HEAT_FIXED = 2, HEAT_DENSITY = 3 };
 enum { OK = 0, TOO_MANY_STEPS = 1, STEP_TOO_SMALL = 2, NOT_FINITE = 3 };
 
 #define MAX_STATES 8
@@ -41,16 +41,21 @@ double pu_flow_phi(double r, double b, double m, double r_linear)
 }
 
 /* Wall heat flow into the gas Q [W] at p [Pa], gas temperature t_gas [K].
- * natural: Q = coeff Nu(Ra) (Tw - T), Nu = 0.59 Ra^0.25 (Ra < 1e9) or 0.10 Ra^(1/3),
- * Nu >= 1, Ra = ra_const |Tw - T|/T (p/T)^2; fixed: Q = coeff (Tw - T); none: 0. */
+ * natural: Q = coeff Nu(Ra) (Tw - T), Nu = 0.59 Ra^0.25 (Ra < 1e9) or turb 0.10 Ra^(1/3)
+ * (turb [-] scales the turbulent branch alone: 1 is the correlation as published; 1.3
+ * gives McAdams' 0.13), Nu >= 1, Ra = ra_const |Tw - T|/T (p/T)^2; fixed: Q = coeff (Tw - T); density:
+ * Q = coeff (p/T)^n (Tw - T), n = ra_const (an hA that varies as the gas density to a
+ * power n; coeff = hA_0 (T_0/p_0)^n [W/K / (Pa/K)^n], hA_0 at the density of p_0, T_0);
+ * none: 0. */
 double pu_heat_flow(double mode, double coeff, double ra_const, double t_wall, double p,
-                    double t_gas)
+                    double t_gas, double turb)
 {
     if (mode == HEAT_NONE) return 0.0;
     double dt_w = t_wall - t_gas;
     if (mode == HEAT_FIXED) return coeff * dt_w;
+    if (mode == HEAT_DENSITY) return coeff * pow(p / t_gas, ra_const) * dt_w;
     double ra = ra_const * fabs(dt_w) / t_gas * (p / t_gas) * (p / t_gas);
-    double nu = ra < 1e9 ? 0.59 * pow(ra, 0.25) : 0.10 * cbrt(ra);
+    double nu = ra < 1e9 ? 0.59 * pow(ra, 0.25) : turb * 0.10 * cbrt(ra);
     return coeff * (nu > 1.0 ? nu : 1.0) * dt_w;
 }
 
@@ -104,7 +109,8 @@ void pu_rhs(double t, const double *y, const double *prm, double *dy)
     if (prm[OLEAK_C_RHO] > 0.0)
         g_out += prm[OLEAK_C_RHO] * p1 * sq_tn / sqrt(t1)
                  * pu_flow_phi(p_atm / p1, prm[OLEAK_B], LEAK_M_INDEX, r_lin);
-    double q = pu_heat_flow(prm[HEAT_MODE], prm[HEAT_A], prm[HEAT_RA], t_wall, p1, t1);
+    double q = pu_heat_flow(prm[HEAT_MODE], prm[HEAT_A], prm[HEAT_RA], t_wall, p1, t1,
+                            prm[HEAT_TURB]);
     /* The gas leaving (or, for g < 0, entering) is taken at the tank gas temperature.
      * Reverse flow through the component happens in these models only as the numerical
      * overshoot of a discharge that ends on g = 0 (the valve closes before p_atm, heat

@@ -56,13 +56,15 @@ T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN = 16, 17, 18, 19, 20
 # leaks: downstream laminar k [kg/(s Pa)]; orifice-law leaks C rho_n [kg/(s Pa)] and b [-],
 # upstream (always open) and downstream (opens with the valve, parallel to the component)
 LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B = 21, 22, 23, 24, 25
-N_PARAMETERS = 26
+# multiplier on the turbulent branch of the natural-convection correlation [-]
+HEAT_TURB = 26
+N_PARAMETERS = 27
 
 #: Subsonic index m of the orifice-law leaks [-] (LEAK_M_INDEX of kernel.c).
 LEAK_M_INDEX = 0.5
 
 #: Heat-law codes of the HEAT_MODE slot.
-HEAT_NONE, HEAT_NATURAL, HEAT_FIXED = 0.0, 1.0, 2.0
+HEAT_NONE, HEAT_NATURAL, HEAT_FIXED, HEAT_DENSITY = 0.0, 1.0, 2.0, 3.0
 
 #: Return codes of :func:`dopri5`.
 OK, TOO_MANY_STEPS, STEP_TOO_SMALL, NOT_FINITE = 0, 1, 2, 3
@@ -149,7 +151,7 @@ def _load() -> ctypes.CDLL:
     lib.pu_flow_phi.restype = dbl
     lib.pu_flow_phi.argtypes = [dbl] * 4
     lib.pu_heat_flow.restype = dbl
-    lib.pu_heat_flow.argtypes = [dbl] * 6
+    lib.pu_heat_flow.argtypes = [dbl] * 7
     lib.pu_opening.restype = dbl
     lib.pu_opening.argtypes = [dbl] * 4
     lib.pu_rhs.restype = None
@@ -177,15 +179,18 @@ def flow_phi(r: float, b: float, m: float, r_linear: float) -> float:
 
 
 def heat_flow(mode: float, coeff: float, ra_const: float, t_wall: float, p: float,
-              t_gas: float) -> float:
+              t_gas: float, turb: float = 1.0) -> float:
     """Wall heat flow into the gas Q [W] at pressure p [Pa] and gas temperature t_gas [K].
 
     mode :data:`HEAT_NATURAL`: Q = coeff Nu(Ra) (T_w - T), Nu = 0.59 Ra^0.25 (laminar) or
-    0.10 Ra^(1/3) (Ra >= 1e9), Nu >= 1, Ra = ra_const |T_w - T|/T (p/T)^2, coeff = A_w k/L
-    times the heat-transfer scale [W/K]; mode :data:`HEAT_FIXED`: Q = coeff (T_w - T),
-    coeff = hA [W/K]; :data:`HEAT_NONE`: 0. t_wall: wall temperature [K].
+    turb 0.10 Ra^(1/3) (Ra >= 1e9; turb [-] scales the turbulent branch alone), Nu >= 1,
+    Ra = ra_const |T_w - T|/T (p/T)^2, coeff = A_w k/L times the heat-transfer scale [W/K];
+    mode :data:`HEAT_FIXED`: Q = coeff (T_w - T), coeff = hA [W/K]; mode
+    :data:`HEAT_DENSITY`: Q = coeff (p/T)^n (T_w - T), n = ra_const [-],
+    coeff = hA_0 (T_0/p_0)^n (hA_0 [W/K] at the gas density of p_0 [Pa], T_0 [K]);
+    :data:`HEAT_NONE`: 0. t_wall: wall temperature [K].
     """
-    return float(_LIB.pu_heat_flow(mode, coeff, ra_const, t_wall, p, t_gas))
+    return float(_LIB.pu_heat_flow(mode, coeff, ra_const, t_wall, p, t_gas, turb))
 
 
 def opening(t: float, t_open: float, ramp: float, t_close: float) -> float:

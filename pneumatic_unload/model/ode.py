@@ -130,7 +130,8 @@ def kernel_parameters(cfg: RigConfig, t_open: float) -> FloatArray:
     if cfg.has("orifice_leak_downstream"):
         prm[kernel.OLEAK_DOWN_C_RHO] = cfg.orifice_leak_downstream_conductance * RHO_N
         prm[kernel.OLEAK_DOWN_B] = cfg.orifice_leak_downstream_critical_ratio
-    prm[kernel.HEAT_MODE], prm[kernel.HEAT_A], prm[kernel.HEAT_RA] = heat_parameters(cfg)
+    (prm[kernel.HEAT_MODE], prm[kernel.HEAT_A], prm[kernel.HEAT_RA],
+     prm[kernel.HEAT_TURB]) = heat_parameters(cfg)
     if cfg.has("pipe_volume"):
         prm[kernel.PIPE] = 1.0
         prm[kernel.PIPE_VOLUME] = cfg.pipe_volume

@@ -1,7 +1,8 @@
 """An independent tank-discharge model for validation: it imports nothing from the package.
 
 Ideal gas in a rigid tank, uniform state, wall heat transfer by Newton cooling with a constant
-hA (thermal time constant tau_h = m0 c_v / hA), the ISO 6358 flow law (choked below the
+hA (thermal time constant tau_h = m0 c_v / hA) or, with ``density_exponent`` n, an hA that
+follows the gas density, hA = hA_0 (rho/rho_0)^n, the ISO 6358 flow law (choked below the
 critical ratio b, the elliptic subsonic branch above, a linear end near r = 1), integrated
 with scipy's Radau at tight tolerance. Written apart from ``pneumatic_unload.model`` on
 purpose: a fit that recovers the parameters of the model it was written beside proves little.
@@ -20,8 +21,10 @@ RHO_REF, T_REF = 1.185, 293.15  # ISO 8778 reference density [kg/m^3] and temper
 
 def discharge(t: np.ndarray, *, volume: float, conductance: float, b: float, p10: float,
               t10: float, p_atm: float, tau_heat: float, t_open: float,
-              r_gas: float = 287.05, gamma: float = 1.4) -> np.ndarray:
-    """Tank pressure [Pa absolute] at instants t [s] (valve opens at t_open [s])."""
+              r_gas: float = 287.05, gamma: float = 1.4,
+              density_exponent: float = 0.0) -> np.ndarray:
+    """Tank pressure [Pa absolute] at instants t [s] (valve opens at t_open [s]; tau_heat
+    [s] at the initial density; density_exponent n [-]: hA ~ rho^n)."""
     cv = r_gas / (gamma - 1.0)
     m0 = p10 * volume / (r_gas * t10)
     h_a = m0 * cv / tau_heat  # [W/K]
@@ -44,7 +47,8 @@ def discharge(t: np.ndarray, *, volume: float, conductance: float, b: float, p10
         p1 = m * r_gas * temp / volume
         g = flow(p1, temp)
         h_out = cv * temp + r_gas * temp  # specific enthalpy leaving [J/kg]
-        return [-g, -g * h_out + h_a * (t10 - temp)]
+        h_now = h_a * (m / m0) ** density_exponent  # rho/rho_0 = m/m0 in a rigid tank
+        return [-g, -g * h_out + h_now * (t10 - temp)]
 
     y0 = [m0, m0 * cv * t10]
     out = np.full(t.size, p10)

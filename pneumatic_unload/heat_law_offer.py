@@ -1,0 +1,72 @@
+"""Which heat laws of the curve fit's family a record can carry: the laws with a second
+parameter (the density law's exponent, the natural law's turbulent branch) are offered to
+the information criterion only where the record determines that parameter; elsewhere they
+are not offered, with the reason (:func:`pneumatic_unload.fitting.fit_curve` reports it).
+
+SI units: s, Pa absolute, K.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.model import discharge
+from pneumatic_unload.model.heat import RA_TURBULENT, rayleigh
+
+if TYPE_CHECKING:
+    from pneumatic_unload.fitting import CurveFit
+
+FloatArray = NDArray[np.float64]
+
+#: The natural law with its turbulent branch fitted apart is offered only when the natural
+#: fit's record spends at least this share of its time [-] in each regime (Ra below and
+#: above :data:`~pneumatic_unload.model.heat.RA_TURBULENT`) ...
+TURBULENT_MIN_SHARE = 0.05
+#: ... and keeps it when that multiplier's log is determined within this 1-sigma [-].
+TURBULENT_MAX_LOG_SD = 0.2
+#: The density law (hA ~ rho^n) is offered only where the record determines the heat
+#: exchange (the constant-hA fit's tau_heat within this relative 1-sigma [-]) ...
+DENSITY_LAW_MIN_TAU_REL_SD = 0.2
+#: ... and its exponent n within this 1-sigma [-] (enough to tell a constant hA, n = 0,
+#: from convection's 1/2-2/3).
+DENSITY_LAW_MAX_EXPONENT_SD = 0.2
+
+
+def turbulent_law_problem(natural: CurveFit | None, settings: EstimatorSettings,
+                          t: FloatArray) -> str | None:
+    """Why the record cannot carry the natural law's turbulent branch apart (None: offer
+    it): the natural fit's model must spend :data:`TURBULENT_MIN_SHARE` of the record after
+    the opening in each regime (t: sample times [s])."""
+    if natural is None or not math.isfinite(natural.conductance):
+        return "no natural-convection fit to start from"
+    t0 = natural.t_start
+    tt = np.linspace(0.0, max(float(t[-1]) - t0, 1e-6), 400)
+    try:
+        cfg = natural.config(settings)
+        pp, tg = discharge(cfg, tt, 0.0)
+    except ValueError as exc:
+        return f"the natural fit's model could not be integrated ({exc})"
+    share = float(np.mean(rayleigh(cfg, pp, tg) >= RA_TURBULENT))
+    if min(share, 1.0 - share) < TURBULENT_MIN_SHARE:
+        return (f"the record stays in one regime of the correlation (turbulent share "
+                f"{100 * share:.0f} %)")
+    return None
+
+
+def density_law_problem(fixed: CurveFit | None) -> str | None:
+    """Why the record cannot carry the density law's exponent, from the constant-hA fit
+    (None: offer it): the heat exchange itself must be measured to
+    :data:`DENSITY_LAW_MIN_TAU_REL_SD` (an hA the record hardly sees has no measurable
+    dependence on density)."""
+    if fixed is None:
+        return "no constant-hA fit to start from"
+    rel = fixed.tau_heat_std / fixed.tau_heat if fixed.tau_heat > 0 else math.nan
+    if not (math.isfinite(rel) and rel <= DENSITY_LAW_MIN_TAU_REL_SD):
+        return (f"the record does not determine the heat exchange (tau_heat 1-sigma "
+                f"{100 * rel:.3g} % > {100 * DENSITY_LAW_MIN_TAU_REL_SD:g} %)")
+    return None

@@ -1,0 +1,62 @@
+"""A model that does not describe the record at its noise level says so (issue #11): a
+residual that is not white (Ljung-Box) or larger than the noise (normalised RMS) inflates
+sigma(C) from the record and is reported as "model inadequate: <reason>" in the status text
+(JSON, text output, the UnloadEstimate message), never silently."""
+
+import dataclasses
+import json
+
+import numpy as np
+
+from pneumatic_unload.budget import EXACT_INPUTS
+from pneumatic_unload.config import RigConfig
+from pneumatic_unload.estimation import analyze, merge_final
+from pneumatic_unload.estimation.types import estimate_fields
+from pneumatic_unload.model import simulate
+from pneumatic_unload.output import format_result, json_default, unload_json
+from pneumatic_unload.physics import orifice_conductance
+from pneumatic_unload.runs import settings_for
+
+
+def _rig(**kw) -> RigConfig:
+    rng = np.random.default_rng(3)
+    return RigConfig(volume=rng.uniform(1e-3, 20e-3),
+                     conductance=orifice_conductance(rng.uniform(1e-3, 3e-3)),
+                     initial_pressure=rng.uniform(4e5, 8e5), critical_ratio=rng.uniform(0.2, 0.5),
+                     noise_std=1000.0, seed=103, **kw)
+
+
+def _final(cfg: RigConfig):
+    """Analysed with the package's heat model only (natural convection, no leak)."""
+    st = dataclasses.replace(settings_for(cfg.replace(effects=("heat_transfer",))),
+                             **EXACT_INPUTS)
+    sim = simulate(cfg)
+    (r,) = merge_final(analyze(sim.t, sim.measured, st))
+    assert r.final
+    return r
+
+
+def test_a_clean_trace_is_not_called_inadequate():
+    r = _final(_rig(effects=("heat_transfer",)))
+    assert "model inadequate" not in r.status_text
+    assert r.extra["model_inadequate"] == ""
+    assert r.extra["curve_fit"]["whiteness_p"] > 1e-3
+    assert r.quality == 1.0
+
+
+def test_a_leak_the_model_lacks_is_reported_and_inflates_sigma():
+    """An upstream laminar leak (3e-10 kg/(s Pa): the plateau decays, the discharge ends
+    early) analysed without it: the residual is structured (Ljung-Box p ~ 1e-70), the
+    status says "model inadequate" with the reason, everywhere the result goes, and the
+    record's part of sigma(C) is inflated."""
+    r = _final(_rig(effects=("heat_transfer", "leak"), leak_coefficient=3e-10))
+    why = r.extra["model_inadequate"]
+    assert why.startswith("residual not white (Ljung-Box p = ")
+    assert f"model inadequate: {why}" in r.status_text
+    assert r.quality <= 0.7
+    assert r.extra["curve_fit"]["inflation"] > 1.1  # the covariance is scaled up
+    text = format_result(r)
+    assert "model inadequate: residual not white" in text
+    doc = json.loads(json.dumps(unload_json(r), default=json_default))
+    assert "model inadequate: residual not white" in doc["status_text"]
+    assert "model inadequate: residual not white" in estimate_fields(r)["status_text"]
