@@ -26,7 +26,9 @@ Functions (SI units: Pa absolute, K, m^3, s, kg/s, W):
 * :func:`rhs` - dy/dt of the discharge for a parameter vector
   (:func:`pneumatic_unload.model.ode.kernel_parameters` packs it);
 * :func:`dopri5` - the integrator over one smooth segment (stiff-switching), output on any
-  grid.
+  grid;
+* :func:`lag` - the sensor's exact first-order lag on an uneven grid (the quadrature
+  nodes of a fit), :func:`pneumatic_unload.model.sensor.first_order_lag`'s loop.
 """
 
 from __future__ import annotations
@@ -155,6 +157,8 @@ def _load() -> ctypes.CDLL:
     lib.pu_dopri5.restype = i32
     lib.pu_dopri5.argtypes = [i32, arr, dbl, dbl, i32, arr, arr, dbl, arr, dbl, i64, arr,
                               ctypes.POINTER(i32)]
+    lib.pu_lag.restype = None
+    lib.pu_lag.argtypes = [i32, arr, arr, dbl, dbl, dbl, dbl, i32, arr]
     return lib
 
 
@@ -252,3 +256,35 @@ def dopri5(y0: FloatArray, t0: float, t1: float, t_out: FloatArray, prm: FloatAr
                             float(hmax), int(max_steps), out.ctypes.data, ctypes.byref(done))
     return int(status), int(done.value)
 
+
+
+def lag(t: FloatArray, u: FloatArray, tau: float, state: tuple[float, float, float],
+        steady: bool) -> FloatArray:
+    """Exact first-order lag y' = (u - y)/tau of the piecewise-linear interpolant of u.
+
+    Parameters
+    ----------
+    t : ndarray
+        Increasing instants [s] (any spacing).
+    u : ndarray
+        Input at t [any unit].
+    tau : float
+        Time constant [s] (> 0).
+    state : tuple
+        (t, u, y) of the previous sample [s, unit, unit].
+    steady : bool
+        Start in steady state at the first sample (y = u there).
+
+    Returns
+    -------
+    ndarray
+        The lagged samples [unit of u].
+    """
+    t = np.ascontiguousarray(t, dtype=float)
+    u = np.ascontiguousarray(u, dtype=float)
+    if t.shape != u.shape or t.ndim != 1:
+        raise ValueError("lag: t and u must be 1-D arrays of equal length")
+    y = np.empty_like(u)
+    _LIB.pu_lag(u.size, t.ctypes.data, u.ctypes.data, float(tau), float(state[0]),
+                float(state[1]), float(state[2]), int(bool(steady)), y.ctypes.data)
+    return y

@@ -15,6 +15,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+import pneumatic_unload.model.kernel as kernel
 from pneumatic_unload.config import RigConfig
 
 FloatArray = NDArray[np.float64]
@@ -73,18 +74,8 @@ def first_order_lag(t: FloatArray, u: FloatArray, tau: float,
         from scipy.signal import lfilter  # local: scipy.signal costs ~0.8 s to import
 
         y, _ = lfilter([b0, b1], [1.0, -a], u, zi=zi)
-    else:
-        y = np.empty_like(u)
-        yp, up, tp = y_prev, u_prev, t_prev
-        for i in range(u.size):
-            hi = float(t[i]) - tp
-            if hi <= 0:
-                yp = float(u[i]) if i == 0 and first_h == 0.0 else yp
-            else:
-                a, b0, b1 = _lag_coefficients(hi, tau)
-                yp = a * yp + b0 * float(u[i]) + b1 * up
-            y[i] = yp
-            up, tp = float(u[i]), float(t[i])
+    else:  # uneven grid (a fit's quadrature nodes): the compiled loop
+        y = kernel.lag(t, u, tau, (t_prev, u_prev, y_prev), first_h == 0.0)
     return y, (float(t[-1]), float(u[-1]), float(y[-1]))
 
 
