@@ -103,8 +103,7 @@ class Problem:
 
     def fit(self, model: ParametricModel, starts: list[Values], *, screen_nfev: int = 12,
             max_nfev: int = 200) -> Fit:
-        """Multi-start fit through the engine: screen the starts in order until two agree
-        (:func:`~pneumatic_unload.fit.lsq.minimize`), fit and polish the best.
+        """Multi-start fit through the engine: screen every start, fit and polish the best.
 
         Parameters
         ----------
@@ -117,7 +116,7 @@ class Problem:
         """
         first, *rest = starts
         res = self.trace.fit(model, start=first, starts=rest, screen_nfev=screen_nfev,
-                             max_nfev=max_nfev, agree=True)
+                             max_nfev=max_nfev)
         return Fit(model=model, result=res)
 
     def residuals(self, model: ParametricModel, values: Values) -> FloatArray:

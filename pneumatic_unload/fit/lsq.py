@@ -34,9 +34,6 @@ DIFF_STEP = 1e-3
 POLISH_CHI2_TOL = 1e-3
 #: Residual value returned for parameters where the model cannot be evaluated [-].
 BAD_RESIDUAL = 1e6
-#: Two screened starts that both converged to chi^2 values this close (in residual
-#: variances) found the same minimum [-]: ten times the search's own stopping tolerance.
-AGREE_CHI2_TOL = 10.0 * POLISH_CHI2_TOL
 
 
 @dataclass
@@ -233,8 +230,7 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
 
 def minimize(residual: Residual, params: Parameters, *,
              starts: list[dict[str, float]] | None = None, screen_nfev: int = 12,
-             max_nfev: int = 200, n_data: int | None = None, agree: bool = False
-             ) -> FitResult:
+             max_nfev: int = 200, n_data: int | None = None) -> FitResult:
     """Bounded non-linear least squares over named parameters.
 
     Parameters
@@ -253,11 +249,6 @@ def minimize(residual: Residual, params: Parameters, *,
         many iterations) [-]; an iteration costs one evaluation per free parameter plus one.
     n_data : int, optional
         Number of data for the BIC [-] (default: the number of residuals).
-    agree : bool
-        Stop screening (in the order given) once two starts have converged to the same
-        chi^2 (within :data:`AGREE_CHI2_TOL` residual variances) and no start screened so
-        far is lower: the further starts are not screened. Deterministic: the same starts
-        in the same order give the same result.
 
     Returns
     -------
@@ -279,18 +270,12 @@ def minimize(residual: Residual, params: Parameters, *,
                          nfev=1, n_data=n_data or f0.size)
     if len(pts) > 1:
         scored = []
-        converged: list[float] = []
         for x0 in pts:
             f0 = fun(x0)
-            xs, fs, _j, ok, n = levenberg_marquardt(fun, x0, f0, lo, hi,
-                                                    max_iter=max(1, screen_nfev))
+            xs, fs, _j, _ok, n = levenberg_marquardt(fun, x0, f0, lo, hi,
+                                                     max_iter=max(1, screen_nfev))
             nfev += n + 1
-            c = float(fs @ fs)
-            scored.append((c, xs, fs))
-            if agree and ok:
-                if _agreed(c, converged, min(s[0] for s in scored), fs.size - xs.size):
-                    break
-                converged.append(c)
+            scored.append((float(fs @ fs), xs, fs))
         scored.sort(key=lambda c: c[0])
         _, x0, f0 = scored[0]
     else:
@@ -303,10 +288,3 @@ def minimize(residual: Residual, params: Parameters, *,
     return FitResult(params=params, values=params.to_values(x), x=x, fun=f, jac=jac,
                      chi2=float(f @ f), success=bool(ok), nfev=nfev,
                      n_data=n_data if n_data is not None else f.size)
-
-
-def _agreed(c: float, converged: list[float], lowest: float, dof: int) -> bool:
-    """True when chi^2 ``c`` of a converged start equals that of an earlier converged one
-    (within :data:`AGREE_CHI2_TOL` residual variances) and is the lowest screened [-]."""
-    tol = AGREE_CHI2_TOL * max(c / max(dof, 1), 1e-300)
-    return c <= lowest + tol and any(abs(c - q) <= tol for q in converged)

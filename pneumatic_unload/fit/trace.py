@@ -93,7 +93,7 @@ class Trace:
 
     def fit(self, model: FittableModel, *, starts: list[Values] | None = None,
             fixed: Values | None = None, start: Values | None = None,
-            screen_nfev: int = 12, max_nfev: int = 200, agree: bool = False) -> FitResult:
+            screen_nfev: int = 12, max_nfev: int = 200) -> FitResult:
         """Fit ``model`` to the trace.
 
         Parameters
@@ -108,8 +108,6 @@ class Trace:
             Replaces the parameters' starting values [units].
         screen_nfev, max_nfev : int
             Evaluation budgets [-].
-        agree : bool
-            Stop screening the starts once two agree (see :func:`minimize`).
         """
         names = set(model.parameters.names)
         params = model.parameters.replace(fixed=fixed or {},
@@ -117,5 +115,4 @@ class Trace:
                                              if k in names and k not in (fixed or {})})
         starts = [{k: v for k, v in s.items() if k in names} for s in (starts or [])]
         return minimize(self.residual(model), params, starts=starts,
-                        screen_nfev=screen_nfev, max_nfev=max_nfev, n_data=self.n,
-                        agree=agree)
+                        screen_nfev=screen_nfev, max_nfev=max_nfev, n_data=self.n)
