@@ -225,7 +225,8 @@ def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTO
         last = s == len(bounds) - 2
         j = t.size if last else int(np.searchsorted(t, b, side="left"))
         grid = np.concatenate((t[k:j], [] if last else [b]))
-        kernel.rhs(a, y, prm, dy)
+        if b <= t_open:  # the rest test below is for the pre-step segment only
+            kernel.rhs(a, y, prm, dy)
         if b <= t_open and not dy.any():
             # valve still shut and the gas at rest (no leak, at the wall temperature):
             # the state stays where it is

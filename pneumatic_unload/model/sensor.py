@@ -91,7 +91,22 @@ def sensor_response(t: FloatArray, p: FloatArray, cfg: RigConfig) -> FloatArray:
     cfg : RigConfig
         Sensor effects switched on in ``cfg.effects``.
     """
-    return SensorChain(0).deterministic(t, p, cfg)
+    return _deterministic(t, p, cfg, None)[0]
+
+
+def _deterministic(t: FloatArray, p: FloatArray, cfg: RigConfig,
+                   lag: tuple[float, float, float] | None
+                   ) -> tuple[FloatArray, tuple[float, float, float] | None]:
+    """Lag (from state ``lag``), gain and offset of true pressures p [Pa] at t [s]; returns
+    (indicated pressure [Pa], lag state after the last sample)."""
+    y = np.asarray(p, dtype=float)
+    if cfg.has("sensor_lag") and cfg.sensor_lag > 0 and y.size > 0:
+        y, lag = first_order_lag(t, y, cfg.sensor_lag, lag)
+    if cfg.has("sensor_gain"):
+        y = y * (1.0 + cfg.sensor_gain)
+    if cfg.has("sensor_offset"):
+        y = y + cfg.sensor_offset
+    return np.array(y, dtype=float), lag
 
 
 def digitise(y: FloatArray, cfg: RigConfig) -> FloatArray:
@@ -127,14 +142,8 @@ class SensorChain:
         cfg : RigConfig
             Sensor effects.
         """
-        y = np.asarray(p, dtype=float)
-        if cfg.has("sensor_lag") and cfg.sensor_lag > 0 and y.size > 0:
-            y, self._lag = first_order_lag(t, y, cfg.sensor_lag, self._lag)
-        if cfg.has("sensor_gain"):
-            y = y * (1.0 + cfg.sensor_gain)
-        if cfg.has("sensor_offset"):
-            y = y + cfg.sensor_offset
-        return np.array(y, dtype=float)
+        y, self._lag = _deterministic(t, p, cfg, self._lag)
+        return y
 
     def noise(self, n: int, cfg: RigConfig) -> FloatArray:
         """White plus stationary AR(1) noise for the next n samples [Pa]."""
