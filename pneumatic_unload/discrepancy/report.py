@@ -296,7 +296,8 @@ def write_report(res: DiscrepancyResult, out: str | Path, *, title: str = "") ->
 
 
 def write_law_report(law: GeometryLaw, out: str | Path, names: list[str]) -> Path:
-    """Markdown section and plot of the shared geometry law of several runs.
+    """Markdown section and plot of the shared geometry law of several runs (and the same
+    as a self-contained ``geometry_law.html``).
 
     Parameters
     ----------
@@ -338,5 +339,8 @@ def write_law_report(law: GeometryLaw, out: str | Path, names: list[str]) -> Pat
         plt.close(fig)
         lines += ["", "![geometry law](geometry_law.png)"]
     path = out / "geometry_law.md"
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    text = "\n".join(lines) + "\n"
+    path.write_text(text, encoding="utf-8")
+    (out / "geometry_law.html").write_text(
+        markdown_to_html(text, out, "Shared geometry law from several runs"), encoding="utf-8")
     return path
