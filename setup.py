@@ -16,6 +16,8 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        # a Foxglove Studio layout: pressure, p*, the crossing and the estimates
+        (f"share/{PACKAGE}/foxglove", sorted(glob("foxglove/*.json"))),
     ],
     install_requires=["setuptools", "numpy", "scipy", "rosbags", "mcap", "PyYAML"],
     extras_require={"test": ["pytest"]},

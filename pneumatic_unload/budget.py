@@ -39,6 +39,8 @@ from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.inversion import invert_crossing
 from pneumatic_unload.physics import conductance_eq39, conductance_isentropic_inversion
 
+#: Name of the wall temperature's line in a budget.
+WALL_TERM = "wall temperature"
 #: Coverage factor of the expanded uncertainty [-] (about 95 % for a normal distribution).
 COVERAGE_FACTOR = 2.0
 #: Default standard uncertainty of V, relative [-] (volume by water weighing or drawing).
@@ -134,7 +136,10 @@ class Budget:
                       "type_a_std": self.part_std("A"), "type_b_std": self.part_std("B"),
                       "model_form_std": self.part_std("model"),
                       "largest": self.largest.name,
-                      "terms": [clean(dataclasses.asdict(t)) for t in self.terms]})
+                      "terms": [clean({"name": t.name, "kind": t.kind, "value": t.value,
+                                       "input_std": t.input_std, "unit": t.unit,
+                                       "std": t.std, "note": t.note})
+                                for t in self.terms]})
 
 
 def with_terms(d: dict[str, Any], terms: list[BudgetTerm]) -> dict[str, Any]:
@@ -256,9 +261,19 @@ def input_terms(settings: EstimatorSettings, c: float, *, tau: float, p10: float
     if math.isfinite(wall_std):
         wall = s.wall
         terms.append(BudgetTerm(
-            "wall temperature", "B", wall, u["temperature"], "K", wall_std,
+            WALL_TERM, "B", wall, u["temperature"], "K", wall_std,
             "given" if s.wall_temperature is not None else "assumed = T10 (not given)"))
     return terms
+
+
+def term_std(budget: dict[str, Any] | None, name: str) -> float:
+    """The standard uncertainty [m^3/(s Pa)] of the line ``name`` of a budget given as
+    :meth:`Budget.to_dict`; NaN when there is no budget or no such line."""
+    for t in (budget or {}).get("terms", ()):
+        if t["name"] == name:
+            v = t["std"]
+            return float(v) if v is not None else math.nan
+    return math.nan
 
 
 def wall_sensitivity(settings: EstimatorSettings, tau: float, *, p10: float, p_atm: float,

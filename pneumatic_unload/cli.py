@@ -15,10 +15,8 @@ status 1 and says why on stderr (and in ``--json``).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import difflib
 import json
-import math
 import re
 import sys
 from collections.abc import Callable, Sequence
@@ -27,17 +25,22 @@ from typing import Any
 
 import numpy as np
 
+from pneumatic_unload import batch_cli
 from pneumatic_unload.config import TANK_FIELDS, ConfigError, RigConfig, TankSpec, adapters
 from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySettings
 from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
-    merge_final,
 )
-from pneumatic_unload.estimation.chunked import ChunkedAnalysis
 from pneumatic_unload.io.csvheader import TEMPERATURE_UNITS, TIME_UNITS
 from pneumatic_unload.output import format_inputs, format_result, json_default, unload_json
-from pneumatic_unload.records import Record, RecordError, analyze_record, open_record
+from pneumatic_unload.records import (
+    Record,
+    RecordError,
+    analyze_input,
+    open_record,
+    settings_for,
+)
 
 PRESSURE_UNITS = {"Pa": 1.0, "kPa": 1e3, "bar": 1e5, "MPa": 1e6, "psi": 6894.757293168361}
 
@@ -103,24 +106,9 @@ def settings_from(args: argparse.Namespace, cfg: dict[str, Any]) -> EstimatorSet
     given = adapters.given_options(args, EstimatorSettings)
     if getattr(args, "atmosphere_auto", False):
         given["atmosphere"] = None
-    live = cfg.get("estimator_settings")
     try:
-        if live is not None:
-            try:
-                base = EstimatorSettings(**adapters.from_mapping(EstimatorSettings, live,
-                                                                 strict=False))
-            except (TypeError, ConfigError, EstimationError) as exc:
-                raise CliError(f"the estimator settings stored in the bag are invalid: {exc}"
-                               ) from exc
-            return dataclasses.replace(base, **given)
-        kw = TankSpec.fields_of(cfg)  # the bag's rig: tank and gas
-        if "initial_temperature" not in kw and "measured_initial_temperature" in cfg:
-            kw["initial_temperature"] = cfg["measured_initial_temperature"]
-        kw.update(given)
-        if "volume" not in kw:
-            raise CliError("--volume M3 is required (the input carries no rig configuration)")
-        return EstimatorSettings(**kw)
-    except (EstimationError, ConfigError) as exc:
+        return settings_for(cfg, given)
+    except (RecordError, EstimationError, ConfigError) as exc:
         raise CliError(str(exc)) from exc
 
 
@@ -179,13 +167,6 @@ def open_input(args: argparse.Namespace) -> Record:
     return rec
 
 
-def _run(rec: Record, settings: EstimatorSettings) -> ChunkedAnalysis:
-    try:
-        return analyze_record(rec, settings)
-    except RecordError as exc:
-        raise CliError(str(exc)) from exc
-
-
 def cmd_analyze(args: argparse.Namespace) -> int:
     """Run the unloading-time analysis and print the estimates (exit status 1 when no unload
     was found, with the reason, or when the readings look like gauge pressures). A CSV log
@@ -197,30 +178,15 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         if not folder.is_dir():
             raise CliError(f"--plot {args.plot}: folder {folder} does not exist")
     rec = open_input(args)
-    settings = settings_from(args, rec.cfg)
-    run = _run(rec, settings)
-    unloads = merge_final(run.published)
-    t10_column = False
-    if (rec.has_temperature and args.initial_temperature is None and unloads
-            and math.isfinite(unloads[0].t_start)):
-        # T10 from the temperature column: the gas temperature at the start of the unload
-        # (the first row may be logged long before, during the charge)
-        try:
-            t10 = rec.temperature_at(unloads[0].t_start)
-        except RecordError as exc:
-            raise CliError(str(exc)) from exc
-        t10_column = True
-        if abs(t10 - settings.initial_temperature) > 1e-3:
-            settings = dataclasses.replace(settings, initial_temperature=t10)
-            run = _run(rec, settings)
-            unloads = merge_final(run.published)
-    published = run.published
-    why = None if unloads else run.explain_no_unload()
-    problem = run.gauge_suspicion()
-    if problem is not None:
-        # C from gauge readings taken as absolute is wrong: no unload may say "ok"
-        unloads = [dataclasses.replace(r, status="bad_data", status_text=problem)
-                   for r in unloads]
+    given = adapters.given_options(args, EstimatorSettings)
+    if getattr(args, "atmosphere_auto", False):
+        given["atmosphere"] = None
+    try:
+        ana = analyze_input(rec, given)
+    except (RecordError, EstimationError, ConfigError) as exc:
+        raise CliError(str(exc)) from exc
+    run, settings, unloads, t10_column = ana.run, ana.settings, ana.unloads, ana.t10_column
+    published, why, problem = run.published, ana.no_unload, ana.input_problem
     inputs = input_sources(args, rec.cfg, settings, t10_column)
     if args.json:
         out = {"source": str(args.path), "samples": run.samples,
@@ -484,6 +450,7 @@ def build_parser() -> argparse.ArgumentParser:
     rc.set_defaults(func=cmd_recover)
 
     add_discrepancy_parser(sub)
+    batch_cli.add_parsers(sub, add_input_options)
     return ap
 
 
@@ -500,7 +467,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args))
-    except CliError as exc:
+    except (CliError, batch_cli.BatchCliError) as exc:
         print(f"pneumatic-unload: error: {exc}", file=sys.stderr)
         return 2
 

@@ -262,38 +262,56 @@ class InversionTable:
     rel_b : float
         Largest relative change of the crossing time for b one prior sigma either way [-]
         (0 when the flow stays choked to p* for every plausible b).
+    rel_wall : float
+        Relative change of the crossing time per the wall temperature moved by its
+        uncertainty (half the change from -u(T) to +u(T), ``temperature_uncertainty``) at
+        the middle grid point [-]; NaN when adiabatic (no heat law, no wall term).
     """
 
     log_c: FloatArray
     log_t: FloatArray
     rel_heat: FloatArray
     rel_b: float
+    rel_wall: float = math.nan
 
     def covers(self, tau: float) -> bool:
         """True when tau [s] lies inside the tabulated range."""
         return bool(math.isfinite(tau) and tau > 0
                     and self.log_t[-1] <= math.log(tau) <= self.log_t[0])
 
-    def invert(self, tau: float, tau_std: float) -> tuple[float, float]:
-        """C and its 1-sigma [m^3/(s Pa)] for a measured tau_exp and its 1-sigma [s]."""
+    def _interpolate(self, tau: float) -> tuple[float, float]:
+        """log C and d log C / d log t at the crossing time tau [s] (Lagrange cubic)."""
         y = math.log(tau)
         k = int(np.searchsorted(-self.log_t, -y))
         j = min(max(k - 2, 0), self.log_t.size - 4)
-        ys, xs = self.log_t[j:j + 4], self.log_c[j:j + 4]
+        ys = self.log_t[j:j + 4].tolist()
+        xs = self.log_c[j:j + 4].tolist()
         x, dxdy = 0.0, 0.0
         for a in range(4):  # Lagrange cubic x(y) and its derivative
             others = [ys[b] for b in range(4) if b != a]
-            den = float(np.prod([ys[a] - o for o in others]))
-            num = float(np.prod([y - o for o in others]))
-            dnum = sum(float(np.prod([y - o for o in others if o is not skip]))
-                       for skip in others)
-            x += xs[a] * num / den
-            dxdy += xs[a] * dnum / den
+            den = (ys[a] - others[0]) * (ys[a] - others[1]) * (ys[a] - others[2])
+            d0, d1, d2 = y - others[0], y - others[1], y - others[2]
+            x += xs[a] * (d0 * d1 * d2) / den
+            dxdy += xs[a] * (d1 * d2 + d0 * d2 + d0 * d1) / den
+        return x, dxdy
+
+    def invert(self, tau: float, tau_std: float) -> tuple[float, float]:
+        """C and its 1-sigma [m^3/(s Pa)] for a measured tau_exp and its 1-sigma [s]."""
+        x, dxdy = self._interpolate(tau)
         c = math.exp(x)
         ends = self.log_c[[0, self.log_c.size // 2, -1]]
         rel_heat = float(np.interp(x, ends, self.rel_heat))
         var = (c * dxdy * tau_std / tau) ** 2 + (c * self.rel_b) ** 2 + (c * rel_heat) ** 2
         return c, math.sqrt(var)
+
+    def wall_std(self, tau: float) -> float:
+        """C's standard uncertainty from the wall temperature [m^3/(s Pa)] at the crossing
+        time tau [s]: the crossing time's relative change (:attr:`rel_wall`) through the
+        slope of log C in log t; NaN when adiabatic."""
+        if not math.isfinite(self.rel_wall):
+            return math.nan
+        x, dxdy = self._interpolate(tau)
+        return math.exp(x) * abs(dxdy) * self.rel_wall
 
 
 def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_star: float,
@@ -349,5 +367,18 @@ def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_
                 tm = model_crossing_time(cfg, p_star, t_mid, rtol=INVERSION_ODE_RTOL)
                 if math.isfinite(tm):
                     rel_b = max(rel_b, abs(tm / t_mid - 1.0))
+    rel_wall = math.nan
+    if settings.heat_model == "natural":
+        # the wall temperature's term of the budget, tabulated here so that the crossing
+        # (and the final fit's budget) need no model run for it
+        u = settings.temperature_uncertainty
+        tw = []
+        for sign in (1.0, -1.0):
+            moved = dataclasses.replace(settings, wall_temperature=settings.wall + sign * u)
+            cfg = rig_from_settings(moved, conductance=math.exp(log_c[TABLE_POINTS // 2]),
+                                    p10=p10, p_atm=p_atm)
+            tw.append(model_crossing_time(cfg, p_star, t_mid, rtol=INVERSION_ODE_RTOL))
+        if all(math.isfinite(x) for x in tw):
+            rel_wall = abs(tw[0] - tw[1]) / (2.0 * t_mid)
     return InversionTable(log_c=np.asarray(log_c), log_t=log_t, rel_heat=rel_heat,
-                          rel_b=rel_b)
+                          rel_b=rel_b, rel_wall=rel_wall)

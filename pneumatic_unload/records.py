@@ -10,6 +10,8 @@ whole); :func:`analyze_record` runs the estimator over them
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,7 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from pneumatic_unload.config import ConfigError, TankSpec, adapters
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.estimation.batch import merge_final
 from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
 from pneumatic_unload.estimation.types import FloatArray
 from pneumatic_unload.io.csvlog import CHUNK_BYTES, CsvError, CsvStream
@@ -148,6 +152,38 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
     return Record(path=p, cfg=cfg, arrays=(t, np.asarray(series[1], float)))
 
 
+def settings_for(cfg: dict[str, Any], given: dict[str, Any]) -> EstimatorSettings:
+    """Estimator settings of a record: the values ``given`` first [SI], then the live
+    estimator's settings recorded in a bag (so that the analysis reproduces what it
+    published), then the bag's rig configuration (tank and gas; a CSV's temperature column
+    for T10), then the defaults of :class:`~pneumatic_unload.config.estimator.
+    EstimatorSettings`.
+
+    Raises
+    ------
+    RecordError
+        The settings stored in a bag are invalid, or the volume is neither given nor stored.
+    EstimationError, ConfigError
+        A value out of range.
+    """
+    live = cfg.get("estimator_settings")
+    if live is not None:
+        try:
+            base = EstimatorSettings(**adapters.from_mapping(EstimatorSettings, live,
+                                                             strict=False))
+        except (TypeError, ConfigError, EstimationError) as exc:
+            raise RecordError(f"the estimator settings stored in the bag are invalid: {exc}"
+                              ) from exc
+        return dataclasses.replace(base, **given)
+    kw = TankSpec.fields_of(cfg)  # the bag's rig: tank and gas
+    if "initial_temperature" not in kw and "measured_initial_temperature" in cfg:
+        kw["initial_temperature"] = cfg["measured_initial_temperature"]
+    kw.update(given)
+    if "volume" not in kw:
+        raise RecordError("--volume M3 is required (the input carries no rig configuration)")
+    return EstimatorSettings(**kw)
+
+
 def analyze_record(record: Record, settings: EstimatorSettings) -> ChunkedAnalysis:
     """The estimator over a record, chunk by chunk (see
     :func:`~pneumatic_unload.estimation.chunked.analyze_chunks`).
@@ -161,3 +197,72 @@ def analyze_record(record: Record, settings: EstimatorSettings) -> ChunkedAnalys
         return analyze_chunks(record.chunks(), settings)
     except EstimationError as exc:
         raise RecordError(f"{record.path}: {exc}") from exc
+
+
+@dataclass
+class InputAnalysis:
+    """The analysis of one input, as ``pneumatic-unload analyze`` and a batch report it.
+
+    Attributes
+    ----------
+    record : Record
+        The input.
+    settings : EstimatorSettings
+        The settings used (T10 from a temperature column at the unload's start when the
+        input has one and T10 was not given).
+    run : ChunkedAnalysis
+        The estimator's run (every published result, the overview, diagnostics).
+    unloads : list of UnloadResult
+        One result per unload (the final one when there is one); all 'bad_data' when the
+        readings look like gauge pressures taken as absolute.
+    t10_column : bool
+        T10 was read from the input's temperature column.
+    no_unload : str or None
+        Why no unload was found (None when one was).
+    input_problem : str or None
+        Why the readings cannot be absolute pressures (None when they can).
+    """
+
+    record: Record
+    settings: EstimatorSettings
+    run: ChunkedAnalysis
+    unloads: list[Any]
+    t10_column: bool
+    no_unload: str | None
+    input_problem: str | None
+
+
+def analyze_input(record: Record, given: dict[str, Any]) -> InputAnalysis:
+    """Analyse an opened input with the settings ``given`` [SI] over what it stores (see
+    :func:`settings_for`): the estimator over its chunks, one result per unload, T10 from
+    a temperature column at the first unload's start (when not given: the input is then
+    analysed again with it), and the gauge-pressure check.
+
+    Raises
+    ------
+    RecordError
+        Unreadable rows, invalid stored settings, no volume.
+    EstimationError, ConfigError
+        A value out of range.
+    """
+    settings = settings_for(record.cfg, given)
+    run = analyze_record(record, settings)
+    unloads = merge_final(run.published)
+    t10_column = False
+    if (record.has_temperature and "initial_temperature" not in given and unloads
+            and math.isfinite(unloads[0].t_start)):
+        # T10 from the temperature column: the gas temperature at the start of the unload
+        # (the first row may be logged long before, during the charge)
+        t10 = record.temperature_at(unloads[0].t_start)
+        t10_column = True
+        if abs(t10 - settings.initial_temperature) > 1e-3:
+            settings = dataclasses.replace(settings, initial_temperature=t10)
+            run = analyze_record(record, settings)
+            unloads = merge_final(run.published)
+    why = None if unloads else run.explain_no_unload()
+    problem = run.gauge_suspicion()
+    if problem is not None:
+        # C from gauge readings taken as absolute is wrong: no unload may say "ok"
+        unloads = [dataclasses.replace(r, status="bad_data", status_text=problem)
+                   for r in unloads]
+    return InputAnalysis(record, settings, run, unloads, t10_column, why, problem)

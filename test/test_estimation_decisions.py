@@ -210,3 +210,30 @@ def test_each_decision_gives_the_same_answer_for_one_index_and_for_many(seed):
     buf, rng = _buffer(seed)
     for _ in range(4):
         _check_one_against_many(buf, rng)
+
+
+def test_sample_buffer_grows_while_a_view_of_it_is_alive():
+    """A view held elsewhere (a sampling profiler's frame, as on a Dask worker) must not
+    stop the buffer from growing (it raised BufferError), and the sums stay the same."""
+    from pneumatic_unload.estimation.buffer import SampleBuffer
+
+    rng = np.random.default_rng(0)
+    t, p = np.arange(300) * 1e-3, 7e5 + rng.normal(0, 1e3, 300)
+    ref, buf = SampleBuffer(), SampleBuffer()
+    for k in range(100):
+        ref.append(float(t[k]), float(p[k]))
+    ref.extend(t[100:200], p[100:200])
+    for k in range(200, 300):
+        ref.append(float(t[k]), float(p[k]))
+    held = []
+    for k in range(100):
+        held.append(buf.views())  # views of every array, kept alive
+        held.append(buf.sums())
+        buf.append(float(t[k]), float(p[k]))
+    held.append(buf.views())
+    buf.extend(t[100:200], p[100:200])
+    for k in range(200, 300):
+        held.append(buf.sums())
+        buf.append(float(t[k]), float(p[k]))
+    for name in ("t", "p", "cs", "cq"):
+        assert getattr(buf, name).tobytes() == getattr(ref, name).tobytes(), name

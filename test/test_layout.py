@@ -308,6 +308,7 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
     for yaml_name in ("simulator.yaml", "estimator.yaml", "recorder.yaml", "replay.yaml"):
         assert (pkg_prefix / "share" / PKG / "config" / yaml_name).is_file()
     assert (msgs_prefix / "share" / MSGS_PKG / "msg" / "UnloadEstimate.msg").is_file()
+    assert (pkg_prefix / "share" / PKG / "foxglove" / "pneumatic_unload.json").is_file()
 
 
 # ------------------------------------------------------------- layers, cycles and sizes
@@ -331,7 +332,9 @@ LAYERS: dict[str, int] = {
     "plotting": 6,
     "records": 6,  # input records of the offline analysis: CSV in chunks, bags
     "output": 6,  # text and JSON output of the analysis (results, inputs, budget)
+    "testline": 6,  # batch on Dask, the results database, part specifications
     "cli": 7,
+    "batch_cli": 7,  # the test-line commands of the CLI (batch, results)
     "demo": 7,
     "nodes": 8,
 }

@@ -139,8 +139,14 @@ def test_measure_action(tmp_path: Path, ros_node: Any) -> None:
     from rclpy.action import ActionClient
 
     node, ex = ros_node
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(f"part_types:\n  g:\n    match: '^V-'\n    conductance: "
+                    f"[{0.95 * C_TRUE}, {1.05 * C_TRUE}]\n")
+    db = tmp_path / "results.sqlite"
     sim = NodeProcess("simulator", {**RIG, "duration": 3.0}, tmp_path)
-    est = NodeProcess("estimator", {"volume": RIG["volume"], "curve_fit": False}, tmp_path)
+    est = NodeProcess("estimator", {"volume": RIG["volume"], "curve_fit": False,
+                                    "results_db": str(db), "spec_file": str(spec),
+                                    "part_id": "bench"}, tmp_path)
     client = ActionClient(node, Measure, "/estimator/measure")
 
     def run_goal(goal: Any, timeout: float) -> tuple[Any, list[Any]]:
@@ -157,9 +163,11 @@ def test_measure_action(tmp_path: Path, ros_node: Any) -> None:
     try:
         assert client.wait_for_server(timeout_sec=15.0)
         time.sleep(1.5)  # a pre-step plateau for the estimator
-        result, feedback = run_goal(Measure.Goal(timeout=20.0, trigger_valve=True), 25.0)
+        result, feedback = run_goal(Measure.Goal(timeout=20.0, trigger_valve=True,
+                                                 part_id="V-17"), 25.0)
         assert result.success, result.message
         assert result.estimate.conductance_model == pytest.approx(C_TRUE, rel=0.05)
+        assert (result.verdict, result.verdict_reason) == ("pass", "within specification")
         assert feedback and {f.state for f in feedback} & {"unloading"}
         assert all(0 < f.pressure < 1.2e6 for f in feedback if math.isfinite(f.pressure))
         result, _ = run_goal(Measure.Goal(timeout=0.5, trigger_valve=False), 10.0)
@@ -179,9 +187,19 @@ def test_measure_action(tmp_path: Path, ros_node: Any) -> None:
         result, _ = run_goal(Measure.Goal(timeout=20.0, trigger_valve=True), 25.0)
         assert not result.success and result.message.startswith("aborted: valve closed")
         assert result.estimate.status == 2  # STATUS_ABORTED
+        assert result.verdict == ""  # no part type for the node's part_id
     finally:
         codes = [p.stop() for p in (sim, est)]
     assert codes == [0, 0]
+    # each unload's estimate in the results database, under the goal's or the node's part
+    from pneumatic_unload.testline import open_db, unload_rows
+
+    con = open_db(db)
+    rows = unload_rows(con)
+    con.close()
+    assert [(r["part_id"], r["verdict"], r["writer"]) for r in rows] == [
+        ("V-17", "pass", "estimator"), ("bench", None, "estimator")]
+    assert rows[0]["status"] == "ok" and rows[1]["status"] in ("aborted", "aborted_sse")
 
 
 def _wait_charged(node: Any, ex: Any, timeout: float) -> bool:

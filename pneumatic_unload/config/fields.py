@@ -12,8 +12,8 @@ numbers).
 
 from __future__ import annotations
 
-import copy
 import dataclasses
+import functools
 import math
 from dataclasses import field
 from typing import Any
@@ -102,6 +102,9 @@ def check_value(f: dataclasses.Field[Any], v: Any) -> Any:
         return None
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ConfigError(f"{f.name} must be a number, got {v!r}")
+    if type(v) is float and md["min"] <= v <= md["max"] and math.isfinite(v) \
+            and kind != "integer":
+        return v  # the common case (a fit's hot loop): finite and in range
     unit = f" {md['unit']}" if md.get("unit") and md["unit"] != "-" else ""
     if isinstance(v, int) and not -1e300 < v < 1e300:  # would overflow a float
         raise ConfigError(f"{f.name} (an integer of {v.bit_length()} bits){unit} is outside "
@@ -132,6 +135,12 @@ def validate(obj: Any) -> None:
             object.__setattr__(obj, f.name, nv)
 
 
+@functools.cache
+def _fields_by_name(cls: type) -> dict[str, dataclasses.Field[Any]]:
+    """The dataclass fields of ``cls`` by name (computed once per class)."""
+    return {f.name: f for f in dataclasses.fields(cls)}
+
+
 def with_changes(obj: Any, changes: dict[str, Any]) -> Any:
     """A copy of a validated frozen dataclass with ``changes``, checking only those fields.
 
@@ -146,8 +155,9 @@ def with_changes(obj: Any, changes: dict[str, Any]) -> Any:
     ConfigError
         A changed value out of range, of the wrong type, or an unknown field.
     """
-    fields = {f.name: f for f in dataclasses.fields(obj)}
-    new = copy.copy(obj)
+    fields = _fields_by_name(type(obj))
+    new = object.__new__(type(obj))  # a shallow copy (copy.copy's reduce protocol is slow)
+    new.__dict__.update(obj.__dict__)
     for name, v in changes.items():
         f = fields.get(name)
         if f is None:

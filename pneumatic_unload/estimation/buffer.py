@@ -16,6 +16,19 @@ import numpy as np
 from pneumatic_unload.estimation.types import FloatArray
 
 
+def _extended(a: array, x: FloatArray) -> array:
+    """``a`` with the float64 values x appended: in place, or on a copy of ``a`` when a
+    view of it is alive (an array that exports its buffer cannot grow: e.g. a sampling
+    profiler, as Dask workers run, holding a frame whose locals view it)."""
+    try:
+        a.frombytes(x.tobytes())
+        return a
+    except BufferError:
+        b = array("d", a.tobytes())
+        b.frombytes(x.tobytes())
+        return b
+
+
 class SampleBuffer:
     """Growing buffer of samples with prefix sums, trimmed from the start when idle.
 
@@ -43,16 +56,29 @@ class SampleBuffer:
 
     def append(self, t: float, p: float) -> int:
         """Store one sample (t [s], p [signal units]); returns its buffer index [-]."""
-        pa, cq, cs = self.p, self.cq, self.cs
+        pa = self.p
         if pa:
             d = p - pa[-1]
-            cq.append(cq[-1] + d * d)
+            vq = self.cq[-1] + d * d
         else:
-            cq.append(cq[-1])
-        cs.append(cs[-1] + p)
-        self.t.append(t)
-        pa.append(p)
-        return len(pa) - 1
+            vq = self.cq[-1]
+        vs = self.cs[-1] + p
+        try:
+            self.cq.append(vq)
+            self.cs.append(vs)
+            self.t.append(t)
+            pa.append(p)
+        except BufferError:  # a view of an array is alive: continue on copies
+            n = len(self.p)  # p is appended last: not yet
+            self._unshare()
+            if len(self.cq) == n + 1:
+                self.cq.append(vq)
+            if len(self.cs) == n + 1:
+                self.cs.append(vs)
+            if len(self.t) == n:
+                self.t.append(t)
+            self.p.append(p)
+        return len(self.p) - 1
 
     def extend(self, t: FloatArray, p: FloatArray) -> None:
         """Store a block of samples (t [s], p [signal units]) with the same sums as
@@ -60,10 +86,15 @@ class SampleBuffer:
         prev = self.p[-1] if self.p else float(p[0])
         d = np.diff(np.concatenate(([prev], p)))
         # frombytes: a memcpy (array.extend would iterate element by element)
-        self.cq.frombytes(np.cumsum(np.concatenate(([self.cq[-1]], d * d)))[1:].tobytes())
-        self.cs.frombytes(np.cumsum(np.concatenate(([self.cs[-1]], p)))[1:].tobytes())
-        self.t.frombytes(np.ascontiguousarray(t, dtype=np.float64).tobytes())
-        self.p.frombytes(np.ascontiguousarray(p, dtype=np.float64).tobytes())
+        self.cq = _extended(self.cq, np.cumsum(np.concatenate(([self.cq[-1]], d * d)))[1:])
+        self.cs = _extended(self.cs, np.cumsum(np.concatenate(([self.cs[-1]], p)))[1:])
+        self.t = _extended(self.t, np.ascontiguousarray(t, dtype=np.float64))
+        self.p = _extended(self.p, np.ascontiguousarray(p, dtype=np.float64))
+
+    def _unshare(self) -> None:
+        """Replace the arrays by copies (views held elsewhere keep the old ones alive)."""
+        for name in ("t", "p", "cs", "cq"):
+            setattr(self, name, array("d", getattr(self, name).tobytes()))
 
     def views(self, n: int | None = None) -> tuple[FloatArray, FloatArray]:
         """Views of the stamps [s] and values [signal units] up to (excluding) index n."""

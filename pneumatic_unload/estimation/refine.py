@@ -16,7 +16,13 @@ from typing import Any
 import numpy as np
 
 from pneumatic_unload import physics
-from pneumatic_unload.budget import eq39_budget, model_budget, wall_sensitivity
+from pneumatic_unload.budget import (
+    WALL_TERM,
+    eq39_budget,
+    model_budget,
+    term_std,
+    wall_sensitivity,
+)
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.config.rig import RigConfig
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
@@ -54,7 +60,8 @@ def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> boo
 
 def crossing_budgets(settings: EstimatorSettings, *, c39: float, c_model: float,
                      c_model_std: float, tau: float, tau_std: float, p10: float,
-                     p_atm: float, p_star: float) -> tuple[float, float, dict[str, Any]]:
+                     p_atm: float, p_star: float, wall_std: float = math.nan
+                     ) -> tuple[float, float, dict[str, Any]]:
     """Uncertainty budgets of the crossing estimate (closed-form sensitivities: a few
     microseconds, inside the live crossing latency).
 
@@ -68,6 +75,9 @@ def crossing_budgets(settings: EstimatorSettings, *, c39: float, c_model: float,
         Unloading time and its 1-sigma [s].
     p10, p_atm, p_star : float
         Pressures [Pa absolute].
+    wall_std : float
+        The model C's standard uncertainty from the wall temperature (see
+        :func:`crossing_wall_std`) [m^3/(s Pa)]; NaN: no such term (no heat law).
 
     Returns
     -------
@@ -87,7 +97,7 @@ def crossing_budgets(settings: EstimatorSettings, *, c39: float, c_model: float,
         bm = model_budget(settings, c_model, type_a_std=c_model_std,
                           type_a_name="crossing time (noise), b prior, heat correlation",
                           model_form_std=0.0, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
-                          atmosphere_measured=measured)
+                          atmosphere_measured=measured, wall_std=wall_std)
         c_model_std = bm.combined_std
         extra["budget"] = bm.to_dict()
     return c39_std, c_model_std, extra
@@ -96,9 +106,10 @@ def crossing_budgets(settings: EstimatorSettings, *, c39: float, c_model: float,
 def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
                  type_a_std: float, model_form_std: float, heat_law: str,
                  extra_terms: tuple[Any, ...] = ()) -> dict[str, Any] | None:
-    """Uncertainty budget of the final (curve-fit) C; the wall temperature's term comes
-    from two model inversions at the crossing when a heat law was fitted (about a
-    millisecond). None when C is not finite.
+    """Uncertainty budget of the final (curve-fit) C. The wall temperature's term (when a
+    heat law was fitted) is the crossing budget's, tabulated before the crossing, scaled
+    to C; without one, two model inversions at the crossing (a few milliseconds). None when
+    C is not finite.
 
     Parameters
     ----------
@@ -116,8 +127,10 @@ def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
         return None
     wall_std = math.nan
     if heat_law in ("natural", "fixed"):
-        wall_std = wall_sensitivity(settings, res.tau_exp, p10=res.p10, p_atm=res.p_atm,
-                                    p_star=res.p_star, c_start=c)
+        wall_std = term_std(res.extra.get("budget"), WALL_TERM)
+        if not math.isfinite(wall_std):
+            wall_std = wall_sensitivity(settings, res.tau_exp, p10=res.p10, p_atm=res.p_atm,
+                                        p_star=res.p_star, c_start=c)
         wall_std = wall_std * c / res.conductance_model \
             if math.isfinite(res.conductance_model) and res.conductance_model > 0 \
             else wall_std
@@ -127,6 +140,32 @@ def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
                         p_atm=res.p_atm, p_star=res.p_star,
                         atmosphere_measured=settings.atmosphere is None,
                         wall_std=wall_std, extra_terms=extra_terms).to_dict()
+
+def crossing_wall_std(settings: EstimatorSettings, table: Any, tau: float, *,
+                      p10: float, p_atm: float, p_star: float, c: float) -> float:
+    """The model C's standard uncertainty from the wall temperature at the crossing
+    [m^3/(s Pa)]: a lookup in the inversion table when it covers tau [s]; else two model
+    inversions with the wall moved by +-u(T); NaN without a heat law (adiabatic).
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Tank, gas, heat model and ``temperature_uncertainty``.
+    table : InversionTable or None
+        The table of :func:`prepare_inversion`.
+    tau : float
+        Crossing time [s].
+    p10, p_atm, p_star : float
+        Pressures [Pa absolute].
+    c : float
+        The model C [m^3/(s Pa)].
+    """
+    if settings.heat_model != "natural" or not (math.isfinite(c) and c > 0):
+        return math.nan
+    if table is not None and table.covers(tau):
+        return float(table.wall_std(tau))
+    return wall_sensitivity(settings, tau, p10=p10, p_atm=p_atm, p_star=p_star, c_start=c)
+
 
 def prepare_inversion(settings: EstimatorSettings, t_mid: float, p_mid: float, p10: float,
                       p_atm: float, p_star: float) -> Any:

@@ -131,14 +131,30 @@ def crossing_fit(t: FloatArray, p: FloatArray, level: float
         (crossing time [s], its standard deviation [s], slope at the crossing [Pa/s]);
         (NaN, inf, 0) when the fit is flat (no crossing).
     """
-    tm = float(np.mean(t))
+    if t.size == 0:
+        return math.nan, math.inf, 0.0
+    tm = float(t.sum()) / t.size  # np.mean's dispatch costs more than the sum here
     x = t - tm
-    a = np.column_stack((np.ones_like(x), x, x * x))
-    coef, *_ = np.linalg.lstsq(a, p, rcond=None)
-    r = p - a @ coef
+    # normal equations of [1, u, u^2] in the centred, scaled time u = x / w and the
+    # centred pressure (well conditioned; 3x3 by Cramer's rule: a crossing is published
+    # at the sample that completes it, so no LAPACK call overhead here)
+    w = float(np.abs(x).max())
+    p_ref = float(p.sum()) / p.size
+    if not (w > 0.0 and math.isfinite(w) and math.isfinite(p_ref)):
+        return math.nan, math.inf, 0.0
+    u = x / w
+    q = p - p_ref
+    u2 = u * u
+    su, su2, su3, su4 = float(u.sum()), float(u2.sum()), float(u2 @ u), float(u2 @ u2)
+    n = float(u.size)
+    m = ((n, su, su2), (su, su2, su3), (su2, su3, su4))
+    sol = solve3(m, (float(q.sum()), float(q @ u), float(q @ u2)))
+    if sol is None:  # fewer than three distinct instants: no curve through them
+        return math.nan, math.inf, 0.0
+    r = q - (sol[0] + sol[1] * u + sol[2] * u2)
     dof = max(p.size - 3, 1)
     s2 = float(r @ r) / dof
-    c0, c1, c2 = (float(v) for v in coef)
+    c0, c1, c2 = sol[0] + p_ref, sol[1] / w, sol[2] / (w * w)
     # root of c2 x^2 + c1 x + (c0 - level) nearest the window centre
     if c1 == 0.0 and c2 == 0.0:  # flat (stuck or degenerate samples): no crossing
         return math.nan, math.inf, 0.0
@@ -153,13 +169,11 @@ def crossing_fit(t: FloatArray, p: FloatArray, level: float
             r1, r2 = (-c1 + sq) / (2 * c2), (-c1 - sq) / (2 * c2)
             xr = r1 if abs(r1) < abs(r2) else r2
     slope = c1 + 2.0 * c2 * xr
-    # delta method: var(f(xr)) / slope^2 with f = c0 + c1 x + c2 x^2
-    try:
-        cov = s2 * np.linalg.inv(a.T @ a)
-        g = np.array([1.0, xr, xr * xr])
-        var_f = float(g @ cov @ g)
-    except np.linalg.LinAlgError:
-        var_f = math.inf
+    # delta method: var(f(xr)) / slope^2 with f = c0 + c1 x + c2 x^2, var = s2 g' M^-1 g
+    ur = xr / w
+    g = (1.0, ur, ur * ur)
+    mg = solve3(m, g)
+    var_f = s2 * (g[0] * mg[0] + g[1] * mg[1] + g[2] * mg[2]) if mg is not None else math.inf
     std = math.sqrt(max(var_f, 0.0)) / abs(slope) if slope != 0 else math.inf
     return tm + xr, std, slope
 

@@ -37,6 +37,7 @@ from pneumatic_unload.budget import BudgetTerm, with_terms
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.refine import (
     crossing_budgets,
+    crossing_wall_std,
     model_inversion,
     refine_with_curve_fit,
 )
@@ -187,9 +188,11 @@ def _crossing(s: EstimatorSettings, *, tau: float, tau_std: float, p10: float,
                                                       s.initial_temperature, gas)
     c_model, c_model_std, method = model_inversion(s, tau, tau_std, p10, p_atm, p_star,
                                                    c_isen)
+    wall_std = crossing_wall_std(s, None, tau, p10=p10, p_atm=p_atm, p_star=p_star,
+                                 c=c_model)
     c39_std, c_model_std, budgets = crossing_budgets(
         s, c39=c39, c_model=c_model, c_model_std=c_model_std, tau=tau, tau_std=tau_std,
-        p10=p10, p_atm=p_atm, p_star=p_star)
+        p10=p10, p_atm=p_atm, p_star=p_star, wall_std=wall_std)
     status, text = "ok", (f"start given; p* crossing interpolated log-linearly between "
                           f"samples {k - 1} and {k} (interpolation error {interp_err:.3g} s)")
     if s.critical_ratio > 0 and p_star < p_atm / s.critical_ratio:

@@ -25,6 +25,7 @@ from pneumatic_unload.estimation.decisions import (
 )
 from pneumatic_unload.estimation.refine import (
     crossing_budgets,
+    crossing_wall_std,
     model_inversion,
     needs_model,
     prepare_inversion,
@@ -355,9 +356,11 @@ def crossing_result(st: EstimatorState, i: int, t_cross: float, t_std: float, ga
         quality = min(quality, 0.5)
     if problem is None and not tau_std <= 0.01 * tau:
         quality = min(quality, 0.5)
+    wall_std = crossing_wall_std(s, u.table, tau, p10=p10, p_atm=p_atm, p_star=p_star,
+                                 c=c_model) if problem is None else math.nan
     c39_std, c_model_std, budgets = crossing_budgets(
         s, c39=c39, c_model=c_model, c_model_std=c_model_std, tau=tau, tau_std=tau_std,
-        p10=p10, p_atm=p_atm, p_star=p_star)
+        p10=p10, p_atm=p_atm, p_star=p_star, wall_std=wall_std)
     shift = st.buf.shift
     res = UnloadResult(
         index=st.n_unloads, status=status, status_text=text, t_start=u.t0,

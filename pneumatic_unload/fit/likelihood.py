@@ -64,14 +64,15 @@ def make_bins(t: FloatArray, t_open: float, *, resolution: float = 0.03,
     k_open = int(np.clip(np.searchsorted(t, t_open), 0, n))
     edges = [k_open]
     k = k_open
+    at = t.item  # Python floats: the same doubles, without a numpy scalar per bin
     while k > 0:  # backwards over the pre-step
-        w = int(min(max(1, resolution * (t_open - t[max(k - 1, 0)]) / dt), wmax))
+        w = int(min(max(1, resolution * (t_open - at(max(k - 1, 0))) / dt), wmax))
         k = max(0, k - w)
         edges.append(k)
     edges.reverse()
     k = k_open
     while k < n:
-        w = int(min(max(1, resolution * (t[k] - t_open) / dt), wmax))
+        w = int(min(max(1, resolution * (at(k) - t_open) / dt), wmax))
         k = min(n, k + w)
         edges.append(k)
     out = np.unique(np.asarray(edges, dtype=np.int64))

@@ -32,6 +32,10 @@ DIFF_STEP = 1e-3
 #: The fit stops when the next Gauss-Newton step would lower chi^2 by less than this [-]
 #: (relative to the residual variance: a deficit of 1e-3 is ~0.05 sigma of position).
 POLISH_CHI2_TOL = 1e-3
+#: Below this predicted chi^2 drop [residual variances] the fit ends with one undamped
+#: Gauss-Newton step (its error is second order: measured, the next iteration predicts
+#: < 1e-2 of this) instead of iterating to :data:`POLISH_CHI2_TOL` [-].
+FINAL_STEP_CHI2 = 0.1
 #: Residual value returned for parameters where the model cannot be evaluated [-].
 BAD_RESIDUAL = 1e6
 
@@ -163,7 +167,9 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
     they are pushed against, projects x + d into the box and accepts it only if chi^2 falls
     (lam shrinks), else retries with more damping. It stops when the undamped Gauss-Newton
     step predicts a chi^2 drop below :data:`POLISH_CHI2_TOL` residual variances: the
-    minimum, not a tolerance short of it (the Jacobian returned is the one at that x); or,
+    minimum, not a tolerance short of it (the Jacobian returned is the one at that x);
+    or, when it predicts less than :data:`FINAL_STEP_CHI2`, after taking that step (the
+    Jacobian returned is the one before it); or,
     in a flat valley of an ill-determined combination, after three accepted steps that
     each lowered chi^2 by less than that.
 
@@ -195,6 +201,17 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
         pred = cost - float(np.sum((f + jf @ gn) ** 2))
         if pred / s2 < POLISH_CHI2_TOL:
             return x, f, jac, True, nfev
+        if pred / s2 < FINAL_STEP_CHI2:
+            # in the quadratic basin of the minimum: the undamped Gauss-Newton step lands
+            # on it (what is left is of the order of pred^2); take it and stop, without a
+            # Jacobian more (the one returned is this one, a fraction of a sigma away)
+            step = np.zeros_like(x)
+            step[free] = gn
+            x_new = np.clip(x + step, inner_lo, inner_hi)
+            f_new = fun(x_new)
+            nfev += 1
+            if float(f_new @ f_new) <= cost:
+                return x_new, f_new, jac, True, nfev
         h = jf.T @ jf
         dg = np.maximum(np.diag(h), 1e-12 * max(float(np.max(np.diag(h))), 1e-300))
         accepted = False

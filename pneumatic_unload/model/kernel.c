@@ -8,6 +8,7 @@
  */
 #include <math.h>
 #include <stddef.h>
+#include <stdlib.h>
 
 enum {
     GAMMA, R_GAS, CP, VOLUME, P_ATM, T_WALL, B_RATIO, M_INDEX, C_RHO, LEAK,
@@ -389,22 +390,28 @@ int pu_dopri5(int n, const double *y0, double t0, double t1, int n_out, const do
             rejected = 1;
             continue;
         }
-        /* accepted: the continuous extension for the outputs in (t, t_new] */
-        while (j < n_out && t_out[j] <= t_new) {
-            double th = (t_out[j] - t) / h, th1 = 1.0 - th;
+        /* accepted: the continuous extension for the outputs in (t, t_new]; its
+         * coefficients once per step (the same expressions as per output: bit-identical) */
+        if (j < n_out && t_out[j] <= t_new) {
+            double r2[MAX_STATES], r3[MAX_STATES], r4[MAX_STATES], r5[MAX_STATES];
             for (i = 0; i < n; i++) {
-                double r2 = yn[i] - y[i];
-                double r3 = h * k1[i] - r2;
-                double r4 = r2 - h * k7[i] - r3;
-                double r5 = h * (-12715105075.0 / 11282082432.0 * k1[i]
-                                 + 87487479700.0 / 32700410799.0 * k3[i]
-                                 - 10690763975.0 / 1880347072.0 * k4[i]
-                                 + 701980252875.0 / 199316789632.0 * k5[i]
-                                 - 1453857185.0 / 822651844.0 * k6[i]
-                                 + 69997945.0 / 29380423.0 * k7[i]);
-                out[j * n + i] = y[i] + th * (r2 + th1 * (r3 + th * (r4 + th1 * r5)));
+                r2[i] = yn[i] - y[i];
+                r3[i] = h * k1[i] - r2[i];
+                r4[i] = r2[i] - h * k7[i] - r3[i];
+                r5[i] = h * (-12715105075.0 / 11282082432.0 * k1[i]
+                             + 87487479700.0 / 32700410799.0 * k3[i]
+                             - 10690763975.0 / 1880347072.0 * k4[i]
+                             + 701980252875.0 / 199316789632.0 * k5[i]
+                             - 1453857185.0 / 822651844.0 * k6[i]
+                             + 69997945.0 / 29380423.0 * k7[i]);
             }
-            j++;
+            while (j < n_out && t_out[j] <= t_new) {
+                double th = (t_out[j] - t) / h, th1 = 1.0 - th;
+                for (i = 0; i < n; i++)
+                    out[j * n + i] = y[i] + th * (r2[i] + th1 * (r3[i] + th * (r4[i]
+                                                                 + th1 * r5[i])));
+                j++;
+            }
         }
         *n_done = j;
         explicit_steps++;
@@ -445,6 +452,80 @@ int pu_dopri5(int n, const double *y0, double t0, double t1, int n_out, const do
             rejected = 0;
         }
         h = fmin(h * fac, hmax);
+    }
+    return OK;
+}
+
+/* The discharge from (t_out[0], y0) over the smooth segments between bounds[0..n_bounds)
+ * (bounds[0] = t_out[0], bounds[n_bounds-1] = t_out[n_out-1], the valve events between),
+ * the states at t_out written row by row into out (n_out x n). In each segment: the state
+ * stays where it is when the valve is still shut and the gas at rest (dy = 0 at the
+ * start); otherwise pu_dopri5 to the segment's end, its step limited to hmax_ramp inside
+ * the opening ramp [t_open, t_open + ramp) (0: no limit). *n_done receives the rows
+ * written; on a failure *fail_segment the segment and y_fail its starting state.
+ * Returns the status of pu_dopri5. */
+int pu_integrate(int n, const double *y0, int n_bounds, const double *bounds, int n_out,
+                 const double *t_out, const double *prm, double rtol, const double *atol,
+                 double t_open, double ramp, long max_steps, double *out, int *n_done,
+                 int *fail_segment, double *y_fail)
+{
+    double y[MAX_STATES], dy[MAX_STATES];
+    int i, k = 0, s;
+    *n_done = 0;
+    *fail_segment = -1;
+    if (n < 1 || n > MAX_STATES || n_out < 1 || n_bounds < 2) return NOT_FINITE;
+    for (i = 0; i < n; i++) y[i] = y0[i];
+    for (s = 0; s < n_bounds - 1; s++) {
+        double a = bounds[s], b = bounds[s + 1];
+        int last = s == n_bounds - 2;
+        int j = k;  /* end of the rows of this segment: first t_out >= b (all when last) */
+        if (last) j = n_out;
+        else while (j < n_out && t_out[j] < b) j++;
+        int rows = j - k + (last ? 0 : 1);  /* plus the state at b */
+        pu_rhs(a, y, prm, dy);
+        int rest = 0;
+        if (b <= t_open) {
+            rest = 1;
+            for (i = 0; i < n; i++) if (dy[i] != 0.0) rest = 0;
+        }
+        if (rest || !(b > a)) {
+            for (int r = k; r < j; r++)
+                for (i = 0; i < n; i++) out[r * n + i] = y[i];
+            k = j;
+            *n_done = k;
+            continue;
+        }
+        /* the segment's grid: its rows of t_out, then b (the state carried on) */
+        double tg_stack[256], og_stack[256 * MAX_STATES];
+        double *tg = tg_stack, *og = og_stack;
+        double *heap = NULL;
+        if (rows > 256) {
+            heap = (double *)malloc(sizeof(double) * (size_t)rows * (size_t)(n + 1));
+            if (!heap) return NOT_FINITE;
+            tg = heap;
+            og = heap + rows;
+        }
+        for (int r = 0; r < j - k; r++) tg[r] = t_out[k + r];
+        if (!last) tg[rows - 1] = b;
+        double hmax = (ramp > 0.0 && t_open <= a && a < t_open + ramp) ? ramp / 4.0 : 0.0;
+        int done = 0;
+        int status = pu_dopri5(n, y, a, b, rows, tg, prm, rtol, atol, hmax, max_steps, og,
+                               &done);
+        int keep = done < j - k ? done : j - k;
+        for (int r = 0; r < keep; r++)
+            for (i = 0; i < n; i++) out[(k + r) * n + i] = og[r * n + i];
+        if (status != OK) {
+            *n_done = k + keep;
+            *fail_segment = s;
+            for (i = 0; i < n; i++) y_fail[i] = y[i];
+            free(heap);
+            return status;
+        }
+        if (rows > 0)
+            for (i = 0; i < n; i++) y[i] = og[(rows - 1) * n + i];
+        free(heap);
+        k = j;
+        *n_done = k;
     }
     return OK;
 }

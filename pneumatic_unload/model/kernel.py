@@ -27,6 +27,8 @@ Functions (SI units: Pa absolute, K, m^3, s, kg/s, W):
   (:func:`pneumatic_unload.model.ode.kernel_parameters` packs it);
 * :func:`dopri5` - the integrator over one smooth segment (stiff-switching), output on any
   grid;
+* :func:`integrate` - :func:`dopri5` over the smooth segments between the valve events, in
+  one call (a fit's model evaluation: no Python per segment);
 * :func:`lag` - the sensor's exact first-order lag on an uneven grid (the quadrature
   nodes of a fit), :func:`pneumatic_unload.model.sensor.first_order_lag`'s loop.
 """
@@ -157,6 +159,9 @@ def _load() -> ctypes.CDLL:
     lib.pu_dopri5.restype = i32
     lib.pu_dopri5.argtypes = [i32, arr, dbl, dbl, i32, arr, arr, dbl, arr, dbl, i64, arr,
                               ctypes.POINTER(i32)]
+    lib.pu_integrate.restype = i32
+    lib.pu_integrate.argtypes = [i32, arr, i32, arr, i32, arr, arr, dbl, arr, dbl, dbl, i64,
+                                 arr, ctypes.POINTER(i32), ctypes.POINTER(i32), arr]
     lib.pu_lag.restype = None
     lib.pu_lag.argtypes = [i32, arr, arr, dbl, dbl, dbl, dbl, i32, arr]
     return lib
@@ -258,6 +263,57 @@ def dopri5(y0: FloatArray, t0: float, t1: float, t_out: FloatArray, prm: FloatAr
 
 
 
+def integrate(y0: FloatArray, bounds: FloatArray, t_out: FloatArray, prm: FloatArray,
+              rtol: float, atol: FloatArray, t_open: float, ramp: float, max_steps: int,
+              out: FloatArray) -> tuple[int, int, int, FloatArray]:
+    """:func:`dopri5` over the smooth segments between ``bounds``, the state carried across.
+
+    In a segment that ends before the valve opens, the state stays where it is when the
+    gas is at rest (dy/dt = 0 at its start); inside the opening ramp the step is at most a
+    quarter of it.
+
+    Parameters
+    ----------
+    y0 : ndarray
+        State at t_out[0] (units of :func:`rhs`).
+    bounds : ndarray
+        Segment ends [s]: t_out[0], the valve events inside, t_out[-1].
+    t_out : ndarray
+        Increasing output instants [s] (at least one).
+    prm : ndarray
+        Parameter vector of :func:`rhs`.
+    rtol, atol : float, ndarray
+        Relative and absolute (per state) tolerances.
+    t_open, ramp : float
+        Valve opening instant and ramp duration [s].
+    max_steps : int
+        Step budget of each segment [-].
+    out : ndarray
+        C-contiguous (len(t_out), len(y0)) float64 array receiving the states.
+
+    Returns
+    -------
+    tuple
+        (status as :func:`dopri5`; rows of ``out`` written; the failing segment's index,
+        -1 when none; the state at that segment's start).
+    """
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    bounds = np.ascontiguousarray(bounds, dtype=float)
+    t_out = np.ascontiguousarray(t_out, dtype=float)
+    atol = np.ascontiguousarray(atol, dtype=float)
+    prm = np.ascontiguousarray(prm, dtype=float)
+    if prm.size != N_PARAMETERS or not 1 <= y0.size <= MAX_STATES or atol.size != y0.size \
+            or out.shape != (t_out.size, y0.size) or not out.flags.c_contiguous \
+            or out.dtype != np.float64 or bounds.size < 2 or t_out.size < 1:
+        raise ValueError("integrate: inconsistent array sizes or types")
+    done, seg = ctypes.c_int(0), ctypes.c_int(-1)
+    y_fail = np.zeros(y0.size)
+    status = _LIB.pu_integrate(y0.size, y0.ctypes.data, bounds.size, bounds.ctypes.data,
+                               t_out.size, t_out.ctypes.data, prm.ctypes.data, float(rtol),
+                               atol.ctypes.data, float(t_open), float(ramp), int(max_steps),
+                               out.ctypes.data, ctypes.byref(done), ctypes.byref(seg),
+                               y_fail.ctypes.data)
+    return int(status), int(done.value), int(seg.value), y_fail
 def lag(t: FloatArray, u: FloatArray, tau: float, state: tuple[float, float, float],
         steady: bool) -> FloatArray:
     """Exact first-order lag y' = (u - y)/tau of the piecewise-linear interpolant of u.

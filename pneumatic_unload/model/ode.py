@@ -183,7 +183,8 @@ def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTO
 
     Integration runs segment by segment between the valve events of
     :func:`valve_events` with the compiled Dormand-Prince 5(4) of
-    :func:`pneumatic_unload.model.kernel.dopri5`; inside the opening ramp the step is
+    :func:`pneumatic_unload.model.kernel.dopri5`, all segments in one call of
+    :func:`pneumatic_unload.model.kernel.integrate`; inside the opening ramp the step is
     limited to a quarter of the ramp, elsewhere it follows the dynamics. The output grid
     can be anything increasing (every sample, or a few quadrature nodes per bin): the cost
     depends on the dynamics, not on the number of output instants.
@@ -212,42 +213,21 @@ def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTO
     prm = kernel_parameters(cfg, t_open)
     y = np.asarray(initial_state(cfg), dtype=float)
     atol = y * rtol * 1e-2
-    out = np.full((t.size, y.size), np.nan)
     if t.size == 0:
-        return out
+        return np.full((0, y.size), np.nan)
+    out = np.empty((t.size, y.size))
     ramp = opening_ramp(cfg)
     cuts = [e for e in valve_events(cfg, t_open) if t[0] < e < t[-1]]
-    bounds = [float(t[0]), *cuts, float(t[-1])]
-    dy = np.empty(y.size)
-    k = 0
-    for s in range(len(bounds) - 1):
-        a, b = bounds[s], bounds[s + 1]
-        last = s == len(bounds) - 2
-        j = t.size if last else int(np.searchsorted(t, b, side="left"))
-        grid = np.concatenate((t[k:j], [] if last else [b]))
-        if b <= t_open:  # the rest test below is for the pre-step segment only
-            kernel.rhs(a, y, prm, dy)
-        if b <= t_open and not dy.any():
-            # valve still shut and the gas at rest (no leak, at the wall temperature):
-            # the state stays where it is
-            ys = np.repeat(y[None, :], grid.size, axis=0)
-        elif b > a:
-            ys = np.empty((grid.size, y.size))
-            status, done = kernel.dopri5(y, a, b, grid, prm, rtol, atol,
-                                         ramp / 4.0 if ramp > 0 and t_open <= a < t_open + ramp
-                                         else 0.0, MAX_STEPS, ys)
-            if status != kernel.OK:
-                if not quiet:
-                    raise IntegrationError(
-                        f"the discharge ODE could not be integrated from t = {a:g} s to "
-                        f"{b:g} s ({_FAILURES[status]}); state at the start {y.tolist()}")
-                out[k:k + min(done, j - k)] = ys[:min(done, j - k)]
-                return out
-        else:
-            ys = np.repeat(y[None, :], grid.size, axis=0)
-        out[k:j] = ys[:j - k]
-        y = ys[-1].copy()
-        k = j
+    bounds = np.array([float(t[0]), *cuts, float(t[-1])])
+    status, done, seg, y_seg = kernel.integrate(y, bounds, t, prm, rtol, atol, t_open, ramp,
+                                                MAX_STEPS, out)
+    if status != kernel.OK:
+        if not quiet:
+            raise IntegrationError(
+                f"the discharge ODE could not be integrated from t = {bounds[seg]:g} s to "
+                f"{bounds[seg + 1]:g} s ({_FAILURES[status]}); state at the start "
+                f"{y_seg.tolist()}")
+        out[done:] = np.nan
     return out
 
 

@@ -91,6 +91,8 @@ def sensor_response(t: FloatArray, p: FloatArray, cfg: RigConfig) -> FloatArray:
     cfg : RigConfig
         Sensor effects switched on in ``cfg.effects``.
     """
+    if not any(cfg.has(e) for e in ("sensor_lag", "sensor_gain", "sensor_offset")):
+        return np.array(p, dtype=float)  # an ideal sensor (a fit's hot path: no chain)
     return _deterministic(t, p, cfg, None)[0]
 
 

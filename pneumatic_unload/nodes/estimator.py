@@ -54,6 +54,9 @@ from pneumatic_unload.estimation import (
     estimate_fields,
 )
 from pneumatic_unload.nodes import common
+from pneumatic_unload.testline import ResultsDBError, SpecError, load_spec
+from pneumatic_unload.testline.job import result_row
+from pneumatic_unload.testline.live import LiveResults
 
 #: Node states reported on /diagnostics and in the action's feedback.
 STATES = ("waiting", "unloading", "done", "error")
@@ -109,6 +112,15 @@ class EstimatorNode(Node):
                 raise common.StartupError(
                     "estimator", f"{name} must be one of {allowed}, got {self._p(name)!r}")
         self.add_on_set_parameters_callback(common.validating_callback(self._check))
+        # the test line: verdicts against a specification, estimates into a results database
+        try:
+            self._spec = load_spec(self._p("spec_file")) if self._p("spec_file") else None
+            self._results_db = LiveResults(self._p("results_db"), self.get_name(),
+                                           self._spec) if self._p("results_db") else None
+        except (SpecError, ResultsDBError) as exc:
+            raise common.StartupError("estimator", str(exc)) from exc
+        self._goal_part = ""  # the part id of the running ~/measure goal
+        self._unload_parts: dict[int, str] = {}  # unload index -> a goal's part id
         _warm_up(self._settings)
         # live: a node (re)started mid-unload skips that unload (no bogus estimate)
         self._est = StreamingEstimator(self._settings, live=True)
@@ -300,6 +312,7 @@ class EstimatorNode(Node):
             self._diagnose(_ERROR, f"could not publish the estimate: {exc}")
         (self.final_latencies if r.final else self.latencies).append(
             time.monotonic() - arrived)
+        self._keep(r)
         self.results.append(r)
         self._last = r
         if r.status in ("ok", "aborted_sse"):
@@ -311,6 +324,25 @@ class EstimatorNode(Node):
             self._state, self._why = "error", f"unload {r.index}: {r.status}: {r.status_text}"
         self.get_logger().info(self._why)
         self._report()
+
+    def _keep(self, r: UnloadResult) -> None:
+        """An unload's last estimate (the final fit's; the crossing's without a curve fit;
+        an aborted or bad unload's only result) into the results database, with its
+        verdict; a failing database is reported, never fatal (the estimate is published)."""
+        last = r.final or not self._settings.curve_fit or r.status in (
+            "aborted", "aborted_sse", "bad_data")
+        if self._results_db is None or not last:
+            return
+        part = self._unload_parts.pop(r.index, "") or self._goal_part or self._p("part_id")
+        try:
+            verdict = self._results_db.write(r, self._settings, part)
+        except ResultsDBError as exc:
+            self._diagnose(_ERROR, f"results_db {self._p('results_db')}: estimate of unload "
+                                   f"{r.index} not written: {exc}")
+            return
+        if verdict is not None:
+            self.get_logger().info(f"unload {r.index} of part {part}: {verdict[0]} "
+                                   f"({verdict[1]})")
 
     # ------------------------------------------------------------------ diagnostics
     def _diagnose(self, level: bytes, message: str) -> None:
@@ -383,6 +415,14 @@ class EstimatorNode(Node):
 
     async def _measure(self, goal_handle: Any, result: Any) -> Any:
         goal = goal_handle.request
+        self._goal_part = goal.part_id
+        try:
+            return await self._measure_part(goal_handle, result)
+        finally:
+            self._goal_part = ""
+
+    async def _measure_part(self, goal_handle: Any, result: Any) -> Any:
+        goal = goal_handle.request
         timeout = goal.timeout if goal.timeout > 0 else self._p("measure_timeout")
         n_before = len(self.results)
         unloads_before = {r.index for r in self.results}
@@ -413,7 +453,14 @@ class EstimatorNode(Node):
             new = [r for r in self.results[n_before:] if r.index not in unloads_before]
             if new:
                 r = new[0]
+                if goal.part_id:  # its final estimate comes after the goal has returned
+                    self._unload_parts[r.index] = goal.part_id
+                    while len(self._unload_parts) > 100:
+                        self._unload_parts.pop(next(iter(self._unload_parts)))
                 fill_estimate(result.estimate, r, self._frame or "tank")
+                if self._spec is not None:
+                    v = self._spec.judge(goal.part_id or self._p("part_id"), result_row(r))
+                    result.verdict, result.verdict_reason = v if v is not None else ("", "")
                 if r.status == "ok":
                     goal_handle.succeed()
                     result.success, result.message = True, "ok"

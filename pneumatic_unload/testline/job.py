@@ -1,0 +1,199 @@
+"""One input of a batch: read it, analyse it, judge it against the part's specification.
+
+:func:`analyze_file` is what a batch worker runs (a plain function of picklable values,
+so it runs the same in this process or on any Dask worker): it never raises for a bad
+input; an unreadable file or one without an estimate is a :class:`~.db.FileRecord` with
+the reason. SI units: m^3/(s Pa), s, Pa.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pneumatic_unload import __version__
+from pneumatic_unload.config import ConfigError
+from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.output import unload_json
+from pneumatic_unload.records import RecordError, analyze_input, open_record
+from pneumatic_unload.testline.db import FileRecord
+from pneumatic_unload.testline.spec import Spec
+
+#: Statuses of a result that carry a C (see :func:`~pneumatic_unload.estimation.types.
+#: recommended`).
+ESTIMATE_STATUSES = ("ok", "aborted_sse", "not_choked")
+
+
+@dataclass(frozen=True)
+class InputOptions:
+    """How a batch reads and analyses its inputs (the same for every file).
+
+    Attributes
+    ----------
+    settings : dict
+        Estimator settings given for every input [SI] (over a bag's stored ones; a CSV
+        needs at least ``volume``).
+    csv : dict
+        CSV reading options (columns, units, gauge, atmosphere [Pa]) of
+        :func:`~pneumatic_unload.records.open_record`.
+    topic : str
+        Pressure topic of a bag.
+    part_regex : str
+        Regular expression on the file's path whose first group (or whole match) is the
+        part id; '' takes the file name without its suffix.
+    spec : Spec or None
+        Specification the unloads are judged against.
+    """
+
+    settings: dict[str, Any] = field(default_factory=dict)
+    csv: dict[str, Any] = field(default_factory=dict)
+    topic: str = "/tank/pressure"
+    part_regex: str = ""
+    spec: Spec | None = None
+
+
+def content_hash(path: str | Path) -> str:
+    """SHA-256 of an input's bytes (a bag directory: of its files' names and bytes) [hex].
+
+    Raises
+    ------
+    OSError
+        The input cannot be read.
+    """
+    p = Path(path)
+    h = hashlib.sha256()
+    files = sorted(q for q in p.rglob("*") if q.is_file()) if p.is_dir() else [p]
+    for q in files:
+        if p.is_dir():
+            h.update(str(q.relative_to(p)).encode() + b"\0")
+        with q.open("rb") as fh:
+            while chunk := fh.read(1 << 20):
+                h.update(chunk)
+    return h.hexdigest()
+
+
+def part_id(path: str | Path, regex: str = "") -> str:
+    """The part an input measured: ``regex``'s first group (or whole match) on the path,
+    else the file name without its suffix."""
+    p = Path(path)
+    if regex:
+        m = re.search(regex, str(p))
+        if m:
+            return m.group(1) if m.groups() and m.group(1) is not None else m.group(0)
+    return p.name[: -len(p.suffix)] if p.suffix and not p.is_dir() else p.name
+
+
+def options_hash(options: InputOptions) -> str:
+    """SHA-256 of what, besides an input's bytes, makes its numbers: the settings and
+    reading options given, the specification and the package version (new code: new
+    numbers) [hex]. A batch skips an input whose content and options hashes are in the
+    database."""
+    spec = options.spec.to_dict() if options.spec is not None else None
+    blob = json.dumps({"settings": options.settings, "csv": options.csv,
+                       "topic": options.topic, "part_regex": options.part_regex,
+                       "spec": spec, "version": __version__}, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _settings_json(s: EstimatorSettings) -> dict[str, Any]:
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for k, v in dataclasses.asdict(s).items()}
+
+
+def result_row(r: Any) -> dict[str, Any]:
+    """A result as a row of the results database: its JSON (:func:`~pneumatic_unload.
+    output.unload_json`) with the recommended C and its standard uncertainty as columns
+    [m^3/(s Pa)]."""
+    u = unload_json(r)
+    u["recommended_conductance"] = u["recommended"]["conductance"]
+    u["recommended_std"] = u["recommended"]["std"]
+    return u
+
+
+#: Points of the pressure curve kept with each unload for the report [-].
+CURVE_POINTS = 200
+
+
+def unload_curve(t: Any, p: Any, t_start: float, t_end: float) -> dict[str, list[float]]:
+    """The unload's pressure curve for the report: at most :data:`CURVE_POINTS` samples
+    from 10 % of the unload's length before its start to its end; times relative to the
+    start [s], pressures [Pa absolute] (empty when unknown)."""
+    import numpy as np
+
+    if not (math.isfinite(t_start) and math.isfinite(t_end) and t_end > t_start):
+        return {"t": [], "p": []}
+    lo = t_start - 0.1 * (t_end - t_start)
+    k = np.flatnonzero((t >= lo) & (t <= t_end))
+    if k.size > CURVE_POINTS:
+        k = k[np.linspace(0, k.size - 1, CURVE_POINTS).astype(int)]
+    return {"t": [round(float(x - t_start), 6) for x in t[k]],
+            "p": [round(float(x), 1) for x in p[k]]}
+
+
+def no_estimate(unloads: list[dict[str, Any]]) -> str:
+    """Why a record whose unloads were found gives no C ('' when one does)."""
+    if any(u["status"] in ESTIMATE_STATUSES and u["recommended"]["conductance"] is not None
+           for u in unloads):
+        return ""
+    return "; ".join(f"unload {k}: {u['status']}: {u['status_text']}"
+                     for k, u in enumerate(unloads)) or "no unload"
+
+
+def analyze_file(path: str, options: InputOptions, chash: str | None = None
+                 ) -> FileRecord:
+    """Analyse one input (a bag or a CSV log) as ``pneumatic-unload analyze`` does, and
+    judge its unloads against the specification of its part type.
+
+    Never raises for a bad input: the record's ``status`` is 'error' (unreadable, invalid
+    settings: ``reason`` says which) or 'no_estimate' (``reason`` says why).
+
+    Parameters
+    ----------
+    path : str
+        The input.
+    options : InputOptions
+        Reading, settings, part id and specification.
+    chash : str, optional
+        The input's :func:`content_hash` when the caller has it.
+    """
+    pid = part_id(path, options.part_regex)
+    ptype = options.spec.part_type(pid) if options.spec is not None else ""
+    shash = options_hash(options)
+    base = {"path": str(path), "part_id": pid, "part_type": ptype or "",
+            "package_version": __version__, "settings_hash": shash}
+    if chash is None:
+        try:
+            chash = content_hash(path)
+        except OSError as exc:
+            return FileRecord(content_hash=f"unreadable:{path}", status="error",
+                              reason=f"{path}: {exc}", **base)
+    try:
+        rec = open_record(path, topic=options.topic, **options.csv)
+        ana = analyze_input(rec, dict(options.settings))
+    except (RecordError, EstimationError, ConfigError) as exc:
+        return FileRecord(content_hash=chash, status="error", reason=str(exc), **base)
+    sj = _settings_json(ana.settings)
+    run, results, problem = ana.run, ana.unloads, ana.input_problem
+    unloads = [result_row(r) for r in results]
+    t_all, p_all = run.overview.arrays()
+    for u, r in zip(unloads, results, strict=True):
+        u["curve"] = unload_curve(t_all, p_all, r.t_start, r.t_end if math.isfinite(r.t_end)
+                                  else r.t_start + 4.0 * r.tau_exp)
+    for u in unloads:
+        verdict = options.spec.judge(pid, u) if options.spec is not None else None
+        u["verdict"], u["verdict_reason"] = verdict if verdict is not None else (None, None)
+    if ana.no_unload is not None:
+        status, reason = "no_estimate", ana.no_unload
+    elif problem is not None:
+        status, reason = "no_estimate", problem
+    else:
+        reason = no_estimate(unloads)
+        status = "no_estimate" if reason else "ok"
+    return FileRecord(content_hash=chash, status=status, reason=reason, unloads=unloads,
+                      settings=sj, **base)
