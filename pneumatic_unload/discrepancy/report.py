@@ -1,9 +1,12 @@
-"""A self-contained Markdown report of the discrepancy workflow, with PNG plots.
+"""The discrepancy workflow's report: Markdown with PNG plots, and one self-contained HTML page.
 
 Written for a test-bench engineer: what the model misses (by name), how sure the
 workflow is, the fitted size of the effect with its 95 % interval, the gap before and
-after, and which extra measurement would settle an ambiguity. Plots use matplotlib's Agg
-backend; pressures are shown in bar absolute, residuals in kPa, times in s.
+after, and which extra measurement would settle an ambiguity; it ends with "What to do
+next" and "Which C to report, and why" (:mod:`~pneumatic_unload.discrepancy.advice`).
+``report.html`` is the same text with the plots embedded
+(:mod:`~pneumatic_unload.discrepancy.html`). Plots use matplotlib's Agg backend; pressures
+are shown in bar absolute, residuals in kPa, times in s.
 """
 
 from __future__ import annotations
@@ -15,6 +18,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pneumatic_unload.discrepancy.advice import what_next, which_c
+from pneumatic_unload.discrepancy.html import markdown_to_html
 from pneumatic_unload.discrepancy.multirun import GeometryLaw
 from pneumatic_unload.discrepancy.types import BIC_HELP, DiscrepancyResult
 
@@ -255,11 +260,16 @@ def markdown(res: DiscrepancyResult, files: dict[str, str], title: str = "") -> 
               "three).", "",
               f"Samples {res.n_samples}, likelihood bins {res.n_bins}, "
               f"run time {res.elapsed:.1f} s.", ""]
+    lines += ["## What to do next", ""] + [f"- {x}" for x in what_next(res)] + [""]
+    lines += ["## Which C to report, and why", ""]
+    for block in which_c(res):
+        lines += [block, ""]
     return "\n".join(lines)
 
 
 def write_report(res: DiscrepancyResult, out: str | Path, *, title: str = "") -> Path:
-    """Write ``report.md`` and its PNG plots into the directory ``out``.
+    """Write ``report.md`` with its PNG plots, and ``report.html`` (the same text, the plots
+    embedded: one file that opens offline) into the directory ``out``.
 
     Parameters
     ----------
@@ -278,12 +288,16 @@ def write_report(res: DiscrepancyResult, out: str | Path, *, title: str = "") ->
     out = Path(out)
     files = write_plots(res, out)
     path = out / "report.md"
-    path.write_text(markdown(res, files, title), encoding="utf-8")
+    text = markdown(res, files, title)
+    path.write_text(text, encoding="utf-8")
+    page = markdown_to_html(text, out, "Discrepancy report" + (f": {title}" if title else ""))
+    (out / "report.html").write_text(page, encoding="utf-8")
     return path
 
 
 def write_law_report(law: GeometryLaw, out: str | Path, names: list[str]) -> Path:
-    """Markdown section and plot of the shared geometry law of several runs.
+    """Markdown section and plot of the shared geometry law of several runs (and the same
+    as a self-contained ``geometry_law.html``).
 
     Parameters
     ----------
@@ -325,5 +339,8 @@ def write_law_report(law: GeometryLaw, out: str | Path, names: list[str]) -> Pat
         plt.close(fig)
         lines += ["", "![geometry law](geometry_law.png)"]
     path = out / "geometry_law.md"
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    text = "\n".join(lines) + "\n"
+    path.write_text(text, encoding="utf-8")
+    (out / "geometry_law.html").write_text(
+        markdown_to_html(text, out, "Shared geometry law from several runs"), encoding="utf-8")
     return path

@@ -6,6 +6,8 @@ SI units: s, Pa.
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -98,7 +100,8 @@ def fit_candidate(prob: Problem, base: Fit, neutral: list[Values], cand: str) ->
     return best
 
 
-def run_round(prob: Problem, base: Fit, neutral: list[Values], candidates: list[str]
+def run_round(prob: Problem, base: Fit, neutral: list[Values], candidates: list[str],
+              progress: Callable[[int, int, str, float], None] | None = None
               ) -> dict[str, Fit]:
     """Fit every candidate added to ``base`` (multi-start) [-].
 
@@ -112,8 +115,16 @@ def run_round(prob: Problem, base: Fit, neutral: list[Values], candidates: list[
         Neutral starting values of the current model's parameters [SI units].
     candidates : list of str
         Effects to try.
+    progress : callable, optional
+        Called after each candidate with (its number from 1, how many, name, seconds).
     """
-    return {cand: fit_candidate(prob, base, neutral, cand) for cand in candidates}
+    out: dict[str, Fit] = {}
+    for i, cand in enumerate(candidates):
+        t0 = time.perf_counter()
+        out[cand] = fit_candidate(prob, base, neutral, cand)
+        if progress is not None:
+            progress(i + 1, len(candidates), cand, time.perf_counter() - t0)
+    return out
 
 
 def decide(base: Fit, fits: dict[str, Fit], threshold: float

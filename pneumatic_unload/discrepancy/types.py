@@ -13,7 +13,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config import EFFECTS, TankSpec
-from pneumatic_unload.config.fields import ConfigError, flag, integer, names, number, validate
+from pneumatic_unload.config.fields import (
+    ConfigError,
+    flag,
+    integer,
+    names,
+    number,
+    optional,
+    validate,
+)
 
 if TYPE_CHECKING:  # annotations only: the settings stay importable without the engine
     from pneumatic_unload.fit.lsq import FitResult
@@ -59,6 +67,10 @@ class DiscrepancySettings(TankSpec):
         Check the linear intervals with the profile likelihood.
     resolution : float
         Relative bin width of the likelihood [-] (smaller: slower, a little more power).
+    time_limit : float or None
+        Wall-clock cap of the fits [s] (None: none); see
+        :func:`~pneumatic_unload.discrepancy.workflow.find_discrepancy` for what happens
+        when it is reached.
     """
 
     fit_wall_temperature: bool = flag(False, "fit the wall temperature with heat transfer")
@@ -68,6 +80,11 @@ class DiscrepancySettings(TankSpec):
                                   "delta-BIC needed to claim an effect and to name it alone")
     profile: bool = flag(True, "check the linear intervals with profile likelihoods")
     resolution: float = number(0.03, "-", 1e-3, 0.5, "relative bin width of the likelihood")
+    time_limit: float | None = optional(
+        600.0, "s", 1.0, 1e6, "wall-clock cap of the search: the fit under way stops at "
+        "its next model evaluation (round 1 unfinished: an error; later: the effects "
+        "named so far)",
+        none="no cap")
 
     def __post_init__(self) -> None:
         """Validate (raises :class:`DiscrepancyError` with the reason)."""

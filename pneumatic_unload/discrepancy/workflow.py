@@ -28,6 +28,18 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
 5. **Greedy.** While the residual is still structured, a further effect is added the same
    way (at most ``max_effects``).
 
+**Time bound.** A run is bounded in evaluations: at most ``max_effects`` (3) rounds of at
+most 10 candidates, each fitted from at most 10 starts (two heat laws x 5) screened for at
+most 12 Levenberg-Marquardt iterations and one full search of at most 100, an iteration
+costing at most (free parameters + 12) model evaluations, each evaluation bounded by the
+integrator's step budget (:data:`pneumatic_unload.model.ode.MAX_STEPS` per segment); the
+profiles add a fixed number of constrained fits per reported parameter. In seconds, the
+wall-clock cap ``settings.time_limit`` (default 600 s) stops the fit under way at its next
+evaluation: in the baseline or the first round that is a :class:`DiscrepancyError` (no
+verdict), later the greedy search ends with the effects named so far (said in the notes)
+and the intervals are linear. Typical runs take seconds
+(``bench/bench_discrepancy_speed.py``).
+
 A constant geometric factor on C (the paper's L/D effect) enters the model only through
 the product f C, so it is reported as not identifiable from one trace; several runs with
 different tank geometries identify it (:mod:`pneumatic_unload.discrepancy.multirun`).
@@ -36,6 +48,7 @@ different tank geometries identify it (:mod:`pneumatic_unload.discrepancy.multir
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -57,13 +70,15 @@ from pneumatic_unload.discrepancy.types import (
     Round,
 )
 from pneumatic_unload.fit.profile import Interval
+from pneumatic_unload.fit.trace import FitTimeout
 from pneumatic_unload.model.effects import separating_data
 
 FloatArray = NDArray[np.float64]
 
 
 def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings, *,
-                     temperature: tuple[FloatArray, FloatArray] | None = None
+                     temperature: tuple[FloatArray, FloatArray] | None = None,
+                     progress: Callable[[str], None] | None = None
                      ) -> DiscrepancyResult:
     """Run the discrepancy workflow on one recorded discharge.
 
@@ -78,6 +93,9 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
     temperature : tuple of ndarray, optional
         Measured gas temperature (instants [s] on the same clock as t, values [K]): used
         as independent evidence for the heat-transfer effect, never in the fit.
+    progress : callable, optional
+        Called with one line per step (baseline, each candidate of each round, intervals,
+        end), e.g. ``"discrepancy: round 1, candidate 3/10 sensor_lag 0.4 s"``.
 
     Returns
     -------
@@ -87,14 +105,24 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
     Raises
     ------
     DiscrepancyError
-        No unload, non-finite samples, too short a trace.
+        No unload, non-finite samples, too short a trace; the time limit reached before
+        the first round ended.
     """
     t_wall0 = time.perf_counter()
+    say = progress if progress is not None else (lambda _msg: None)
     prob = Problem(t, p, settings)
+    if settings.time_limit is not None:
+        prob.trace.deadline = time.monotonic() + settings.time_limit - (
+            time.perf_counter() - t_wall0)
     thr = settings.bic_threshold
     # 1. baseline, multi-start over b
     neutral = [prob.neutral_theta(0.3), prob.neutral_theta(0.5)]
-    base = prob.fit(prob.model(()), neutral)
+    try:
+        base = prob.fit(prob.model(()), neutral)
+    except FitTimeout as exc:
+        raise _timeout(settings, "during the baseline fit") from exc
+    say(f"discrepancy: baseline {time.perf_counter() - t_wall0:.1f} s "
+        f"({prob.lik.n} samples, {prob.lik.n_bins} bins)")
     before, m_before = diagnose(prob, base)
     # 2-5. greedy rounds
     current = base
@@ -104,10 +132,24 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
     first_effect, first_amb = "none", []
     remaining = [c for c in settings.candidates]
     neutral_cur = [prob.neutral_theta(0.4)]
+    timed_out = ""
     while remaining and len(claimed) < settings.max_effects:
         if claimed and not current_diag.structured:
             break
-        fits = run_round(prob, current, neutral_cur, remaining)
+        k_round = len(rounds) + 1
+
+        def step(i: int, n: int, cand: str, dt: float, k: int = k_round) -> None:
+            say(f"discrepancy: round {k}, candidate {i}/{n} {cand} {dt:.1f} s")
+
+        try:
+            fits = run_round(prob, current, neutral_cur, remaining, progress=step)
+        except FitTimeout as exc:
+            if not rounds:
+                raise _timeout(settings, "during the first round of candidates") from exc
+            timed_out = (f"time limit of {settings.time_limit:g} s reached in round "
+                         f"{k_round}: the greedy search stopped there (the effects named "
+                         "before it stand; intervals linear)")
+            break
         delta, win, amb = decide(current, fits, thr)
         rounds.append(Round(base_effects=current.effects, base_bic=current.bic, fits=fits,
                             delta_bic=delta, winner=win, ambiguous_with=amb))
@@ -124,15 +166,25 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
         current_diag, _ = diagnose(prob, current)
     after, m_after = diagnose(prob, current)
     names = [q for q in current.result.params.free if q not in base.result.params.names]
-    params = intervals(prob, current, names, profile=settings.profile) if names else {}
+    t_iv = time.perf_counter()
+    try:
+        params = intervals(prob, current, names, profile=settings.profile and not timed_out)
+    except FitTimeout:
+        params = intervals(prob, current, names, profile=False)
+        timed_out = timed_out or (f"time limit of {settings.time_limit:g} s reached in the "
+                                  "profile checks: the intervals are linear")
+    prob.trace.deadline = None  # what follows is a fixed, small number of evaluations
     params.update(intervals(prob, current, ["C"], profile=False))
+    say(f"discrepancy: intervals {time.perf_counter() - t_iv:.1f} s")
     extra = separating_data([first_effect, *first_amb]) if first_amb else []
     geo = geometry_factor_check(prob, current)
-    notes = [C_MEANING]
+    notes = [C_MEANING] + ([timed_out] if timed_out else [])
     if prob.noise.source == "differences":
         notes.append("no plateau long enough for the noise model: sigma from second "
                      "differences of the whole trace, rho assumed 0")
     verdict = _verdict(first_effect, first_amb, claimed, before, after, params)
+    if timed_out:
+        verdict += f"; {timed_out}"
     c_amb = conductance_ambiguity(base, rounds, current, thr)
     if c_amb.ambiguous:
         verdict += "; " + describe(c_amb)
@@ -150,7 +202,15 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
         res.temperature_check = temperature_check(prob, base, current, res.t_temperature,
                                                   res.temperature)
     res.elapsed = time.perf_counter() - t_wall0
+    say(f"discrepancy: done in {res.elapsed:.1f} s")
     return res
+
+
+def _timeout(settings: DiscrepancySettings, where: str) -> DiscrepancyError:
+    """The error of a run whose time limit passed before any verdict was possible."""
+    return DiscrepancyError(
+        f"time limit of {settings.time_limit:g} s reached {where}: no verdict (raise "
+        "--time-limit, or shorten the record around the unload)")
 
 
 def _verdict(effect: str, amb: list[str], claimed: list[str], before: Diagnostics,

@@ -140,12 +140,12 @@ def forward_jacobian(fun: Callable[[FloatArray], FloatArray], x: FloatArray, f0:
 
 def _guarded(residual: Residual, params: Parameters, n_out: list[int]
              ) -> Callable[[FloatArray], FloatArray]:
-    """Residuals of scaled coordinates, with failures mapped to a large constant."""
+    """Residuals of scaled coordinates, with failures mapped to a large constant (called
+    under ``np.errstate(all="ignore")``, set once by :func:`minimize`)."""
 
     def fun(x: FloatArray) -> FloatArray:
         try:
-            with np.errstate(all="ignore"):
-                r = np.asarray(residual(params.to_values(x)), dtype=float)
+            r = np.asarray(residual(params.to_values(x)), dtype=float)
         except (ValueError, ArithmeticError):
             r = np.full(n_out[0], BAD_RESIDUAL) if n_out[0] else np.array([BAD_RESIDUAL])
         if n_out[0] == 0:
@@ -272,36 +272,37 @@ def minimize(residual: Residual, params: Parameters, *,
     FitResult
         The minimum with its Jacobian.
     """
-    lo, hi = params.bounds()
-    eps = 1e-9 * np.maximum(hi - lo, 1e-300)
-    eps = np.where(np.isfinite(eps), eps, 1e-9)
-    n_out = [0]
-    fun = _guarded(residual, params, n_out)
-    pts = [params.to_x()] + [params.to_x(s) for s in (starts or [])]
-    pts = [np.clip(p, lo + eps, hi - eps) for p in pts]
-    nfev = 0
-    if not params.free:
-        f0 = fun(np.zeros(0))
-        return FitResult(params=params, values=params.to_values(np.zeros(0)), x=np.zeros(0),
-                         fun=f0, jac=np.zeros((f0.size, 0)), chi2=float(f0 @ f0), success=True,
-                         nfev=1, n_data=n_data or f0.size)
-    if len(pts) > 1:
-        scored = []
-        for x0 in pts:
+    with np.errstate(all="ignore"):  # once per fit: per evaluation it cost ~0.1 ms
+        lo, hi = params.bounds()
+        eps = 1e-9 * np.maximum(hi - lo, 1e-300)
+        eps = np.where(np.isfinite(eps), eps, 1e-9)
+        n_out = [0]
+        fun = _guarded(residual, params, n_out)
+        pts = [params.to_x()] + [params.to_x(s) for s in (starts or [])]
+        pts = [np.clip(p, lo + eps, hi - eps) for p in pts]
+        nfev = 0
+        if not params.free:
+            f0 = fun(np.zeros(0))
+            return FitResult(params=params, values=params.to_values(np.zeros(0)), x=np.zeros(0),
+                             fun=f0, jac=np.zeros((f0.size, 0)), chi2=float(f0 @ f0), success=True,
+                             nfev=1, n_data=n_data or f0.size)
+        if len(pts) > 1:
+            scored = []
+            for x0 in pts:
+                f0 = fun(x0)
+                xs, fs, _j, _ok, n = levenberg_marquardt(fun, x0, f0, lo, hi,
+                                                         max_iter=max(1, screen_nfev))
+                nfev += n + 1
+                scored.append((float(fs @ fs), xs, fs))
+            scored.sort(key=lambda c: c[0])
+            _, x0, f0 = scored[0]
+        else:
+            x0 = pts[0]
             f0 = fun(x0)
-            xs, fs, _j, _ok, n = levenberg_marquardt(fun, x0, f0, lo, hi,
-                                                     max_iter=max(1, screen_nfev))
-            nfev += n + 1
-            scored.append((float(fs @ fs), xs, fs))
-        scored.sort(key=lambda c: c[0])
-        _, x0, f0 = scored[0]
-    else:
-        x0 = pts[0]
-        f0 = fun(x0)
-        nfev += 1
-    x, f, jac, ok, n_lm = levenberg_marquardt(fun, x0, f0, lo, hi,
-                                              max_iter=max(2, max_nfev // 2))
-    nfev += n_lm
-    return FitResult(params=params, values=params.to_values(x), x=x, fun=f, jac=jac,
-                     chi2=float(f @ f), success=bool(ok), nfev=nfev,
-                     n_data=n_data if n_data is not None else f.size)
+            nfev += 1
+        x, f, jac, ok, n_lm = levenberg_marquardt(fun, x0, f0, lo, hi,
+                                                  max_iter=max(2, max_nfev // 2))
+        nfev += n_lm
+        return FitResult(params=params, values=params.to_values(x), x=x, fun=f, jac=jac,
+                         chi2=float(f @ f), success=bool(ok), nfev=nfev,
+                         n_data=n_data if n_data is not None else f.size)

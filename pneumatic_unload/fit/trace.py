@@ -9,6 +9,7 @@ evaluating the model only at the likelihood's quadrature nodes. SI units: s, Pa.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Protocol
 
@@ -22,6 +23,10 @@ from pneumatic_unload.fit.params import Parameters
 
 FloatArray = NDArray[np.float64]
 Values = dict[str, float]
+
+
+class FitTimeout(RuntimeError):
+    """The trace's deadline (:attr:`Trace.deadline`) passed during a fit."""
 
 
 class FittableModel(Protocol):
@@ -63,6 +68,9 @@ class Trace:
         if edges is None:
             edges = make_bins(self.t, t_open, resolution=resolution)
         self.lik = BinnedLikelihood(self.t, self.y, noise, edges)
+        #: :func:`time.monotonic` instant [s] after which an evaluation raises
+        #: :class:`FitTimeout` (None: no deadline); one evaluation is the granularity.
+        self.deadline: float | None = None
 
     @property
     def n(self) -> int:
@@ -70,10 +78,15 @@ class Trace:
         return self.lik.n
 
     def residual(self, model: FittableModel) -> Callable[[Values], FloatArray]:
-        """The normalised binned residual of ``model`` as a function of its values [-]."""
+        """The normalised binned residual of ``model`` as a function of its values [-].
+
+        Raises :class:`FitTimeout` once :attr:`deadline` has passed.
+        """
         lik = self.lik
 
         def fun(v: Values) -> FloatArray:
+            if self.deadline is not None and time.monotonic() > self.deadline:
+                raise FitTimeout("the time limit passed during a fit")
             return lik.residuals_at(lambda tt: model.signal(v, tt), model.events(v))
 
         return fun

@@ -174,15 +174,36 @@ static void lu_solve(int n, const double *a, const int *piv, double *b)
     }
 }
 
+/* Returned by rosenbrock() (never by pu_dopri5) when its steps stay shorter than the
+ * explicit method's stability-limited step: the explicit method is the cheaper one there. */
+#define EXPLICIT_CHEAPER (-1)
+/* Accepted Rosenbrock steps over which its mean step is compared with the explicit one. */
+#define ROS_WINDOW 50
+/* Accepted explicit steps after which the stiff method is tried again (a trial costs about
+ * 2 ROS_WINDOW steps, so at most a tenth more steps where the explicit method wins). */
+#define ROS_RETRY (20 * ROS_WINDOW)
+
 /* Stiff continuation: the Rosenbrock 2(3) W-method of Shampine & Reichelt (1997, the
- * formula of MATLAB's ode23s) from (t, y) to t1, with a finite-difference Jacobian and
+ * formula of MATLAB's ode23s) from (*t_io, y) to t1, with a finite-difference Jacobian and
  * time derivative at every step and its own continuous extension for the outputs from
- * index j. Same arguments and return codes as pu_dopri5. */
-static int rosenbrock(int n, double *y, double t, double t1, double h, int n_out,
-                      const double *t_out, int j, const double *prm, double rtol,
-                      const double *atol, double hmax, long steps, long max_steps,
-                      double *out, int *n_done)
+ * index *j_io. Same arguments and return codes as pu_dopri5, and EXPLICIT_CHEAPER when
+ * the mean accepted step over a window of ROS_WINDOW steps (after the first, the start-up
+ * from the explicit step) is below h_explicit (the
+ * stability-limited step of the explicit method when it switched): a second-order method
+ * at a tight tolerance can need far shorter steps than a moderately stiff problem allows
+ * the explicit one (a pipe 1e-3 of the tank: 290 000 steps against 6 000). Then t, y,
+ * *j_io, *steps_io hold where it stopped and *h_mean its mean step. */
+static int rosenbrock(int n, double *y, double *t_io, double t1, double h,
+                      double h_explicit, int n_out, const double *t_out, int *j_io,
+                      const double *prm, double rtol, const double *atol, double hmax,
+                      long *steps_io, long max_steps, double *out, int *n_done,
+                      double *h_mean)
 {
+    double t = *t_io;
+    int j = *j_io;
+    long steps = *steps_io;
+    long accepted = 0;
+    double t_window = t;
     const double d = 1.0 / (2.0 + sqrt(2.0)), e32 = 6.0 + sqrt(2.0);
     double f0[MAX_STATES], f1[MAX_STATES], f2[MAX_STATES], ft[MAX_STATES];
     double k1[MAX_STATES], k2[MAX_STATES], k3[MAX_STATES], yt[MAX_STATES];
@@ -260,6 +281,17 @@ static int rosenbrock(int n, double *y, double t, double t1, double h, int n_out
             }
             double fac = e == 0.0 ? 5.0 : fmin(5.0, 0.8 * pow(e, -1.0 / 3.0));
             h = fmin(h * fac, hmax);
+            if (++accepted % ROS_WINDOW == 0) {  /* the first window: its start-up */
+                double mean = (t - t_window) / ROS_WINDOW;
+                t_window = t;
+                if (accepted > ROS_WINDOW && mean < h_explicit && t < t1) {
+                    *t_io = t;
+                    *j_io = j;
+                    *steps_io = steps;
+                    *h_mean = mean;
+                    return EXPLICIT_CHEAPER;
+                }
+            }
             break;
         }
     }
@@ -269,7 +301,10 @@ static int rosenbrock(int n, double *y, double t, double t1, double h, int n_out
 /* Dormand-Prince 5(4) from (t0, y0) to t1 (> t0), the states at t_out[0..n_out) written
  * row by row into out (n_out x n). Returns the status; *n_done receives the rows written.
  * When the problem turns stiff (Hairer's test: h |lambda| > 3.25 on 15 accepted steps) the
- * rest of the segment is integrated by the Rosenbrock method above. */
+ * segment is continued by the Rosenbrock method above, and handed back to this one where
+ * the Rosenbrock steps turn out shorter than the explicit ones (EXPLICIT_CHEAPER); it
+ * switches again when its own steps fall below half of those, or after ROS_RETRY steps
+ * (the dynamics change along a discharge: the stiff method wins near its end). */
 int pu_dopri5(int n, const double *y0, double t0, double t1, int n_out, const double *t_out,
               const double *prm, double rtol, const double *atol, double hmax,
               long max_steps, double *out, int *n_done)
@@ -315,6 +350,8 @@ int pu_dopri5(int n, const double *y0, double t0, double t1, int n_out, const do
     if (!(h > 0.0) || !isfinite(h)) return NOT_FINITE;
     long steps = 0;
     int rejected = 0, n_stiff = 0, non_stiff = 0;
+    double h_stiff = INFINITY;  /* mean step of the stiff method where it gave up [s] */
+    long explicit_steps = 0;    /* accepted explicit steps since then */
     while (t < t1) {
         if (steps >= max_steps) return TOO_MANY_STEPS;
         int last = (t + h >= t1) || (t1 - (t + h) < 1e-12 * span);
@@ -383,6 +420,7 @@ int pu_dopri5(int n, const double *y0, double t0, double t1, int n_out, const do
             }
         }
         *n_done = j;
+        explicit_steps++;
         /* stiffness test (Hairer & Wanner, dopri5): h |lambda| from the last two stages */
         double stnum = 0.0, stden = 0.0;
         for (i = 0; i < n; i++) {
@@ -391,10 +429,20 @@ int pu_dopri5(int n, const double *y0, double t0, double t1, int n_out, const do
         }
         if (stden > 0.0 && h * sqrt(stnum / stden) > 3.25) {
             non_stiff = 0;
-            if (++n_stiff >= 15 && t_new < t1) {
+            /* switch when stiff, unless the stiff method was tried and its steps were
+             * not much longer than the explicit ones are now */
+            if (++n_stiff >= 15 && t_new < t1
+                && (h < 0.5 * h_stiff || explicit_steps >= ROS_RETRY)) {
                 for (i = 0; i < n; i++) y[i] = yn[i];
-                return rosenbrock(n, y, t_new, t1, h, n_out, t_out, j, prm, rtol, atol, hmax,
-                                  steps, max_steps, out, n_done);
+                t = t_new;
+                int status = rosenbrock(n, y, &t, t1, h, h, n_out, t_out, &j, prm, rtol,
+                                        atol, hmax, &steps, max_steps, out, n_done,
+                                        &h_stiff);
+                if (status != EXPLICIT_CHEAPER) return status;
+                n_stiff = non_stiff = rejected = 0;
+                explicit_steps = 0;
+                pu_rhs(t, y, prm, k1);
+                continue;  /* on with the explicit method from where it stopped */
             }
         } else if (++non_stiff >= 6) {
             n_stiff = 0;
@@ -486,4 +534,27 @@ int pu_integrate(int n, const double *y0, int n_bounds, const double *bounds, in
         *n_done = k;
     }
     return OK;
+}
+
+/* Exact first-order lag y' = (u - y)/tau of the piecewise-linear interpolant of u on any
+ * increasing grid t[0..n-1] [s] (tau > 0 [s]), from the previous sample (t_prev, u_prev,
+ * y_prev); steady != 0 starts in steady state at the first sample (y = u there). A
+ * zero-length step keeps y. Written into y[0..n-1] (unit of u). */
+void pu_lag(int n, const double *t, const double *u, double tau, double t_prev,
+            double u_prev, double y_prev, int steady, double *y)
+{
+    double yp = y_prev, up = u_prev, tp = t_prev;
+    for (int i = 0; i < n; i++) {
+        double h = t[i] - tp;
+        if (h <= 0.0) {
+            if (i == 0 && steady) yp = u[i];
+        } else {
+            double a = exp(-h / tau);
+            double k = tau / h * (1.0 - a);
+            yp = a * yp + (1.0 - k) * u[i] + (k - a) * up;
+        }
+        y[i] = yp;
+        up = u[i];
+        tp = t[i];
+    }
 }

@@ -28,7 +28,9 @@ Functions (SI units: Pa absolute, K, m^3, s, kg/s, W):
 * :func:`dopri5` - the integrator over one smooth segment (stiff-switching), output on any
   grid;
 * :func:`integrate` - :func:`dopri5` over the smooth segments between the valve events, in
-  one call (a fit's model evaluation: no Python per segment).
+  one call (a fit's model evaluation: no Python per segment);
+* :func:`lag` - the sensor's exact first-order lag on an uneven grid (the quadrature
+  nodes of a fit), :func:`pneumatic_unload.model.sensor.first_order_lag`'s loop.
 """
 
 from __future__ import annotations
@@ -162,6 +164,8 @@ def _load() -> ctypes.CDLL:
     lib.pu_integrate.restype = i32
     lib.pu_integrate.argtypes = [i32, arr, i32, arr, i32, arr, arr, dbl, arr, dbl, dbl, i64,
                                  arr, ctypes.POINTER(i32), ctypes.POINTER(i32), arr]
+    lib.pu_lag.restype = None
+    lib.pu_lag.argtypes = [i32, arr, arr, dbl, dbl, dbl, dbl, i32, arr]
     return lib
 
 
@@ -315,3 +319,33 @@ def integrate(y0: FloatArray, bounds: FloatArray, t_out: FloatArray, prm: FloatA
                                out.ctypes.data, ctypes.byref(done), ctypes.byref(seg),
                                y_fail.ctypes.data)
     return int(status), int(done.value), int(seg.value), y_fail
+def lag(t: FloatArray, u: FloatArray, tau: float, state: tuple[float, float, float],
+        steady: bool) -> FloatArray:
+    """Exact first-order lag y' = (u - y)/tau of the piecewise-linear interpolant of u.
+
+    Parameters
+    ----------
+    t : ndarray
+        Increasing instants [s] (any spacing).
+    u : ndarray
+        Input at t [any unit].
+    tau : float
+        Time constant [s] (> 0).
+    state : tuple
+        (t, u, y) of the previous sample [s, unit, unit].
+    steady : bool
+        Start in steady state at the first sample (y = u there).
+
+    Returns
+    -------
+    ndarray
+        The lagged samples [unit of u].
+    """
+    t = np.ascontiguousarray(t, dtype=float)
+    u = np.ascontiguousarray(u, dtype=float)
+    if t.shape != u.shape or t.ndim != 1:
+        raise ValueError("lag: t and u must be 1-D arrays of equal length")
+    y = np.empty_like(u)
+    _LIB.pu_lag(u.size, t.ctypes.data, u.ctypes.data, float(tau), float(state[0]),
+                float(state[1]), float(state[2]), int(bool(steady)), y.ctypes.data)
+    return y

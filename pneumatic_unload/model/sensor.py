@@ -15,6 +15,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+import pneumatic_unload.model.kernel as kernel
 from pneumatic_unload.config import RigConfig
 
 FloatArray = NDArray[np.float64]
@@ -73,18 +74,8 @@ def first_order_lag(t: FloatArray, u: FloatArray, tau: float,
         from scipy.signal import lfilter  # local: scipy.signal costs ~0.8 s to import
 
         y, _ = lfilter([b0, b1], [1.0, -a], u, zi=zi)
-    else:
-        y = np.empty_like(u)
-        yp, up, tp = y_prev, u_prev, t_prev
-        for i in range(u.size):
-            hi = float(t[i]) - tp
-            if hi <= 0:
-                yp = float(u[i]) if i == 0 and first_h == 0.0 else yp
-            else:
-                a, b0, b1 = _lag_coefficients(hi, tau)
-                yp = a * yp + b0 * float(u[i]) + b1 * up
-            y[i] = yp
-            up, tp = float(u[i]), float(t[i])
+    else:  # uneven grid (a fit's quadrature nodes): the compiled loop
+        y = kernel.lag(t, u, tau, (t_prev, u_prev, y_prev), first_h == 0.0)
     return y, (float(t[-1]), float(u[-1]), float(y[-1]))
 
 
@@ -102,7 +93,22 @@ def sensor_response(t: FloatArray, p: FloatArray, cfg: RigConfig) -> FloatArray:
     """
     if not any(cfg.has(e) for e in ("sensor_lag", "sensor_gain", "sensor_offset")):
         return np.array(p, dtype=float)  # an ideal sensor (a fit's hot path: no chain)
-    return SensorChain(0).deterministic(t, p, cfg)
+    return _deterministic(t, p, cfg, None)[0]
+
+
+def _deterministic(t: FloatArray, p: FloatArray, cfg: RigConfig,
+                   lag: tuple[float, float, float] | None
+                   ) -> tuple[FloatArray, tuple[float, float, float] | None]:
+    """Lag (from state ``lag``), gain and offset of true pressures p [Pa] at t [s]; returns
+    (indicated pressure [Pa], lag state after the last sample)."""
+    y = np.asarray(p, dtype=float)
+    if cfg.has("sensor_lag") and cfg.sensor_lag > 0 and y.size > 0:
+        y, lag = first_order_lag(t, y, cfg.sensor_lag, lag)
+    if cfg.has("sensor_gain"):
+        y = y * (1.0 + cfg.sensor_gain)
+    if cfg.has("sensor_offset"):
+        y = y + cfg.sensor_offset
+    return np.array(y, dtype=float), lag
 
 
 def digitise(y: FloatArray, cfg: RigConfig) -> FloatArray:
@@ -138,14 +144,8 @@ class SensorChain:
         cfg : RigConfig
             Sensor effects.
         """
-        y = np.asarray(p, dtype=float)
-        if cfg.has("sensor_lag") and cfg.sensor_lag > 0 and y.size > 0:
-            y, self._lag = first_order_lag(t, y, cfg.sensor_lag, self._lag)
-        if cfg.has("sensor_gain"):
-            y = y * (1.0 + cfg.sensor_gain)
-        if cfg.has("sensor_offset"):
-            y = y + cfg.sensor_offset
-        return np.array(y, dtype=float)
+        y, self._lag = _deterministic(t, p, cfg, self._lag)
+        return y
 
     def noise(self, n: int, cfg: RigConfig) -> FloatArray:
         """White plus stationary AR(1) noise for the next n samples [Pa]."""
