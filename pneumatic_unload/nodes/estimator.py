@@ -77,8 +77,9 @@ def fill_estimate(msg: Any, r: UnloadResult, frame_id: str) -> Any:
 
 
 def _warm_up(settings: EstimatorSettings) -> None:
-    """Run the estimator once on a short synthetic unload, so that the first live estimate
-    does not pay for lazy imports and first-call set-up (tens of ms)."""
+    """Run the estimator once on a short synthetic unload, curve fit included, so that the
+    first live estimate does not pay for lazy imports (the fit's whiteness test imports
+    scipy.special: ~0.3 s) and first-call set-up."""
     from pneumatic_unload.config import RigConfig
     from pneumatic_unload.estimation import analyze
     from pneumatic_unload.model import simulate
@@ -87,7 +88,7 @@ def _warm_up(settings: EstimatorSettings) -> None:
                              noise_std=500.0, seed=0))
     analyze(sim.t, sim.measured, dataclasses.replace(
         settings, volume=1e-3, signal_gain=1.0, signal_offset=0.0, atmosphere=101325.0,
-        initial_temperature=293.15, curve_fit=False))
+        initial_temperature=293.15, curve_fit=True))
 
 
 class EstimatorNode(Node):
