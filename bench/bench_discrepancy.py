@@ -12,6 +12,7 @@ the speed line runs the full workflow with profiles.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 import time
@@ -107,6 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--null", type=int, default=40)
     ap.add_argument("--ar", type=int, default=20, help="null trials per AR(1) rho")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--rows", metavar="FILE", help="write every trial's row as JSON lines")
     args = ap.parse_args(argv)
     jobs = [(e, 1000 + k, 0.0) for e in EFFECTS for k in range(args.per_effect)]
     jobs += [("none", 5000 + k, 0.0) for k in range(args.null)]
@@ -120,6 +122,10 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"  {i + 1}/{len(jobs)} trials, {time.perf_counter() - t0:.0f} s",
                       file=sys.stderr, flush=True)
     wall = time.perf_counter() - t0
+    if args.rows:
+        with open(args.rows, "w", encoding="utf-8") as fh:
+            for r in sorted(rows, key=lambda r: (r["effect"], r["rho"], r["seed"])):
+                fh.write(json.dumps(r, default=float) + "\n")
     errors = [r for r in rows if r["error"]]
     ok = [r for r in rows if not r["error"]]
     eff = [r for r in ok if r["effect"] != "none"]

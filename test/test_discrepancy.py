@@ -321,7 +321,7 @@ def test_cli_json_fields_and_report_files(tmp_path, capsys):
     assert set(d["delta_bic"]) == {"heat_transfer", "valve_opening", "sensor_lag", "leak",
                                    "leak_downstream", "orifice_leak",
                                    "orifice_leak_downstream", "pipe_volume", "sensor_offset",
-                                   "sensor_gain"}
+                                   "sensor_gain", "hot_start"}
     assert d["noise"]["sigma"] == pytest.approx(1000.0, rel=0.1) and "rho" in d["noise"]
     off = d["parameters"]["offset"]
     assert off["ci_low"] <= 5000.0 <= off["ci_high"] or abs(off["value"] - 5000) < 150
@@ -364,6 +364,11 @@ def test_real_aerolab_runs_end_to_end(tmp_path, capsys):
     assert tc["final"]["rms"] < tc["baseline"]["rms"]
     assert (rep / "temperature.png").exists() and (rep / "report.md").exists()
     assert 0.5e-8 < d["conductance"] < 3e-8
+    # the fitted model still heats the gas back toward a warm wall while the log shows it
+    # cooling: flagged, with the wall temperature as the likely culprit (issue 12)
+    assert tc["contradicts"] and "wall temperature" in tc["likely_reason"]
+    assert "contradicts" in d["verdict"]
+    assert d["conductance_range"]["low"] <= d["conductance"] <= d["conductance_range"]["high"]
 
 
 # ------------------------------------------------------------- ambiguity rules (issue 12)
@@ -432,6 +437,11 @@ def test_ambiguity_rules_each_add_the_competing_C():
     quality[id(alone["pipe_volume"])] = _diag(True, 1.05)
     assert not conductance_ambiguity(base, [_round(base, alone)], heat, 10.0,
                                      lambda f: quality[id(f)]).ambiguous
+    # ... nor one no better than its round's base (its C trades along a degenerate valley)
+    worse = _Fit(("pipe_volume",), 1.7e-8, 1e-11, 1005.0)
+    quality[id(worse)] = _diag(True, 1.0)
+    assert not conductance_ambiguity(base, [_round(base, {**alone, "pipe_volume": worse})],
+                                     heat, 10.0, lambda f: quality[id(f)]).ambiguous
     # a winner with a parameter at its bound: its runner-up, however far behind
     heat_b = _Fit(("heat_transfer",), 1.00e-8, 1e-11, 500.0, at_bound=True)
     amb = conductance_ambiguity(base, [_round(base, {**alone, "heat_transfer": heat_b})],

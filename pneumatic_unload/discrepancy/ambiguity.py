@@ -9,9 +9,11 @@ their combined 1-sigma:
 * **equal fits**: a model of a round (its base or a candidate) whose BIC is within the
   threshold of that round's best (BICs compare only within a round: a further round may
   use a noise model refitted on the residual);
-* **white fits**: a model whose residual is white with a normalised RMS <= 1.02
-  (:data:`~pneumatic_unload.discrepancy.types.NRMS_LIMIT`), as is the final model's: both
-  explain the trace within noise, whatever their BICs;
+* **white fits**: a candidate that improves on its round's base (lower BIC) and whose
+  residual is white with a normalised RMS <= 1.02 (:data:`~pneumatic_unload.discrepancy.
+  types.NRMS_LIMIT`), as is the final model's: both explain the trace within noise,
+  whatever their BICs (a candidate no better than its base only spends its parameters on
+  a degenerate direction, e.g. a pipe conductance in series trading with C);
 * **a winner at a bound**: a round's winner with a parameter at its bound is a stand-in
   for physics it does not quite describe, however far ahead; its runner-up is a member;
 * **variants**: the runner-up of a round is the same physics in another place or law (a
@@ -173,17 +175,20 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
     round_base = base
     for r in rounds:
         round_base = r.base if r.base is not None else round_base
-        pool = [round_base, *r.fits.values()]
+        # a refused candidate (a transducer effect without evidence of its own) competes
+        # with nothing: a physics model explains what it would
+        pool = [round_base, *(f for k, f in r.fits.items() if k not in r.refused)]
         best = min(f.bic for f in pool if math.isfinite(f.bic))
         for f in pool:
             if f.bic - best <= threshold:
                 add(f, f"fits about as well (delta-BIC within {threshold:g} of the best)",
                     f.bic - best)
             elif final_white and quality is not None and f is not round_base \
-                    and differs(f) and _within_noise(quality(f)):
+                    and f.bic < round_base.bic and differs(f) and _within_noise(quality(f)):
                 add(f, "explains the trace within noise too (white, normalised RMS <= "
                        f"{NRMS_LIMIT:g})", f.bic - best)
-        order = sorted(r.delta_bic, key=lambda k: -r.delta_bic[k])
+        order = [k for k in sorted(r.delta_bic, key=lambda k: -r.delta_bic[k])
+                 if k not in r.refused]
         if r.winner != "none" and len(order) > 1:
             runner = r.fits[order[1]]
             bound = at_bounds(r.fits[r.winner])
