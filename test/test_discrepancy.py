@@ -546,3 +546,26 @@ def test_logged_temperature_contradicting_the_model_names_the_wall():
     tc = res.temperature_check
     assert res.effect == "hot_start" and not tc["contradicts"] and tc["agrees"], \
         tc["summary"]
+
+
+def test_nested_extension_and_look_alikes_must_earn_their_place():
+    from pneumatic_unload.discrepancy.search import decide, look_alikes
+
+    base = _Fit((), 1e-8, 1e-11, 1000.0)
+    # the hot start (one parameter more than heat transfer) within 10 of it: heat transfer
+    # is named, alone
+    fits = {"heat_transfer": _Fit(("heat_transfer",), 1e-8, 1e-11, 500.0),
+            "hot_start": _Fit(("hot_start",), 1e-8, 1e-11, 492.0),
+            "pipe_volume": _Fit(("pipe_volume",), 1e-8, 1e-11, 700.0)}
+    assert decide(base, fits, 10.0)[1:] == ("heat_transfer", [])
+    fits["hot_start"] = _Fit(("hot_start",), 1e-8, 1e-11, 470.0)  # 30 better: named
+    assert decide(base, fits, 10.0)[1:] == ("hot_start", [])
+    # a refused candidate is neither winner nor ambiguity
+    assert decide(base, fits, 10.0, {"hot_start": "no"})[1:] == ("heat_transfer", [])
+    # once a leak is named, its other law / place and the round's ambiguity set are not
+    # tried on top of it
+    rest = ["leak", "orifice_leak", "leak_downstream", "pipe_volume", "sensor_gain",
+            "heat_transfer"]
+    assert look_alikes("leak", ["sensor_gain"], rest) == [
+        "leak", "orifice_leak", "leak_downstream", "sensor_gain"]
+    assert look_alikes("heat_transfer", [], ["hot_start", "leak"]) == ["hot_start"]
