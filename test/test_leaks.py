@@ -12,7 +12,7 @@ import pytest
 from pneumatic_unload.cli import main
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.discrepancy import DiscrepancySettings, find_discrepancy
-from pneumatic_unload.discrepancy.ambiguity import C_MEANING, PARALLEL_LEAK_MAX
+from pneumatic_unload.discrepancy.ambiguity import C_MEANING, K_RANGE, PARALLEL_LEAK_MAX
 from pneumatic_unload.model import simulate
 from pneumatic_unload.physics import RHO_N
 
@@ -109,7 +109,7 @@ def test_downstream_orifice_leak_is_indistinguishable_from_C_and_the_verdict_say
     lo, hi = res.conductance_range
     assert lo <= C <= hi
     assert res.conductance_ambiguity.parallel_low == pytest.approx(
-        (res.conductance - 2 * res.conductance_std()) / (1 + PARALLEL_LEAK_MAX))
+        (res.conductance - K_RANGE * res.conductance_std()) / (1 + PARALLEL_LEAK_MAX))
     assert "plugged" in res.conductance_ambiguity.separating[0]
 
 

@@ -31,8 +31,8 @@ therefore always reaches down to the component's C with such a leak of up to
 :data:`PARALLEL_LEAK_MAX` times its own C (``parallel_low``); a run with the component
 plugged removes that caveat.
 
-The range spans the members' C values and their 95 % intervals (C +- 2 sigma, clipped at
-zero) and the parallel-leak bound.
+The range spans the members' C values and their 3-sigma intervals (C +- 3 sigma, clipped
+at zero) and the parallel-leak bound.
 """
 
 from __future__ import annotations
@@ -64,8 +64,10 @@ VARIANTS: tuple[frozenset[str], ...] = (
 #: (the hot start adds the wall temperature; the data judge it by the BIC like any effect).
 SAME_PHYSICS: tuple[frozenset[str], ...] = (*VARIANTS, frozenset({"heat_transfer",
                                                                     HOT_START}))
-#: Coverage factor of the members' C intervals in the range [-].
-K_RANGE = 2.0
+#: Coverage factor of the members' C intervals in the range [-]: the 3-sigma interval by
+#: which a reported C is judged (a C more than 3 sigma off with no range is "confidently
+#: wrong"); 2 sigma would miss the truth in 1 of 20 verdicts by noise alone.
+K_RANGE = 3.0
 #: Largest leak in parallel with the component the range allows, relative to the
 #: component's own C [-]: a leak carrying more than the component is a second outlet (a
 #: plumbing error), not a leaky seal.
@@ -90,11 +92,11 @@ class ConductanceAmbiguity:
         [m^3/(s Pa)], 'delta_bic' (BIC above the best model of its round) [-], 'why'.
         Empty when no other model competes (C is then not ambiguous).
     low, high : float
-        C range across the members, their 95 % intervals and the parallel-leak bound
+        C range across the members, their 3-sigma intervals and the parallel-leak bound
         included [m^3/(s Pa)].
     parallel_low : float
         Component's C if a leak in parallel with it of :data:`PARALLEL_LEAK_MAX` times
-        its C were hidden in the final model's C (lower 95 % end) [m^3/(s Pa)].
+        its C were hidden in the final model's C (lower 3-sigma end) [m^3/(s Pa)].
     separating : list of str
         Measurements that would separate them.
     """
