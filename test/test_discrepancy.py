@@ -428,6 +428,11 @@ def test_ambiguity_rules_each_add_the_competing_C():
     # ... not when their C agree within sigma
     same = {**alone, "pipe_volume": _Fit(("pipe_volume",), 1.00001e-8, 1e-11, 505.0)}
     assert not conductance_ambiguity(base, [_round(base, same)], heat, 10.0).ambiguous
+    # ... nor when they differ by a negligible 0.05 % of C, however small the sigmas
+    tiny = _Fit(("heat_transfer",), 1.00e-8, 1e-14, 500.0)
+    near = {"heat_transfer": tiny, "pipe_volume": _Fit(("pipe_volume",), 1.0005e-8, 1e-14,
+                                                       505.0)}
+    assert not conductance_ambiguity(base, [_round(base, near)], tiny, 10.0).ambiguous
     # white fits: far behind by BIC, but both white at nRMS <= 1.02
     quality = {id(heat): _diag(True, 1.0), id(alone["pipe_volume"]): _diag(True, 1.01),
                id(base): _diag(False, 3.0)}

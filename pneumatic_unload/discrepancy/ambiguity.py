@@ -72,6 +72,11 @@ K_RANGE = 3.0
 #: component's own C [-]: a leak carrying more than the component is a second outlet (a
 #: plumbing error), not a leaky seal.
 PARALLEL_LEAK_MAX = 1.0
+#: Relative C difference below which two models do not make an ambiguity [-]: far below
+#: every other term of C's budget (volume, temperature: about 1 %); without it, a candidate
+#: fitted at almost nothing on effect-free data (C 0.01 % apart, sigma 0.006 %) was called
+#: one.
+C_NEGLIGIBLE = 1e-3
 #: How close to a bound (in units of the parameter's fitted scale) counts as at it [-].
 AT_BOUND = 1e-3
 
@@ -167,7 +172,7 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
     def differs(f: Fit) -> bool:
         c, s = f.theta["C"], _std(f)
         comb = math.hypot(s0 if math.isfinite(s0) else 0.0, s if math.isfinite(s) else 0.0)
-        return abs(c - c0) > max(comb, 1e-12 * c0)
+        return abs(c - c0) > max(comb, C_NEGLIGIBLE * c0)
 
     def add(f: Fit, why: str, dbic: float) -> None:
         if f is not final and f.effects != final.effects and differs(f):
