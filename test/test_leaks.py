@@ -12,7 +12,7 @@ import pytest
 from pneumatic_unload.cli import main
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.discrepancy import DiscrepancySettings, find_discrepancy
-from pneumatic_unload.discrepancy.ambiguity import C_MEANING
+from pneumatic_unload.discrepancy.ambiguity import C_MEANING, K_RANGE, PARALLEL_LEAK_MAX
 from pneumatic_unload.model import simulate
 from pneumatic_unload.physics import RHO_N
 
@@ -105,11 +105,20 @@ def test_downstream_orifice_leak_is_indistinguishable_from_C_and_the_verdict_say
     total = C + c_leak
     assert abs(res.conductance - total) <= 3 * res.conductance_std() + 2e-3 * total
     assert C_MEANING in res.notes and "plugged" in C_MEANING
+    # never a confident wrong C: the range reaches down to the component's own C
+    lo, hi = res.conductance_range
+    assert lo <= C <= hi
+    assert res.conductance_ambiguity.parallel_low == pytest.approx(
+        (res.conductance - K_RANGE * res.conductance_std()) / (1 + PARALLEL_LEAK_MAX))
+    assert "plugged" in res.conductance_ambiguity.separating[0]
 
 
 def test_leak_free_trace_claims_no_leak():
     res = _run(_rig(seed=21))
     assert res.effect == "none" and res.effects == []
-    if res.conductance_range is not None:  # a small leak cannot be excluded: a narrow range
-        lo, hi = res.conductance_range
-        assert lo <= C <= hi and hi - lo < 0.05 * C
+    # no model competes: the range is the parallel-leak caveat alone (a leak in parallel
+    # with the component's own law cannot be excluded from one trace), not an ambiguity
+    assert not res.conductance_ambiguity.ambiguous and "C is ambiguous" not in res.verdict
+    lo, hi = res.conductance_range
+    assert lo <= C <= hi and hi - C < 0.01 * C
+    assert lo == pytest.approx(res.conductance_ambiguity.parallel_low)

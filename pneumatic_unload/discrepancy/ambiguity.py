@@ -2,38 +2,88 @@
 
 Naming an effect is not enough when models that explain the trace about equally well give
 different sonic conductances C: the verdict must then give the C range across them and the
-measurement that separates them. Three cases are collected (SI units: m^3/(s Pa)):
+measurement that separates them. Members are collected by these rules (SI units:
+m^3/(s Pa)); a member is kept only when its C differs from the final model's by more than
+their combined 1-sigma:
 
-* **equal fits**: every fitted model (baseline, every candidate of every round) whose BIC
-  is within the threshold of the best, and whose C differs from the final model's by more
-  than their combined 1-sigma;
-* **placement variants**: the runner-up of a round is the same physics placed elsewhere in
-  the rig (a leak upstream or downstream of the valve), however far behind;
+* **equal fits**: a model of a round (its base or a candidate) whose BIC is within the
+  threshold of that round's best (BICs compare only within a round: a further round may
+  use a noise model refitted on the residual);
+* **white fits**: a candidate that improves on its round's base (lower BIC) and whose
+  residual is white with a normalised RMS <= 1.02 (:data:`~pneumatic_unload.discrepancy.
+  types.NRMS_LIMIT`), as is the final model's: both explain the trace within noise,
+  whatever their BICs (a candidate no better than its base only spends its parameters on
+  a degenerate direction, e.g. a pipe conductance in series trading with C);
+* **a winner at a bound**: a round's winner with a parameter at its bound is a stand-in
+  for physics it does not quite describe, however far ahead; its runner-up is a member;
+* **variants**: the runner-up of a round is the same physics in another place or law (a
+  leak upstream / downstream of the valve, laminar / orifice: :data:`VARIANTS`), however
+  far behind;
 * **a leak in parallel with the component** (:data:`~pneumatic_unload.model.effects.
-  DOWNSTREAM_LEAKS`) in the final model: it opens with the valve as the component does, so
-  C is confounded with it; the C interval of that fit is reported as the range, and the
-  measurement that separates them is a run with the component plugged.
+  DOWNSTREAM_LEAKS`) in the final model: C is confounded with it; the C interval of that
+  fit is the range, and a run with the component plugged separates them.
 
-The range spans the members' C values and their 95 % intervals (C +- 2 sigma, clipped at
-zero).
+Whatever the verdict, C of the final model is the conductance of everything downstream of
+the valve: a leak in parallel with the component that follows the component's own flow
+law (an orifice leak with the same b) changes the trace exactly as a larger C does, at any
+size (the ISO 6358 flow is linear in C at a fixed b), so no fit can bound it. The range
+therefore always reaches down to the component's C with such a leak of up to
+:data:`PARALLEL_LEAK_MAX` times its own C (``parallel_low``); a run with the component
+plugged removes that caveat.
+
+The range spans the members' C values and their 3-sigma intervals (C +- 3 sigma, clipped
+at zero) and the parallel-leak bound.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from pneumatic_unload.discrepancy.types import Fit, Round
-from pneumatic_unload.model.effects import DOWNSTREAM_LEAKS, PLUGGED_RUN, separating_data
+from pneumatic_unload.discrepancy.types import NRMS_LIMIT, Diagnostics, Fit, Round
+from pneumatic_unload.model.effects import (
+    DOWNSTREAM_LEAKS,
+    HOT_START,
+    PLUGGED_RUN,
+    separating_data,
+)
 
-#: Effects that are the same physics placed upstream / downstream of the valve.
-PLACEMENT_VARIANTS: dict[str, str] = {
-    "leak": "leak_downstream", "leak_downstream": "leak",
-    "orifice_leak": "orifice_leak_downstream", "orifice_leak_downstream": "orifice_leak",
-}
-#: Coverage factor of the members' C intervals in the range [-].
-K_RANGE = 2.0
+#: Pairs of candidates that are the same physics in another law or place, neither nested
+#: in the other: the runner-up of such a pair is a C-ambiguity member however far behind.
+VARIANTS: tuple[frozenset[str], ...] = (
+    frozenset({"leak", "orifice_leak"}),
+    frozenset({"leak_downstream", "orifice_leak_downstream"}),
+    frozenset({"leak", "leak_downstream"}),
+    frozenset({"orifice_leak", "orifice_leak_downstream"}),
+    frozenset({"leak", "orifice_leak_downstream"}),
+    frozenset({"orifice_leak", "leak_downstream"}),
+)
+#: Pairs of the same physics: the variants and the nested pair heat transfer / hot start
+#: (the hot start adds the wall temperature; the data judge it by the BIC like any effect).
+SAME_PHYSICS: tuple[frozenset[str], ...] = (*VARIANTS, frozenset({"heat_transfer",
+                                                                    HOT_START}))
+#: Coverage factor of the members' C intervals in the range [-]: the 3-sigma interval by
+#: which a reported C is judged (a C more than 3 sigma off with no range is "confidently
+#: wrong"); 2 sigma would miss the truth in 1 of 20 verdicts by noise alone.
+K_RANGE = 3.0
+#: Largest leak in parallel with the component the range allows, relative to the
+#: component's own C [-]: a leak carrying more than the component is a second outlet (a
+#: plumbing error), not a leaky seal.
+PARALLEL_LEAK_MAX = 1.0
+#: Relative C difference below which two models do not make an ambiguity [-]: far below
+#: every other term of C's budget (volume, temperature: about 1 %); without it, a candidate
+#: fitted at almost nothing on effect-free data (C 0.01 % apart, sigma 0.006 %) was called
+#: one.
+C_NEGLIGIBLE = 1e-3
+#: How close to a bound (in units of the parameter's fitted scale) counts as at it [-].
+AT_BOUND = 1e-3
+
+
+def same_physics(a: str, b: str) -> bool:
+    """True when candidates a and b are the same physics in another law or place."""
+    return frozenset({a, b}) in SAME_PHYSICS
 
 
 @dataclass
@@ -44,9 +94,14 @@ class ConductanceAmbiguity:
     ----------
     members : list of dict
         Per model: 'effects' (names), 'conductance' [m^3/(s Pa)], 'conductance_std'
-        [m^3/(s Pa)], 'delta_bic' (BIC above the best model) [-], 'why'.
+        [m^3/(s Pa)], 'delta_bic' (BIC above the best model of its round) [-], 'why'.
+        Empty when no other model competes (C is then not ambiguous).
     low, high : float
-        C range across the members, their 95 % intervals included [m^3/(s Pa)].
+        C range across the members, their 3-sigma intervals and the parallel-leak bound
+        included [m^3/(s Pa)].
+    parallel_low : float
+        Component's C if a leak in parallel with it of :data:`PARALLEL_LEAK_MAX` times
+        its C were hidden in the final model's C (lower 3-sigma end) [m^3/(s Pa)].
     separating : list of str
         Measurements that would separate them.
     """
@@ -54,17 +109,20 @@ class ConductanceAmbiguity:
     members: list[dict[str, Any]] = field(default_factory=list)
     low: float = math.nan
     high: float = math.nan
+    parallel_low: float = math.nan
     separating: list[str] = field(default_factory=list)
 
     @property
     def ambiguous(self) -> bool:
-        """True when more than the final model is a member (or a downstream leak is)."""
+        """True when another model competes (or a downstream leak is in the final one)."""
         return bool(self.members)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (the ``conductance_range`` of the JSON output)."""
         return {"low": self.low, "high": self.high, "unit": "m^3/(s Pa)",
-                "members": self.members, "separating": self.separating}
+                "ambiguous": self.ambiguous, "members": self.members,
+                "parallel_leak_low": self.parallel_low,
+                "parallel_leak_max": PARALLEL_LEAK_MAX, "separating": self.separating}
 
 
 def _std(f: Fit) -> float:
@@ -76,81 +134,113 @@ def _std(f: Fit) -> float:
     return s if math.isfinite(s) and s >= 0 else math.nan
 
 
-def _label(f: Fit) -> str:
-    return ", ".join(f.effects) if f.effects else "baseline (no effect)"
+def at_bounds(f: Fit) -> list[str]:
+    """Free parameters of a fit at (within :data:`AT_BOUND` of) a bound."""
+    params = f.result.params
+    lo, hi = params.bounds()
+    x = params.to_x(f.theta)
+    return [n for n, xi, a, b in zip(params.free, x, lo, hi, strict=True)
+            if xi - a < AT_BOUND or b - xi < AT_BOUND]
 
 
-def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold: float
+def _within_noise(d: Diagnostics | None) -> bool:
+    return d is not None and d.white and d.nrms <= NRMS_LIMIT
+
+
+def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold: float,
+                          quality: Callable[[Fit], Diagnostics] | None = None
                           ) -> ConductanceAmbiguity:
     """Collect the models whose C competes with the final model's.
 
     Parameters
     ----------
     base : Fit
-        The baseline fit.
+        The baseline fit (the base of the first round).
     rounds : list of Round
         The greedy rounds (every candidate fit).
     final : Fit
         The model the verdict reports.
     threshold : float
         Delta-BIC within which two models fit "about equally" [-].
+    quality : callable, optional
+        Diagnostics of a fit (residual whiteness and normalised RMS); without it the
+        white-fits rule is not applied.
     """
-    fits: list[Fit] = [base] + [f for r in rounds for f in r.fits.values()]
-    best_bic = min(f.bic for f in fits if math.isfinite(f.bic))
     c0, s0 = final.theta["C"], _std(final)
-    members: dict[tuple[str, ...], tuple[Fit, str]] = {}
+    members: dict[tuple[str, ...], tuple[Fit, str, float]] = {}
 
     def differs(f: Fit) -> bool:
         c, s = f.theta["C"], _std(f)
         comb = math.hypot(s0 if math.isfinite(s0) else 0.0, s if math.isfinite(s) else 0.0)
-        return abs(c - c0) > max(comb, 1e-12 * c0)
+        return abs(c - c0) > max(comb, C_NEGLIGIBLE * c0)
 
-    for f in fits:
-        if f is final or f.effects == final.effects:
-            continue
-        if f.bic - best_bic <= threshold and differs(f):
-            members[f.effects] = (f, "fits about as well (delta-BIC within "
-                                     f"{threshold:g} of the best)")
+    def add(f: Fit, why: str, dbic: float) -> None:
+        if f is not final and f.effects != final.effects and differs(f):
+            members.setdefault(f.effects, (f, why, dbic))
+
+    final_white = quality is not None and _within_noise(quality(final))
+    round_base = base
     for r in rounds:
-        order = sorted(r.delta_bic, key=lambda k: -r.delta_bic[k])
-        if r.winner == "none" or len(order) < 2:
-            continue
-        runner = order[1]
-        if PLACEMENT_VARIANTS.get(r.winner) == runner and r.delta_bic[runner] > threshold:
-            f = r.fits[runner]
-            if f.effects != final.effects and differs(f):
-                members.setdefault(f.effects, (f, f"placement variant of {r.winner} "
-                                                  "(the same leak on the other side of "
-                                                  "the valve)"))
+        round_base = r.base if r.base is not None else round_base
+        # a refused candidate (a transducer effect without evidence of its own) competes
+        # with nothing: a physics model explains what it would
+        pool = [round_base, *(f for k, f in r.fits.items() if k not in r.refused)]
+        best = min(f.bic for f in pool if math.isfinite(f.bic))
+        for f in pool:
+            if f.bic - best <= threshold:
+                add(f, f"fits about as well (delta-BIC within {threshold:g} of the best)",
+                    f.bic - best)
+            elif final_white and quality is not None and f is not round_base \
+                    and f.bic < round_base.bic and differs(f) and _within_noise(quality(f)):
+                add(f, "explains the trace within noise too (white, normalised RMS <= "
+                       f"{NRMS_LIMIT:g})", f.bic - best)
+        order = [k for k in sorted(r.delta_bic, key=lambda k: -r.delta_bic[k])
+                 if k not in r.refused]
+        if r.winner != "none" and len(order) > 1:
+            runner = r.fits[order[1]]
+            bound = at_bounds(r.fits[r.winner])
+            if bound:
+                add(runner, f"runner-up of {r.winner}, whose {', '.join(bound)} sit(s) at "
+                            "a bound (a stand-in for physics it does not quite describe)",
+                    runner.bic - best)
+            if frozenset({r.winner, order[1]}) in VARIANTS:
+                add(runner, f"the same physics as {r.winner} in another place or law",
+                    runner.bic - best)
+        if r.winner != "none":
+            round_base = r.fits[r.winner]
     down = [e for e in final.effects if e in DOWNSTREAM_LEAKS]
     out = ConductanceAmbiguity()
+    s0_ = s0 if math.isfinite(s0) else 0.0
+    out.parallel_low = max(c0 - K_RANGE * s0_, 0.0) / (1.0 + PARALLEL_LEAK_MAX)
+    out.low, out.high = out.parallel_low, c0 + K_RANGE * s0_
+    plugged = f"C vs a leak in parallel with the component: {PLUGGED_RUN}"
     if not members and not down:
+        out.separating.append(plugged)
         return out
     why_final = "the reported model" + (
         f": {', '.join(down)} is in parallel with the component, so C is confounded "
         "with the leak" if down else "")
-    rows = [(final, why_final), *members.values()]
-    lows, highs = [], []
-    for f, why in rows:
+    rows = [(final, why_final, 0.0), *members.values()]
+    for f, why, dbic in rows:
         c, s = f.theta["C"], _std(f)
         s = s if math.isfinite(s) else 0.0
-        lows.append(max(c - K_RANGE * s, 0.0))
-        highs.append(c + K_RANGE * s)
+        out.low = min(out.low, max(c - K_RANGE * s, 0.0))
+        out.high = max(out.high, c + K_RANGE * s)
         out.members.append({"effects": list(f.effects), "conductance": c,
-                            "conductance_std": s, "delta_bic": f.bic - best_bic,
-                            "why": why})
-    out.low, out.high = min(lows), max(highs)
-    names = sorted({e for f, _ in rows for e in f.effects} | set(down))
-    if down or any(e in DOWNSTREAM_LEAKS for f, _ in rows for e in f.effects):
-        out.separating.append(f"C vs a leak in parallel with the component: {PLUGGED_RUN}")
+                            "conductance_std": s, "delta_bic": dbic, "why": why})
+    names = sorted({e for f, _, _ in rows for e in f.effects})
     effs = [e for e in names if e not in final.effects] + list(final.effects)
-    if len(effs) > 1:
-        out.separating += separating_data(effs[:4])
+    specific = separating_data(effs[:4]) if len(effs) > 1 else []
+    if down or any(e in DOWNSTREAM_LEAKS for e in names):
+        out.separating = [plugged, *specific]
+    else:
+        out.separating = [*specific, plugged]
     return out
 
 
 def describe(amb: ConductanceAmbiguity) -> str:
-    """One sentence for the verdict: the C range and what separates the members."""
+    """One sentence for the verdict: the C range and what separates the members (call it
+    when :attr:`ConductanceAmbiguity.ambiguous`)."""
     who = "; ".join(f"{_fmt(m['effects'])}: C = {m['conductance']:.4g}" for m in amb.members)
     txt = (f"C is ambiguous: {amb.low:.4g} to {amb.high:.4g} m^3/(s Pa) across "
            f"{len(amb.members)} model(s) ({who})")
@@ -163,7 +253,9 @@ def describe(amb: ConductanceAmbiguity) -> str:
 #: opens with it; a sonic one changes the trace exactly as a larger C does).
 C_MEANING = ("C is the conductance of everything downstream of the shut-off valve: a leak "
              "in parallel with the component adds to it (an orifice-law one with the same "
-             "b is indistinguishable from a larger C); to exclude one: " + PLUGGED_RUN)
+             "b is indistinguishable from a larger C, at any size); the C range reported "
+             "reaches down to the component's C with such a leak of up to "
+             f"{PARALLEL_LEAK_MAX:g} times its own C; to exclude one: " + PLUGGED_RUN)
 
 
 def _fmt(effects: list[str]) -> str:

@@ -70,12 +70,20 @@ def geometry_factor_check(prob: Problem, fit: Fit) -> dict[str, Any]:
                       "with different tank geometries (L/D) to identify a shared law"}
 
 
+#: Agreement tolerance of a logged gas temperature with a model [K]: the calibration of a
+#: gas thermocouple (about 2 K) and its lag (seconds), which flattens the fast cooling of the
+#: first seconds of a discharge.
+TEMPERATURE_TOLERANCE = 5.0
+
+
 def temperature_check(prob: Problem, base: Fit, final: Fit, t_meas: FloatArray,
                       temp_meas: FloatArray) -> dict[str, Any]:
     """Compare a measured gas temperature with the baseline and final models [K].
 
     The measured temperature is not used in any fit, so agreement is independent evidence
-    for (or against) the heat-transfer effect fitted on the pressure alone.
+    for (or against) the heat-transfer effect fitted on the pressure alone. A final model
+    whose temperature differs from the log by more than :data:`TEMPERATURE_TOLERANCE` (rms)
+    is flagged ('contradicts') with the likely reason and what to measure next.
     """
     sel = (t_meas >= prob.t[0]) & (t_meas <= prob.t[-1])
     if np.count_nonzero(sel) < 3:
@@ -83,22 +91,74 @@ def temperature_check(prob: Problem, base: Fit, final: Fit, t_meas: FloatArray,
     tm, Tm = t_meas[sel], temp_meas[sel]
     out: dict[str, Any] = {"available": True, "samples": int(tm.size),
                            "measured_min": float(np.min(Tm)),
-                           "measured_start": float(Tm[0])}
+                           "measured_start": float(Tm[0]), "measured_end": float(Tm[-1]),
+                           "tolerance": TEMPERATURE_TOLERANCE}
+    diffs = {}
     for label, f in (("baseline", base), ("final", final)):
         Tmod = f.model.temperature(f.theta, tm)
         d = Tmod - Tm
+        diffs[label] = d
         out[label] = {"rms": float(np.sqrt(np.mean(d * d))), "mean": float(np.mean(d)),
-                      "min_model": float(np.min(Tmod))}
-    heat = "heat_transfer" in final.effects
+                      "min_model": float(np.min(Tmod)), "end_model": float(Tmod[-1])}
+    heat = any(e in ("heat_transfer", "hot_start") for e in final.effects)
     better = out["final"]["rms"] < out["baseline"]["rms"]
+    contradicts = out["final"]["rms"] > TEMPERATURE_TOLERANCE
     out["heat_transfer_fitted"] = heat
-    out["agrees"] = bool(heat and better)
+    out["contradicts"] = contradicts
+    out["agrees"] = bool(heat and better and not contradicts)
+    reason, next_ = _temperature_reason(prob, final, diffs["final"], Tm) if contradicts \
+        else ("", "")
+    out["likely_reason"], out["measure_next"] = reason, next_
+    head = ("the measured gas temperature is closer to the model with the fitted heat "
+            "transfer" if better else "the measured gas temperature does NOT support the "
+            "fitted model better than the adiabatic baseline")
+    if contradicts:
+        head = (f"the logged gas temperature CONTRADICTS the final model (rms "
+                f"{out['final']['rms']:.1f} K > {TEMPERATURE_TOLERANCE:g} K; mean "
+                f"{out['final']['mean']:+.1f} K); likely: {reason}; next: {next_}; "
+                + ("it is still closer than the adiabatic baseline" if better else
+                   "it is not even closer than the adiabatic baseline"))
     out["summary"] = (
-        ("the measured gas temperature is closer to the model with the fitted heat "
-         "transfer" if better else "the measured gas temperature does NOT support the "
-         "fitted model better than the adiabatic baseline")
-        + f" (rms {out['baseline']['rms']:.2f} K adiabatic vs {out['final']['rms']:.2f} K "
-          f"final model; measured minimum {out['measured_min']:.1f} K, adiabatic model "
-          f"minimum {out['baseline']['min_model']:.1f} K, final model minimum "
-          f"{out['final']['min_model']:.1f} K)")
+        head + f" (rms {out['baseline']['rms']:.2f} K adiabatic vs {out['final']['rms']:.2f} K "
+        f"final model; measured minimum {out['measured_min']:.1f} K, end "
+        f"{out['measured_end']:.1f} K; adiabatic model minimum "
+        f"{out['baseline']['min_model']:.1f} K, final model minimum "
+        f"{out['final']['min_model']:.1f} K, end {out['final']['end_model']:.1f} K)")
     return out
+
+
+def _temperature_reason(prob: Problem, final: Fit, d: FloatArray, temp: FloatArray
+                        ) -> tuple[str, str]:
+    """Likely reason a model's gas temperature contradicts the log, and what to measure.
+
+    d = model - measured [K] at the logged instants, temp the logged values [K].
+    """
+    tank = prob.tank
+    cfg = final.model.config(final.theta)
+    t_wall, t10 = cfg.wall, tank.initial_temperature
+    src = ("fitted" if "t_wall" in final.theta else "assumed equal to T10"
+           if tank.wall_temperature is None else "stated")
+    late = d[-max(d.size // 3, 1):]
+    late_mean = float(np.mean(late))
+    t_end = float(temp[-1])
+    heat = any(e in ("heat_transfer", "hot_start") for e in final.effects)
+    tol = TEMPERATURE_TOLERANCE
+    wall_next = ("log the wall (room) temperature and state it (--wall-temperature); "
+                 "a gas that starts hot after charging relaxes toward the wall, not toward "
+                 "T10")
+    if late_mean > tol and heat and t_wall > t_end + tol:
+        return (f"the wall temperature assumption: the model's wall is at {t_wall:.1f} K "
+                f"({src}; T10 {t10:.1f} K) while the logged gas ends at {t_end:.1f} K, so "
+                "the model heats the gas back toward a wall that is colder in the rig"
+                ), wall_next
+    if late_mean > tol:
+        return ("the model's gas stays too warm late in the discharge: heat transfer too "
+                "strong in the model, or the temperature sensor reads low"), \
+            "check the temperature sensor against the room before the run; " + wall_next
+    if late_mean < -tol:
+        return ("the model's gas stays too cold late in the discharge: the rig's wall "
+                "supplies more heat than the model (a larger wall area, a warmer wall), or "
+                "the heat-transfer effect is missing"), wall_next
+    return ("the early swing differs: a gas thermocouple lags (seconds) and flattens the "
+            "fast cooling, or the heat-transfer law differs"), \
+        "a faster temperature sensor (fine-wire thermocouple) or its time constant"

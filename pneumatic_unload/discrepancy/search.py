@@ -5,6 +5,7 @@ SI units: s, Pa.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable
@@ -12,10 +13,25 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from pneumatic_unload.discrepancy.ambiguity import same_physics
 from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.types import WHITE_P, Diagnostics, Fit
-from pneumatic_unload.fit.noise import ljung_box
-from pneumatic_unload.model.effects import HEAT_VARIANTS
+from pneumatic_unload.fit.noise import NoiseModel, ljung_box
+from pneumatic_unload.fit.trace import Trace
+from pneumatic_unload.model.effects import HEAT_VARIANTS, HOT_START
+
+#: Nested extensions of an effect (extension -> the effect it extends by one parameter).
+NESTED: dict[str, str] = {HOT_START: "heat_transfer"}
+#: Transducer effects: claimed only with evidence no physics effect can give.
+SENSOR_EFFECTS: tuple[str, ...] = ("sensor_offset", "sensor_gain")
+#: The end of the discharge: where the physics model's pressure is within this fraction
+#: of p10 - p_atm above p_atm [-].
+END_FRACTION = 0.05
+#: Fewest samples of the end of the discharge for evidence on the end level [-].
+END_SAMPLES = 30
+#: Standard errors by which the end level must disagree with every physics model before
+#: a transducer effect is claimed [-].
+END_Z = 4.0
 
 FloatArray = NDArray[np.float64]
 Values = dict[str, float]
@@ -74,6 +90,17 @@ def diagnose(prob: Problem, fit: Fit) -> tuple[Diagnostics, FloatArray]:
     return d, m
 
 
+def fit_quality(prob: Problem, fit: Fit) -> Diagnostics:
+    """Normalised RMS and residual whiteness of a fit (no phases, no correlations) [-]."""
+    m = fit.model.signal(fit.theta, prob.t)
+    r = prob.y - m
+    rms = float(np.sqrt(np.mean(r * r)))
+    _, p_lb = ljung_box(prob.lik.residuals(m))
+    return Diagnostics(rms=rms, nrms=rms / prob.noise.sigma, ljung_box_p=p_lb,
+                       white=bool(math.isfinite(p_lb) and p_lb >= WHITE_P), phases={},
+                       corr_pressure=math.nan, corr_rate=math.nan)
+
+
 def fit_candidate(prob: Problem, base: Fit, neutral: list[Values], cand: str) -> Fit:
     """The current model with ``cand`` added, fitted from several starts.
 
@@ -84,7 +111,7 @@ def fit_candidate(prob: Problem, base: Fit, neutral: list[Values], cand: str) ->
     same number of parameters, so chi^2 compares them) and the better one kept.
     """
     effects = (*base.effects, cand)
-    laws = [base.model.heat_law] if cand != "heat_transfer" else \
+    laws = [base.model.heat_law] if cand not in ("heat_transfer", HOT_START) else \
         [k for k, e in HEAT_VARIANTS.items() if len(e.params) == 1]
     best: Fit | None = None
     for law in laws:
@@ -127,15 +154,108 @@ def run_round(prob: Problem, base: Fit, neutral: list[Values], candidates: list[
     return out
 
 
-def decide(base: Fit, fits: dict[str, Fit], threshold: float
+def decide(base: Fit, fits: dict[str, Fit], threshold: float,
+           refused: dict[str, str] | None = None
            ) -> tuple[dict[str, float], str, list[str]]:
-    """Delta-BIC per candidate, winner ('none' if no claim) and its ambiguity set."""
+    """Delta-BIC per candidate, winner ('none' if no claim) and its ambiguity set.
+
+    Candidates in ``refused`` (name -> reason) are never the winner nor in its set. A
+    nested extension (:data:`NESTED`: the hot start is heat transfer plus the wall
+    temperature) is named only when it beats the effect it extends by the threshold;
+    within it, the simpler effect is named and the extension is no ambiguity.
+    """
     delta = {k: base.bic - f.bic for k, f in fits.items()}
-    if not delta:
+    order = [k for k in sorted(delta, key=lambda k: -delta[k]) if k not in (refused or {})]
+    for ext, sub in NESTED.items():
+        if ext in order and sub in order and delta[ext] - delta[sub] <= threshold:
+            order.remove(ext)
+    if not order or delta[order[0]] <= threshold:
         return delta, "none", []
-    order = sorted(delta, key=lambda k: -delta[k])
     win = order[0]
-    if delta[win] <= threshold:
-        return delta, "none", []
     amb = [k for k in order[1:] if delta[win] - delta[k] <= threshold]
     return delta, win, amb
+
+
+def end_level_evidence(prob: Problem, base: Fit, fits: dict[str, Fit]) -> tuple[float, str]:
+    """How far the measured end of the discharge sits from every physics model [-].
+
+    A transducer offset or gain shifts the end level (p_atm, stated) where no physics
+    effect can: a leak, heat transfer or a pipe volume all end at p_atm. The best model of
+    the round without a transducer effect (the base or a physics candidate) is compared
+    with the samples where its pressure is within :data:`END_FRACTION` of p10 - p_atm above
+    p_atm: z = mean residual / its standard error (AR(1) noise).
+
+    Returns
+    -------
+    tuple
+        (|z| [-], a sentence saying what was compared); z is 0 when the trace has no end to
+        compare.
+    """
+    physics = [f for f in (base, *(f for k, f in fits.items() if k not in SENSOR_EFFECTS))
+               if not any(e in SENSOR_EFFECTS for e in f.effects)]
+    if not physics:
+        return 0.0, "every model of the round has a transducer effect already"
+    best = min(physics, key=lambda f: f.bic)
+    cfg = best.model.config(best.theta)
+    m = best.model.signal(best.theta, prob.t)
+    p_atm, p10 = cfg.atmosphere, cfg.initial_pressure
+    end = (prob.t > best.theta["t_open"]) & (m - p_atm < END_FRACTION * (p10 - p_atm))
+    n = int(np.count_nonzero(end))
+    label = ", ".join(best.effects) or "the baseline"
+    if n < END_SAMPLES:
+        return 0.0, f"the record does not reach the end of the discharge ({n} samples)"
+    r = prob.y[end] - m[end]
+    rho = prob.noise.rho
+    se = prob.noise.sigma * math.sqrt((1.0 + rho) / max(1.0 - rho, 1e-6) / n)
+    z = abs(float(np.mean(r))) / se
+    return z, (f"end level {float(np.mean(r)):+.4g} Pa from {label} over {n} samples "
+               f"({z:.1f} standard errors; p_atm {'stated' if prob.tank.atmosphere else 'fitted'})")
+
+
+def sensor_refusals(prob: Problem, base: Fit, fits: dict[str, Fit], threshold: float
+                    ) -> dict[str, str]:
+    """Transducer candidates that would be named (the winner or in its set) but lack
+    evidence a physics effect cannot give (name -> reason): the end level must disagree
+    with every physics model by more than :data:`END_Z` standard errors."""
+    _, win, amb = decide(base, fits, threshold)
+    cands = [k for k in (win, *amb) if k in SENSOR_EFFECTS]
+    if not cands:
+        return {}
+    z, what = end_level_evidence(prob, base, fits)
+    if z > END_Z:
+        return {}
+    return {k: f"no evidence a physics effect cannot give: {what}" for k in cands}
+
+
+def look_alikes(named: str, ambiguous_with: list[str], remaining: list[str]) -> list[str]:
+    """Candidates not to add once ``named`` is in the model: the same physics in another
+    law or place, and those the data could not tell from it in its round (within the BIC
+    threshold): either would describe the signature already explained."""
+    return [c for c in remaining if c == named or c in ambiguous_with or same_physics(c, named)]
+
+
+def residual_noise(prob: Problem, fit: Fit) -> Problem:
+    """The trace with its noise model refitted on the residual of ``fit``.
+
+    The AR(1) sigma and rho of the sample residual y - model [Pa, -], never below the
+    trace's own noise model: what the named effects leave unexplained counts as noise
+    when a further effect is tested, so that it must explain more than that structure to
+    earn its place. Same samples and bins; SI units.
+    """
+    m = fit.model.signal(fit.theta, prob.t)
+    r = prob.y - m
+    r = r - float(np.mean(r))
+    ss = float(r @ r)
+    rho_r = float(np.clip(r[1:] @ r[:-1] / ss, 0.0, 0.99)) if ss > 0 else 0.0
+    sig_r = math.sqrt(ss / max(r.size - 1, 1))
+    base = prob.noise
+    noise = NoiseModel(sigma=max(base.sigma, sig_r), rho=max(base.rho, rho_r), n=int(r.size),
+                       source=f"residual of ({', '.join(fit.effects)})",
+                       sigma_plateau=base.sigma_plateau, sigma_highpass=base.sigma_highpass,
+                       highpass_weight=base.highpass_weight)
+    out = copy.copy(prob)
+    out.noise = noise
+    out.trace = Trace(prob.t, prob.y, noise, prob.start.t_open, edges=prob.lik.edges)
+    out.trace.deadline = prob.trace.deadline  # the run's time limit holds here too
+    out.lik = out.trace.lik
+    return out

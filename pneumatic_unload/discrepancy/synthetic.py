@@ -5,6 +5,8 @@ V 1-5 L, p10 4-8 bar abs, C 1e-9..5e-8 m^3/(s Pa) (log-uniform), b 0.3-0.5, 0.2 
 pre-step samples, record length the simulator's automatic 6 tau_exp. Effect sizes:
 
 * heat_transfer: thermal time constant tau_heat = m0 c_v/(h A) 0.5-5 s (fixed h A);
+* hot_start: the same heat transfer, the gas starting 10-40 K above the wall (T_N); the
+  workflow is told the gas's T10, not the wall temperature;
 * valve_opening: 10-100 ms; sensor_lag: 5-50 ms;
 * leak: 2-20 % of the choked flow at p10 (K (p10 - p_atm) = f G_choked(p10));
 * leak_downstream (opens with the valve): 5-50 % of the choked flow at p10;
@@ -89,9 +91,15 @@ def draw_case(effect: str, seed: int, *, rho: float = 0.0, noise_std: float = NO
     kw: dict[str, object] = {}
     truth: dict[str, float] = {}
     gamma = 1.4
-    if effect == "heat_transfer":
+    t_wall = T_N
+    sim_effects: tuple[str, ...] = () if effect == "none" else (effect,)
+    if effect in ("heat_transfer", "hot_start"):
         tau = rng.uniform(0.5, 5.0)
         truth["tau_heat"] = tau
+        if effect == "hot_start":
+            t10 = T_N + rng.uniform(10.0, 40.0)
+            truth["t_wall"] = t_wall
+            sim_effects = ("heat_transfer",)
         kw.update(heat_transfer_mode="fixed",
                   heat_transfer_coefficient=p10 * vol / ((gamma - 1.0) * t10 * tau))
     elif effect == "valve_opening":
@@ -133,7 +141,7 @@ def draw_case(effect: str, seed: int, *, rho: float = 0.0, noise_std: float = NO
     if rho > 0:
         noise = {"noise_std": 0.0, "noise_ar_std": noise_std, "noise_ar_rho": rho}
     cfg = RigConfig(volume=vol, conductance=c, critical_ratio=b, initial_pressure=p10,
-                    initial_temperature=t10, wall_temperature=t10, rate=1000.0, pre_time=0.2,
-                    effects=() if effect == "none" else (effect,),
+                    initial_temperature=t10, wall_temperature=t_wall, rate=1000.0,
+                    pre_time=0.2, effects=sim_effects,
                     seed=int(rng.integers(0, 2**31 - 1)), **noise, **kw)  # type: ignore[arg-type]
     return Case(effect=effect, truth=truth, config=cfg, seed=seed)

@@ -35,6 +35,10 @@ FloatArray = NDArray[np.float64]
 WHITE_P = 0.01
 #: Normalised RMS above which a residual is called structured [-].
 NRMS_LIMIT = 1.02
+#: Candidate effects of the search: the configuration's effects and the hot start (heat
+#: transfer with the wall temperature fitted; :data:`pneumatic_unload.model.effects.
+#: CANDIDATES`, spelled here so that the settings stay importable without the engine).
+CANDIDATES: tuple[str, ...] = (*EFFECTS, "hot_start")
 #: How to read a delta-BIC (for reports).
 BIC_HELP = ("delta-BIC = BIC(current model) - BIC(current model + candidate), BIC = chi^2 + "
             "k ln(n): positive means the candidate explains the trace better after paying "
@@ -58,7 +62,8 @@ class DiscrepancySettings(TankSpec):
         Fit the wall temperature together with the heat transfer (when the gas starts
         warmer or colder than the wall, e.g. just after charging).
     candidates : tuple of str
-        Effects tried (default all of :data:`pneumatic_unload.config.EFFECTS`).
+        Effects tried (default all of :data:`CANDIDATES`: the configuration's effects and
+        ``hot_start``; with ``fit_wall_temperature`` the hot start is heat_transfer).
     max_effects : int
         At most this many effects are added (greedy) [-].
     bic_threshold : float
@@ -74,7 +79,7 @@ class DiscrepancySettings(TankSpec):
     """
 
     fit_wall_temperature: bool = flag(False, "fit the wall temperature with heat transfer")
-    candidates: tuple[str, ...] = names(EFFECTS, EFFECTS, "candidate effects tried")
+    candidates: tuple[str, ...] = names(CANDIDATES, CANDIDATES, "candidate effects tried")
     max_effects: int = integer(3, 1, 3, "at most this many effects are added")
     bic_threshold: float = number(10.0, "-", 0.0, 1e6,
                                   "delta-BIC needed to claim an effect and to name it alone")
@@ -220,6 +225,14 @@ class Round:
         Best candidate ('none' when none beats the base by the threshold).
     ambiguous_with : list of str
         Candidates within the threshold of the winner.
+    base : Fit or None
+        The model the candidates were added to, fitted with this round's noise model
+        (a further round refits the noise on the residual of the effects named).
+    noise_source : str
+        Where this round's noise model comes from.
+    refused : dict
+        Candidates that beat the base but were not claimed -> the reason (a transducer
+        effect without evidence a physics effect cannot give).
     """
 
     base_effects: tuple[str, ...]
@@ -228,6 +241,9 @@ class Round:
     delta_bic: dict[str, float]
     winner: str
     ambiguous_with: list[str]
+    base: Fit | None = None
+    noise_source: str = ""
+    refused: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -266,14 +282,18 @@ class DiscrepancyResult:
     temperature: FloatArray | None = None
     settings: DiscrepancySettings | None = None
     notes: list[str] = field(default_factory=list)
-    #: Models that fit about equally with different C (None: C is not ambiguous); a
-    #: :class:`~pneumatic_unload.discrepancy.ambiguity.ConductanceAmbiguity`.
+    #: The C range: models that fit about equally with different C, and the bound of a
+    #: leak in parallel with the component; a
+    #: :class:`~pneumatic_unload.discrepancy.ambiguity.ConductanceAmbiguity` (its
+    #: ``ambiguous`` says whether another model competes). None only when not computed.
     conductance_ambiguity: Any = None
 
     @property
     def conductance_range(self) -> tuple[float, float] | None:
-        """C range across the models that fit about equally [m^3/(s Pa)] (None: C is
-        not ambiguous)."""
+        """Range of the component's C [m^3/(s Pa)]: across the models that fit about
+        equally, down to the component's C with a parallel leak of up to
+        :data:`~pneumatic_unload.discrepancy.ambiguity.PARALLEL_LEAK_MAX` C hidden in it
+        (None only when not computed)."""
         a = self.conductance_ambiguity
         return None if a is None else (a.low, a.high)
 
@@ -316,7 +336,8 @@ class DiscrepancyResult:
             "white_before": self.before.white, "white_after": self.after.white,
             "delta_bic": self.delta_bic,
             "rounds": [{"base_effects": list(r.base_effects), "delta_bic": r.delta_bic,
-                        "winner": r.winner, "ambiguous_with": r.ambiguous_with}
+                        "winner": r.winner, "ambiguous_with": r.ambiguous_with,
+                        "noise_source": r.noise_source, "refused": r.refused}
                        for r in self.rounds],
             "noise": self.noise.to_dict(),
             "baseline": theta(self.baseline), "final_model": theta(self.final),

@@ -18,15 +18,25 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
 3. **Decision** by BIC = chi^2 + k ln(n): an effect is claimed only if it beats the
    current model by more than ``bic_threshold`` (10); it is named alone only if the
    runner-up is more than 10 behind, otherwise the ambiguity set is reported with the
-   extra data that would separate its members. Models that fit about equally but give
-   different C (or a leak in parallel with the component, which C is confounded with) are
-   reported as a C ambiguity with the C range (:mod:`~pneumatic_unload.discrepancy.
+   extra data that would separate its members. A nested extension (the hot start: heat
+   transfer with the wall temperature fitted) must beat the effect it extends by 10. A
+   transducer effect (offset, gain) is claimed only with evidence no physics effect can
+   give: the end level disagreeing with every physics model of the round
+   (:func:`~pneumatic_unload.discrepancy.search.sensor_refusals`).
+4. **C range.** Models that fit about equally but give different C (BIC window, white
+   fits, a winner at a bound, a placement or law variant, a leak in parallel with the
+   component) are reported as a C ambiguity; whatever the verdict, the range reaches down
+   to the component's C with a hidden parallel leak (:mod:`~pneumatic_unload.discrepancy.
    ambiguity`).
-4. **Gap.** RMS before and after, the effect's parameters with 95 % intervals (linear from
+5. **Gap.** RMS before and after, the effect's parameters with 95 % intervals (linear from
    the Jacobian, replaced by the profile likelihood when the linear one is unreliable); an
    interval that does not close within the parameter range means "not identifiable".
-5. **Greedy.** While the residual is still structured, a further effect is added the same
-   way (at most ``max_effects``).
+6. **Greedy.** While the residual is still structured, a further effect is added the same
+   way (at most ``max_effects``), tested against the model with the effects named and the
+   noise model refitted on its residual; the effects named and their look-alikes (the same
+   physics in another law or place, the round's ambiguity set) are not tried again.
+7. **Temperature.** A logged gas temperature is compared with the models; a final model
+   that contradicts it is flagged with the likely reason (e.g. the wall temperature).
 
 **Time bound.** A run is bounded in evaluations: at most ``max_effects`` (3) rounds of at
 most 10 candidates, each fitted from at most 10 starts (two heat laws x 5) screened for at
@@ -61,17 +71,26 @@ from pneumatic_unload.discrepancy.intervals import (
 )
 from pneumatic_unload.discrepancy.multirun import GeometryLaw, fit_geometry_law
 from pneumatic_unload.discrepancy.problem import Problem
-from pneumatic_unload.discrepancy.search import decide, diagnose, run_round
+from pneumatic_unload.discrepancy.search import (
+    decide,
+    diagnose,
+    fit_quality,
+    look_alikes,
+    residual_noise,
+    run_round,
+    sensor_refusals,
+)
 from pneumatic_unload.discrepancy.types import (
     Diagnostics,
     DiscrepancyError,
     DiscrepancyResult,
     DiscrepancySettings,
+    Fit,
     Round,
 )
 from pneumatic_unload.fit.profile import Interval
 from pneumatic_unload.fit.trace import FitTimeout
-from pneumatic_unload.model.effects import separating_data
+from pneumatic_unload.model.effects import HOT_START, separating_data
 
 FloatArray = NDArray[np.float64]
 
@@ -130,8 +149,10 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
     claimed: list[str] = []
     rounds: list[Round] = []
     first_effect, first_amb = "none", []
-    remaining = [c for c in settings.candidates]
+    remaining = [c for c in settings.candidates
+                 if not (c == HOT_START and settings.fit_wall_temperature)]
     neutral_cur = [prob.neutral_theta(0.4)]
+    prob_k, prob_final = prob, prob
     timed_out = ""
     while remaining and len(claimed) < settings.max_effects:
         if claimed and not current_diag.structured:
@@ -142,7 +163,13 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
             say(f"discrepancy: round {k}, candidate {i}/{n} {cand} {dt:.1f} s")
 
         try:
-            fits = run_round(prob, current, neutral_cur, remaining, progress=step)
+            base_k = current
+            if claimed:
+                # a further effect must earn its place against the effects named, with the
+                # noise model refitted on their residual
+                prob_k = residual_noise(prob, current)
+                base_k = prob_k.fit(current.model, [dict(current.theta)], max_nfev=60)
+            fits = run_round(prob_k, base_k, neutral_cur, remaining, progress=step)
         except FitTimeout as exc:
             if not rounds:
                 raise _timeout(settings, "during the first round of candidates") from exc
@@ -150,42 +177,55 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
                          f"{k_round}: the greedy search stopped there (the effects named "
                          "before it stand; intervals linear)")
             break
-        delta, win, amb = decide(current, fits, thr)
-        rounds.append(Round(base_effects=current.effects, base_bic=current.bic, fits=fits,
-                            delta_bic=delta, winner=win, ambiguous_with=amb))
+        refused = sensor_refusals(prob_k, base_k, fits, thr)
+        delta, win, amb = decide(base_k, fits, thr, refused)
+        rounds.append(Round(base_effects=current.effects, base_bic=base_k.bic, fits=fits,
+                            delta_bic=delta, winner=win, ambiguous_with=amb, base=base_k,
+                            noise_source=prob_k.noise.source, refused=refused))
         if win == "none":
             break
         if not claimed:
             first_effect, first_amb = win, amb
         claimed.append(win)
-        current = fits[win]
+        current, prob_final = fits[win], prob_k
         # neutral starts of the next round: neutral baseline + this round's winner values
         neutral_cur = [{**th, **{k: v for k, v in current.theta.items() if k not in th}}
                        for th in neutral_cur]
-        remaining = [c for c in remaining if c != win]
+        drop = look_alikes(win, amb, remaining)
+        remaining = [c for c in remaining if c not in drop]
         current_diag, _ = diagnose(prob, current)
     after, m_after = diagnose(prob, current)
     names = [q for q in current.result.params.free if q not in base.result.params.names]
     t_iv = time.perf_counter()
     try:
-        params = intervals(prob, current, names, profile=settings.profile and not timed_out)
+        params = intervals(prob_final, current, names,
+                           profile=settings.profile and not timed_out) if names else {}
     except FitTimeout:
-        params = intervals(prob, current, names, profile=False)
+        params = intervals(prob_final, current, names, profile=False)
         timed_out = timed_out or (f"time limit of {settings.time_limit:g} s reached in the "
                                   "profile checks: the intervals are linear")
-    prob.trace.deadline = None  # what follows is a fixed, small number of evaluations
-    params.update(intervals(prob, current, ["C"], profile=False))
+    for q in {prob, prob_final}:
+        q.trace.deadline = None  # what follows is a fixed, small number of evaluations
+    params.update(intervals(prob_final, current, ["C"], profile=False))
     say(f"discrepancy: intervals {time.perf_counter() - t_iv:.1f} s")
     extra = separating_data([first_effect, *first_amb]) if first_amb else []
-    geo = geometry_factor_check(prob, current)
+    geo = geometry_factor_check(prob_final, current)
     notes = [C_MEANING] + ([timed_out] if timed_out else [])
     if prob.noise.source == "differences":
         notes.append("no plateau long enough for the noise model: sigma from second "
                      "differences of the whole trace, rho assumed 0")
+    notes += [f"{k} not claimed: {why}" for r in rounds for k, why in r.refused.items()]
     verdict = _verdict(first_effect, first_amb, claimed, before, after, params)
     if timed_out:
         verdict += f"; {timed_out}"
-    c_amb = conductance_ambiguity(base, rounds, current, thr)
+    quality: dict[int, Diagnostics] = {}
+
+    def fit_quality_of(f: Fit) -> Diagnostics:
+        if id(f) not in quality:
+            quality[id(f)] = after if f is current else fit_quality(prob, f)
+        return quality[id(f)]
+
+    c_amb = conductance_ambiguity(base, rounds, current, thr, fit_quality_of)
     if c_amb.ambiguous:
         verdict += "; " + describe(c_amb)
         extra += [x for x in c_amb.separating if x not in extra]
@@ -195,12 +235,17 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
         before=before, after=after, extra_data=extra, geometry_factor=geo, t=prob.t,
         y=prob.y, model_before=m_before, model_after=m_after, t_ref=prob.t_ref,
         n_samples=prob.lik.n, n_bins=prob.lik.n_bins, elapsed=0.0, settings=settings,
-        notes=notes, conductance_ambiguity=c_amb if c_amb.ambiguous else None)
+        notes=notes, conductance_ambiguity=c_amb)
     if temperature is not None:
         res.t_temperature = np.asarray(temperature[0], dtype=float) - prob.t_ref
         res.temperature = np.asarray(temperature[1], dtype=float)
-        res.temperature_check = temperature_check(prob, base, current, res.t_temperature,
-                                                  res.temperature)
+        tc = temperature_check(prob, base, current, res.t_temperature, res.temperature)
+        res.temperature_check = tc
+        if tc.get("contradicts"):
+            res.verdict += (f"; the logged gas temperature contradicts the fitted model "
+                            f"(rms {tc['final']['rms']:.1f} K): likely "
+                            f"{tc['likely_reason']}")
+            res.extra_data.append(f"gas temperature: {tc['measure_next']}")
     res.elapsed = time.perf_counter() - t_wall0
     say(f"discrepancy: done in {res.elapsed:.1f} s")
     return res

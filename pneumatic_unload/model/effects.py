@@ -41,8 +41,9 @@ from pneumatic_unload.physics import RHO_N, T_N
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["DOWNSTREAM_LEAKS", "PLUGGED_RUN", "REGISTRY", "SEPARATING_DATA", "Effect",
-           "EffectParam", "ParametricModel", "Start", "separating_data"]
+__all__ = ["CANDIDATES", "DOWNSTREAM_LEAKS", "HOT_START", "PLUGGED_RUN", "REGISTRY",
+           "SEPARATING_DATA", "Effect", "EffectParam", "ParametricModel", "Start",
+           "separating_data"]
 
 #: Integrator tolerance of every fit of the parametric model [-]: the model error (~1e-8
 #: p10, well under a Pa) stays far below the noise and below the finite-difference steps of
@@ -355,6 +356,38 @@ WALL_TEMPERATURE = EffectParam("t_wall", "K", False, 150.0, 600.0, lambda s: mat
 
 assert set(REGISTRY) == set(EFFECTS), "every effect of the configuration needs a record"
 
+#: Name of the hot-start effect: heat transfer with the wall temperature as a parameter.
+HOT_START = "hot_start"
+#: The hot start's record. It is the heat-transfer effect (its law, either of
+#: :data:`HEAT_VARIANTS`, and its parameter) plus the wall temperature t_wall [K]
+#: (:data:`WALL_TEMPERATURE`, the curve fit's "+wall" variants): the configuration it
+#: builds switches ``heat_transfer`` on with ``wall_temperature`` = t_wall, so the
+#: simulator needs no effect of its own.
+HOT_START_RECORD = Effect(
+    HOT_START,
+    "the gas at the valve opening: warmer (or colder) than the tank wall, e.g. hot just "
+    "after charging; it exchanges heat with the wall by the heat-transfer law and relaxes "
+    "toward t_wall, the wall (room) temperature; T10 stays the gas's own initial "
+    "temperature",
+    (WALL_TEMPERATURE,),
+    lambda s: {},  # the wall at T10 (ParametricModel.off_values)
+    lambda s: [],  # below T10 (ParametricModel.effect_starts, HOT_START_DROPS)
+    lambda v, tank: {"wall_temperature": clamp(v["t_wall"], WALL_TEMPERATURE.lo,
+                                               WALL_TEMPERATURE.hi)},
+)
+
+
+def effect_record(name: str) -> Effect:
+    """The record of a candidate effect (where it sits, its parameters) by name."""
+    return HOT_START_RECORD if name == HOT_START else REGISTRY[name]
+
+
+#: Every candidate effect of a discrepancy search: the configuration's effects and the
+#: hot start.
+CANDIDATES: tuple[str, ...] = (*EFFECTS, HOT_START)
+#: Wall temperature starts of a hot start, below T10 [K].
+HOT_START_DROPS: tuple[float, ...] = (12.0, 35.0)
+
 
 class ParametricModel:
     """The baseline discharge plus effects, as a function of named parameter values.
@@ -372,22 +405,30 @@ class ParametricModel:
         'natural+turbulent' (:data:`HEAT_VARIANTS`).
     fit_wall_temperature : bool
         Fit the wall temperature with the heat-transfer effect (start: ``tank.wall``).
+        ``hot_start`` in ``effects`` is the heat-transfer effect with the wall temperature
+        always fitted (start: below T10, :data:`HOT_START_DROPS`).
     """
 
     def __init__(self, effects: tuple[str, ...], tank: TankSpec, start: Start, *,
                  heat_law: str = "natural", fit_wall_temperature: bool = False) -> None:
-        bad = [e for e in effects if e not in REGISTRY]
+        bad = [e for e in effects if e not in CANDIDATES]
         if bad:
-            raise ValueError(f"unknown effect(s) {bad}; known: {', '.join(REGISTRY)}")
+            raise ValueError(f"unknown effect(s) {bad}; known: {', '.join(CANDIDATES)}")
+        if HOT_START in effects and "heat_transfer" in effects:
+            raise ValueError("hot_start is heat_transfer with the wall temperature fitted: "
+                             "give one of them")
         if heat_law not in HEAT_VARIANTS:
             raise ValueError(f"unknown heat law {heat_law!r}; known: {list(HEAT_VARIANTS)}")
         self.effects = tuple(effects)
         self.tank = tank
         self.start = start
         self.heat_law = heat_law
-        self.fit_wall_temperature = fit_wall_temperature
-        self.records = tuple(HEAT_VARIANTS[heat_law] if e == "heat_transfer" else REGISTRY[e]
-                             for e in self.effects)
+        self.hot_start = HOT_START in effects
+        self.fit_wall_temperature = fit_wall_temperature or self.hot_start
+        #: effects of the configuration (the hot start is heat transfer in the simulator)
+        self.config_effects = tuple("heat_transfer" if e == HOT_START else e
+                                    for e in self.effects)
+        self.records = tuple(self._record(e) for e in self.effects)
         self.parameters = self._parameters()
         self._last_config: tuple[tuple[tuple[str, float], ...], RigConfig] | None = None
         self._base_config: RigConfig | None = None
@@ -429,7 +470,7 @@ class ParametricModel:
         """Values that switch ``effect`` (almost) off [SI]."""
         rec = self._record(effect)
         out = dict(rec.off(self.start))
-        if effect == "heat_transfer" and self.fit_wall_temperature:
+        if effect in ("heat_transfer", HOT_START) and self.fit_wall_temperature:
             out["t_wall"] = self.tank.wall
         return out
 
@@ -437,12 +478,20 @@ class ParametricModel:
         """Starting values of an effect's parameters (small and large) [SI]."""
         rec = self._record(effect)
         out = rec.starts(self.start)
-        if effect == "heat_transfer" and self.fit_wall_temperature:
+        if effect == HOT_START:
+            t10 = self.tank.initial_temperature
+            out = [{**d, "t_wall": clamp(t10 - dt, WALL_TEMPERATURE.lo, WALL_TEMPERATURE.hi)}
+                   for d in out for dt in HOT_START_DROPS]
+        elif effect == "heat_transfer" and self.fit_wall_temperature:
             out = [{**d, "t_wall": self.tank.wall} for d in out]
         return out
 
     def _record(self, effect: str) -> Effect:
-        return HEAT_VARIANTS[self.heat_law] if effect == "heat_transfer" else REGISTRY[effect]
+        """The record whose parameters the effect adds (the heat law's for the hot start:
+        its wall temperature is added with the heat-transfer record's parameters)."""
+        if effect in ("heat_transfer", HOT_START):
+            return HEAT_VARIANTS[self.heat_law]
+        return REGISTRY[effect]
 
     def config(self, v: Values) -> RigConfig:
         """The :class:`RigConfig` of parameter values (valve opens at ``v['t_open']``).
@@ -469,12 +518,14 @@ class ParametricModel:
             "wall_temperature": float(v.get("t_wall", tank.wall))}
         for rec in self.records:
             kw.update(rec.apply(vv, tank))
+        if self.hot_start:
+            kw.update(HOT_START_RECORD.apply(vv, tank))
         if self._base_config is None:
             gas = tank.gas
             self._base_config = RigConfig(
                 volume=tank.volume, length_diameter_ratio=tank.length_diameter_ratio,
                 initial_temperature=tank.initial_temperature,
-                gas_constant=gas.gas_constant, gamma=gas.gamma, effects=self.effects,
+                gas_constant=gas.gas_constant, gamma=gas.gamma, effects=self.config_effects,
                 pre_time=0.0, noise_std=0.0, **kw)  # type: ignore[arg-type]
             return self._base_config
         # the tank, gas and effects are fixed: only the fitted fields are checked again

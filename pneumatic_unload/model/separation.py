@@ -52,6 +52,19 @@ for _b in ("heat_transfer", "pipe_volume", "sensor_offset", "sensor_gain"):
     SEPARATING_DATA.setdefault(frozenset({"orifice_leak", _b}),
                                SEPARATING_DATA[frozenset({"leak", _b})])
 
+#: The hot start (heat transfer with the gas warmer than the wall) and its look-alikes: a
+#: hot gas cooling in the closed tank makes the plateau decay as an upstream leak does.
+_HOT_TEMPERATURE = ("a gas temperature measurement from before the valve opens (a hot gas "
+                    "cooling toward the wall), or the wall (room) temperature stated")
+SEPARATING_DATA[frozenset({"hot_start", "heat_transfer"})] = _HOT_TEMPERATURE
+for _b in ("leak", "orifice_leak"):
+    SEPARATING_DATA[frozenset({"hot_start", _b})] = (
+        _HOT_TEMPERATURE + "; or a leak test once the gas has settled to room temperature "
+        "(a closed tank held at p10: a leak keeps its pressure falling, a cooling gas stops)")
+for _b in EFFECTS:
+    SEPARATING_DATA.setdefault(frozenset({"hot_start", _b}), _HOT_TEMPERATURE)
+
+
 def separating_data(names: list[str]) -> list[str]:
     """Advice: which extra data would separate each pair of confusable effects."""
     out: list[str] = []
