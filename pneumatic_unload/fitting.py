@@ -1,7 +1,7 @@
 """Model-based sonic conductance from the whole record: the final curve fit.
 
 :func:`fit_curve` fits the estimator's parametric model
-(:class:`pneumatic_unload.model.effects.ParametricModel`: the discharge of
+(:class:`pneumatic_unload.model.parametric.ParametricModel`: the discharge of
 :mod:`pneumatic_unload.model`, with wall heat transfer by the law the data choose, or
 adiabatic) through the one engine (:mod:`pneumatic_unload.fit`) for C, b, the start
 instant, p10 (and p_atm when it is not given, and the heat exchange when the data carry

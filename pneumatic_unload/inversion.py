@@ -2,7 +2,7 @@
 measured tau_exp, directly (a secant on log t(C)) or from a table of the model's crossing
 times built half way to p* (so that the live estimate is a lookup at the crossing sample).
 
-The model is the estimator's :class:`~pneumatic_unload.model.effects.ParametricModel`
+The model is the estimator's :class:`~pneumatic_unload.model.parametric.ParametricModel`
 (natural-convection wall heat transfer from the tank's V and L/D, or adiabatic). SI units:
 s, Pa absolute, K, m^3, m^3/(s Pa).
 """
@@ -20,7 +20,8 @@ from numpy.typing import NDArray
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.model import discharge
-from pneumatic_unload.model.effects import ParametricModel, Start
+from pneumatic_unload.model.effects import Start
+from pneumatic_unload.model.parametric import ParametricModel
 from pneumatic_unload.physics import P_STAR_FRACTION, isentropic_crossing_time
 
 FloatArray = NDArray[np.float64]

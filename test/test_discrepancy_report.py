@@ -47,8 +47,10 @@ def _write_csv(path, t, p):
 # ------------------------------------------------------------------------------- report
 def test_report_html_is_self_contained_and_ends_with_the_advice(tmp_path):
     t, p = _offset_trace()
+    # p_atm stated: the end level is the evidence a transducer offset needs to be claimed
     res = find_discrepancy(t, p, DiscrepancySettings(volume=V, candidates=FEW,
-                                                     max_effects=1))
+                                                     max_effects=1, atmosphere=101325.0))
+    assert res.effect == "sensor_offset", res.verdict
     md_path = write_report(res, tmp_path / "rep", title="offset run")
     md = md_path.read_text()
     page = (tmp_path / "rep" / "report.html").read_text()

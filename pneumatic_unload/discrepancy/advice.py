@@ -97,7 +97,7 @@ def which_c(res: DiscrepancyResult) -> list[str]:
     model = ", ".join(res.effects) if res.effects else "the adiabatic baseline"
     amb = res.conductance_ambiguity
     dm3 = 1e-8  # m^3/(s Pa) per dm^3/(s bar)
-    if amb is not None:
+    if amb is not None and amb.ambiguous:
         members = [f"- {', '.join(m['effects']) or 'baseline'}: C = {m['conductance']:.4g} "
                    f"+- {m['conductance_std']:.2g} m^3/(s Pa) ({m['why']})"
                    for m in amb.members]
@@ -130,4 +130,10 @@ def which_c(res: DiscrepancyResult) -> list[str]:
     if res.after.structured:
         lines.append("Caution: the final model leaves a structured residual, so this sigma "
                      "understates the uncertainty of C.")
+    if amb is not None and math.isfinite(amb.parallel_low):
+        lines.append(f"A leak in parallel with the component (a fixture seal downstream of "
+                     f"the valve) would be counted in this C and no trace shows it: if one "
+                     f"cannot be excluded, the component's C may be as low as "
+                     f"{amb.parallel_low:.4g} m^3/(s Pa) (a run with the component plugged "
+                     "measures the leak).")
     return lines

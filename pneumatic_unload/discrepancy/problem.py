@@ -24,7 +24,8 @@ from pneumatic_unload.estimation import (
 )
 from pneumatic_unload.fit.noise import estimate_noise
 from pneumatic_unload.fit.trace import Trace
-from pneumatic_unload.model.effects import ParametricModel, Start
+from pneumatic_unload.model.effects import Start
+from pneumatic_unload.model.parametric import ParametricModel
 
 FloatArray = NDArray[np.float64]
 Values = dict[str, float]

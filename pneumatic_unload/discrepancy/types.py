@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # annotations only: the settings stay importable without the 
     from pneumatic_unload.fit.lsq import FitResult
     from pneumatic_unload.fit.noise import NoiseModel
     from pneumatic_unload.fit.profile import Interval
-    from pneumatic_unload.model.effects import ParametricModel
+    from pneumatic_unload.model.parametric import ParametricModel
 
 FloatArray = NDArray[np.float64]
 

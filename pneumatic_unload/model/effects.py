@@ -1,12 +1,14 @@
-"""The registry of real-rig effects and the parametric discharge model built from it.
+"""The registry of real-rig effects (the parametric model built from it:
+:mod:`pneumatic_unload.model.parametric`).
 
 One :class:`Effect` record per effect says where it sits in the rig, which parameters it
 adds (SI unit, bounds, fitted in log or not, the scale of its fitted coordinate, its centre,
 a value that switches it off, starting values), how they map onto
 :class:`~pneumatic_unload.config.RigConfig`, and which extra data separate it from its
-look-alikes. :class:`ParametricModel` (the baseline: C, b, t_open, p10 [, p_atm], plus any
-effects) turns named parameter values into a configuration and the model's signal; the
-estimator's curve fit, its model inversion and the discrepancy workflow all fit it.
+look-alikes. :class:`~pneumatic_unload.model.parametric.ParametricModel` (the baseline: C,
+b, t_open, p10 [, p_atm], plus any effects) turns named parameter values into a
+configuration and the model's signal; the estimator's curve fit, its model inversion and the
+discrepancy workflow all fit it.
 
 Heat transfer has three laws (:mod:`pneumatic_unload.model.heat`): ``natural`` fits the
 multiplier ``heat_scale`` [-] on the natural-convection correlation; ``fixed`` fits the
@@ -26,11 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.config import EFFECTS, RigConfig, TankSpec
-from pneumatic_unload.config.fields import with_changes
-from pneumatic_unload.fit.params import Parameter, Parameters
-from pneumatic_unload.model.ode import integrate, valve_events
-from pneumatic_unload.model.sensor import sensor_response
+from pneumatic_unload.config import EFFECTS, TankSpec
 from pneumatic_unload.model.separation import (  # re-exported: the advice on look-alikes
     DOWNSTREAM_LEAKS,
     PLUGGED_RUN,
@@ -42,7 +40,7 @@ from pneumatic_unload.physics import RHO_N, T_N
 FloatArray = NDArray[np.float64]
 
 __all__ = ["CANDIDATES", "DOWNSTREAM_LEAKS", "HOT_START", "PLUGGED_RUN", "REGISTRY",
-           "SEPARATING_DATA", "Effect", "EffectParam", "ParametricModel", "Start",
+           "SEPARATING_DATA", "Effect", "EffectParam", "Start",
            "separating_data"]
 
 #: Integrator tolerance of every fit of the parametric model [-]: the model error (~1e-8
@@ -387,166 +385,3 @@ def effect_record(name: str) -> Effect:
 CANDIDATES: tuple[str, ...] = (*EFFECTS, HOT_START)
 #: Wall temperature starts of a hot start, below T10 [K].
 HOT_START_DROPS: tuple[float, ...] = (12.0, 35.0)
-
-
-class ParametricModel:
-    """The baseline discharge plus effects, as a function of named parameter values.
-
-    Parameters
-    ----------
-    effects : tuple of str
-        Effects switched on (names of :data:`REGISTRY`).
-    tank : TankSpec
-        Known tank and gas data (``atmosphere`` None: p_atm is fitted).
-    start : Start
-        Neutral values (centres of the fitted coordinates, bounds of t_open).
-    heat_law : str
-        Law of the heat-transfer effect: 'natural', 'fixed', 'density' or
-        'natural+turbulent' (:data:`HEAT_VARIANTS`).
-    fit_wall_temperature : bool
-        Fit the wall temperature with the heat-transfer effect (start: ``tank.wall``).
-        ``hot_start`` in ``effects`` is the heat-transfer effect with the wall temperature
-        always fitted (start: below T10, :data:`HOT_START_DROPS`).
-    """
-
-    def __init__(self, effects: tuple[str, ...], tank: TankSpec, start: Start, *,
-                 heat_law: str = "natural", fit_wall_temperature: bool = False) -> None:
-        bad = [e for e in effects if e not in CANDIDATES]
-        if bad:
-            raise ValueError(f"unknown effect(s) {bad}; known: {', '.join(CANDIDATES)}")
-        if HOT_START in effects and "heat_transfer" in effects:
-            raise ValueError("hot_start is heat_transfer with the wall temperature fitted: "
-                             "give one of them")
-        if heat_law not in HEAT_VARIANTS:
-            raise ValueError(f"unknown heat law {heat_law!r}; known: {list(HEAT_VARIANTS)}")
-        self.effects = tuple(effects)
-        self.tank = tank
-        self.start = start
-        self.heat_law = heat_law
-        self.hot_start = HOT_START in effects
-        self.fit_wall_temperature = fit_wall_temperature or self.hot_start
-        #: effects of the configuration (the hot start is heat transfer in the simulator)
-        self.config_effects = tuple("heat_transfer" if e == HOT_START else e
-                                    for e in self.effects)
-        self.records = tuple(self._record(e) for e in self.effects)
-        self.parameters = self._parameters()
-        self._last_config: tuple[tuple[tuple[str, float], ...], RigConfig] | None = None
-        self._base_config: RigConfig | None = None
-
-    def _parameters(self) -> Parameters:
-        s = self.start
-        p = s.p10
-        ps = [
-            Parameter("C", s.conductance, 1e-13, 1e-5, "m^3/(s Pa)", log=True, scale=0.1,
-                      doc="sonic conductance"),
-            Parameter("b", clamp(s.critical_ratio, 0.02, 0.94), 0.01, 0.95, "-",
-                      scale=0.1, doc="critical pressure ratio"),
-            Parameter("t_open", s.t_open, s.t_first,
-                      max(min(s.t_last, s.t_open + 0.5 * s.tau), s.t_open + s.dt), "s",
-                      scale=max(10.0 * s.dt, 1e-3 * s.tau), doc="valve opening instant"),
-            Parameter("p10", p, 0.3 * p, 3.0 * p, "Pa", scale=1e-3 * p,
-                      doc="initial pressure (absolute)"),
-        ]
-        if self.tank.atmosphere is None:
-            ps.append(Parameter("p_atm", s.p_atm, 0.3 * s.p_atm, 3.0 * s.p_atm, "Pa",
-                                scale=1e-3 * s.p_atm, doc="atmospheric pressure (absolute)"))
-        for rec in self.records:
-            for q in rec.params:
-                c = q.centre(s)
-                ps.append(Parameter(q.name, c, q.lo, q.hi, q.unit, log=q.log, scale=q.scale,
-                                    doc=q.doc))
-            if rec.name == "heat_transfer" and self.fit_wall_temperature:
-                q = WALL_TEMPERATURE
-                ps.append(Parameter(q.name, self.tank.wall, q.lo, q.hi, q.unit,
-                                    scale=q.scale, doc=q.doc))
-        return Parameters(ps)
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        """Parameter names, in order."""
-        return self.parameters.names
-
-    def off_values(self, effect: str) -> Values:
-        """Values that switch ``effect`` (almost) off [SI]."""
-        rec = self._record(effect)
-        out = dict(rec.off(self.start))
-        if effect in ("heat_transfer", HOT_START) and self.fit_wall_temperature:
-            out["t_wall"] = self.tank.wall
-        return out
-
-    def effect_starts(self, effect: str) -> list[Values]:
-        """Starting values of an effect's parameters (small and large) [SI]."""
-        rec = self._record(effect)
-        out = rec.starts(self.start)
-        if effect == HOT_START:
-            t10 = self.tank.initial_temperature
-            out = [{**d, "t_wall": clamp(t10 - dt, WALL_TEMPERATURE.lo, WALL_TEMPERATURE.hi)}
-                   for d in out for dt in HOT_START_DROPS]
-        elif effect == "heat_transfer" and self.fit_wall_temperature:
-            out = [{**d, "t_wall": self.tank.wall} for d in out]
-        return out
-
-    def _record(self, effect: str) -> Effect:
-        """The record whose parameters the effect adds (the heat law's for the hot start:
-        its wall temperature is added with the heat-transfer record's parameters)."""
-        if effect in ("heat_transfer", HOT_START):
-            return HEAT_VARIANTS[self.heat_law]
-        return REGISTRY[effect]
-
-    def config(self, v: Values) -> RigConfig:
-        """The :class:`RigConfig` of parameter values (valve opens at ``v['t_open']``).
-
-        The last one is kept: a fit asks for the events and the signal of the same values.
-        """
-        key = tuple(v.items())
-        last = self._last_config
-        if last is not None and last[0] == key:
-            return last[1]
-        cfg = self._build_config(v)
-        self._last_config = (key, cfg)
-        return cfg
-
-    def _build_config(self, v: Values) -> RigConfig:
-        tank = self.tank
-        c = clamp(v["C"], 1e-13, 1e-5)
-        vv = {**v, "C": c}
-        p_atm = v.get("p_atm", tank.atmosphere if tank.atmosphere is not None else 101325.0)
-        kw: dict[str, object] = {
-            "conductance": c, "critical_ratio": clamp(v["b"], 0.0, 0.99),
-            "initial_pressure": clamp(v["p10"], 1e4, 5e7),
-            "atmosphere": clamp(p_atm, 1e3, 2e5),
-            "wall_temperature": float(v.get("t_wall", tank.wall))}
-        for rec in self.records:
-            kw.update(rec.apply(vv, tank))
-        if self.hot_start:
-            kw.update(HOT_START_RECORD.apply(vv, tank))
-        if self._base_config is None:
-            gas = tank.gas
-            self._base_config = RigConfig(
-                volume=tank.volume, length_diameter_ratio=tank.length_diameter_ratio,
-                initial_temperature=tank.initial_temperature,
-                gas_constant=gas.gas_constant, gamma=gas.gamma, effects=self.config_effects,
-                pre_time=0.0, noise_std=0.0, **kw)  # type: ignore[arg-type]
-            return self._base_config
-        # the tank, gas and effects are fixed: only the fitted fields are checked again
-        return with_changes(self._base_config, kw)
-
-    def events(self, v: Values) -> list[float]:
-        """Instants where the model's signal is not smooth [s]."""
-        return valve_events(self.config(v), v["t_open"])
-
-    def states(self, v: Values, t: FloatArray) -> FloatArray:
-        """ODE states at instants t (p [Pa], T [K], ...) for parameter values v."""
-        return integrate(self.config(v), np.asarray(t, dtype=float), v["t_open"],
-                         rtol=FIT_RTOL, quiet=True)
-
-    def signal(self, v: Values, t: FloatArray) -> FloatArray:
-        """Noise-free sensor output of the model at instants t [Pa]."""
-        cfg = self.config(v)
-        t = np.asarray(t, dtype=float)
-        p = integrate(cfg, t, v["t_open"], rtol=FIT_RTOL, quiet=True)[:, 0]
-        return sensor_response(t, p, cfg)
-
-    def temperature(self, v: Values, t: FloatArray) -> FloatArray:
-        """Mean gas temperature of the model at instants t [K]."""
-        return self.states(v, t)[:, 1]
