@@ -130,7 +130,7 @@ def test_simulator_estimator_recorder_end_to_end(tmp_path: Path, ros_node: Any,
     assert len(offline) == len(recorded)
     for live, off in zip(recorded, offline, strict=True):
         for key in ("conductance", "conductance_model", "tau_exp", "p10", "p_star"):
-            assert off[key] == pytest.approx(live[key], rel=1e-9), key
+            assert off[key] == pytest.approx(live[key], rel=1e-9, abs=0.0), key
 
 
 def test_measure_action(tmp_path: Path, ros_node: Any) -> None:
@@ -361,7 +361,7 @@ def test_replay_of_reference_bag_into_live_estimator(tmp_path: Path, ros_node: A
     for live, ref in zip(got, recorded, strict=True):
         assert live.unload_index == ref["index"] and live.method == ref["method"]
         for key in ("conductance", "conductance_model", "tau_exp", "p10", "p_star"):
-            assert getattr(live, key) == pytest.approx(ref[key], rel=1e-9), key
+            assert getattr(live, key) == pytest.approx(ref[key], rel=1e-9, abs=0.0), key
 
 
 def test_uncalibrated_volts_input(tmp_path: Path, ros_node: Any) -> None:
