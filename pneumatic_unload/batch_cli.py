@@ -43,7 +43,7 @@ from pneumatic_unload.testline import (
 from pneumatic_unload.testline.batch import PART_COLUMNS
 from pneumatic_unload.testline.db import EXPORT_COLUMNS, file_rows
 from pneumatic_unload.testline.report import html_report
-from pneumatic_unload.testline.spec import DM3_PER_S_BAR
+from pneumatic_unload.testline.spec import DM3_PER_S_BAR, read_file_data
 
 CSV_OPTIONS = ("time_column", "pressure_column", "pressure_unit", "time_unit",
                "temperature_unit")
@@ -54,23 +54,16 @@ class BatchCliError(Exception):
 
 
 def _settings_file(path: str) -> dict[str, Any]:
-    p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
-        if p.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
-            import yaml
-
-            data = yaml.safe_load(text)
-    except Exception as exc:  # unreadable or not YAML/JSON: one line, no traceback
-        raise BatchCliError(f"--settings {p}: {exc}") from exc
+        data = read_file_data(path)
+    except SpecError as exc:  # unreadable or not YAML/JSON: one line, no traceback
+        raise BatchCliError(f"--settings {exc}") from exc
     if not isinstance(data, dict):
-        raise BatchCliError(f"--settings {p}: expected a mapping of estimator settings")
+        raise BatchCliError(f"--settings {path}: expected a mapping of estimator settings")
     try:
         return adapters.from_mapping(EstimatorSettings, data)
     except (ConfigError, EstimationError, TypeError) as exc:
-        raise BatchCliError(f"--settings {p}: {exc}") from exc
+        raise BatchCliError(f"--settings {path}: {exc}") from exc
 
 
 def options_from(args: argparse.Namespace) -> InputOptions:

@@ -241,10 +241,8 @@ def fit_curve(
                 continue
             # from the constant-hA fit (n = 0), the exponent moved towards convection's
             fx = fits["fixed"][0]
-            law_start = {k: v for k, v in {
-                "C": fx.conductance, "t_open": fx.t_start - float(t[0]), "p10": fx.p10,
-                "tau_heat": fx.tau_heat, "b": fx.critical_ratio, "p_atm": fx.p_atm,
-                "heat_exponent": 0.3}.items() if math.isfinite(v)}
+            law_start = _start_from(fx, float(t[0]), tau_heat=fx.tau_heat,
+                                    heat_exponent=0.3)
             nfev = 80
         if law == "natural+turbulent":
             why = turbulent_law_problem(fits.get("natural", (None,))[0], settings, t)
@@ -252,10 +250,8 @@ def fit_curve(
                 not_offered[law] = why
                 continue
             nt = fits["natural"][0]
-            law_start = {k: v for k, v in {
-                "C": nt.conductance, "t_open": nt.t_start - float(t[0]), "p10": nt.p10,
-                "heat_scale": nt.heat_scale, "b": nt.critical_ratio, "p_atm": nt.p_atm,
-                "heat_turbulent": 1.0}.items() if math.isfinite(v)}
+            law_start = _start_from(nt, float(t[0]), heat_scale=nt.heat_scale,
+                                    heat_turbulent=1.0)
             nfev = 80
         fits[law] = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
@@ -349,6 +345,15 @@ def fit_curve(
     return dataclasses.replace(
         cf, conductance_std=math.hypot(cf.conductance_std, mf), model_form_std=mf,
         laws=table, heat_law=best if natural else "none", not_offered=not_offered)
+
+
+def _start_from(fit: CurveFit, t0: float, **heat: float) -> dict[str, float]:
+    """Starting values [SI] of another law's fit from ``fit`` (times relative to t0 [s]):
+    its C, opening, p10, b and p_atm, and the heat parameters given; non-finite ones left
+    out."""
+    v = {"C": fit.conductance, "t_open": fit.t_start - t0, "p10": fit.p10,
+         "b": fit.critical_ratio, "p_atm": fit.p_atm, **heat}
+    return {k: x for k, x in v.items() if math.isfinite(x)}
 
 
 def _fit_law(

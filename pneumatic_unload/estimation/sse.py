@@ -175,12 +175,8 @@ def step_recovery(st: EstimatorState, i: int) -> list[UnloadResult]:
         if span * dt > max(20.0 * (u.t_close - u.t0), 2.0) and span >= 4 * PLATEAU:
             # a recovery no fit describes must not be followed for ever (the buffer grows)
             st.mode = SKIP  # abort_result: no further recovery fit
-            res = abort_result(st, i, recovered=False, text=(
-                "valve closed before p*; the pressure after the closing fits no recovery: "
-                "no SSE value"))
-            res.final = True
-            st.to_waiting(i + 1)
-            return [res]
+            return _end_without_sse(st, i, "valve closed before p*; the pressure after the "
+                                           "closing fits no recovery: no SSE value")
         return []
     if (recovery_significant(fit, st.sigma) and fit.remaining <= 0.05 * fit.rise
             and fit.p_inf_std < 0.02 * fit.rise
@@ -193,13 +189,18 @@ def step_recovery(st: EstimatorState, i: int) -> list[UnloadResult]:
     t_star = u.t_close - u.t0
     if not recovery_significant(fit, st.sigma) and span * dt > max(20.0 * t_star, 2.0) \
             and span >= 4 * PLATEAU:
-        res = abort_result(st, i, recovered=False, text=(
-            "valve closed before p*; no pressure recovery after closing (no re-heating "
-            "seen), so no SSE value"))
-        res.final = True
-        st.to_waiting(i + 1)
-        return [res]
+        return _end_without_sse(st, i, "valve closed before p*; no pressure recovery after "
+                                       "closing (no re-heating seen), so no SSE value")
     return []
+
+
+def _end_without_sse(st: EstimatorState, i: int, text: str) -> list[UnloadResult]:
+    """Close an aborted unload at index i with its final result and no SSE value
+    (``text``: why), and wait for the next unload."""
+    res = abort_result(st, i, recovered=False, text=text)
+    res.final = True
+    st.to_waiting(i + 1)
+    return [res]
 
 
 def scan_recovery(st: EstimatorState, i: int, end: int) -> int:

@@ -213,6 +213,21 @@ def rhs(t: float, y: FloatArray, prm: FloatArray, dy: FloatArray) -> None:
     _LIB.pu_rhs(t, y.ctypes.data, prm.ctypes.data, dy.ctypes.data)
 
 
+def _checked(name: str, y0: FloatArray, t_out: FloatArray, atol: FloatArray,
+             prm: FloatArray, out: FloatArray
+             ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The integrators' arrays as C-contiguous float64, their sizes checked (ValueError)."""
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    t_out = np.ascontiguousarray(t_out, dtype=float)
+    atol = np.ascontiguousarray(atol, dtype=float)
+    prm = np.ascontiguousarray(prm, dtype=float)
+    if prm.size != N_PARAMETERS or not 1 <= y0.size <= MAX_STATES or atol.size != y0.size \
+            or out.shape != (t_out.size, y0.size) or not out.flags.c_contiguous \
+            or out.dtype != np.float64:
+        raise ValueError(f"{name}: inconsistent array sizes or types")
+    return y0, t_out, atol, prm
+
+
 def dopri5(y0: FloatArray, t0: float, t1: float, t_out: FloatArray, prm: FloatArray,
            rtol: float, atol: FloatArray, hmax: float, max_steps: int,
            out: FloatArray) -> tuple[int, int]:
@@ -252,14 +267,7 @@ def dopri5(y0: FloatArray, t0: float, t1: float, t_out: FloatArray, prm: FloatAr
         (status: :data:`OK`, :data:`TOO_MANY_STEPS`, :data:`STEP_TOO_SMALL` or
         :data:`NOT_FINITE`; number of rows of ``out`` written).
     """
-    y0 = np.ascontiguousarray(y0, dtype=float)
-    t_out = np.ascontiguousarray(t_out, dtype=float)
-    atol = np.ascontiguousarray(atol, dtype=float)
-    prm = np.ascontiguousarray(prm, dtype=float)
-    if prm.size != N_PARAMETERS or not 1 <= y0.size <= MAX_STATES or atol.size != y0.size \
-            or out.shape != (t_out.size, y0.size) or not out.flags.c_contiguous \
-            or out.dtype != np.float64:
-        raise ValueError("dopri5: inconsistent array sizes or types")
+    y0, t_out, atol, prm = _checked("dopri5", y0, t_out, atol, prm, out)
     done = ctypes.c_int(0)
     status = _LIB.pu_dopri5(y0.size, y0.ctypes.data, float(t0), float(t1), t_out.size,
                             t_out.ctypes.data, prm.ctypes.data, float(rtol), atol.ctypes.data,
@@ -302,14 +310,9 @@ def integrate(y0: FloatArray, bounds: FloatArray, t_out: FloatArray, prm: FloatA
         (status as :func:`dopri5`; rows of ``out`` written; the failing segment's index,
         -1 when none; the state at that segment's start).
     """
-    y0 = np.ascontiguousarray(y0, dtype=float)
+    y0, t_out, atol, prm = _checked("integrate", y0, t_out, atol, prm, out)
     bounds = np.ascontiguousarray(bounds, dtype=float)
-    t_out = np.ascontiguousarray(t_out, dtype=float)
-    atol = np.ascontiguousarray(atol, dtype=float)
-    prm = np.ascontiguousarray(prm, dtype=float)
-    if prm.size != N_PARAMETERS or not 1 <= y0.size <= MAX_STATES or atol.size != y0.size \
-            or out.shape != (t_out.size, y0.size) or not out.flags.c_contiguous \
-            or out.dtype != np.float64 or bounds.size < 2 or t_out.size < 1:
+    if bounds.size < 2 or t_out.size < 1:
         raise ValueError("integrate: inconsistent array sizes or types")
     done, seg = ctypes.c_int(0), ctypes.c_int(-1)
     y_fail = np.zeros(y0.size)

@@ -20,7 +20,7 @@ from typing import Any
 from pneumatic_unload import __version__
 from pneumatic_unload.config import ConfigError
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.output import unload_json
+from pneumatic_unload.output import finite_or_none, unload_json
 from pneumatic_unload.records import RecordError, analyze_input, open_record
 from pneumatic_unload.testline.db import FileRecord
 from pneumatic_unload.testline.spec import Spec
@@ -101,9 +101,9 @@ def options_hash(options: InputOptions) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
-def _settings_json(s: EstimatorSettings) -> dict[str, Any]:
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-            for k, v in dataclasses.asdict(s).items()}
+def settings_json(s: EstimatorSettings) -> dict[str, Any]:
+    """The settings as JSON-ready values (SI; non-finite as None)."""
+    return finite_or_none(dataclasses.asdict(s))
 
 
 def result_row(r: Any) -> dict[str, Any]:
@@ -178,7 +178,7 @@ def analyze_file(path: str, options: InputOptions, chash: str | None = None
         ana = analyze_input(rec, dict(options.settings))
     except (RecordError, EstimationError, ConfigError) as exc:
         return FileRecord(content_hash=chash, status="error", reason=str(exc), **base)
-    sj = _settings_json(ana.settings)
+    sj = settings_json(ana.settings)
     run, results, problem = ana.run, ana.unloads, ana.input_problem
     unloads = [result_row(r) for r in results]
     t_all, p_all = run.overview.arrays()

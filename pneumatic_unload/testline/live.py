@@ -11,17 +11,15 @@ and other nodes may write at the same time (see :mod:`~.db`). SI units.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
-import math
 from pathlib import Path
 
 from pneumatic_unload import __version__
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.types import UnloadResult
 from pneumatic_unload.testline.db import FileRecord, open_db, write_file
-from pneumatic_unload.testline.job import result_row
+from pneumatic_unload.testline.job import result_row, settings_json
 from pneumatic_unload.testline.spec import Spec
 
 
@@ -69,8 +67,7 @@ class LiveResults:
         u = result_row(r)
         verdict = self.judge(r, part_id)
         u["verdict"], u["verdict_reason"] = verdict if verdict is not None else (None, None)
-        sj = {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-              for k, v in dataclasses.asdict(settings).items()}
+        sj = settings_json(settings)
         key = f"live:{self.writer}:{r.t_start!r}:{r.index}"
         rec = FileRecord(
             path=f"live:{self.writer}", content_hash=hashlib.sha256(key.encode()).hexdigest(),

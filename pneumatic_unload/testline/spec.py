@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pneumatic_unload.output import finite_or_none
+
 DM3_PER_S_BAR = 1e-8  # 1 dm^3/(s bar) in m^3/(s Pa)
 
 
@@ -104,9 +106,7 @@ class Spec:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (NaN limits as None)."""
-        return {"part_types": [
-            {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-             for k, v in vars(t).items()} for t in self.types]}
+        return {"part_types": [finite_or_none(vars(t)) for t in self.types]}
 
 
 def _pair(name: str, key: str, v: Any, src: str) -> tuple[float, float]:
@@ -163,13 +163,13 @@ def parse_spec(data: Any, src: str = "specification") -> Spec:
     return Spec(tuple(out))
 
 
-def load_spec(path: str | Path) -> Spec:
-    """Read a specification file (YAML or JSON).
+def read_file_data(path: str | Path) -> Any:
+    """The data of a YAML or JSON file (JSON by the .json suffix, else YAML).
 
     Raises
     ------
     SpecError
-        Unreadable or malformed file.
+        Unreadable file or invalid YAML/JSON (a one-line message naming the file).
     """
     p = Path(path)
     try:
@@ -178,11 +178,20 @@ def load_spec(path: str | Path) -> Spec:
         raise SpecError(f"{p}: {exc}") from exc
     try:
         if p.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
-            import yaml
+            return json.loads(text)
+        import yaml
 
-            data = yaml.safe_load(text)
-    except Exception as exc:  # any parser's error: the file is not a specification
+        return yaml.safe_load(text)
+    except Exception as exc:  # any parser's error: the file is not YAML/JSON
         raise SpecError(f"{p}: not valid {p.suffix.lstrip('.') or 'YAML'}: {exc}") from exc
-    return parse_spec(data, str(p))
+
+
+def load_spec(path: str | Path) -> Spec:
+    """Read a specification file (YAML or JSON).
+
+    Raises
+    ------
+    SpecError
+        Unreadable or malformed file.
+    """
+    return parse_spec(read_file_data(path), str(path))
