@@ -126,20 +126,41 @@ class Budget:
         return max(self.terms, key=lambda t: t.std if math.isfinite(t.std) else -1.0)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: value, combined, expanded (k), parts, largest term, the lines."""
-        def clean(d: dict[str, Any]) -> dict[str, Any]:  # NaN (not applicable) -> None
-            return {k: None if isinstance(v, float) and not math.isfinite(v) else v
-                    for k, v in d.items()}
-
-        return clean({"value": self.value, "combined_std": self.combined_std,
-                      "expanded": self.expanded, "coverage_factor": COVERAGE_FACTOR,
-                      "type_a_std": self.part_std("A"), "type_b_std": self.part_std("B"),
-                      "model_form_std": self.part_std("model"),
-                      "largest": self.largest.name,
-                      "terms": [clean({"name": t.name, "kind": t.kind, "value": t.value,
-                                       "input_std": t.input_std, "unit": t.unit,
-                                       "std": t.std, "note": t.note})
-                                for t in self.terms]})
+        """JSON-ready: value, combined, expanded (k), parts, largest term, the lines (NaN,
+        not applicable, as None). One pass over the terms, the sums in the order of
+        :attr:`combined_std` and :meth:`part_std` (it is on the live crossing's path)."""
+        isfinite = math.isfinite
+        total, parts = 0.0, {"A": 0.0, "B": 0.0, "model": 0.0}
+        largest, big = "", -math.inf
+        lines = []
+        for t in self.terms:
+            std = t.std
+            if isfinite(std):
+                v = std**2
+                total += v
+                parts[t.kind] = parts.get(t.kind, 0.0) + v
+                key = std
+            else:
+                key = -1.0
+            if key > big:
+                largest, big = t.name, key
+            value, input_std = t.value, t.input_std
+            lines.append({
+                "name": t.name, "kind": t.kind,
+                "value": value if not isinstance(value, float) or isfinite(value) else None,
+                "input_std": input_std if isfinite(input_std) else None,
+                "unit": t.unit, "std": std if isfinite(std) else None, "note": t.note})
+        combined = math.sqrt(total)
+        out = {"value": self.value, "combined_std": combined,
+               "expanded": COVERAGE_FACTOR * combined, "coverage_factor": COVERAGE_FACTOR,
+               "type_a_std": math.sqrt(parts["A"]), "type_b_std": math.sqrt(parts["B"]),
+               "model_form_std": math.sqrt(parts["model"]), "largest": largest,
+               "terms": lines}
+        for k in ("value", "combined_std", "expanded", "type_a_std", "type_b_std",
+                  "model_form_std"):
+            if not isfinite(out[k]):
+                out[k] = None
+        return out
 
 
 def with_terms(d: dict[str, Any], terms: list[BudgetTerm]) -> dict[str, Any]:
