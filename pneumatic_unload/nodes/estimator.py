@@ -155,6 +155,9 @@ class EstimatorNode(Node):
         # estimates, and final (curve-fit) estimates
         self.latencies: deque[float] = deque(maxlen=100_000)
         self.final_latencies: deque[float] = deque(maxlen=100_000)
+        #: [s] CPU time of the fit worker's thread for each final fit (against its share of
+        #: the latency: what the fit costs, and what waiting for the CPU or the GIL adds)
+        self.fit_cpu: deque[float] = deque(maxlen=100_000)
         self.received = 0
         #: The last RESULTS_KEPT results published (all are in ~/estimate and the bag):
         #: bounded, a node runs for days.
@@ -324,7 +327,9 @@ class EstimatorNode(Node):
                 continue
             job, arrived = self._fits.popleft()
             try:
+                cpu = time.thread_time()
                 r = job.run()
+                self.fit_cpu.append(time.thread_time() - cpu)
             except Exception as exc:  # never silent: report and keep the node alive
                 self._diagnose(_ERROR, f"final curve fit of unload {job.crossing.index} "
                                        f"failed: {type(exc).__name__}: {exc}")
@@ -547,7 +552,8 @@ class EstimatorNode(Node):
         stats = {"received": self.received, "rejected": self._rejected,
                  "results": self.n_results,
                  "latencies_ms": [round(x * 1e3, 4) for x in self.latencies],
-                 "final_latencies_ms": [round(x * 1e3, 4) for x in self.final_latencies]}
+                 "final_latencies_ms": [round(x * 1e3, 4) for x in self.final_latencies],
+                 "final_fit_cpu_ms": [round(x * 1e3, 4) for x in self.fit_cpu]}
         self.get_logger().info(f"stats {json.dumps(stats)}")
 
 
