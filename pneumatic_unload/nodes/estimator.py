@@ -18,11 +18,13 @@ Action
     ~/measure (pneumatic_unload_msgs/action/Measure): arm, optionally open the valve through a
         std_srvs/Trigger service, report progress, return the estimate or fail clearly.
 
-The subscription callback feeds the core's
-:class:`~pneumatic_unload.estimation.StreamingEstimator` at once and publishes the crossing
-estimate from the callback that completes it (no hand-over to another thread on that path);
-the final curve fit of each unload (tens of ms) is taken off the stream as a job
-(``defer_final_fit``) and run by a worker thread, so it never blocks the reception of
+A PressureBlock is fed to the core's
+:class:`~pneumatic_unload.estimation.StreamingEstimator` by the subscription callback at
+once, which publishes the crossing estimate it completes (no hand-over to another thread
+on that path). Single FluidPressure samples (10 kHz: one message each) are only queued by
+the callback and fed by the worker thread, so that the receiving thread keeps up with the
+message rate. The final curve fit of each unload (tens of ms) is taken off the stream as a
+job (``defer_final_fit``) and run by the worker, so it never blocks the reception of
 samples (none is dropped at 10 kHz with the EventsExecutor) and gives the result the
 offline analysis gives.
 """
@@ -141,6 +143,9 @@ class EstimatorNode(Node):
         self._pub_lock = threading.Lock()  # the published results (executor and fit worker)
         #: Final curve fits to run, with the arrival [s, monotonic] of the completing sample.
         self._fits: deque[tuple[FinalFit, float]] = deque()
+        #: Single samples (FluidPressure input) for the worker: stamp [ns], pressure [Pa],
+        #: arrival [s, monotonic].
+        self._samples: deque[tuple[int, float, float]] = deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._frame = self._p("frame_id")
@@ -187,7 +192,7 @@ class EstimatorNode(Node):
         # switch interval the receiving thread could wait that long for it while a fit
         # runs; 0.5 ms keeps the reception (and a crossing during a fit) prompt at 10 kHz.
         sys.setswitchinterval(5e-4)
-        self._worker = threading.Thread(target=self._work, name="final-fit", daemon=True)
+        self._worker = threading.Thread(target=self._work, name="estimator", daemon=True)
         self._worker.start()
         topic = self._p("block_topic" if self._p("input") == "block" else "pressure_topic")
         self.get_logger().info(
@@ -236,7 +241,9 @@ class EstimatorNode(Node):
         arrived = time.monotonic()
         if not self._frame_ok(msg.header.frame_id):
             return
-        self._feed(common.stamp_to_ns(msg.header.stamp), msg.fluid_pressure, arrived)
+        self._samples.append((common.stamp_to_ns(msg.header.stamp), msg.fluid_pressure,
+                              arrived))
+        self._wake.set()
 
     def _on_block(self, msg: Any) -> None:
         if not self._frame_ok(msg.header.frame_id):
@@ -317,8 +324,14 @@ class EstimatorNode(Node):
             self._n_diag = 0
 
     def _work(self) -> None:
-        """The fit worker: runs the final curve fits in order and publishes them."""
+        """The worker: feeds the queued single samples, and runs the final curve fits in
+        order and publishes them (the samples first: a fit waits for a queue drained)."""
+        samples = self._samples
         while True:
+            if samples:
+                while samples:
+                    self._feed(*samples.popleft())
+                continue
             if not self._fits:
                 if self._stop.is_set():
                     return
@@ -414,7 +427,8 @@ class EstimatorNode(Node):
         lat = np.asarray(self.latencies) * 1e3
         values = {
             "state": self._state, "core_state": self._est.state,
-            "samples": str(self.received), "fits_queued": str(len(self._fits)),
+            "samples": str(self.received), "queued": str(len(self._samples)),
+            "fits_queued": str(len(self._fits)),
             "rejected": str(self._rejected),
             "unloads": str(self._n_unloads),
             "latency_p50_ms": f"{np.percentile(lat, 50):.3f}" if lat.size else "",
@@ -545,7 +559,8 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ shutdown
     def close(self) -> None:
-        """Run the final fits queued (at most 5 s), then stop the worker."""
+        """Feed the samples queued and run the final fits queued (at most 5 s), then stop
+        the worker."""
         self._stop.set()
         self._wake.set()
         self._worker.join(timeout=5.0)
