@@ -20,7 +20,13 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
+from pneumatic_unload.config import TankSpec
+from pneumatic_unload.config.estimator import (
+    AMBIENT_TEMPERATURE,
+    WALL_ASSUMED_STD,
+    EstimatorSettings,
+    wall_uncertainty,
+)
 from pneumatic_unload.curve_fit_result import CurveFit
 from pneumatic_unload.fit.likelihood import make_bins
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
@@ -70,10 +76,16 @@ def curve_fit_trace(t: FloatArray, p: FloatArray, t_start: float) -> Trace:
 #: Laws fitted in turn by :func:`fit_curve` when the natural model is on (the data choose).
 CURVE_FIT_LAWS: tuple[str, ...] = ("natural", "fixed", "density", "natural+turbulent")
 #: Residual inflation above which, with the wall assumed at T10, the hot-start variants
-#: (wall temperature fitted) are tried too [-].
+#: (wall temperature fitted) are tried too [-] (they are also tried when T10 is more than
+#: sqrt(3) WALL_ASSUMED_STD from a room's AMBIENT_TEMPERATURE).
 HOT_START_INFLATION = 1.5
 #: Delta-BIC below which another law counts as fitting about as well [-].
 LAW_BIC_THRESHOLD = 10.0
+#: The wall temperatures the model takes [K] (TankSpec's bounds): an assumed wall moved by
+#: its uncertainty stays inside.
+WALL_RANGE: tuple[float, float] = next(
+    (float(f.metadata["min"]), float(f.metadata["max"]))
+    for f in dataclasses.fields(TankSpec) if f.name == "wall_temperature")
 
 
 def fit_curve(
@@ -194,12 +206,16 @@ def fit_curve(
             if again[1] < fits[law][1]:
                 fits[law] = again
     if (natural and fit_heat and settings.wall_temperature is None
-            and min(f[0].inflation for f in fits.values()) > HOT_START_INFLATION):
-        # the wall was assumed at T10 and every law leaves structure: a gas hot (or cold)
-        # after charging is a model of its own, the wall temperature fitted, from each law's
-        # fit; the information criterion below decides whether the record carries it (the
-        # one-parameter laws only: a wall and an exponent both fitted are not told apart
-        # on one discharge)
+            and (min(f[0].inflation for f in fits.values()) > HOT_START_INFLATION
+                 or abs(settings.initial_temperature - AMBIENT_TEMPERATURE)
+                 > math.sqrt(3.0) * WALL_ASSUMED_STD)):
+        # the wall was assumed at T10 and every law leaves structure, or T10 is far from a
+        # room's temperature (a gas warmed or cooled by the charge: the density law can
+        # take up a wall away from T10 with white residuals and a C several % off): a gas
+        # hot (or cold) after charging is a model of its own, the wall temperature fitted,
+        # from each law's fit; the information criterion below decides whether the record
+        # carries it (the one-parameter laws only: a wall and an exponent both fitted are
+        # not told apart on one discharge)
         for law in [k for k in ("natural", "fixed") if k in fits]:
             base = fits[law][0]
             if not math.isfinite(base.conductance):
@@ -244,10 +260,12 @@ def fit_curve(
         cf, conductance_std=math.hypot(cf.conductance_std, mf), model_form_std=mf,
         laws=table, heat_law=best if natural else "none", not_offered=not_offered)
     if natural and settings.wall_temperature is None and not best.endswith("+wall"):
-        # the wall assumed = T10: its uncertainty from the record (the hot starts' walls
-        # are evidence of a gap), C's from the chosen law refitted with the wall moved
+        # the wall assumed = T10: its uncertainty from the record (the walls of the hot
+        # starts that fit about as well as the chosen law are evidence of a gap), C's from
+        # the chosen law refitted with the wall moved
         u, why = wall_uncertainty(settings, hot_walls=[
-            f[0].wall_temperature for k, f in fits.items() if k.endswith("+wall")])
+            f[0].wall_temperature for k, f in fits.items()
+            if k.endswith("+wall") and bic[k] - bic[best] < LAW_BIC_THRESHOLD])
         out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why, wall_std=0.0
                                   if u == 0.0 else _wall_refit(
                                       trace, out, settings, u, law=best, fit_heat=bool(
@@ -265,7 +283,8 @@ def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: flo
     up unevenly: the response is not linear over u of 10-20 K); NaN when a refit fails."""
     out = []
     for sign in (1.0, -1.0):
-        moved = dataclasses.replace(settings, wall_temperature=settings.wall + sign * u)
+        wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
+        moved = dataclasses.replace(settings, wall_temperature=wall)
         start = _start_from(fit, float(t[0]), heat_scale=fit.heat_scale,
                             tau_heat=fit.tau_heat, heat_exponent=fit.heat_exponent,
                             heat_turbulent=fit.heat_turbulent)
