@@ -35,6 +35,12 @@ Measured on the full grid (24 cases, hyddown 0.50.0):
   inadequate" (full02, 06, 08, 10, 16, 18: Ljung-Box p 1e-7 ... 1e-250; HydDown's Nusselt
   number jumps by 19 % at Ra = 1e9, which no smooth law follows), none of the fixed-h ones;
   their C is still within 0.82 %.
+* branch h11b (the wall's uncertainty: 0 here, HydDown's wall starts at T10): unchanged,
+  0.816 %, 0.248 %, 16/24 and 23/24. With ``--wall-assumed`` (the operator does not know
+  the wall is at T10: 2 K from the record, 5.8 K for T10 = 303 K): 19/24 (79 %) within 1
+  sigma, 24/24 (100 %) within 2: too wide at 2 sigma on a grid whose wall is exactly at T10
+  (the truth at the centre of the assumed spread), as the default intends for rigs whose
+  wall is not known.
 """
 
 from __future__ import annotations
