@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -83,6 +84,11 @@ HOT_START_INFLATION = 1.5
 LAW_BIC_THRESHOLD = 10.0
 #: The wall temperatures the model takes [K] (TankSpec's bounds): an assumed wall moved by
 #: its uncertainty stays inside.
+#: Largest wall-temperature uncertainty [K] whose effect on C is taken from the fit's
+#: linear response (two model evaluations); above it the chosen law is refitted with the
+#: wall moved (the response is not linear over 10-20 K). Measured at 2-5 K: see
+#: test_wall_budget.
+WALL_LINEAR_MAX = 5.0
 WALL_RANGE: tuple[float, float] = next(
     (float(f.metadata["min"]), float(f.metadata["max"]))
     for f in dataclasses.fields(TankSpec) if f.name == "wall_temperature")
@@ -140,6 +146,7 @@ def fit_curve(
     p = np.asarray(p, dtype=float)
     trace = curve_fit_trace(t - t[0], p, t_start - float(t[0]))  # the same for every law
     not_offered: dict[str, str] = {}
+    raw: dict[str, dict[str, Any]] = {}  # each law's FitResult and model (the wall term)
     for law in tried:
         law_start, nfev = start, (200 if not fits else 32)
         if law == "density":
@@ -164,7 +171,8 @@ def fit_curve(
         fits[law] = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
                              profile_heat=profile_heat, law=law, start=law_start,
-                             max_nfev=nfev, trace=trace, hold=hold)
+                             max_nfev=nfev, trace=trace, hold=hold,
+                             keep=raw.setdefault(law, {}))
         if law == "density":
             sd = fits[law][0].heat_exponent_std
             if not (math.isfinite(sd) and sd <= DENSITY_LAW_MAX_EXPONENT_SD):
@@ -199,12 +207,14 @@ def fit_curve(
         # nearly isothermal discharge fitted from the weak-exchange side); explore strong
         # and weak heat exchange from the neutral values and keep what fits better
         for law in list(fits):
+            kept: dict[str, Any] = {}
             again = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
                              profile_heat=profile_heat, law=law, explore=True,
-                             trace=trace, hold=hold)
+                             trace=trace, hold=hold, keep=kept)
             if again[1] < fits[law][1]:
                 fits[law] = again
+                raw[law] = kept
     if (natural and fit_heat and settings.wall_temperature is None
             and (min(f[0].inflation for f in fits.values()) > HOT_START_INFLATION
                  or abs(settings.initial_temperature - AMBIENT_TEMPERATURE)
@@ -266,11 +276,48 @@ def fit_curve(
         u, why = wall_uncertainty(settings, hot_walls=[
             f[0].wall_temperature for k, f in fits.items()
             if k.endswith("+wall") and bic[k] - bic[best] < LAW_BIC_THRESHOLD])
-        out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why, wall_std=0.0
-                                  if u == 0.0 else _wall_refit(
-                                      trace, out, settings, u, law=best, fit_heat=bool(
-                                          fit_heat), hold=hold, t=t, p=p))
+        if u == 0.0:
+            wall_std = 0.0
+        elif u <= WALL_LINEAR_MAX and raw.get(best):
+            wall_std = _wall_linear(trace, raw[best], settings, u, law=best)
+        else:
+            wall_std = _wall_refit(trace, out, settings, u, law=best,
+                                   fit_heat=bool(fit_heat), hold=hold, t=t, p=p)
+        out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why,
+                                  wall_std=wall_std)
     return out
+
+
+def _wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
+                 u: float, *, law: str) -> float:
+    """C's standard uncertainty [m^3/(s Pa)] from an assumed wall temperature of standard
+    uncertainty u [K] (at most :data:`WALL_LINEAR_MAX`): the refit of :func:`_wall_refit`
+    to first order, at a cost of two model evaluations instead of two fits. With the wall
+    moved by +-u the residual at the fitted values changes by dr; the refit's parameter
+    shift is the Gauss-Newton step -J^+ dr with the fit's Jacobian J (the fitted values are
+    the minimum of the unmoved problem, J^T r = 0 there); C's moves are root-mean-squared
+    as the refit's are. NaN when it cannot be computed."""
+    fit, model = kept["result"], kept["model"]
+    free = list(fit.params.free)
+    jac = np.asarray(fit.jac, dtype=float)
+    if "C" not in free or jac.shape != (fit.fun.size, len(free)) \
+            or not np.all(np.isfinite(jac)):
+        return math.nan
+    moves = []
+    with np.errstate(all="ignore"):
+        for sign in (1.0, -1.0):
+            wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
+            moved = estimator_model(dataclasses.replace(settings, wall_temperature=wall),
+                                    model.start, heat_law=law)
+            try:
+                dr = np.asarray(trace.residual(moved)(fit.values), dtype=float) - fit.fun
+            except (ValueError, ArithmeticError):
+                return math.nan
+            if not np.all(np.isfinite(dr)):
+                return math.nan
+            dx, *_ = np.linalg.lstsq(jac, -dr, rcond=1e-12)
+            moves.append(fit.params.to_values(fit.x + dx)["C"] - fit.values["C"])
+    return math.sqrt(sum(m * m for m in moves) / 2.0)
 
 
 def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: float, *,
@@ -315,6 +362,7 @@ def _fit_law(
     profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
     max_nfev: int = 200, explore: bool = False, trace: Trace | None = None,
     hold: tuple[str, ...] = (), fit_wall: bool = False,
+    keep: dict[str, Any] | None = None,
 ) -> tuple[CurveFit, float, int]:
     """One law's fit for :func:`fit_curve`; returns (fit, chi^2 [Pa^2: residuals are bin
     sums over sqrt(count)], free parameters [-]).
@@ -351,6 +399,9 @@ def _fit_law(
     fit_wall : bool
         Fit the wall temperature too (hot-start variant; starts screened 10 and 30 K below
         T10).
+    keep : dict, optional
+        Receives the fit's :class:`~pneumatic_unload.fit.lsq.FitResult` ('result') and
+        model ('model'), for :func:`_wall_linear`.
     """
     t_abs = np.asarray(t, dtype=float)
     t_ref = float(t_abs[0])
@@ -388,6 +439,8 @@ def _fit_law(
                  for k, v in start.items() if math.isfinite(v)}
     fit = trace.fit(model, fixed=fixed, start=start, starts=starts, screen_nfev=9,
                     max_nfev=max_nfev)
+    if keep is not None:
+        keep.update(result=fit, model=model)
     v = fit.values
     # residuals are bin sums / sqrt(count): their variance is the per-sample variance
     s2 = fit.chi2 / fit.dof
