@@ -34,6 +34,16 @@ Measured on the full grid (24 cases, hyddown 0.50.0):
   inadequate" (full02, 06, 08, 10, 16, 18: Ljung-Box p 1e-7 ... 1e-250; HydDown's Nusselt
   number jumps by 19 % at Ra = 1e9, which no smooth law follows), none of the fixed-h ones;
   their C is still within 0.82 %.
+
+``python bench/bench_hyddown.py --discrepancy [FOLDER]``: the discrepancy workflow's verdict
+on each trace instead (issue 12's peer line: heat transfer, or an ambiguity containing it,
+with C within 2 %; the hot start counts as heat transfer). Full grid, branch h12c (load
+~10 on 2 cores): 22/24; median |C error| 0.37 %. Misses: full00 (2.1 L, calc): round 2
+names pipe_volume (white, delta-BIC 47, pipe volume 21 % of V, heat scale 1.28 -> 0.87),
+C +30.8 % (the C range, 0.61-1.39 of the truth, holds it: heat transfer alone competes);
+full16 (the turbulent-branch case above): hot_start, C +2.86 % (the search fits the
+one-parameter heat laws only). The committed six: 6/6, -0.10 % ... +0.52 % (before the
+further-effect rule v50l named hot_start + pipe_volume, C +16 %).
 """
 
 from __future__ import annotations
