@@ -245,6 +245,7 @@ def bench_live(tmp: Path, unloads: int, block: int = 0,
     stats = json.loads(m[-1]) if m else {}
     lat = np.asarray(stats.get("latencies_ms", []), dtype=float)
     fin = np.asarray(stats.get("final_latencies_ms", []), dtype=float)
+    cpu = np.asarray(stats.get("final_fit_cpu_ms", []), dtype=float)
     seen = {int(i) for i in re.findall(r"\] \[estimator\]: unload (\d+):", text)}
     n_final = len(re.findall(r"\] \[estimator\]: unload \d+:.*\(final\)", text))
     received = int(stats.get("received", 0))
@@ -253,6 +254,9 @@ def bench_live(tmp: Path, unloads: int, block: int = 0,
     print(f"\nLive, {what}: {len(seen)} unloads seen ({lat.size} crossing estimates, "
           f"{n_final} final fits) in {wall:.0f} s at {rate:g} Hz; published {published:,}, "
           f"analysed {received:,}, lost {published - received:,} samples; load average {load}.")
+    if cpu.size:
+        print(f"Final fits: CPU time of the fit thread p50 / p99 / max {_pct(cpu)} ms (the rest "
+              f"of the final latency is waiting for a core or the GIL, and the publication).")
     p99 = float(np.percentile(lat, 99)) if lat.size else float("nan")
     f99 = float(np.percentile(fin, 99)) if fin.size else float("nan")
     return [{"input": what, "latency": "crossing estimate", "unloads": lat.size,

@@ -22,8 +22,15 @@ carries the time scale V/(C sqrt(T10)) of every model of the package:
   d): dC = (dC/dp_cross + dC/dp10) d;
 * p_atm given by a barometer: it moves p* and so the crossing, which the inversion follows
   exactly while the flow is choked (dC = 0); eq 39, whose formula holds p* fixed, moves;
-* the wall temperature (fitted heat laws only): the model-based inversion at the crossing
-  with the natural law, the wall moved by its uncertainty (:func:`wall_sensitivity`).
+* the wall temperature (heat laws only): given, it has ``temperature_uncertainty``; not
+  given, it is assumed = T10 with the uncertainty the record allows (a default, widened
+  when T10 is far from a room's temperature or a hot start is fitted:
+  :func:`~pneumatic_unload.config.estimator.wall_uncertainty`); the line states
+  |dC/dTw|. At the crossing: the model-based inversion with the natural law, the wall moved
+  by its uncertainty (:func:`wall_sensitivity`); for the curve fit's C with an assumed wall,
+  the chosen law refitted with the wall moved (the fitted heat exchange takes up part of
+  the move: :func:`pneumatic_unload.fitting.fit_curve`); a wall fitted by a hot-start law
+  is in the fit's type A line (the wall line then shows it with 0).
 
 SI units: m^3/(s Pa) for C, m^3, K, Pa, s.
 """
@@ -35,7 +42,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
 from pneumatic_unload.inversion import invert_crossing
 from pneumatic_unload.physics import conductance_eq39, conductance_isentropic_inversion
 
@@ -52,6 +59,7 @@ PRESSURE_REL_DEFAULT = 0.001
 #: package's own model (a simulation analysed with its own tank and gas): the budget keeps
 #: the record's terms and the heat laws' spread only.
 EXACT_INPUTS: dict[str, float] = {"volume_uncertainty": 0.0, "temperature_uncertainty": 0.0,
+                                  "wall_temperature_uncertainty": 0.0,
                                   "pressure_uncertainty": 0.0, "atmosphere_uncertainty": 0.0,
                                   "model_uncertainty": 0.0}
 #: The stated inputs exact, the model's limits kept: a peer simulation (HydDown) analysed
@@ -126,20 +134,41 @@ class Budget:
         return max(self.terms, key=lambda t: t.std if math.isfinite(t.std) else -1.0)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: value, combined, expanded (k), parts, largest term, the lines."""
-        def clean(d: dict[str, Any]) -> dict[str, Any]:  # NaN (not applicable) -> None
-            return {k: None if isinstance(v, float) and not math.isfinite(v) else v
-                    for k, v in d.items()}
-
-        return clean({"value": self.value, "combined_std": self.combined_std,
-                      "expanded": self.expanded, "coverage_factor": COVERAGE_FACTOR,
-                      "type_a_std": self.part_std("A"), "type_b_std": self.part_std("B"),
-                      "model_form_std": self.part_std("model"),
-                      "largest": self.largest.name,
-                      "terms": [clean({"name": t.name, "kind": t.kind, "value": t.value,
-                                       "input_std": t.input_std, "unit": t.unit,
-                                       "std": t.std, "note": t.note})
-                                for t in self.terms]})
+        """JSON-ready: value, combined, expanded (k), parts, largest term, the lines (NaN,
+        not applicable, as None). One pass over the terms, the sums in the order of
+        :attr:`combined_std` and :meth:`part_std` (it is on the live crossing's path)."""
+        isfinite = math.isfinite
+        total, parts = 0.0, {"A": 0.0, "B": 0.0, "model": 0.0}
+        largest, big = "", -math.inf
+        lines = []
+        for t in self.terms:
+            std = t.std
+            if isfinite(std):
+                v = std**2
+                total += v
+                parts[t.kind] = parts.get(t.kind, 0.0) + v
+                key = std
+            else:
+                key = -1.0
+            if key > big:
+                largest, big = t.name, key
+            value, input_std = t.value, t.input_std
+            lines.append({
+                "name": t.name, "kind": t.kind,
+                "value": value if not isinstance(value, float) or isfinite(value) else None,
+                "input_std": input_std if isfinite(input_std) else None,
+                "unit": t.unit, "std": std if isfinite(std) else None, "note": t.note})
+        combined = math.sqrt(total)
+        out = {"value": self.value, "combined_std": combined,
+               "expanded": COVERAGE_FACTOR * combined, "coverage_factor": COVERAGE_FACTOR,
+               "type_a_std": math.sqrt(parts["A"]), "type_b_std": math.sqrt(parts["B"]),
+               "model_form_std": math.sqrt(parts["model"]), "largest": largest,
+               "terms": lines}
+        for k in ("value", "combined_std", "expanded", "type_a_std", "type_b_std",
+                  "model_form_std"):
+            if not isfinite(out[k]):
+                out[k] = None
+        return out
 
 
 def with_terms(d: dict[str, Any], terms: list[BudgetTerm]) -> dict[str, Any]:
@@ -198,7 +227,8 @@ def _isentropic(settings: EstimatorSettings, tau: float, p_cross: float, p10: fl
 
 def input_terms(settings: EstimatorSettings, c: float, *, tau: float, p10: float,
                 p_atm: float, p_star: float, atmosphere_measured: bool,
-                wall_std: float = math.nan, eq39: bool = False) -> list[BudgetTerm]:
+                wall_std: float = math.nan, eq39: bool = False,
+                wall_input: tuple[float, str] | None = None) -> list[BudgetTerm]:
     """The type B lines of the budget of a C.
 
     Parameters
@@ -218,6 +248,9 @@ def input_terms(settings: EstimatorSettings, c: float, *, tau: float, p10: float
         :func:`wall_sensitivity`); NaN: no heat law fitted, no term.
     eq39 : bool
         The budget of eq 39's C (its formula's own sensitivities) instead of the model's.
+    wall_input : tuple, optional
+        The wall temperature's standard uncertainty [K] that ``wall_std`` is for and where
+        it comes from; default :func:`~pneumatic_unload.config.estimator.wall_uncertainty`.
     """
     s = settings
     u = input_uncertainties(s, p10)
@@ -259,11 +292,28 @@ def input_terms(settings: EstimatorSettings, c: float, *, tau: float, p10: float
         terms.append(BudgetTerm("atmosphere p_atm (given)", "B", p_atm, ua, "Pa", std_a,
                                 "atmosphere_uncertainty"))
     if math.isfinite(wall_std):
-        wall = s.wall
-        terms.append(BudgetTerm(
-            WALL_TERM, "B", wall, u["temperature"], "K", wall_std,
-            "given" if s.wall_temperature is not None else "assumed = T10 (not given)"))
+        terms.append(wall_term(s, c, wall_std, *(wall_input or wall_uncertainty(s))))
     return terms
+
+
+def wall_term(settings: EstimatorSettings, c: float, std: float, u: float,
+              why: str) -> BudgetTerm:
+    """The wall temperature's line of the budget of C [m^3/(s Pa)]: C's standard
+    uncertainty ``std`` [m^3/(s Pa)] from the wall moved by its uncertainty ``u`` [K]
+    (``why``: where u comes from, :func:`~pneumatic_unload.config.estimator.
+    wall_uncertainty`); the note states the sensitivity dC/dTw [%/K] and, for an assumed
+    wall, that it was assumed."""
+    per_k = 100.0 * std / (u * abs(c)) if u > 0 and c else math.nan
+    sens = f"|dC/dTw| = {per_k:.3g} %/K" if math.isfinite(per_k) else "u = 0"
+    return BudgetTerm(WALL_TERM, "B", settings.wall, u, "K", std, f"{why}; {sens}")
+
+
+def fitted_wall_term(wall: float, wall_std: float, law: str) -> BudgetTerm:
+    """The wall temperature's line when the chosen heat law fitted it (a hot start,
+    ``law`` 'natural+wall' or 'fixed+wall'; ``wall``, ``wall_std`` [K]): its uncertainty is
+    the fit's, already in the type A line (0 here: not counted twice)."""
+    return BudgetTerm(WALL_TERM, "B", wall, wall_std, "K", 0.0,
+                      f"fitted ({law}, a hot start): in the curve fit's line")
 
 
 def term_std(budget: dict[str, Any] | None, name: str) -> float:
@@ -279,9 +329,10 @@ def term_std(budget: dict[str, Any] | None, name: str) -> float:
 def wall_sensitivity(settings: EstimatorSettings, tau: float, *, p10: float, p_atm: float,
                      p_star: float, c_start: float) -> float:
     """C's standard uncertainty from the wall temperature [m^3/(s Pa)]: the model-based
-    inversion at the crossing (natural heat law) with the wall moved by +-u(T)
-    (temperature_uncertainty [K]); NaN when it cannot be computed."""
-    u = settings.temperature_uncertainty
+    inversion at the crossing (natural heat law) with the wall moved by +-u [K]
+    (:func:`~pneumatic_unload.config.estimator.wall_uncertainty`); NaN when it cannot be
+    computed."""
+    u = wall_uncertainty(settings)[0]
     out = []
     for sign in (1.0, -1.0):
         moved = dataclasses.replace(settings, wall_temperature=settings.wall + sign * u,
@@ -298,7 +349,7 @@ def wall_sensitivity(settings: EstimatorSettings, tau: float, *, p10: float, p_a
 def model_budget(settings: EstimatorSettings, c: float, *, type_a_std: float,
                  type_a_name: str, model_form_std: float, tau: float, p10: float,
                  p_atm: float, p_star: float, atmosphere_measured: bool,
-                 wall_std: float = math.nan,
+                 wall_std: float = math.nan, wall_input: tuple[float, str] | None = None,
                  extra_terms: tuple[BudgetTerm, ...] = ()) -> Budget:
     """The budget of a model-based C (crossing inversion or curve fit).
 
@@ -314,14 +365,15 @@ def model_budget(settings: EstimatorSettings, c: float, *, type_a_std: float,
         What that is (e.g. 'curve fit (noise, AR(1))').
     model_form_std : float
         Spread of the heat laws that fit about equally well [m^3/(s Pa)].
-    tau, p10, p_atm, p_star, atmosphere_measured, wall_std
+    tau, p10, p_atm, p_star, atmosphere_measured, wall_std, wall_input
         See :func:`input_terms`.
     extra_terms : tuple of BudgetTerm
-        Further type B lines (e.g. a given initial pressure's).
+        Further type B lines (e.g. a given initial pressure's, a fitted wall's).
     """
     terms = [BudgetTerm(type_a_name, "A", math.nan, math.nan, "", type_a_std)]
     terms += input_terms(settings, c, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
-                         atmosphere_measured=atmosphere_measured, wall_std=wall_std)
+                         atmosphere_measured=atmosphere_measured, wall_std=wall_std,
+                         wall_input=wall_input)
     terms += list(extra_terms)
     terms.append(BudgetTerm("model form (heat laws)", "model", math.nan, math.nan, "",
                             model_form_std))

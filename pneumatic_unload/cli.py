@@ -32,6 +32,7 @@ import numpy as np
 
 from pneumatic_unload import batch_cli
 from pneumatic_unload.config import TANK_FIELDS, ConfigError, RigConfig, TankSpec, adapters
+from pneumatic_unload.config.estimator import wall_uncertainty
 from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySettings
 from pneumatic_unload.estimation import (
     EstimationError,
@@ -151,16 +152,21 @@ def input_sources(args: argparse.Namespace, cfg: dict[str, Any], settings: Estim
                                 "source": t10_src},
         "wall_temperature": {"value": s.wall, "unit": "K",
                              "source": source("wall_temperature")
-                             if s.wall_temperature is not None else "assumed = T10"},
+                             if s.wall_temperature is not None else
+                             f"assumed = T10 (+- {wall_uncertainty(s)[0]:.3g} K, more if a "
+                             "hot start is found; a hot-start law fits it instead: see the "
+                             "budget's wall line)"},
         "atmosphere": {"value": s.atmosphere, "unit": "Pa",
                        "source": source("atmosphere") if s.atmosphere is not None
                        else "measured: the final plateau (auto)"},
         "gas": {"gas_constant": s.gas_constant, "gamma": s.gamma},
         "heat_model": s.heat_model,
         "uncertainties": {"volume_m3": s.volume_uncertainty, "temperature_K":
-                          s.temperature_uncertainty, "pressure_Pa": s.pressure_uncertainty,
+                          s.temperature_uncertainty, "wall_temperature_K":
+                          s.wall_temperature_uncertainty, "pressure_Pa": s.pressure_uncertainty,
                           "atmosphere_Pa": s.atmosphere_uncertainty,
-                          "defaults": "volume 0.5 % of V, pressure 0.1 % of p10"},
+                          "defaults": "volume 0.5 % of V, pressure 0.1 % of p10, an assumed "
+                          "wall's from the record (the budget's wall line)"},
     }
 
 

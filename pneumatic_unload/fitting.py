@@ -16,13 +16,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.config import RigConfig
-from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.config import TankSpec
+from pneumatic_unload.config.estimator import (
+    AMBIENT_TEMPERATURE,
+    WALL_ASSUMED_STD,
+    EstimatorSettings,
+    wall_uncertainty,
+)
+from pneumatic_unload.curve_fit_result import CurveFit
 from pneumatic_unload.fit.likelihood import make_bins
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
 from pneumatic_unload.fit.profile import valley_std
@@ -38,10 +43,7 @@ from pneumatic_unload.heat_law_offer import (
     density_law_problem,
     turbulent_law_problem,
 )
-from pneumatic_unload.inversion import (
-    estimator_model,
-    rig_from_settings,
-)
+from pneumatic_unload.inversion import estimator_model
 from pneumatic_unload.model.effects import Start
 from pneumatic_unload.model.heat import thermal_time_constant
 from pneumatic_unload.physics import tau_exp_eq38
@@ -54,108 +56,8 @@ PROFILE_MIN_SD = 0.1
 #: Relative bin width of the curve fit's likelihood [-] (see
 #: :func:`pneumatic_unload.fit.likelihood.make_bins`).
 CURVE_FIT_RESOLUTION = 0.01
-
-@dataclass(frozen=True)
-class CurveFit:
-    """Result of :func:`fit_curve` (SI units; std NaN when not identifiable).
-
-    Attributes
-    ----------
-    conductance, conductance_std : float
-        C and its 1-sigma [m^3/(s Pa)].
-    critical_ratio, critical_ratio_std : float
-        b and its 1-sigma [-] (NaN when the subsonic tail does not identify it).
-    t_start : float
-        Valve opening instant [s].
-    p10, p_atm : float
-        Initial and atmospheric pressure [Pa absolute].
-    heat_scale, heat_scale_std : float
-        Multiplier on the natural-convection correlation [-] (1 and NaN when not fitted).
-    rms : float
-        Residual root mean square [Pa].
-    n : int
-        Samples fitted [-].
-    success : bool
-        Optimiser convergence.
-    inflation : float
-        Variance inflation applied for serially correlated residuals [-]
-        (:func:`residual_inflation`).
-    heat_law : str
-        Heat-transfer law the data chose ('natural', 'fixed', 'density', each possibly
-        with '+wall'; 'none' when adiabatic).
-    tau_heat, tau_heat_std : float
-        Thermal time constant m0 c_v/(hA) of the 'fixed' law (of hA_0, at the initial
-        density, for 'density') and its 1-sigma [s] (NaN otherwise).
-    heat_exponent, heat_exponent_std : float
-        Exponent n of the 'density' law, hA ~ rho^n, and its 1-sigma [-] (NaN otherwise).
-    heat_turbulent, heat_turbulent_std : float
-        Multiplier on the natural law's turbulent branch and its 1-sigma [-] (1 and NaN
-        unless 'natural+turbulent').
-    model_form_std : float
-        Model-form 1-sigma of C from the laws that fit about as well (delta-BIC < 10) but
-        give another C [m^3/(s Pa)] (included in ``conductance_std``).
-    laws : dict
-        Per law offered: C [m^3/(s Pa)], chi2 and BIC [-].
-    whiteness_p : float
-        Ljung-Box p-value of the chosen law's residuals (binned, in time order) [-]: small
-        means structure the model does not describe.
-    not_offered : dict
-        Laws fitted but not offered to the choice, with the reason (the record does not
-        carry their extra parameter).
-    wall_temperature : float
-        The wall temperature fitted by a hot-start variant ('natural+wall', 'fixed+wall':
-        the gas starts at T10, the wall is elsewhere) [K]; NaN when the wall was not fitted.
-    """
-
-    conductance: float
-    conductance_std: float
-    critical_ratio: float
-    critical_ratio_std: float
-    t_start: float
-    p10: float
-    p_atm: float
-    heat_scale: float
-    heat_scale_std: float
-    rms: float
-    n: int
-    success: bool
-    inflation: float = 1.0
-    heat_law: str = "natural"
-    tau_heat: float = math.nan
-    tau_heat_std: float = math.nan
-    heat_exponent: float = math.nan
-    heat_exponent_std: float = math.nan
-    heat_turbulent: float = 1.0
-    heat_turbulent_std: float = math.nan
-    model_form_std: float = 0.0
-    laws: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
-    wall_temperature: float = math.nan
-    whiteness_p: float = math.nan
-    not_offered: dict[str, str] = dataclasses.field(default_factory=dict)
-
-    def config(self, settings: EstimatorSettings) -> RigConfig:
-        """The fitted model's configuration (valve opening at t = 0) [SI]."""
-        b = self.critical_ratio if math.isfinite(self.critical_ratio) else None
-        cfg = rig_from_settings(settings, conductance=self.conductance, p10=self.p10,
-                                p_atm=self.p_atm, critical_ratio=b,
-                                heat_scale=self.heat_scale)
-        if self.heat_law.startswith("natural") and self.heat_turbulent != 1.0:
-            cfg = cfg.replace(heat_transfer_turbulent_ratio=float(
-                np.clip(self.heat_turbulent, 0.0, 10.0)))
-        if math.isfinite(self.wall_temperature):
-            cfg = cfg.replace(wall_temperature=float(self.wall_temperature))
-        if self.heat_law.startswith(("fixed", "density")) and math.isfinite(self.tau_heat):
-            g = settings.gas
-            h_a = self.p10 * settings.volume / ((g.gamma - 1.0) * settings.initial_temperature
-                                                * self.tau_heat)
-            cfg = cfg.replace(heat_transfer_mode="fixed",
-                              heat_transfer_coefficient=float(np.clip(h_a, 0.0, 1e4)))
-            if self.heat_law.startswith("density"):
-                cfg = cfg.replace(heat_transfer_mode="density", heat_transfer_exponent=float(
-                    np.clip(self.heat_exponent, -2.0, 4.0)))
-        return cfg
-
-
+#: Re-exported: the result of :func:`fit_curve`.
+__all__ = ["CurveFit", "fit_curve"]
 
 
 def curve_fit_bins(t: FloatArray, t_start: float) -> NDArray[np.int64]:
@@ -174,10 +76,16 @@ def curve_fit_trace(t: FloatArray, p: FloatArray, t_start: float) -> Trace:
 #: Laws fitted in turn by :func:`fit_curve` when the natural model is on (the data choose).
 CURVE_FIT_LAWS: tuple[str, ...] = ("natural", "fixed", "density", "natural+turbulent")
 #: Residual inflation above which, with the wall assumed at T10, the hot-start variants
-#: (wall temperature fitted) are tried too [-].
+#: (wall temperature fitted) are tried too [-] (they are also tried when T10 is more than
+#: sqrt(3) WALL_ASSUMED_STD from a room's AMBIENT_TEMPERATURE).
 HOT_START_INFLATION = 1.5
 #: Delta-BIC below which another law counts as fitting about as well [-].
 LAW_BIC_THRESHOLD = 10.0
+#: The wall temperatures the model takes [K] (TankSpec's bounds): an assumed wall moved by
+#: its uncertainty stays inside.
+WALL_RANGE: tuple[float, float] = next(
+    (float(f.metadata["min"]), float(f.metadata["max"]))
+    for f in dataclasses.fields(TankSpec) if f.name == "wall_temperature")
 
 
 def fit_curve(
@@ -298,12 +206,16 @@ def fit_curve(
             if again[1] < fits[law][1]:
                 fits[law] = again
     if (natural and fit_heat and settings.wall_temperature is None
-            and min(f[0].inflation for f in fits.values()) > HOT_START_INFLATION):
-        # the wall was assumed at T10 and every law leaves structure: a gas hot (or cold)
-        # after charging is a model of its own, the wall temperature fitted, from each law's
-        # fit; the information criterion below decides whether the record carries it (the
-        # one-parameter laws only: a wall and an exponent both fitted are not told apart
-        # on one discharge)
+            and (min(f[0].inflation for f in fits.values()) > HOT_START_INFLATION
+                 or abs(settings.initial_temperature - AMBIENT_TEMPERATURE)
+                 > math.sqrt(3.0) * WALL_ASSUMED_STD)):
+        # the wall was assumed at T10 and every law leaves structure, or T10 is far from a
+        # room's temperature (a gas warmed or cooled by the charge: the density law can
+        # take up a wall away from T10 with white residuals and a C several % off): a gas
+        # hot (or cold) after charging is a model of its own, the wall temperature fitted,
+        # from each law's fit; the information criterion below decides whether the record
+        # carries it (the one-parameter laws only: a wall and an exponent both fitted are
+        # not told apart on one discharge)
         for law in [k for k in ("natural", "fixed") if k in fits]:
             base = fits[law][0]
             if not math.isfinite(base.conductance):
@@ -340,11 +252,52 @@ def fit_curve(
             w_sum += w
             var_mf += w * (other.conductance - cf.conductance) ** 2
     mf = math.sqrt(var_mf / w_sum) if w_sum > 0 else 0.0
-    table = {law: {"conductance": f[0].conductance, "bic": bic[law],
-                   "chi2": f[1] / unit} for law, f in fits.items()}
-    return dataclasses.replace(
+    table = {law: {"conductance": f[0].conductance, "bic": bic[law], "chi2": f[1] / unit,
+                   **({"wall_temperature": f[0].wall_temperature,
+                       "wall_temperature_std": f[0].wall_temperature_std}
+                      if law.endswith("+wall") else {})} for law, f in fits.items()}
+    out = dataclasses.replace(
         cf, conductance_std=math.hypot(cf.conductance_std, mf), model_form_std=mf,
         laws=table, heat_law=best if natural else "none", not_offered=not_offered)
+    if natural and settings.wall_temperature is None and not best.endswith("+wall"):
+        # the wall assumed = T10: its uncertainty from the record (the walls of the hot
+        # starts that fit about as well as the chosen law are evidence of a gap), C's from
+        # the chosen law refitted with the wall moved
+        u, why = wall_uncertainty(settings, hot_walls=[
+            f[0].wall_temperature for k, f in fits.items()
+            if k.endswith("+wall") and bic[k] - bic[best] < LAW_BIC_THRESHOLD])
+        out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why, wall_std=0.0
+                                  if u == 0.0 else _wall_refit(
+                                      trace, out, settings, u, law=best, fit_heat=bool(
+                                          fit_heat), hold=hold, t=t, p=p))
+    return out
+
+
+def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: float, *,
+                law: str, fit_heat: bool, hold: tuple[str, ...], t: FloatArray,
+                p: FloatArray) -> float:
+    """C's standard uncertainty [m^3/(s Pa)] from an assumed wall temperature of standard
+    uncertainty u [K]: ``law`` refitted (from ``fit``) with the wall at T10 + u and T10 - u,
+    the root mean square of the two moves of C (the fitted heat exchange takes up part of a
+    move, which the crossing's inversion with the correlation held does not, and may take it
+    up unevenly: the response is not linear over u of 10-20 K); NaN when a refit fails."""
+    out = []
+    for sign in (1.0, -1.0):
+        wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
+        moved = dataclasses.replace(settings, wall_temperature=wall)
+        start = _start_from(fit, float(t[0]), heat_scale=fit.heat_scale,
+                            tau_heat=fit.tau_heat, heat_exponent=fit.heat_exponent,
+                            heat_turbulent=fit.heat_turbulent)
+        try:
+            again = _fit_law(t, p, moved, t_start=fit.t_start, p10=fit.p10, p_atm=fit.p_atm,
+                             conductance=fit.conductance, fit_heat=fit_heat,
+                             profile_heat=False, law=law, start=start, max_nfev=60,
+                             trace=trace, hold=hold)[0]
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            return math.nan
+        out.append(again.conductance)
+    return math.sqrt(sum((c - fit.conductance) ** 2 for c in out) / 2.0) \
+        if all(math.isfinite(c) for c in out) else math.nan
 
 
 def _start_from(fit: CurveFit, t0: float, **heat: float) -> dict[str, float]:
@@ -480,6 +433,7 @@ def _fit_law(
         success=bool(fit.success), inflation=inflation,
         heat_law=f"{law}+wall" if fit_wall else law,
         wall_temperature=v.get("t_wall", math.nan),
+        wall_temperature_std=float(std["t_wall"]) if "t_wall" in free else math.nan,
         tau_heat=v.get("tau_heat", math.nan),
         tau_heat_std=float(std["tau_heat"]) if "tau_heat" in free else math.nan,
         heat_exponent=v.get("heat_exponent", math.nan),

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import Start
 from pneumatic_unload.model.parametric import ParametricModel
@@ -265,7 +265,8 @@ class InversionTable:
         (0 when the flow stays choked to p* for every plausible b).
     rel_wall : float
         Relative change of the crossing time per the wall temperature moved by its
-        uncertainty (half the change from -u(T) to +u(T), ``temperature_uncertainty``) at
+        uncertainty (half the change from -u to +u, u of
+        :func:`~pneumatic_unload.config.estimator.wall_uncertainty`) at
         the middle grid point [-]; NaN when adiabatic (no heat law, no wall term).
     """
 
@@ -372,7 +373,7 @@ def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_
     if settings.heat_model == "natural":
         # the wall temperature's term of the budget, tabulated here so that the crossing
         # (and the final fit's budget) need no model run for it
-        u = settings.temperature_uncertainty
+        u = wall_uncertainty(settings)[0]
         tw = []
         for sign in (1.0, -1.0):
             moved = dataclasses.replace(settings, wall_temperature=settings.wall + sign * u)

@@ -46,7 +46,8 @@ def unload_json(r: UnloadResult) -> dict[str, Any]:
                           "heat_scale": cf.get("heat_scale"), "tau_heat": cf.get("tau_heat"),
                           "heat_exponent": cf.get("heat_exponent"),
                           "heat_turbulent": cf.get("heat_turbulent"),
-                          "wall_temperature": cf.get("wall_temperature")}
+                          "wall_temperature": cf.get("wall_temperature"),
+                          "wall_temperature_std": cf.get("wall_temperature_std")}
     d["model_inadequate"] = extra.get("model_inadequate", "")
     d["recommended"] = recommended(r)
     return finite_or_none(d)

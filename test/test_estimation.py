@@ -386,3 +386,50 @@ def test_auto_atmosphere_on_a_short_low_rate_record(duration_factor, ok):
     else:
         assert r.status == "aborted" and "p_atm unknown" in r.status_text
         assert not math.isfinite(r.conductance)
+
+
+def test_deferred_final_fit_gives_the_inline_result():
+    """A live node publishes the crossing estimate at once and runs the final curve fit on a
+    worker (``defer_final_fit``): the jobs give, field by field, the final results the
+    inline path returns, and the crossing results are the same objects' values."""
+    cfg = RigConfig(volume=2e-3, conductance=orifice_conductance(1.5e-3), noise_std=FS_NOISE,
+                    seed=41, effects=("heat_transfer",))
+    cfg2, _a, t, p, _ = _two_unloads(0.3)
+    for c, (tt, pp) in ((cfg, (lambda s: (s.t, s.measured))(simulate(cfg))), (cfg2, (t, p))):
+        st = dataclasses.replace(settings_for(c), curve_fit=True)
+        inline = StreamingEstimator(st, live=True)
+        res_inline = inline.push_block(tt, pp) + inline.finish()
+        assert inline.take_final_fits() == []
+        deferred = StreamingEstimator(st, live=True, defer_final_fit=True)
+        res_def, jobs = [], []
+        for k in range(0, tt.size, 100):  # blocks, as a node receives them
+            res_def += deferred.push_block(tt[k:k + 100], pp[k:k + 100])
+            jobs += deferred.take_final_fits()
+        res_def += deferred.finish()
+        jobs += deferred.take_final_fits()
+        assert not any(r.final for r in res_def)
+        finals = [r for r in (job.run() for job in jobs) if r is not None]
+        assert finals and all(r.final for r in finals)
+        assert [r.to_dict() for r in res_inline] == \
+            [r.to_dict() for r in sorted(res_def + finals, key=lambda r: (r.index, r.final))]
+
+
+def test_settings_changed_between_unloads_apply_to_the_next():
+    """A node's parameter change (e.g. ``ros2 param set /estimator volume``) sets the
+    streaming estimator's settings: the next unload is analysed with them (C scales with
+    the volume in eq 39)."""
+    cfg = RigConfig(volume=2e-3, conductance=orifice_conductance(1.5e-3), noise_std=FS_NOISE,
+                    seed=42)
+    sim = simulate(cfg)
+    st = dataclasses.replace(settings_for(cfg), curve_fit=False)
+    est = StreamingEstimator(st)
+    first = est.push_block(sim.t, sim.measured)
+    assert est.state == "waiting" or est.state == "tail"
+    est.finish()
+    est.settings = dataclasses.replace(st, volume=4e-3)
+    assert est.settings.volume == 4e-3
+    second = est.push_block(sim.t + sim.t[-1] + 1.0, sim.measured) + est.finish()
+    assert first[0].volume == 2e-3 and second[0].volume == 4e-3
+    assert second[0].conductance == pytest.approx(2 * first[0].conductance, rel=1e-9, abs=0)
+    with pytest.raises(EstimationError, match="start_time"):
+        est.settings = dataclasses.replace(st, start_time=0.0)

@@ -324,6 +324,7 @@ LAYERS: dict[str, int] = {
     "rig": 4,  # the simulator's sample stream
     "inversion": 4,  # model-based C at the crossing (and its table)
     "fitting": 4,  # model-based C: the curve fit, its heat-law choice
+    "curve_fit_result": 4,  # the curve fit's result (fitted values, laws compared)
     "heat_law_offer": 4,  # which heat laws a record can carry (offered to the fit's choice)
     "recovery": 4,  # SSE: the re-heating after an aborted unload
     "budget": 4,  # the uncertainty budget of a C (GUM: type A, type B, model form)

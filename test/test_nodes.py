@@ -334,7 +334,11 @@ def test_estimator_survives_bad_messages(tmp_path: Path, ros_node: Any) -> None:
 
 def test_replay_of_reference_bag_into_live_estimator(tmp_path: Path, ros_node: Any,
                                                      repo_root: Path) -> None:
-    """Replaying bags/two_unloads into a live estimator reproduces analyze's estimates."""
+    """Replaying bags/two_unloads into a live estimator reproduces analyze's estimates.
+
+    The estimator starts with a wrong tank volume, which is then corrected at run time
+    (as ``ros2 param set /estimator volume ...``): the estimates must be the recorded ones,
+    so a parameter change reaches the core."""
     from pneumatic_unload.io.bag import read_config
 
     node, ex = ros_node
@@ -345,8 +349,11 @@ def test_replay_of_reference_bag_into_live_estimator(tmp_path: Path, ros_node: A
                           "--json"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     recorded = json.loads(out.stdout)["published"]
-    est = NodeProcess("estimator", {"volume": cfg["volume"], "qos": "reliable"}, tmp_path)
+    est = NodeProcess("estimator", {"volume": 2.0 * cfg["volume"], "qos": "reliable"},
+                      tmp_path)
     est.wait_output("estimating on", 20.0)
+    (r,) = _set_params(node, ex, "estimator", volume=float(cfg["volume"]))
+    assert r.successful, r.reason
     rep = NodeProcess("replay", {"bag": str(bag), "rate": 0.0, "topics": ["/tank/pressure"]},
                       tmp_path)
     try:

@@ -5,6 +5,8 @@ the model-based fits below the estimator use them without importing it. SI units
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from pneumatic_unload.config.fields import (
@@ -17,6 +19,14 @@ from pneumatic_unload.config.fields import (
     validate,
 )
 from pneumatic_unload.config.tank import TankSpec
+
+#: A room's temperature [K] (20 C, the ISO 554 standard atmosphere for testing): a T10 far
+#: from it means a gas warmed (or cooled) by the charge, not yet at the wall's temperature.
+AMBIENT_TEMPERATURE = 293.15
+#: Standard uncertainty of an assumed wall temperature (= T10, not given) when the record
+#: carries no evidence of a gap [K]: a tank left to settle after charging, its gas within a
+#: few kelvin of the wall.
+WALL_ASSUMED_STD = 2.0
 
 
 class EstimationError(ValueError):
@@ -51,7 +61,12 @@ class EstimatorSettings(TankSpec):
     volume_uncertainty : float or None
         Standard uncertainty of V [m^3] (None: 0.5 % of V) for the budget of C.
     temperature_uncertainty : float
-        Standard uncertainty of T10 and of the wall temperature [K].
+        Standard uncertainty of T10 and of a given wall temperature [K].
+    wall_temperature_uncertainty : float or None
+        Standard uncertainty of the wall temperature when it is not given (assumed = T10)
+        [K]: how far the wall may be from the gas at the start. None: from the record
+        (:func:`wall_uncertainty`: :data:`WALL_ASSUMED_STD` [K], more when T10 is far from
+        a room's :data:`AMBIENT_TEMPERATURE` or a hot start is fitted).
     pressure_uncertainty : float or None
         Standard uncertainty of the pressure transducer, as an offset common to all its
         readings [Pa] (None: 0.1 % of p10).
@@ -89,7 +104,11 @@ class EstimatorSettings(TankSpec):
     volume_uncertainty: float | None = optional(
         None, "m^3", 0.0, 10.0, "standard uncertainty of V", "0.5 % of V")
     temperature_uncertainty: float = number(
-        1.0, "K", 0.0, 100.0, "standard uncertainty of T10 and of the wall temperature")
+        1.0, "K", 0.0, 100.0, "standard uncertainty of T10 and of a given wall temperature")
+    wall_temperature_uncertainty: float | None = optional(
+        None, "K", 0.0, 100.0, "standard uncertainty of the wall temperature when it is not "
+        "given (assumed = T10)", "from the record: 2 K, more when T10 is far from 20 C or a "
+        "hot start is fitted")
     pressure_uncertainty: float | None = optional(
         None, "Pa", 0.0, 1e7, "standard uncertainty of a pressure reading, an offset "
         "common to all", "0.1 % of p10")
@@ -115,3 +134,35 @@ class EstimatorSettings(TankSpec):
             raise EstimationError(str(exc)) from exc
         if self.signal_gain == 0:
             raise EstimationError("signal_gain must be non-zero")
+
+
+def wall_uncertainty(settings: EstimatorSettings,
+                     hot_walls: Iterable[float] = ()) -> tuple[float, str]:
+    """Standard uncertainty of the wall temperature used by the model [K], and where it
+    comes from.
+
+    * given (``wall_temperature``): ``temperature_uncertainty``;
+    * assumed = T10 with ``wall_temperature_uncertainty`` stated: that;
+    * assumed, from the record: the largest of :data:`WALL_ASSUMED_STD`, and, for each gap
+      the record shows between the gas at the start and where the wall may be, the gap over
+      sqrt(3) (the wall anywhere within +- the gap of T10, a rectangular distribution, GUM
+      4.3.7): T10 against a room's :data:`AMBIENT_TEMPERATURE`, and T10 against the walls
+      fitted by the hot-start variants of the curve fit (``hot_walls`` [K]).
+    """
+    s = settings
+    if s.wall_temperature is not None:
+        return s.temperature_uncertainty, "given; temperature_uncertainty"
+    if s.wall_temperature_uncertainty is not None:
+        return s.wall_temperature_uncertainty, "assumed = T10; wall_temperature_uncertainty"
+    t10 = s.initial_temperature
+    u, why = WALL_ASSUMED_STD, f"assumed = T10; default {WALL_ASSUMED_STD:g} K"
+    gap = abs(t10 - AMBIENT_TEMPERATURE)
+    if gap / math.sqrt(3.0) > u:
+        u, why = gap / math.sqrt(3.0), (f"assumed = T10; T10 is {gap:.1f} K from a room's "
+                                        f"{AMBIENT_TEMPERATURE:g} K: gap/sqrt(3)")
+    for tw in hot_walls:
+        gap = abs(t10 - tw)
+        if math.isfinite(gap) and gap / math.sqrt(3.0) > u:
+            u, why = gap / math.sqrt(3.0), (f"assumed = T10; a hot start fitted the wall "
+                                            f"{gap:.1f} K from T10: gap/sqrt(3)")
+    return u, why

@@ -48,6 +48,7 @@ from pneumatic_unload.estimation.history import RESULTS_KEPT, DiagnosticLog
 from pneumatic_unload.estimation.regression import corner_fit, crossing_fit, hinge_fit
 from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
 from pneumatic_unload.estimation.streaming import StreamingEstimator
+from pneumatic_unload.estimation.tail import FinalFit
 from pneumatic_unload.estimation.types import (
     SENSOR_FAULT_TEXTS,
     STATUSES,
@@ -70,6 +71,7 @@ __all__ = [
     "DiagnosticLog",
     "EstimationError",
     "EstimatorSettings",
+    "FinalFit",
     "FloatArray",
     "StreamingEstimator",
     "UnloadResult",

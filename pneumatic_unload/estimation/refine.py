@@ -19,6 +19,7 @@ from pneumatic_unload import physics
 from pneumatic_unload.budget import (
     WALL_TERM,
     eq39_budget,
+    fitted_wall_term,
     model_budget,
     term_std,
     wall_sensitivity,
@@ -27,7 +28,7 @@ from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.config.rig import RigConfig
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 from pneumatic_unload.fit.uncertainty import inadequacy
-from pneumatic_unload.fitting import fit_curve
+from pneumatic_unload.fitting import CurveFit, fit_curve
 from pneumatic_unload.inversion import (
     fitted_tau_exp,
     inversion_table,
@@ -114,11 +115,14 @@ def crossing_budgets(settings: EstimatorSettings, *, c39: float, c_model: float,
 
 def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
                  type_a_std: float, model_form_std: float, heat_law: str,
-                 extra_terms: tuple[Any, ...] = ()) -> dict[str, Any] | None:
+                 extra_terms: tuple[Any, ...] = (), fit: CurveFit | None = None
+                 ) -> dict[str, Any] | None:
     """Uncertainty budget of the final (curve-fit) C. The wall temperature's term (when a
-    heat law was fitted) is the crossing budget's, tabulated before the crossing, scaled
-    to C; without one, two model inversions at the crossing (a few milliseconds). None when
-    C is not finite.
+    heat law was fitted): a wall assumed = T10, the curve fit's own (``fit.wall_std``: the
+    law refitted with the wall moved by its uncertainty from the record); a wall fitted by a
+    hot-start law, a line of 0 (it is in the fit's type A); a given wall, the crossing
+    budget's, tabulated before the crossing, scaled to C (without one, two model
+    inversions at the crossing: a few milliseconds). None when C is not finite.
 
     Parameters
     ----------
@@ -130,12 +134,20 @@ def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
         The fitted C, its 1-sigma from the record (noise, AR(1)-corrected, inflated for
         structured residuals) and the heat laws' spread [m^3/(s Pa)].
     heat_law : str
-        The heat law chosen ('natural', 'fixed' or 'none').
+        The heat law chosen ('natural', 'fixed', 'density', 'natural+turbulent', a
+        '+wall' variant, or 'none').
+    fit : CurveFit, optional
+        The curve fit (its wall: fitted, or assumed with its uncertainty and C's).
     """
     if not (math.isfinite(c) and c > 0):
         return None
-    wall_std = math.nan
-    if heat_law in ("natural", "fixed", "density"):
+    wall_std, wall_input = math.nan, None
+    if heat_law.endswith("+wall") and fit is not None:
+        extra_terms = (*extra_terms, fitted_wall_term(fit.wall_temperature,
+                                                      fit.wall_temperature_std, heat_law))
+    elif heat_law != "none" and fit is not None and math.isfinite(fit.wall_uncertainty):
+        wall_std, wall_input = fit.wall_std, (fit.wall_uncertainty, fit.wall_source)
+    elif heat_law != "none":
         wall_std = term_std(res.extra.get("budget"), WALL_TERM)
         if not math.isfinite(wall_std):
             wall_std = wall_sensitivity(settings, res.tau_exp, p10=res.p10, p_atm=res.p_atm,
@@ -148,7 +160,8 @@ def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
                         model_form_std=model_form_std, tau=res.tau_exp, p10=res.p10,
                         p_atm=res.p_atm, p_star=res.p_star,
                         atmosphere_measured=settings.atmosphere is None,
-                        wall_std=wall_std, extra_terms=extra_terms).to_dict()
+                        wall_std=wall_std, wall_input=wall_input,
+                        extra_terms=extra_terms).to_dict()
 
 def crossing_wall_std(settings: EstimatorSettings, table: Any, tau: float, *,
                       p10: float, p_atm: float, p_star: float, c: float) -> float:
@@ -319,7 +332,8 @@ def refine_with_curve_fit(
     if "budget_eq39" in res.extra:
         extra["budget_eq39"] = res.extra["budget_eq39"]
     budget = final_budget(res, settings, c=fit.conductance, type_a_std=c_std,
-                          model_form_std=mf, heat_law=fit.heat_law, extra_terms=extra_terms)
+                          model_form_std=mf, heat_law=fit.heat_law, extra_terms=extra_terms,
+                          fit=fit)
     if budget is not None:
         extra["budget"] = budget
         c_std = budget["combined_std"]

@@ -122,11 +122,18 @@ class EstimatorState:
     live : bool
         The stream may join an unload under way (see
         :func:`~.unloading.first_unload_check`).
+    defer_final_fit : bool
+        Keep each unload's final curve fit as a job in :attr:`final_fits` instead of
+        running it inside the call that completes the unload.
     """
 
-    def __init__(self, settings: EstimatorSettings, *, live: bool = False) -> None:
+    def __init__(self, settings: EstimatorSettings, *, live: bool = False,
+                 defer_final_fit: bool = False) -> None:
         self.settings = settings
         self.live = live
+        self.defer_final_fit = defer_final_fit
+        #: Final-fit jobs not yet taken (``defer_final_fit``; :class:`~.tail.FinalFit`).
+        self.final_fits: list[Any] = []
         self.buf = SampleBuffer()
         #: The first and the last diagnostics (bounded, see :mod:`.history`).
         self.diagnostics = DiagnosticLog()

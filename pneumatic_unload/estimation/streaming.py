@@ -51,6 +51,14 @@ STEPS: dict[str, Callable[[EstimatorState, int], list[UnloadResult]]] = {
 }
 
 
+def _check_streaming(settings: EstimatorSettings) -> None:
+    """Refuse settings the streaming estimator cannot use (EstimationError)."""
+    if settings.start_time is not None:
+        raise EstimationError(
+            "start_time is for offline records that begin at the valve opening "
+            "(analyze, --start-time); the streaming estimator detects each start")
+
+
 class StreamingEstimator:
     """Sample-by-sample unloading-time estimator; see the package docstring.
 
@@ -63,6 +71,12 @@ class StreamingEstimator:
         any time): the first unload, when it has no pre-step plateau, gets no result, a
         warning and is skipped until a plateau. Offline (default) a record is taken to
         start where its author chose: that unload is analysed, with a warning.
+    defer_final_fit : bool
+        Do not run an unload's final curve fit (``settings.curve_fit``) inside the call
+        that completes the unload: keep it as a :class:`~.tail.FinalFit` job, taken with
+        :meth:`take_final_fits` and run by the caller (a live node publishes the crossing
+        estimate at once and fits on a worker thread). ``job.run()`` gives the very result
+        the inline path returns; it is not added to :attr:`results`.
 
     Examples
     --------
@@ -88,14 +102,11 @@ class StreamingEstimator:
     #: Samples looked ahead per vectorised scan [-].
     SCAN_HORIZON = decisions.SCAN_HORIZON
 
-    def __init__(self, settings: EstimatorSettings | None = None, *, live: bool = False
-                 ) -> None:
-        self.settings = settings or EstimatorSettings()
-        if self.settings.start_time is not None:
-            raise EstimationError(
-                "start_time is for offline records that begin at the valve opening "
-                "(analyze, --start-time); the streaming estimator detects each start")
-        self._st = EstimatorState(self.settings, live=live)
+    def __init__(self, settings: EstimatorSettings | None = None, *, live: bool = False,
+                 defer_final_fit: bool = False) -> None:
+        settings = settings or EstimatorSettings()
+        _check_streaming(settings)
+        self._st = EstimatorState(settings, live=live, defer_final_fit=defer_final_fit)
         #: The first and the last diagnostics (a bounded
         #: :class:`~.history.DiagnosticLog`; ``diagnostics.total`` counts all).
         self.diagnostics = self._st.diagnostics
@@ -105,6 +116,17 @@ class StreamingEstimator:
         self._append = self._st.buf.append  # hot path (trimming keeps the buffer object)
 
     # ------------------------------------------------------------------ public API
+    @property
+    def settings(self) -> EstimatorSettings:
+        """The settings in use; a new value applies from the next unload (set it while
+        :attr:`state` is 'waiting' to be sure the unload under way is not mixed)."""
+        return self._st.settings
+
+    @settings.setter
+    def settings(self, value: EstimatorSettings) -> None:
+        _check_streaming(value)
+        self._st.settings = value
+
     @property
     def state(self) -> str:
         """'waiting', 'confirming', 'unloading', 'tail', 'recovery' or 'skipping' (the
@@ -121,6 +143,15 @@ class StreamingEstimator:
     def buffer(self) -> SampleBuffer:
         """The samples held and their prefix sums (read only)."""
         return self._st.buf
+
+    def take_final_fits(self) -> list[tail.FinalFit]:
+        """The final-fit jobs of the unloads completed since the last call, in order
+        (``defer_final_fit``; else always empty)."""
+        jobs = self._st.final_fits
+        if not jobs:
+            return []
+        self._st.final_fits = []
+        return jobs
 
     def push(self, t: float, p: float) -> list[UnloadResult]:
         """Feed one sample.

@@ -7,9 +7,11 @@ indices in buffer samples."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
+from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.decisions import (
     PERIOD,
     PLATEAU,
@@ -26,7 +28,49 @@ from pneumatic_unload.estimation.decisions import (
 )
 from pneumatic_unload.estimation.refine import final_curve_fit
 from pneumatic_unload.estimation.state import EstimatorState
-from pneumatic_unload.estimation.types import STUCK_TEXT, UnloadResult
+from pneumatic_unload.estimation.types import STUCK_TEXT, FloatArray, UnloadResult
+
+
+@dataclass(frozen=True)
+class FinalFit:
+    """The final curve fit of one unload, as a job: everything it needs, copied out of the
+    stream, so that it can run later on another thread (a live node publishes the crossing
+    estimate at once and fits on a worker, see ``StreamingEstimator(defer_final_fit=True)``)
+    with the same result as inline.
+
+    Attributes
+    ----------
+    crossing : UnloadResult
+        The unload's crossing result (published at the p* crossing).
+    t, p : ndarray
+        The unload's samples from before its plateau to the end of its tail [s], [Pa
+        absolute] (copies).
+    settings : EstimatorSettings
+        The estimator settings of the unload.
+    noise_std : float
+        Sample noise [Pa].
+    i_complete : int
+        Stream index of the sample that completed the unload [-].
+    t_complete : float
+        Its stamp [s].
+    """
+
+    crossing: UnloadResult
+    t: FloatArray
+    p: FloatArray
+    settings: EstimatorSettings
+    noise_std: float
+    i_complete: int
+    t_complete: float
+
+    def run(self) -> UnloadResult | None:
+        """The final result (None when the fit fails; see
+        :func:`~.refine.final_curve_fit`)."""
+        fin = final_curve_fit(self.crossing, self.t, self.p, self.settings,
+                              noise_std=self.noise_std)
+        if fin is not None:
+            fin.i_complete, fin.t_complete = self.i_complete, self.t_complete
+        return fin
 
 
 def _flat_tail(st: EstimatorState, cs: np.ndarray, k: int | np.ndarray, tau: float
@@ -135,11 +179,15 @@ def finish_tail(st: EstimatorState, i: int, ended: bool, decided: int | None = N
         if s.curve_fit:
             tv, pv = st.buf.views(i + 1)
             lo = max(st.arm_index, u.i0 - 2 * PLATEAU)
-            fin = final_curve_fit(res, tv[lo:i + 1], st.to_pa_array(pv[lo:i + 1]), s,
-                                  noise_std=abs(st.sigma * s.signal_gain))
-            if fin is not None:
-                fin.i_complete, fin.t_complete = dec + st.buf.shift, float(st.buf.t[dec])
-                out.append(fin)
+            job = FinalFit(res, np.array(tv[lo:i + 1]), st.to_pa_array(pv[lo:i + 1]), s,
+                           abs(st.sigma * s.signal_gain), dec + st.buf.shift,
+                           float(st.buf.t[dec]))
+            if st.defer_final_fit:
+                st.final_fits.append(job)
+            else:
+                fin = job.run()
+                if fin is not None:
+                    out.append(fin)
     st.to_waiting(i + 1)
     return out
 

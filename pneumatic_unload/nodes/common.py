@@ -177,7 +177,14 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
         ex.add_node(node)
         # spin() of the EventsExecutor does not return on shutdown: poll the context
         while rclpy.ok():
-            ex.spin_once(timeout_sec=0.1)
+            try:
+                ex.spin_once(timeout_sec=0.1)
+            except RuntimeError:
+                # SIGINT shuts the context down from the signal handler; an event taken
+                # by the EventsExecutor in that instant cannot be handed to Python
+                # ("Unable to convert call argument"): that is the shutdown, not a fault
+                if rclpy.ok():
+                    raise
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except StartupError as exc:

@@ -18,9 +18,15 @@ Action
     ~/measure (pneumatic_unload_msgs/action/Measure): arm, optionally open the valve through a
         std_srvs/Trigger service, report progress, return the estimate or fail clearly.
 
-The subscription callback only queues the sample; a worker thread runs the core's
-:class:`~pneumatic_unload.estimation.StreamingEstimator`, so a slow curve fit never blocks
-the reception of samples (none is dropped at 10 kHz with the EventsExecutor).
+A PressureBlock is fed to the core's
+:class:`~pneumatic_unload.estimation.StreamingEstimator` by the subscription callback at
+once, which publishes the crossing estimate it completes (no hand-over to another thread
+on that path). Single FluidPressure samples (10 kHz: one message each) are only queued by
+the callback and fed by the worker thread, so that the receiving thread keeps up with the
+message rate. The final curve fit of each unload (tens of ms) is taken off the stream as a
+job (``defer_final_fit``) and run by the worker, so it never blocks the reception of
+samples (none is dropped at 10 kHz with the EventsExecutor) and gives the result the
+offline analysis gives.
 """
 
 from __future__ import annotations
@@ -51,6 +57,7 @@ from pneumatic_unload.estimation import (
     RESULTS_KEPT,
     EstimationError,
     EstimatorSettings,
+    FinalFit,
     StreamingEstimator,
     UnloadResult,
     estimate_fields,
@@ -131,9 +138,14 @@ class EstimatorNode(Node):
         gc.collect()
         gc.freeze()
         # live: a node (re)started mid-unload skips that unload (no bogus estimate)
-        self._est = StreamingEstimator(self._settings, live=True)
-        self._lock = threading.Lock()
-        self._queue: deque[tuple[int, float, float]] = deque()
+        self._est = StreamingEstimator(self._settings, live=True, defer_final_fit=True)
+        self._lock = threading.Lock()  # the core (executor thread, parameter changes)
+        self._pub_lock = threading.Lock()  # the published results (executor and fit worker)
+        #: Final curve fits to run, with the arrival [s, monotonic] of the completing sample.
+        self._fits: deque[tuple[FinalFit, float]] = deque()
+        #: Single samples (FluidPressure input) for the worker: stamp [ns], pressure [Pa],
+        #: arrival [s, monotonic].
+        self._samples: deque[tuple[int, float, float]] = deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._frame = self._p("frame_id")
@@ -148,6 +160,9 @@ class EstimatorNode(Node):
         # estimates, and final (curve-fit) estimates
         self.latencies: deque[float] = deque(maxlen=100_000)
         self.final_latencies: deque[float] = deque(maxlen=100_000)
+        #: [s] CPU time of the fit worker's thread for each final fit (against its share of
+        #: the latency: what the fit costs, and what waiting for the CPU or the GIL adds)
+        self.fit_cpu: deque[float] = deque(maxlen=100_000)
         self.received = 0
         #: The last RESULTS_KEPT results published (all are in ~/estimate and the bag):
         #: bounded, a node runs for days.
@@ -173,9 +188,9 @@ class EstimatorNode(Node):
         ActionServer(self, Measure, "~/measure", execute_callback=self._execute,
                      goal_callback=self._on_goal, cancel_callback=lambda _g: CancelResponse.ACCEPT)
         self.create_timer(self._p("diagnostics_period"), self._report)
-        # The receiving thread and the worker share the GIL: with the default 5 ms switch
-        # interval the worker could wait that long for it at the sample that completes an
-        # estimate; 0.5 ms keeps the publication latency low at 10 kHz.
+        # The receiving thread and the fit worker share the GIL: with the default 5 ms
+        # switch interval the receiving thread could wait that long for it while a fit
+        # runs; 0.5 ms keeps the reception (and a crossing during a fit) prompt at 10 kHz.
         sys.setswitchinterval(5e-4)
         self._worker = threading.Thread(target=self._work, name="estimator", daemon=True)
         self._worker.start()
@@ -223,10 +238,11 @@ class EstimatorNode(Node):
         return True
 
     def _on_pressure(self, msg: FluidPressure) -> None:
+        arrived = time.monotonic()
         if not self._frame_ok(msg.header.frame_id):
             return
-        self._queue.append((common.stamp_to_ns(msg.header.stamp), msg.fluid_pressure,
-                            time.monotonic()))
+        self._samples.append((common.stamp_to_ns(msg.header.stamp), msg.fluid_pressure,
+                              arrived))
         self._wake.set()
 
     def _on_block(self, msg: Any) -> None:
@@ -242,8 +258,7 @@ class EstimatorNode(Node):
         p = np.asarray(msg.pressure, dtype=float)
         # the stamps of the per-sample path, ns0 + round(k T 1e9), for the whole block
         ns = ns0 + np.round(np.arange(p.size) * period * 1e9).astype(np.int64)
-        self._queue.append((ns, p, now))  # one item: the core takes it vectorised
-        self._wake.set()
+        self._feed(ns, p, now)  # the core takes the block vectorised
 
     def _on_temperature(self, msg: Temperature) -> None:
         t = msg.temperature + 273.15
@@ -259,29 +274,18 @@ class EstimatorNode(Node):
                     self._est.settings = self._settings
                     self._pub_settings.publish(String(data=adapters.to_json(self._settings)))
 
-    # ------------------------------------------------------------------ worker
-    def _work(self) -> None:
-        try:
-            while not self._stop.is_set():
-                if not self._queue:
-                    self._wake.wait(0.1)
-                    self._wake.clear()
-                    continue
-                self._drain()
-        except Exception as exc:  # never silent: report and keep the node alive
-            self._diagnose(_ERROR, f"estimator worker stopped: {type(exc).__name__}: {exc}")
-            self._state, self._why = "error", f"internal error: {exc}"
-
-    def _drain(self) -> None:
-        q = self._queue
+    # ------------------------------------------------------------------ the core
+    def _feed(self, ns: Any, p: Any, arrived: float) -> None:
+        """Samples into the core (stamps ``ns`` [ns], pressures ``p`` [Pa]: one sample, or
+        arrays for a block), the results published at once, final fits to the worker.
+        ``arrived``: monotonic arrival of the message [s]."""
         est = self._est
-        while q:
-            ns, p, arrived = q.popleft()
+        try:
             with self._lock:
                 prev = est.state
                 if isinstance(p, np.ndarray):  # a PressureBlock
                     if not p.size:
-                        continue
+                        return
                     out = est.push_block(ns * 1e-9, p)  # = common.ns_to_seconds per sample
                     self.received += p.size
                     p = float(p[-1])
@@ -289,19 +293,62 @@ class EstimatorNode(Node):
                     out = est.push(common.ns_to_seconds(ns), p)
                     self.received += 1
                 state = est.state
-            self._last_pressure = p
-            if out:
-                for r in out:
-                    self._publish_result(r, arrived)
-            elif state != prev:
-                self._on_state(state)
-            if est.diagnostics.total > self._n_diag:
-                for dg in est.diagnostics.since(self._n_diag):
-                    level = {"ok": _OK, "warn": _WARN}.get(dg.level, _ERROR)
-                    if level != _OK:
-                        self._rejected += 1
-                    self._diagnose(level, dg.message)
-                self._n_diag = est.diagnostics.total
+                jobs = est.take_final_fits()
+        except Exception as exc:  # never silent, never fatal: report and start afresh
+            self._restart_core(exc)
+            return
+        self._last_pressure = p
+        for r in out:
+            self._publish_result(r, arrived)
+        if not out and state != prev:
+            self._on_state(state)
+        if jobs:
+            self._fits.extend((job, arrived) for job in jobs)
+            self._wake.set()
+        if est.diagnostics.total > self._n_diag:
+            for dg in est.diagnostics.since(self._n_diag):
+                level = {"ok": _OK, "warn": _WARN}.get(dg.level, _ERROR)
+                if level != _OK:
+                    self._rejected += 1
+                self._diagnose(level, dg.message)
+            self._n_diag = est.diagnostics.total
+
+    def _restart_core(self, exc: Exception) -> None:
+        """An internal error of the core: say so and go on with a fresh estimator, which
+        skips the unload under way (live) and analyses the next ones."""
+        self._diagnose(_ERROR, f"estimator error, restarted (the unload under way is "
+                               f"skipped): {type(exc).__name__}: {exc}")
+        self._state, self._why = "error", f"internal error: {exc}"
+        with self._lock:
+            self._est = StreamingEstimator(self._settings, live=True, defer_final_fit=True)
+            self._n_diag = 0
+
+    def _work(self) -> None:
+        """The worker: feeds the queued single samples, and runs the final curve fits in
+        order and publishes them (the samples first: a fit waits for a queue drained)."""
+        samples = self._samples
+        while True:
+            if samples:
+                while samples:
+                    self._feed(*samples.popleft())
+                continue
+            if not self._fits:
+                if self._stop.is_set():
+                    return
+                self._wake.wait(0.1)
+                self._wake.clear()
+                continue
+            job, arrived = self._fits.popleft()
+            try:
+                cpu = time.thread_time()
+                r = job.run()
+                self.fit_cpu.append(time.thread_time() - cpu)
+            except Exception as exc:  # never silent: report and keep the node alive
+                self._diagnose(_ERROR, f"final curve fit of unload {job.crossing.index} "
+                                       f"failed: {type(exc).__name__}: {exc}")
+                continue
+            if r is not None:
+                self._publish_result(r, arrived)
 
     def _on_state(self, core_state: str) -> None:
         if core_state == "waiting":
@@ -325,19 +372,24 @@ class EstimatorNode(Node):
         (self.final_latencies if r.final else self.latencies).append(
             time.monotonic() - arrived)
         self._keep(r)
-        if self._last is None or r.index != self._last.index:
-            self._n_unloads += 1
-        self.results.append(r)
-        self.n_results += 1
-        self._last = r
         if r.status in ("ok", "aborted_sse"):
-            self._state = "done" if self._est.state == "waiting" else "unloading"
-            self._why = (f"unload {r.index}: C={r.conductance:.4g} m^3/(s Pa) (eq 39), "
-                         f"model {r.conductance_model:.4g}, tau_exp={r.tau_exp:.5g} s"
-                         f"{' (final)' if r.final else ''}")
+            why = (f"unload {r.index}: C={r.conductance:.4g} m^3/(s Pa) (eq 39), "
+                   f"model {r.conductance_model:.4g}, tau_exp={r.tau_exp:.5g} s"
+                   f"{' (final)' if r.final else ''}")
         else:
-            self._state, self._why = "error", f"unload {r.index}: {r.status}: {r.status_text}"
-        self.get_logger().info(self._why)
+            why = f"unload {r.index}: {r.status}: {r.status_text}"
+        with self._pub_lock:
+            if self._last is None or r.index != self._last.index:
+                self._n_unloads += 1
+            self.results.append(r)
+            self.n_results += 1
+            self._last = r
+            self._why = why
+            if r.status not in ("ok", "aborted_sse"):
+                self._state = "error"
+            else:
+                self._state = "done" if self._est.state == "waiting" else "unloading"
+        self.get_logger().info(why)
         self._report()
 
     def _keep(self, r: UnloadResult) -> None:
@@ -375,7 +427,8 @@ class EstimatorNode(Node):
         lat = np.asarray(self.latencies) * 1e3
         values = {
             "state": self._state, "core_state": self._est.state,
-            "samples": str(self.received), "queued": str(len(self._queue)),
+            "samples": str(self.received), "queued": str(len(self._samples)),
+            "fits_queued": str(len(self._fits)),
             "rejected": str(self._rejected),
             "unloads": str(self._n_unloads),
             "latency_p50_ms": f"{np.percentile(lat, 50):.3f}" if lat.size else "",
@@ -440,7 +493,8 @@ class EstimatorNode(Node):
         goal = goal_handle.request
         timeout = goal.timeout if goal.timeout > 0 else self._p("measure_timeout")
         n_before = self.n_results
-        unloads_before = {r.index for r in self.results}
+        with self._pub_lock:
+            unloads_before = {r.index for r in self.results}
         t0 = time.monotonic()
         fb = self._Measure.Feedback()
         # an unload already under way is not ours: only a new unload index answers the goal
@@ -465,7 +519,8 @@ class EstimatorNode(Node):
                 return result
         while True:
             elapsed = time.monotonic() - t0
-            fresh = list(self.results)[len(self.results) - (self.n_results - n_before):]
+            with self._pub_lock:
+                fresh = list(self.results)[len(self.results) - (self.n_results - n_before):]
             new = [r for r in fresh if r.index not in unloads_before]
             if new:
                 r = new[0]
@@ -504,17 +559,16 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ shutdown
     def close(self) -> None:
-        """Analyse what is queued, then stop the worker."""
-        deadline = time.monotonic() + 2.0
-        while self._queue and time.monotonic() < deadline:
-            time.sleep(0.01)
+        """Feed the samples queued and run the final fits queued (at most 5 s), then stop
+        the worker."""
         self._stop.set()
         self._wake.set()
-        self._worker.join(timeout=2.0)
+        self._worker.join(timeout=5.0)
         stats = {"received": self.received, "rejected": self._rejected,
                  "results": self.n_results,
                  "latencies_ms": [round(x * 1e3, 4) for x in self.latencies],
-                 "final_latencies_ms": [round(x * 1e3, 4) for x in self.final_latencies]}
+                 "final_latencies_ms": [round(x * 1e3, 4) for x in self.final_latencies],
+                 "final_fit_cpu_ms": [round(x * 1e3, 4) for x in self.fit_cpu]}
         self.get_logger().info(f"stats {json.dumps(stats)}")
 
 

@@ -1,0 +1,132 @@
+"""The result of the final curve fit (:func:`pneumatic_unload.fitting.fit_curve`): the
+fitted values of the chosen heat law, their standard deviations, the laws compared, and the
+fitted model's configuration.
+
+SI units: s, Pa absolute, K, m^3, m^3/(s Pa).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from pneumatic_unload.config import RigConfig
+from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.inversion import rig_from_settings
+
+
+@dataclass(frozen=True)
+class CurveFit:
+    """Result of :func:`fit_curve` (SI units; std NaN when not identifiable).
+
+    Attributes
+    ----------
+    conductance, conductance_std : float
+        C and its 1-sigma [m^3/(s Pa)].
+    critical_ratio, critical_ratio_std : float
+        b and its 1-sigma [-] (NaN when the subsonic tail does not identify it).
+    t_start : float
+        Valve opening instant [s].
+    p10, p_atm : float
+        Initial and atmospheric pressure [Pa absolute].
+    heat_scale, heat_scale_std : float
+        Multiplier on the natural-convection correlation [-] (1 and NaN when not fitted).
+    rms : float
+        Residual root mean square [Pa].
+    n : int
+        Samples fitted [-].
+    success : bool
+        Optimiser convergence.
+    inflation : float
+        Variance inflation applied for serially correlated residuals [-]
+        (:func:`residual_inflation`).
+    heat_law : str
+        Heat-transfer law the data chose ('natural', 'fixed', 'density', each possibly
+        with '+wall'; 'none' when adiabatic).
+    tau_heat, tau_heat_std : float
+        Thermal time constant m0 c_v/(hA) of the 'fixed' law (of hA_0, at the initial
+        density, for 'density') and its 1-sigma [s] (NaN otherwise).
+    heat_exponent, heat_exponent_std : float
+        Exponent n of the 'density' law, hA ~ rho^n, and its 1-sigma [-] (NaN otherwise).
+    heat_turbulent, heat_turbulent_std : float
+        Multiplier on the natural law's turbulent branch and its 1-sigma [-] (1 and NaN
+        unless 'natural+turbulent').
+    model_form_std : float
+        Model-form 1-sigma of C from the laws that fit about as well (delta-BIC < 10) but
+        give another C [m^3/(s Pa)] (included in ``conductance_std``).
+    laws : dict
+        Per law offered: C [m^3/(s Pa)], chi2 and BIC [-].
+    whiteness_p : float
+        Ljung-Box p-value of the chosen law's residuals (binned, in time order) [-]: small
+        means structure the model does not describe.
+    not_offered : dict
+        Laws fitted but not offered to the choice, with the reason (the record does not
+        carry their extra parameter).
+    wall_temperature, wall_temperature_std : float
+        The wall temperature fitted by a hot-start variant ('natural+wall', 'fixed+wall':
+        the gas starts at T10, the wall is elsewhere) and its 1-sigma [K]; NaN when the wall
+        was not fitted.
+    wall_uncertainty, wall_source : float, str
+        With the wall assumed = T10 (not given, not fitted): its standard uncertainty [K]
+        (:func:`~pneumatic_unload.config.estimator.wall_uncertainty`, the hot starts' walls
+        as evidence) and where it comes from; NaN and '' otherwise.
+    wall_std : float
+        C's standard uncertainty from that assumed wall [m^3/(s Pa)]: the chosen law
+        refitted with the wall moved by +-wall_uncertainty (not in ``conductance_std``);
+        NaN otherwise.
+    """
+
+    conductance: float
+    conductance_std: float
+    critical_ratio: float
+    critical_ratio_std: float
+    t_start: float
+    p10: float
+    p_atm: float
+    heat_scale: float
+    heat_scale_std: float
+    rms: float
+    n: int
+    success: bool
+    inflation: float = 1.0
+    heat_law: str = "natural"
+    tau_heat: float = math.nan
+    tau_heat_std: float = math.nan
+    heat_exponent: float = math.nan
+    heat_exponent_std: float = math.nan
+    heat_turbulent: float = 1.0
+    heat_turbulent_std: float = math.nan
+    model_form_std: float = 0.0
+    laws: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
+    wall_temperature: float = math.nan
+    wall_temperature_std: float = math.nan
+    whiteness_p: float = math.nan
+    not_offered: dict[str, str] = dataclasses.field(default_factory=dict)
+    wall_uncertainty: float = math.nan
+    wall_source: str = ""
+    wall_std: float = math.nan
+
+    def config(self, settings: EstimatorSettings) -> RigConfig:
+        """The fitted model's configuration (valve opening at t = 0) [SI]."""
+        b = self.critical_ratio if math.isfinite(self.critical_ratio) else None
+        cfg = rig_from_settings(settings, conductance=self.conductance, p10=self.p10,
+                                p_atm=self.p_atm, critical_ratio=b,
+                                heat_scale=self.heat_scale)
+        if self.heat_law.startswith("natural") and self.heat_turbulent != 1.0:
+            cfg = cfg.replace(heat_transfer_turbulent_ratio=float(
+                np.clip(self.heat_turbulent, 0.0, 10.0)))
+        if math.isfinite(self.wall_temperature):
+            cfg = cfg.replace(wall_temperature=float(self.wall_temperature))
+        if self.heat_law.startswith(("fixed", "density")) and math.isfinite(self.tau_heat):
+            g = settings.gas
+            h_a = self.p10 * settings.volume / ((g.gamma - 1.0) * settings.initial_temperature
+                                                * self.tau_heat)
+            cfg = cfg.replace(heat_transfer_mode="fixed",
+                              heat_transfer_coefficient=float(np.clip(h_a, 0.0, 1e4)))
+            if self.heat_law.startswith("density"):
+                cfg = cfg.replace(heat_transfer_mode="density", heat_transfer_exponent=float(
+                    np.clip(self.heat_exponent, -2.0, 4.0)))
+        return cfg
