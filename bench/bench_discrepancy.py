@@ -6,7 +6,10 @@ Data: :func:`pneumatic_unload.discrepancy.synthetic.draw_case` (fixed seeds), th
 not told which effect is on. "Noise-free misfit" is the chi^2 of the baseline fitted to the
 noise-free trace with the true noise model (sigma = 1 kPa); detection is scored on trials
 with a misfit >= 50. Intervals are linear here (``profile=False``) to keep the run short;
-the speed line runs the full workflow with profiles.
+the speed line runs the full workflow with profiles. "Claimed" is an effect the data name
+(``DiscrepancyResult.named``: its round's runner-up more than the BIC threshold behind);
+a member of an ambiguity is reported, not claimed. ``--seed-offset`` draws fresh trials
+(seeds not used while the decision rules were written); ``--effects`` runs a subset.
 """
 
 from __future__ import annotations
@@ -73,7 +76,8 @@ def trial(job: tuple[str, int, float]) -> dict:
            "amb": list(res.ambiguous_with), "delta": res.delta_bic, "n": sim.t.size,
            "nrms_after": res.after.nrms, "white_after": res.after.white,
            "nrms_before": res.before.nrms, "elapsed": el, "error": None,
-           "effects": list(res.effects), "c": res.conductance, "c_std": res.conductance_std(),
+           "effects": list(res.effects), "named": list(res.named),
+           "c": res.conductance, "c_std": res.conductance_std(),
            "c_true": cfg.conductance, "c_range": getattr(res, "conductance_range", None),
            "c_amb": bool(getattr(res.conductance_ambiguity, "ambiguous", False)),
            "c_parallel_low": getattr(res.conductance_ambiguity, "parallel_low", math.nan)}
@@ -109,10 +113,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ar", type=int, default=20, help="null trials per AR(1) rho")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rows", metavar="FILE", help="write every trial's row as JSON lines")
+    ap.add_argument("--seed-offset", type=int, default=0,
+                    help="added to every seed (fresh trials: e.g. 100000)")
+    ap.add_argument("--effects", nargs="*", default=None, choices=EFFECTS,
+                    help="only these hidden effects (default: all)")
     args = ap.parse_args(argv)
-    jobs = [(e, 1000 + k, 0.0) for e in EFFECTS for k in range(args.per_effect)]
-    jobs += [("none", 5000 + k, 0.0) for k in range(args.null)]
-    jobs += [("none", 6000 + k, r) for r in (0.5, 0.9) for k in range(args.ar)]
+    so = args.seed_offset
+    jobs = [(e, so + 1000 + k, 0.0) for e in (args.effects or EFFECTS)
+            for k in range(args.per_effect)]
+    jobs += [("none", so + 5000 + k, 0.0) for k in range(args.null)]
+    jobs += [("none", so + 6000 + k, r) for r in (0.5, 0.9) for k in range(args.ar)]
     t0 = time.perf_counter()
     with Pool(args.workers) as pool:
         rows = []
@@ -202,9 +212,16 @@ def main(argv: list[str] | None = None) -> int:
         return () if r["effect"] == "none" else (r["effect"],
                                                  *ALSO_SIMULATED.get(r["effect"], ()))
 
+    # claimed = named by the data (:attr:`DiscrepancyResult.named`); a member of an
+    # ambiguity is reported, not claimed, though the best one stands for the set in the
+    # final model (the next line, for information)
     line("an effect claimed that was not simulated, all trials", sum(
-        any(x not in simulated(r) for x in r["effects"]) for r in allr), len(allr), 0.02,
+        any(x not in simulated(r) for x in r["named"]) for r in allr), len(allr), 0.02,
         geq=False)
+    lines.append("| (information) an effect in the final model that was not simulated, an "
+                 "ambiguity's stand-in included, all trials | " + pct(sum(
+                     any(x not in simulated(r) for x in r["effects"]) for r in allr),
+                     len(allr)) + " | | |")
     claimed_ok = [r for r in big if r["claimed"] != "none"]
     line("after the effect: nrms <= 1.02 and white (claimed trials)", sum(
         r["nrms_after"] <= 1.02 and r["white_after"] for r in claimed_ok), len(claimed_ok),

@@ -574,3 +574,34 @@ def test_nested_extension_and_look_alikes_must_earn_their_place():
     assert look_alikes("leak", ["sensor_gain"], rest) == [
         "leak", "orifice_leak", "leak_downstream", "sensor_gain"]
     assert look_alikes("heat_transfer", [], ["hot_start", "leak"]) == ["hot_start"]
+
+
+def test_an_ambiguity_names_none_of_its_members_and_advises_only_the_separation():
+    """Two candidates within the BIC threshold (a downstream leak and a pipe volume fit a
+    pipe-volume trace alike): the verdict names neither (``named`` empty) although the best
+    stands for the set in the final model, and 'What to do next' gives the measurement that
+    separates them, not the repair of either; a later round's clear winner is named."""
+    from types import SimpleNamespace
+
+    from pneumatic_unload.discrepancy.advice import ACTIONS, what_next
+    from pneumatic_unload.discrepancy.types import DiscrepancyResult
+
+    base = _Fit((), 1e-8, 1e-11, 1000.0)
+    r1 = _round(base, {"leak_downstream": _Fit(("leak_downstream",), 0.6e-8, 1e-11, 500.0),
+                       "pipe_volume": _Fit(("pipe_volume",), 1e-8, 1e-11, 504.0)})
+    assert (r1.winner, r1.ambiguous_with) == ("leak_downstream", ["pipe_volume"])
+    b2 = r1.fits["leak_downstream"]
+    r2 = _round(b2, {"sensor_lag": _Fit(("leak_downstream", "sensor_lag"), 0.6e-8, 1e-11,
+                                        450.0)})
+    res = SimpleNamespace(rounds=[r1], conductance_ambiguity=None, temperature_check=None,
+                          after=_diag(True, 1.0), notes=[], effect=r1.winner,
+                          before=_diag(False, 3.0))
+    res.named = DiscrepancyResult.named.fget(res)
+    assert res.named == []
+    advice = what_next(res)
+    assert any(a.startswith("**Separate the candidates** (leak_downstream, pipe_volume")
+               for a in advice), advice
+    assert not any(ACTIONS["leak_downstream"] in a or ACTIONS["pipe_volume"] in a
+                   for a in advice), advice
+    res.rounds = [r1, r2]
+    assert DiscrepancyResult.named.fget(res) == ["sensor_lag"]

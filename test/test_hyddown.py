@@ -122,3 +122,37 @@ def test_sigma_coverage_over_the_grid():
     # 6 cases cannot resolve the upper bounds (98 %, 80 %) nor the lower ones exactly: at
     # least 5 of 6 within 2 sigma (binomial, see the module note), 4 of 6 within 1
     assert within2 >= 5 / 6 - 1e-9 and within1 >= 0.55
+
+
+# ------------------------------------------------------- the discrepancy workflow (#12)
+#: Verdicts that are heat transfer: the hot start is heat transfer with the wall
+#: temperature fitted (HydDown's lumped wall cools during the discharge).
+HEAT = ("heat_transfer", "hot_start")
+#: Committed cases run through the discrepancy workflow (about 20 s of CPU together): the
+#: 50 L one is the case whose second round once added a pipe volume at its bound (C +16 %);
+#: the 2 L one has a constant h. Measured (linear intervals): v50l hot_start alone,
+#: C -0.02 %; v2l heat_transfer alone, +0.50 % (the other four: v1l, v10l, v20l, v5l
+#: -0.10 % ... +0.52 %; ``bench/bench_hyddown.py --discrepancy`` runs any grid).
+DISCREPANCY_CASES = ["v50l_ld3_d3_calc", "v2l_ld4_d2_h2"]
+
+@pytest.mark.parametrize("name", DISCREPANCY_CASES)
+def test_discrepancy_names_heat_transfer_on_hyddown_with_c_within_2_percent(name):
+    """The issue's peer line: a HydDown discharge comes out as heat transfer (or an
+    ambiguity containing it), no other effect named, and the reported C within 2 %."""
+    from pneumatic_unload.discrepancy import DiscrepancySettings, find_discrepancy
+
+    trace = load(DATA_DIR / f"{name}.npz")
+    m = trace.meta
+    t, y = record(trace, zlib.crc32(name.encode()))
+    res = find_discrepancy(t, y, DiscrepancySettings(
+        volume=m["volume"], initial_temperature=m["t10"], atmosphere=101325.0,
+        profile=False))
+    print(f"{name}: {res.verdict}")
+    assert any(e in HEAT for e in [res.effect, *res.ambiguous_with]), res.verdict
+    assert all(e in HEAT for e in res.named) and all(e in HEAT for e in res.effects), \
+        res.verdict
+    assert abs(res.conductance / m["truth_conductance"] - 1.0) < TOLERANCE
+    # the range's high end is C + 3 sigma with the fit's noise-only sigma: it need not
+    # reach a foreign model's truth (the budget's model-limits term is not in it)
+    lo, hi = res.conductance_range
+    assert lo <= m["truth_conductance"] <= hi * (1.0 + TOLERANCE)

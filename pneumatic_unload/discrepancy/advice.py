@@ -3,9 +3,10 @@
 Written for the test-bench engineer from a :class:`~pneumatic_unload.discrepancy.types.
 DiscrepancyResult`: the measurement that separates the candidates the data cannot tell
 apart (:func:`~pneumatic_unload.model.separation.separating_data`), what to check or
-recalibrate for each effect named and when, and the conductance to write in the test
-record: one value with its sigma when the verdict is unambiguous, the range across the
-models that fit about equally when it is not. SI units; C also in dm^3/(s bar).
+recalibrate for each effect named and when (a member of an ambiguity gets no action, only
+the measurement that separates it), and the conductance to write in the test record: one
+value with its sigma when the verdict is unambiguous, the range across the models that fit
+about equally when it is not. SI units; C also in dm^3/(s bar).
 """
 
 from __future__ import annotations
@@ -54,14 +55,16 @@ ACTIONS: dict[str, str] = {
 def what_next(res: DiscrepancyResult) -> list[str]:
     """Bullet points of the report's "What to do next" (one measurement or check each)."""
     out: list[str] = []
-    if res.ambiguous_with:
-        names = [res.effect, *res.ambiguous_with]
-        out.append(f"**Separate the candidates** ({', '.join(names)} fit alike): "
-                   + "; ".join(separating_data(names)))
+    for rd in res.rounds:
+        if rd.winner != "none" and rd.ambiguous_with:
+            names = [rd.winner, *rd.ambiguous_with]
+            out.append(f"**Separate the candidates** ({', '.join(names)} fit alike): "
+                       + "; ".join(separating_data(names)))
     amb = res.conductance_ambiguity
     if amb is not None and amb.separating:
         out.append("**Pin down C**: " + "; ".join(amb.separating))
-    for e in res.effects:
+    # act only on the effects the data name: a member of an ambiguity may not be there
+    for e in res.named:
         if e in ACTIONS:
             out.append(f"**{e}**: {ACTIONS[e]}")
     tc = res.temperature_check

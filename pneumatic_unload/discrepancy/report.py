@@ -176,12 +176,14 @@ def markdown(res: DiscrepancyResult, files: dict[str, str], title: str = "") -> 
     lines = [f"# Discrepancy report{': ' + title if title else ''}", ""]
     lines += ["## Verdict", "", f"**{res.verdict}**", ""]
     if res.effect != "none":
-        lines.append(f"- Missing effect named: **{res.effect}**" +
-                     (f" (cannot be told apart from: {', '.join(res.ambiguous_with)})"
-                      if res.ambiguous_with else " (named alone: the runner-up is more "
-                                                 "than 10 BIC behind)"))
+        lines.append(f"- Missing effect named: **{res.effect}** (named alone: the runner-up "
+                     "is more than 10 BIC behind)" if not res.ambiguous_with else
+                     f"- Missing effect: one of **{', '.join([res.effect, *res.ambiguous_with])}"
+                     f"** (the data cannot tell them apart; none is claimed, {res.effect} "
+                     "stands for them in the final model)")
         if len(res.effects) > 1:
-            lines.append(f"- Effects added greedily, in order: {', '.join(res.effects)}")
+            lines.append(f"- Effects added greedily, in order: {', '.join(res.effects)} "
+                         f"(named: {', '.join(res.named) or 'none'})")
     lines += [f"- Gap: RMS {res.rms_before:.4g} Pa before, {res.rms_after:.4g} Pa after; "
               f"normalised by the noise {res.before.nrms:.3f} -> {res.after.nrms:.3f} "
               "(1.0 = the noise level)",

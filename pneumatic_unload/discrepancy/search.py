@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from pneumatic_unload.discrepancy.ambiguity import same_physics
 from pneumatic_unload.discrepancy.problem import Problem
-from pneumatic_unload.discrepancy.types import WHITE_P, Diagnostics, Fit
+from pneumatic_unload.discrepancy.types import NRMS_LIMIT, WHITE_P, Diagnostics, Fit
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.model.effects import HEAT_VARIANTS, HOT_START
@@ -258,4 +258,35 @@ def residual_noise(prob: Problem, fit: Fit) -> Problem:
     out.trace = Trace(prob.t, prob.y, noise, prob.start.t_open, edges=prob.lik.edges)
     out.trace.deadline = prob.trace.deadline  # the run's time limit holds here too
     out.lik = out.trace.lik
+    return out
+
+
+def structure_refusals(prob: Problem, named: Diagnostics, fits: dict[str, Fit],
+                       delta: dict[str, float], threshold: float) -> dict[str, str]:
+    """Further candidates that fit model error, not a missing effect (name -> reason).
+
+    Applies when the effects already named leave a residual at the noise level in size
+    (normalised RMS ``named.nrms`` <= :data:`~pneumatic_unload.discrepancy.types.
+    NRMS_LIMIT`) and the search goes on only because it is not white: a further effect
+    then earns its place only by explaining that structure, i.e. by leaving a white
+    residual (Ljung-Box on ``prob``'s own noise model). A candidate that beats the model
+    by the BIC threshold but leaves the residual as structured is chipping at the model's
+    own limits (on a long record, a heat law that does not quite follow the gas: every
+    leak and volume candidate then gains about alike, each moving C its own way); the
+    remaining structure is reported as unexplained instead. Below the threshold nothing
+    is tested (not claimed anyway).
+    """
+    if named.nrms > NRMS_LIMIT:
+        return {}
+    out: dict[str, str] = {}
+    for k, f in fits.items():
+        if delta[k] <= threshold:
+            continue
+        q = fit_quality(prob, f)
+        if not q.white:
+            out[k] = (f"the effects named already explain the trace at the noise level "
+                      f"(normalised RMS {named.nrms:.4f}) and {k} leaves the residual "
+                      f"structured (normalised RMS {q.nrms:.4f}, Ljung-Box p "
+                      f"{q.ljung_box_p:.2g}): it fits the model's limits, not a missing "
+                      "effect")
     return out

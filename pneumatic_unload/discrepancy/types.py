@@ -252,8 +252,11 @@ class DiscrepancyResult:
 
     ``effect`` is the first effect claimed ('none' when the baseline explains the trace
     within noise), ``ambiguous_with`` the effects the data cannot tell from it, and
-    ``effects`` all effects added greedily. ``before``/``after`` are the diagnostics of
-    the baseline and of the final model.
+    ``effects`` all effects added greedily (the final model's: of a round whose candidates
+    the data cannot tell apart, the best one, which stands for the set only so that the
+    search can go on); :attr:`named` the effects the data name, each told apart from every
+    other candidate of its round. ``before``/``after`` are the diagnostics of the baseline
+    and of the final model.
     """
 
     effect: str
@@ -298,6 +301,14 @@ class DiscrepancyResult:
         return None if a is None else (a.low, a.high)
 
     @property
+    def named(self) -> list[str]:
+        """Effects claimed: the winner of each round whose runner-up is more than the BIC
+        threshold behind. A round that ends in an ambiguity names none of its members (the
+        verdict lists them, with the measurement that separates them); its best member is
+        in :attr:`effects` and the final model only to stand for the set."""
+        return [r.winner for r in self.rounds if r.winner != "none" and not r.ambiguous_with]
+
+    @property
     def rms_before(self) -> float:
         """RMS of the baseline residual [Pa]."""
         return self.before.rms
@@ -329,7 +340,7 @@ class DiscrepancyResult:
 
         return finite_json({
             "effect": self.effect, "ambiguous_with": list(self.ambiguous_with),
-            "effects": list(self.effects), "verdict": self.verdict,
+            "effects": list(self.effects), "named": self.named, "verdict": self.verdict,
             "parameters": {k: interval_dict(v) for k, v in self.parameters.items()},
             "rms_before": self.rms_before, "rms_after": self.rms_after,
             "nrms_before": self.before.nrms, "nrms_after": self.after.nrms,

@@ -33,8 +33,12 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
    interval that does not close within the parameter range means "not identifiable".
 6. **Greedy.** While the residual is still structured, a further effect is added the same
    way (at most ``max_effects``), tested against the model with the effects named and the
-   noise model refitted on its residual; the effects named and their look-alikes (the same
-   physics in another law or place, the round's ambiguity set) are not tried again.
+   noise model refitted on its residual; when the effects named leave a residual at the
+   noise level that is only not white, a further effect must also leave it white (else it
+   fits the model's limits and the residual is reported as unexplained:
+   :func:`~pneumatic_unload.discrepancy.search.structure_refusals`); the effects named and
+   their look-alikes (the same physics in another law or place, the round's ambiguity
+   set) are not tried again.
 7. **Temperature.** A logged gas temperature is compared with the models; a final model
    that contradicts it is flagged with the likely reason (e.g. the wall temperature).
 
@@ -79,6 +83,7 @@ from pneumatic_unload.discrepancy.search import (
     residual_noise,
     run_round,
     sensor_refusals,
+    structure_refusals,
 )
 from pneumatic_unload.discrepancy.types import (
     Diagnostics,
@@ -178,6 +183,11 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
                          "before it stand; intervals linear)")
             break
         refused = sensor_refusals(prob_k, base_k, fits, thr)
+        if claimed:
+            # a further effect must explain the structure the named effects leave
+            delta, _, _ = decide(base_k, fits, thr, refused)
+            refused.update(structure_refusals(prob, current_diag, {
+                k: f for k, f in fits.items() if k not in refused}, delta, thr))
         delta, win, amb = decide(base_k, fits, thr, refused)
         rounds.append(Round(base_effects=current.effects, base_bic=base_k.bic, fits=fits,
                             delta_bic=delta, winner=win, ambiguous_with=amb, base=base_k,
