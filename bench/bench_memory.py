@@ -16,6 +16,10 @@ Cases (``--case``, default all):
   sensor noise is 20 Pa (not 1 kPa): the detector looks for the step over a few hundred
   samples, and at 10 kHz a discharge of 2000 s falls about 0.3 Pa per sample at its start
   (with 1 kPa of noise the 20 M-row one is not detected: "no unload", with the reason).
+  The estimator holds the unload from its start to the end of its tail (its final plateau
+  judged flat): about 37 % of the rows, the table's "longest unload" column; above
+  ``REDUCE_FROM`` (4 M) of them its old samples are reduced to bins
+  (:mod:`pneumatic_unload.estimation.reduction`).
 
 The files are written under a temporary directory (``--dir`` keeps them, and re-uses files
 already there).
@@ -169,8 +173,8 @@ def main() -> int:
     print(f"code: {args.code}, load average at start {os.getloadavg()[0]:.2f} "
           f"({os.cpu_count()} cores)\n")
     print("| case | rows | file [MiB] | wall [s] | rows/s | peak RSS [MiB] | unloads | "
-          "C model [m^3/(s Pa)] | rig C |")
-    print("|---|---:|---:|---:|---:|---:|---:|---|---|")
+          "longest unload [samples] | C model [m^3/(s Pa)] | rig C |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---|---|")
     try:
         for case in args.case:
             for m in millions:
@@ -188,10 +192,15 @@ def main() -> int:
                 doc = json.loads(str(res["stdout"]))
                 cs = ", ".join(f"{u['conductance_model']:.5g}" if u["conductance_model"]
                                else str(u["status"]) for u in doc["unloads"])
+                # the longest unload, start to the end of its tail (what one unload holds)
+                span = max((u["i_complete"] - u["i_start"] for u in doc["unloads"]
+                            if u.get("i_complete") is not None
+                            and u.get("i_start") is not None), default=0)
                 wall = float(res["wall"])  # type: ignore[arg-type]
                 print(f"| {case} | {rows:,} | {file_size(path) / 2**20:.0f} | {wall:.1f} | "
                       f"{rows / wall:,.0f} | {int(res['rss']) / 2**20:.0f} | "  # type: ignore[call-overload]
-                      f"{len(doc['unloads'])} | {cs} | {cfg.conductance:.5g} |", flush=True)
+                      f"{len(doc['unloads'])} | {span:,} | {cs} | {cfg.conductance:.5g} |",
+                      flush=True)
     finally:
         if tmp is not None:
             tmp.cleanup()
