@@ -21,6 +21,11 @@ Cases (``--case``, default all):
   ``REDUCE_FROM`` (4 M) of them its old samples are reduced to bins
   (:mod:`pneumatic_unload.estimation.reduction`).
 
+* ``stream``: the ``long`` discharge, without a file: one child process computes it at 100 Hz
+  (noise-free), interpolates it to 10 kHz block by block with 20 Pa of noise and feeds
+  :class:`~pneumatic_unload.estimation.StreamingEstimator` (blocks of 1 M samples): the
+  estimator's own memory on one unload of any length, without the CSV reader's.
+
 The files are written under a temporary directory (``--dir`` keeps them, and re-uses files
 already there).
 
@@ -141,6 +146,56 @@ print(json.dumps({"wall": wall, "rss": rss, "code": proc.returncode,
 """
 
 
+_STREAM = """
+import dataclasses, json, resource, sys, time
+import numpy as np
+from pneumatic_unload.config import RigConfig
+from pneumatic_unload.estimation import EstimatorSettings, StreamingEstimator
+from pneumatic_unload.model import simulate
+from pneumatic_unload.rig import default_duration
+rows, rate = int(sys.argv[1]), float(sys.argv[2])
+cfg = RigConfig(rate=100.0, pre_time=1.0, seed=1, noise_std=0.0)
+want = 0.9 * rows / rate - cfg.pre_time
+cfg = dataclasses.replace(cfg, conductance=cfg.conductance * default_duration(cfg) / want)
+sim = simulate(cfg)
+est = StreamingEstimator(EstimatorSettings(volume=cfg.volume, atmosphere=cfg.atmosphere))
+rng = np.random.default_rng(1)
+out, held, c0 = [], 0, time.process_time()
+for k0 in range(0, rows, 1_000_000):
+    t = np.arange(k0, min(rows, k0 + 1_000_000)) / rate
+    p = np.interp(t, sim.t, sim.measured) + 20.0 * rng.standard_normal(t.size)
+    out += est.push_block(1.7e9 + t, p)
+    held = max(held, len(est.buffer))
+out += est.finish()
+print(json.dumps({"cpu": time.process_time() - c0, "held": held,
+                  "rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+                  "unloads": [{"status": r.status, "conductance_model": r.conductance_model,
+                               "i_start": r.i_start, "i_complete": r.i_complete}
+                              for r in out if r.final], "rig_c": cfg.conductance}))
+"""
+
+
+def measure_stream(rows: int, code: Path) -> dict[str, object]:
+    """The ``stream`` case in a fresh process: CPU time [s], peak RSS [B], samples held."""
+    env = dict(os.environ, PYTHONPATH=str(code), OPENBLAS_NUM_THREADS="1",
+               OMP_NUM_THREADS="1")
+    out = subprocess.run([sys.executable, "-c", _STREAM, str(rows), str(RATE)],
+                         capture_output=True, text=True, env=env, check=True, cwd=code)
+    return json.loads(out.stdout)
+
+
+def stream_row(rows: int, code: Path) -> str:
+    """The table row of the ``stream`` case (time: the child's CPU time)."""
+    st = measure_stream(rows, code)
+    units: list[dict[str, float]] = st["unloads"]  # type: ignore[assignment]
+    cpu, rss, held = float(st["cpu"]), int(st["rss"]), int(st["held"])  # type: ignore[arg-type, call-overload]
+    span = max((int(u["i_complete"] - u["i_start"]) for u in units), default=0)
+    cs = ", ".join(f"{u['conductance_model']:.5g}" for u in units)
+    return (f"| stream | {rows:,} | - | {cpu:.1f} (CPU) | {rows / cpu:,.0f} | "
+            f"{rss / 2**20:.0f} | {len(units)} | {span:,} (held at most {held:,}) | {cs} | "
+            f"{float(st['rig_c']):.5g} |")  # type: ignore[arg-type]
+
+
 def measure(path: Path, cfg: RigConfig, code: Path) -> dict[str, object]:
     """Run the CLI on one file in a fresh measuring process: wall [s], peak RSS [B]."""
     cmd = [sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path), "--json",
@@ -163,7 +218,7 @@ def main() -> int:
                     help="keep the CSV files here (default: a temporary directory)")
     ap.add_argument("--code", type=Path, default=ROOT,
                     help="checkout of the package to analyse with (default: this one)")
-    ap.add_argument("--case", choices=("csv", "bag", "long"), nargs="+",
+    ap.add_argument("--case", choices=("csv", "bag", "long", "stream"), nargs="+",
                     default=["csv", "bag", "long"], help="records to analyse (default all)")
     args = ap.parse_args()
     millions = [1.0] if args.quick else (args.rows or [1.0, 5.0, 20.0])
@@ -179,6 +234,9 @@ def main() -> int:
         for case in args.case:
             for m in millions:
                 rows = int(m * 1e6)
+                if case == "stream":
+                    print(stream_row(rows, args.code), flush=True)
+                    continue
                 name = {"csv": "discharge", "bag": "discharge", "long": "long"}[case]
                 path = folder / f"{name}_{rows}{'' if case == 'bag' else '.csv'}"
                 cfg = rig_for(case, rows)
