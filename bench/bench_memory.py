@@ -153,7 +153,7 @@ from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import EstimatorSettings, StreamingEstimator
 from pneumatic_unload.model import simulate
 from pneumatic_unload.rig import default_duration
-rows, rate = int(sys.argv[1]), float(sys.argv[2])
+rows, rate, noise = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
 cfg = RigConfig(rate=100.0, pre_time=1.0, seed=1, noise_std=0.0)
 want = 0.9 * rows / rate - cfg.pre_time
 cfg = dataclasses.replace(cfg, conductance=cfg.conductance * default_duration(cfg) / want)
@@ -163,7 +163,7 @@ rng = np.random.default_rng(1)
 out, held, c0 = [], 0, time.process_time()
 for k0 in range(0, rows, 1_000_000):
     t = np.arange(k0, min(rows, k0 + 1_000_000)) / rate
-    p = np.interp(t, sim.t, sim.measured) + 20.0 * rng.standard_normal(t.size)
+    p = np.interp(t, sim.t, sim.measured) + noise * rng.standard_normal(t.size)
     out += est.push_block(1.7e9 + t, p)
     held = max(held, len(est.buffer))
 out += est.finish()
@@ -175,18 +175,18 @@ print(json.dumps({"cpu": time.process_time() - c0, "held": held,
 """
 
 
-def measure_stream(rows: int, code: Path) -> dict[str, object]:
+def measure_stream(rows: int, code: Path, noise: float = 20.0) -> dict[str, object]:
     """The ``stream`` case in a fresh process: CPU time [s], peak RSS [B], samples held."""
     env = dict(os.environ, PYTHONPATH=str(code), OPENBLAS_NUM_THREADS="1",
                OMP_NUM_THREADS="1")
-    out = subprocess.run([sys.executable, "-c", _STREAM, str(rows), str(RATE)],
+    out = subprocess.run([sys.executable, "-c", _STREAM, str(rows), str(RATE), str(noise)],
                          capture_output=True, text=True, env=env, check=True, cwd=code)
     return json.loads(out.stdout)
 
 
-def stream_row(rows: int, code: Path) -> str:
-    """The table row of the ``stream`` case (time: the child's CPU time)."""
-    st = measure_stream(rows, code)
+def stream_row(rows: int, code: Path, noise: float = 20.0) -> str:
+    """The table row of the ``stream`` case (time: the child's CPU time; ``noise`` [Pa])."""
+    st = measure_stream(rows, code, noise)
     units: list[dict[str, float]] = st["unloads"]  # type: ignore[assignment]
     cpu, rss, held = float(st["cpu"]), int(st["rss"]), int(st["held"])  # type: ignore[arg-type, call-overload]
     span = max((int(u["i_complete"] - u["i_start"]) for u in units), default=0)
@@ -220,6 +220,9 @@ def main() -> int:
                     help="checkout of the package to analyse with (default: this one)")
     ap.add_argument("--case", choices=("csv", "bag", "long", "stream"), nargs="+",
                     default=["csv", "bag", "long"], help="records to analyse (default all)")
+    ap.add_argument("--stream-noise", type=float, default=20.0,
+                    help="sensor noise of the stream case [Pa] (a slower discharge needs "
+                         "less to be detected: 2 Pa at 100 M rows)")
     args = ap.parse_args()
     millions = [1.0] if args.quick else (args.rows or [1.0, 5.0, 20.0])
     tmp = None if args.dir else tempfile.TemporaryDirectory(prefix="bench_memory_")
@@ -235,7 +238,7 @@ def main() -> int:
             for m in millions:
                 rows = int(m * 1e6)
                 if case == "stream":
-                    print(stream_row(rows, args.code), flush=True)
+                    print(stream_row(rows, args.code, args.stream_noise), flush=True)
                     continue
                 name = {"csv": "discharge", "bag": "discharge", "long": "long"}[case]
                 path = folder / f"{name}_{rows}{'' if case == 'bag' else '.csv'}"
