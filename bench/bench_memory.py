@@ -154,6 +154,9 @@ from pneumatic_unload.estimation import EstimatorSettings, StreamingEstimator
 from pneumatic_unload.model import simulate
 from pneumatic_unload.rig import default_duration
 rows, rate, noise = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
+if len(sys.argv) > 4:  # --reduce-from: the reduction's thresholds (code that has them)
+    from pneumatic_unload.estimation import reduction
+    reduction.REDUCE_FROM, reduction.KEEP_RAW = int(sys.argv[4]), int(sys.argv[4]) // 4
 cfg = RigConfig(rate=100.0, pre_time=1.0, seed=1, noise_std=0.0)
 want = 0.9 * rows / rate - cfg.pre_time
 cfg = dataclasses.replace(cfg, conductance=cfg.conductance * default_duration(cfg) / want)
@@ -175,18 +178,22 @@ print(json.dumps({"cpu": time.process_time() - c0, "held": held,
 """
 
 
-def measure_stream(rows: int, code: Path, noise: float = 20.0) -> dict[str, object]:
+def measure_stream(rows: int, code: Path, noise: float = 20.0,
+                   reduce_from: int | None = None) -> dict[str, object]:
     """The ``stream`` case in a fresh process: CPU time [s], peak RSS [B], samples held."""
     env = dict(os.environ, PYTHONPATH=str(code), OPENBLAS_NUM_THREADS="1",
                OMP_NUM_THREADS="1")
-    out = subprocess.run([sys.executable, "-c", _STREAM, str(rows), str(RATE), str(noise)],
+    extra = [] if reduce_from is None else [str(reduce_from)]
+    out = subprocess.run([sys.executable, "-c", _STREAM, str(rows), str(RATE), str(noise),
+                          *extra],
                          capture_output=True, text=True, env=env, check=True, cwd=code)
     return json.loads(out.stdout)
 
 
-def stream_row(rows: int, code: Path, noise: float = 20.0) -> str:
+def stream_row(rows: int, code: Path, noise: float = 20.0,
+               reduce_from: int | None = None) -> str:
     """The table row of the ``stream`` case (time: the child's CPU time; ``noise`` [Pa])."""
-    st = measure_stream(rows, code, noise)
+    st = measure_stream(rows, code, noise, reduce_from)
     units: list[dict[str, float]] = st["unloads"]  # type: ignore[assignment]
     cpu, rss, held = float(st["cpu"]), int(st["rss"]), int(st["held"])  # type: ignore[arg-type, call-overload]
     span = max((int(u["i_complete"] - u["i_start"]) for u in units), default=0)
@@ -223,6 +230,9 @@ def main() -> int:
     ap.add_argument("--stream-noise", type=float, default=20.0,
                     help="sensor noise of the stream case [Pa] (a slower discharge needs "
                          "less to be detected: 2 Pa at 100 M rows)")
+    ap.add_argument("--reduce-from", type=int, default=None,
+                    help="stream case: REDUCE_FROM of estimation.reduction (KEEP_RAW a "
+                         "quarter of it) instead of the code's")
     args = ap.parse_args()
     millions = [1.0] if args.quick else (args.rows or [1.0, 5.0, 20.0])
     tmp = None if args.dir else tempfile.TemporaryDirectory(prefix="bench_memory_")
@@ -238,7 +248,8 @@ def main() -> int:
             for m in millions:
                 rows = int(m * 1e6)
                 if case == "stream":
-                    print(stream_row(rows, args.code, args.stream_noise), flush=True)
+                    print(stream_row(rows, args.code, args.stream_noise, args.reduce_from),
+                          flush=True)
                     continue
                 name = {"csv": "discharge", "bag": "discharge", "long": "long"}[case]
                 path = folder / f"{name}_{rows}{'' if case == 'bag' else '.csv'}"
