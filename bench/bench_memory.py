@@ -16,6 +16,15 @@ Cases (``--case``, default all):
   sensor noise is 20 Pa (not 1 kPa): the detector looks for the step over a few hundred
   samples, and at 10 kHz a discharge of 2000 s falls about 0.3 Pa per sample at its start
   (with 1 kPa of noise the 20 M-row one is not detected: "no unload", with the reason).
+  The estimator holds the unload from its start to the end of its tail (its final plateau
+  judged flat): about 37 % of the rows, the table's "longest unload" column; above
+  ``REDUCE_FROM`` (4 M) of them its old samples are reduced to bins
+  (:mod:`pneumatic_unload.estimation.reduction`).
+
+* ``stream``: the ``long`` discharge, without a file: one child process computes it at 100 Hz
+  (noise-free), interpolates it to 10 kHz block by block with 20 Pa of noise and feeds
+  :class:`~pneumatic_unload.estimation.StreamingEstimator` (blocks of 1 M samples): the
+  estimator's own memory on one unload of any length, without the CSV reader's.
 
 The files are written under a temporary directory (``--dir`` keeps them, and re-uses files
 already there).
@@ -137,6 +146,63 @@ print(json.dumps({"wall": wall, "rss": rss, "code": proc.returncode,
 """
 
 
+_STREAM = """
+import dataclasses, json, resource, sys, time
+import numpy as np
+from pneumatic_unload.config import RigConfig
+from pneumatic_unload.estimation import EstimatorSettings, StreamingEstimator
+from pneumatic_unload.model import simulate
+from pneumatic_unload.rig import default_duration
+rows, rate, noise = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
+if len(sys.argv) > 4:  # --reduce-from: the reduction's thresholds (code that has them)
+    from pneumatic_unload.estimation import reduction
+    reduction.REDUCE_FROM, reduction.KEEP_RAW = int(sys.argv[4]), int(sys.argv[4]) // 4
+cfg = RigConfig(rate=100.0, pre_time=1.0, seed=1, noise_std=0.0)
+want = 0.9 * rows / rate - cfg.pre_time
+cfg = dataclasses.replace(cfg, conductance=cfg.conductance * default_duration(cfg) / want)
+sim = simulate(cfg)
+est = StreamingEstimator(EstimatorSettings(volume=cfg.volume, atmosphere=cfg.atmosphere))
+rng = np.random.default_rng(1)
+out, held, c0 = [], 0, time.process_time()
+for k0 in range(0, rows, 1_000_000):
+    t = np.arange(k0, min(rows, k0 + 1_000_000)) / rate
+    p = np.interp(t, sim.t, sim.measured) + noise * rng.standard_normal(t.size)
+    out += est.push_block(1.7e9 + t, p)
+    held = max(held, len(est.buffer))
+out += est.finish()
+print(json.dumps({"cpu": time.process_time() - c0, "held": held,
+                  "rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+                  "unloads": [{"status": r.status, "conductance_model": r.conductance_model,
+                               "i_start": r.i_start, "i_complete": r.i_complete}
+                              for r in out if r.final], "rig_c": cfg.conductance}))
+"""
+
+
+def measure_stream(rows: int, code: Path, noise: float = 20.0,
+                   reduce_from: int | None = None) -> dict[str, object]:
+    """The ``stream`` case in a fresh process: CPU time [s], peak RSS [B], samples held."""
+    env = dict(os.environ, PYTHONPATH=str(code), OPENBLAS_NUM_THREADS="1",
+               OMP_NUM_THREADS="1")
+    extra = [] if reduce_from is None else [str(reduce_from)]
+    out = subprocess.run([sys.executable, "-c", _STREAM, str(rows), str(RATE), str(noise),
+                          *extra],
+                         capture_output=True, text=True, env=env, check=True, cwd=code)
+    return json.loads(out.stdout)
+
+
+def stream_row(rows: int, code: Path, noise: float = 20.0,
+               reduce_from: int | None = None) -> str:
+    """The table row of the ``stream`` case (time: the child's CPU time; ``noise`` [Pa])."""
+    st = measure_stream(rows, code, noise, reduce_from)
+    units: list[dict[str, float]] = st["unloads"]  # type: ignore[assignment]
+    cpu, rss, held = float(st["cpu"]), int(st["rss"]), int(st["held"])  # type: ignore[arg-type, call-overload]
+    span = max((int(u["i_complete"] - u["i_start"]) for u in units), default=0)
+    cs = ", ".join(f"{u['conductance_model']:.5g}" for u in units)
+    return (f"| stream | {rows:,} | - | {cpu:.1f} (CPU) | {rows / cpu:,.0f} | "
+            f"{rss / 2**20:.0f} | {len(units)} | {span:,} (held at most {held:,}) | {cs} | "
+            f"{float(st['rig_c']):.5g} |")  # type: ignore[arg-type]
+
+
 def measure(path: Path, cfg: RigConfig, code: Path) -> dict[str, object]:
     """Run the CLI on one file in a fresh measuring process: wall [s], peak RSS [B]."""
     cmd = [sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path), "--json",
@@ -159,8 +225,14 @@ def main() -> int:
                     help="keep the CSV files here (default: a temporary directory)")
     ap.add_argument("--code", type=Path, default=ROOT,
                     help="checkout of the package to analyse with (default: this one)")
-    ap.add_argument("--case", choices=("csv", "bag", "long"), nargs="+",
+    ap.add_argument("--case", choices=("csv", "bag", "long", "stream"), nargs="+",
                     default=["csv", "bag", "long"], help="records to analyse (default all)")
+    ap.add_argument("--stream-noise", type=float, default=20.0,
+                    help="sensor noise of the stream case [Pa] (a slower discharge needs "
+                         "less to be detected: 2 Pa at 100 M rows)")
+    ap.add_argument("--reduce-from", type=int, default=None,
+                    help="stream case: REDUCE_FROM of estimation.reduction (KEEP_RAW a "
+                         "quarter of it) instead of the code's")
     args = ap.parse_args()
     millions = [1.0] if args.quick else (args.rows or [1.0, 5.0, 20.0])
     tmp = None if args.dir else tempfile.TemporaryDirectory(prefix="bench_memory_")
@@ -169,12 +241,16 @@ def main() -> int:
     print(f"code: {args.code}, load average at start {os.getloadavg()[0]:.2f} "
           f"({os.cpu_count()} cores)\n")
     print("| case | rows | file [MiB] | wall [s] | rows/s | peak RSS [MiB] | unloads | "
-          "C model [m^3/(s Pa)] | rig C |")
-    print("|---|---:|---:|---:|---:|---:|---:|---|---|")
+          "longest unload [samples] | C model [m^3/(s Pa)] | rig C |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---|---|")
     try:
         for case in args.case:
             for m in millions:
                 rows = int(m * 1e6)
+                if case == "stream":
+                    print(stream_row(rows, args.code, args.stream_noise, args.reduce_from),
+                          flush=True)
+                    continue
                 name = {"csv": "discharge", "bag": "discharge", "long": "long"}[case]
                 path = folder / f"{name}_{rows}{'' if case == 'bag' else '.csv'}"
                 cfg = rig_for(case, rows)
@@ -188,10 +264,15 @@ def main() -> int:
                 doc = json.loads(str(res["stdout"]))
                 cs = ", ".join(f"{u['conductance_model']:.5g}" if u["conductance_model"]
                                else str(u["status"]) for u in doc["unloads"])
+                # the longest unload, start to the end of its tail (what one unload holds)
+                span = max((u["i_complete"] - u["i_start"] for u in doc["unloads"]
+                            if u.get("i_complete") is not None
+                            and u.get("i_start") is not None), default=0)
                 wall = float(res["wall"])  # type: ignore[arg-type]
                 print(f"| {case} | {rows:,} | {file_size(path) / 2**20:.0f} | {wall:.1f} | "
                       f"{rows / wall:,.0f} | {int(res['rss']) / 2**20:.0f} | "  # type: ignore[call-overload]
-                      f"{len(doc['unloads'])} | {cs} | {cfg.conductance:.5g} |", flush=True)
+                      f"{len(doc['unloads'])} | {span:,} | {cs} | {cfg.conductance:.5g} |",
+                      flush=True)
     finally:
         if tmp is not None:
             tmp.cleanup()

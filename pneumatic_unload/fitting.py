@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +32,7 @@ from pneumatic_unload.curve_fit_result import CurveFit
 from pneumatic_unload.fit.likelihood import make_bins
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
 from pneumatic_unload.fit.profile import valley_std
+from pneumatic_unload.fit.reduced import Reducer
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.fit.uncertainty import (
     WHITENESS_P,
@@ -59,6 +60,21 @@ PROFILE_MIN_SD = 0.1
 CURVE_FIT_RESOLUTION = 0.01
 #: Re-exported: the result of :func:`fit_curve`.
 __all__ = ["CurveFit", "fit_curve"]
+
+
+class CurveSpan(NamedTuple):
+    """Where the fitted samples lie: first and last instant [s, absolute], duration [s],
+    samples [-] and sample period (median of the first 100 000 intervals) [s]."""
+
+    t_ref: float
+    t_last: float
+    duration: float
+    n: int
+    dt: float
+
+
+#: The curve fit's noise model: unit (the residual variance is estimated afterwards).
+UNIT_NOISE = NoiseModel(sigma=1.0, rho=0.0, n=0, source="unit")
 
 
 def curve_fit_bins(t: FloatArray, t_start: float) -> NDArray[np.int64]:
@@ -98,7 +114,7 @@ def fit_curve(
     t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_start: float,
     p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
     profile_heat: bool = True, laws: tuple[str, ...] | None = None,
-    hold: tuple[str, ...] = (),
+    hold: tuple[str, ...] = (), reduced: Reducer | None = None,
 ) -> CurveFit:
     """Least-squares fit of the discharge model to a recorded unload, with the heat law
     chosen by the data.
@@ -130,6 +146,9 @@ def fit_curve(
         Values held at what was given instead of fitted: 't_open' (the valve opening at
         t_start: a record that begins at the opening) and/or 'p10' (a given initial
         pressure).
+    reduced : Reducer, optional
+        The samples already reduced to bins (an unload too long to hold, see
+        :mod:`pneumatic_unload.fit.reduced`), used instead of t and p (None).
 
     Returns
     -------
@@ -142,9 +161,17 @@ def fit_curve(
     tried = (laws or CURVE_FIT_LAWS) if (natural and fit_heat) else ("natural",)
     fits: dict[str, tuple[CurveFit, float, int]] = {}
     start: dict[str, float] | None = None
-    t = np.asarray(t, dtype=float)
-    p = np.asarray(p, dtype=float)
-    trace = curve_fit_trace(t - t[0], p, t_start - float(t[0]))  # the same for every law
+    if reduced is not None:
+        bins = reduced.bins()
+        trace = Trace.from_stats(bins, UNIT_NOISE)  # the same for every law
+        last = float(bins.t_last[-1])
+        span = CurveSpan(reduced.t_ref, reduced.t_ref + last, last, bins.n, reduced.dt)
+    else:
+        t = np.asarray(t, dtype=float)
+        tr = t - t[0]
+        trace = curve_fit_trace(tr, np.asarray(p, dtype=float), t_start - float(t[0]))
+        dt = float(np.median(np.diff(tr[:100_001]))) if t.size > 1 else 1.0
+        span = CurveSpan(float(t[0]), float(t[-1]), float(tr[-1]), int(t.size), dt)
     not_offered: dict[str, str] = {}
     raw: dict[str, dict[str, Any]] = {}  # each law's FitResult and model (the wall term)
     for law in tried:
@@ -156,19 +183,20 @@ def fit_curve(
                 continue
             # from the constant-hA fit (n = 0), the exponent moved towards convection's
             fx = fits["fixed"][0]
-            law_start = _start_from(fx, float(t[0]), tau_heat=fx.tau_heat,
+            law_start = _start_from(fx, span.t_ref, tau_heat=fx.tau_heat,
                                     heat_exponent=0.3)
             nfev = 80
         if law == "natural+turbulent":
-            why = turbulent_law_problem(fits.get("natural", (None,))[0], settings, t)
+            why = turbulent_law_problem(fits.get("natural", (None,))[0], settings,
+                                        span.t_last)
             if why is not None:
                 not_offered[law] = why
                 continue
             nt = fits["natural"][0]
-            law_start = _start_from(nt, float(t[0]), heat_scale=nt.heat_scale,
+            law_start = _start_from(nt, span.t_ref, heat_scale=nt.heat_scale,
                                     heat_turbulent=1.0)
             nfev = 80
-        fits[law] = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
+        fits[law] = _fit_law(span, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
                              profile_heat=profile_heat, law=law, start=law_start,
                              max_nfev=nfev, trace=trace, hold=hold,
@@ -195,7 +223,7 @@ def fit_curve(
             # exchange expressed as the thermal time constant of the gas 20 K below the
             # wall; otherwise from the neutral values, with a second start screened
             cfg = first.config(settings)
-            start = {"C": first.conductance, "t_open": first.t_start - float(t[0]),
+            start = {"C": first.conductance, "t_open": first.t_start - span.t_ref,
                      "p10": first.p10, "tau_heat": thermal_time_constant(
                          cfg, first.p10, cfg.wall - 20.0)}
             if math.isfinite(first.critical_ratio):
@@ -208,7 +236,7 @@ def fit_curve(
         # and weak heat exchange from the neutral values and keep what fits better
         for law in list(fits):
             kept: dict[str, Any] = {}
-            again = _fit_law(t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
+            again = _fit_law(span, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                              conductance=conductance, fit_heat=bool(fit_heat and natural),
                              profile_heat=profile_heat, law=law, explore=True,
                              trace=trace, hold=hold, keep=kept)
@@ -230,11 +258,11 @@ def fit_curve(
             base = fits[law][0]
             if not math.isfinite(base.conductance):
                 continue
-            start_w = {"C": base.conductance, "t_open": base.t_start - float(t[0]),
+            start_w = {"C": base.conductance, "t_open": base.t_start - span.t_ref,
                        "p10": base.p10, "heat_scale": base.heat_scale,
                        "tau_heat": base.tau_heat, "b": base.critical_ratio}
             hot = _fit_law(
-                t, p, settings, t_start=t_start, p10=p10, p_atm=p_atm,
+                span, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                 conductance=conductance, fit_heat=True, profile_heat=False, law=law,
                 start={k: v for k, v in start_w.items() if math.isfinite(v)},
                 max_nfev=120, trace=trace, hold=hold, fit_wall=True)
@@ -250,7 +278,7 @@ def fit_curve(
     lowest = min(fits, key=lambda k: fits[k][1])
     ref = fits[lowest][0]
     unit = max(ref.rms**2 * ref.inflation, 1e-300)  # [Pa^2] per residual
-    log_n = math.log(max(int(t.size), 2))
+    log_n = math.log(max(span.n, 2))
     bic = {law: chi2 / unit + k * log_n for law, (_cf, chi2, k) in fits.items()}
     best = min(bic, key=lambda k: bic[k])
     cf = fits[best][0]
@@ -282,7 +310,7 @@ def fit_curve(
             wall_std = _wall_linear(trace, raw[best], settings, u, law=best)
         else:
             wall_std = _wall_refit(trace, out, settings, u, law=best,
-                                   fit_heat=bool(fit_heat), hold=hold, t=t, p=p)
+                                   fit_heat=bool(fit_heat), hold=hold, span=span)
         out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why,
                                   wall_std=wall_std)
     return out
@@ -321,8 +349,7 @@ def _wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings
 
 
 def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: float, *,
-                law: str, fit_heat: bool, hold: tuple[str, ...], t: FloatArray,
-                p: FloatArray) -> float:
+                law: str, fit_heat: bool, hold: tuple[str, ...], span: CurveSpan) -> float:
     """C's standard uncertainty [m^3/(s Pa)] from an assumed wall temperature of standard
     uncertainty u [K]: ``law`` refitted (from ``fit``) with the wall at T10 + u and T10 - u,
     the root mean square of the two moves of C (the fitted heat exchange takes up part of a
@@ -332,11 +359,11 @@ def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: flo
     for sign in (1.0, -1.0):
         wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
         moved = dataclasses.replace(settings, wall_temperature=wall)
-        start = _start_from(fit, float(t[0]), heat_scale=fit.heat_scale,
+        start = _start_from(fit, span.t_ref, heat_scale=fit.heat_scale,
                             tau_heat=fit.tau_heat, heat_exponent=fit.heat_exponent,
                             heat_turbulent=fit.heat_turbulent)
         try:
-            again = _fit_law(t, p, moved, t_start=fit.t_start, p10=fit.p10, p_atm=fit.p_atm,
+            again = _fit_law(span, moved, t_start=fit.t_start, p10=fit.p10, p_atm=fit.p_atm,
                              conductance=fit.conductance, fit_heat=fit_heat,
                              profile_heat=False, law=law, start=start, max_nfev=60,
                              trace=trace, hold=hold)[0]
@@ -357,10 +384,10 @@ def _start_from(fit: CurveFit, t0: float, **heat: float) -> dict[str, float]:
 
 
 def _fit_law(
-    t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_start: float,
+    span: CurveSpan, settings: EstimatorSettings, *, t_start: float,
     p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
     profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
-    max_nfev: int = 200, explore: bool = False, trace: Trace | None = None,
+    max_nfev: int = 200, explore: bool = False, trace: Trace,
     hold: tuple[str, ...] = (), fit_wall: bool = False,
     keep: dict[str, Any] | None = None,
 ) -> tuple[CurveFit, float, int]:
@@ -369,8 +396,8 @@ def _fit_law(
 
     Parameters
     ----------
-    t, p : ndarray
-        Samples [s], [Pa absolute] from the pre-step plateau to the end of the record.
+    span : CurveSpan
+        Where the samples lie (pre-step plateau to the end of the record).
     settings : EstimatorSettings
         Tank, gas and heat model (``atmosphere=None`` fits p_atm).
     t_start, p10, p_atm, conductance : float
@@ -392,8 +419,8 @@ def _fit_law(
         from the first law's fit is not the better law).
     explore : bool
         Screen starts of strong and weak heat exchange too.
-    trace : Trace, optional
-        :func:`curve_fit_trace` of the same samples (shared by the laws of one fit).
+    trace : Trace
+        :func:`curve_fit_trace` of the samples (shared by the laws of one fit).
     hold : tuple of str
         See :func:`fit_curve`.
     fit_wall : bool
@@ -403,19 +430,15 @@ def _fit_law(
         Receives the fit's :class:`~pneumatic_unload.fit.lsq.FitResult` ('result') and
         model ('model'), for :func:`_wall_linear`.
     """
-    t_abs = np.asarray(t, dtype=float)
-    t_ref = float(t_abs[0])
-    t = t_abs - t_ref  # relative times: absolute stamps (~1.7e9 s) ruin finite differences
+    t_ref = span.t_ref  # relative times: absolute stamps (~1.7e9 s) ruin finite differences
     t_start = t_start - t_ref
-    p = np.asarray(p, dtype=float)
     natural = settings.heat_model == "natural"
-    # the median sample period [s] (of the first 100 000 intervals: O(1) on long records)
-    dt = float(np.median(np.diff(t[:100_001]))) if t.size > 1 else 1.0
+    dt = span.dt
     tau = tau_exp_eq38(p10, p_atm, settings.volume, conductance, settings.initial_temperature,
                        settings.gas)
     neutral = Start(conductance=conductance, critical_ratio=settings.critical_ratio,
-                  t_open=float(np.clip(t_start, t[0], t[-1])), p10=p10, p_atm=p_atm,
-                  tau=tau, dt=dt, t_first=float(t[0]), t_last=float(t[-1]))
+                  t_open=float(np.clip(t_start, 0.0, span.duration)), p10=p10, p_atm=p_atm,
+                  tau=tau, dt=dt, t_first=0.0, t_last=span.duration)
     model = estimator_model(settings, neutral, heat_law=law, fit_wall=fit_wall)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
     if "t_open" in hold:
@@ -429,8 +452,6 @@ def _fit_law(
     if explore and natural and fit_heat:
         starts = ([{"heat_scale": 30.0}, {"heat_scale": 0.1}] if law.startswith("natural") else
                   [{"tau_heat": 0.05 * tau}, {"tau_heat": 20.0 * tau}])
-    if trace is None:
-        trace = curve_fit_trace(t, p, t_start)
     if start is not None:
         lo_t, hi_t = 0.0, math.inf
         if "tau_heat" in model.parameters:
@@ -482,7 +503,7 @@ def _fit_law(
         conductance=c, conductance_std=float(std["C"]), critical_ratio=b,
         critical_ratio_std=b_std, t_start=v["t_open"] + t_ref, p10=v["p10"],
         p_atm=v.get("p_atm", p_atm) if settings.atmosphere is None else p_atm,
-        heat_scale=h, heat_scale_std=h_std, rms=math.sqrt(s2), n=int(t.size),
+        heat_scale=h, heat_scale_std=h_std, rms=math.sqrt(s2), n=span.n,
         success=bool(fit.success), inflation=inflation,
         heat_law=f"{law}+wall" if fit_wall else law,
         wall_temperature=v.get("t_wall", math.nan),

@@ -38,14 +38,14 @@ DENSITY_LAW_MAX_EXPONENT_SD = 0.2
 
 
 def turbulent_law_problem(natural: CurveFit | None, settings: EstimatorSettings,
-                          t: FloatArray) -> str | None:
+                          t_last: float) -> str | None:
     """Why the record cannot carry the natural law's turbulent branch apart (None: offer
     it): the natural fit's model must spend :data:`TURBULENT_MIN_SHARE` of the record after
-    the opening in each regime (t: sample times [s])."""
+    the opening in each regime (t_last: the record's last instant [s])."""
     if natural is None or not math.isfinite(natural.conductance):
         return "no natural-convection fit to start from"
     t0 = natural.t_start
-    tt = np.linspace(0.0, max(float(t[-1]) - t0, 1e-6), 400)
+    tt = np.linspace(0.0, max(t_last - t0, 1e-6), 400)
     try:
         cfg = natural.config(settings)
         pp, tg = discharge(cfg, tt, 0.0)

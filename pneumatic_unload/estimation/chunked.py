@@ -11,9 +11,12 @@ the overview fills up).
 
 Memory: the chunk, the overview (at most 2 ``overview_samples`` x 16 B) and the estimator's
 buffer, which holds an idle plateau's last ``IDLE_KEEP`` samples
-(:data:`~pneumatic_unload.estimation.decisions.IDLE_KEEP`) and each unload's samples from
-its plateau to the end of its tail (32 B per sample, plus the final curve fit's work arrays
-over the same samples): the memory grows with the longest unload, not with the record.
+(:data:`~pneumatic_unload.estimation.decisions.IDLE_KEEP`) and an unload's samples from its
+plateau to the end of its tail (32 B per sample, plus the final curve fit's work arrays over
+them) up to ``REDUCE_FROM`` of them: a longer unload's older samples are reduced to bins as
+they come (:mod:`~pneumatic_unload.estimation.reduction`), except, before its p* crossing,
+those from p* + 5 crossing half-widths on (the crossing fit's window), and all of them before
+the crossing when p_atm is found from the final plateau (``atmosphere`` None).
 
 SI units: s, Pa absolute (or the input's signal units with ``signal_gain``).
 """

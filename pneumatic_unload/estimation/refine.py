@@ -253,8 +253,9 @@ def model_inversion(settings: EstimatorSettings, tau: float, tau_std: float, p10
     return c, std, f"eq39+model-inversion({law})"
 
 
-def final_curve_fit(res: UnloadResult, t: FloatArray, p: FloatArray,
-                    settings: EstimatorSettings, *, noise_std: float) -> UnloadResult | None:
+def final_curve_fit(res: UnloadResult, t: FloatArray | None, p: FloatArray | None,
+                    settings: EstimatorSettings, *, noise_std: float,
+                    reduced: Any = None) -> UnloadResult | None:
     """Final result of an unload from the full-curve fit (None when it fails).
 
     Parameters
@@ -267,8 +268,11 @@ def final_curve_fit(res: UnloadResult, t: FloatArray, p: FloatArray,
         Tank, gas and heat-model settings.
     noise_std : float
         Noise standard deviation [Pa].
+    reduced : Reducer, optional
+        The samples reduced to bins, used instead of t and p (None): a long unload, see
+        :mod:`pneumatic_unload.estimation.reduction`.
     """
-    return refine_with_curve_fit(res, t, p, settings, noise_std=noise_std)
+    return refine_with_curve_fit(res, t, p, settings, noise_std=noise_std, reduced=reduced)
 
 
 def recovery_fit(t: FloatArray, p: FloatArray, t_close: float) -> Any:
@@ -284,7 +288,7 @@ def recovery_fit(t: FloatArray, p: FloatArray, t_close: float) -> Any:
 def refine_with_curve_fit(
     res: UnloadResult, t: FloatArray, p: FloatArray, settings: EstimatorSettings,
     *, noise_std: float, hold: tuple[str, ...] = (), extra_terms: tuple[Any, ...] = (),
-    fit_heat: bool | None = None,
+    fit_heat: bool | None = None, reduced: Any = None,
 ) -> UnloadResult | None:
     """Final result of an unload: the crossing result refined by :func:`fit_curve`
     (``hold``: values held, and ``fit_heat``, see there; ``extra_terms``: further lines of
@@ -311,7 +315,8 @@ def refine_with_curve_fit(
 
     try:
         fit = fit_curve(t, p, settings, t_start=res.t_start, p10=res.p10, p_atm=res.p_atm,
-                        conductance=res.conductance_model, hold=hold, fit_heat=fit_heat)
+                        conductance=res.conductance_model, hold=hold, fit_heat=fit_heat,
+                        reduced=reduced)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return dataclasses.replace(res, final=True, extra={"curve_fit_error": str(exc)})
     mf = fit.model_form_std if math.isfinite(fit.model_form_std) else 0.0

@@ -53,7 +53,7 @@ def on_abort(st: EstimatorState, i: int) -> list[UnloadResult]:
                                 float(tv[i - 8]))
     j = int(np.searchsorted(tv, t_c))
     half = max(64, (j - u.i0) // 5)
-    lo2, hi2 = max(u.i0 + 1, j - half), min(i + 1, j + half)
+    lo2, hi2 = max(u.i0 + 1, j - half, 0), min(i + 1, j + half)  # 0: see .reduction
     if hi2 - lo2 >= 24:
         t_c, p_c, _rms = corner_fit(tv[lo2:hi2], pv[lo2:hi2], float(tv[lo2 + 4]),
                                     float(tv[hi2 - 5]))

@@ -84,6 +84,10 @@ class UnloadState:
         [signal units].
     rec_high : float
         Highest PERIOD-sample mean of the recovery so far [signal units].
+    reduced : Any
+        The fit window's samples already reduced to bins and dropped from the buffer (a
+        long unload, see :mod:`.reduction`; :class:`pneumatic_unload.fit.reduced.Reducer`),
+        or None.
     """
 
     trigger: int
@@ -110,6 +114,7 @@ class UnloadState:
     skip_since: int = -1
     skip_rise: float = math.nan
     rec_high: float = -math.inf
+    reduced: Any = None
 
 
 class EstimatorState:

@@ -26,9 +26,11 @@ from pneumatic_unload.estimation.decisions import (
     running_low,
     settled,
 )
+from pneumatic_unload.estimation.reduction import fit_window, reduce_due, reduce_unload
 from pneumatic_unload.estimation.refine import final_curve_fit
 from pneumatic_unload.estimation.state import EstimatorState
 from pneumatic_unload.estimation.types import STUCK_TEXT, FloatArray, UnloadResult
+from pneumatic_unload.fit.reduced import Reducer
 
 
 @dataclass(frozen=True)
@@ -42,9 +44,9 @@ class FinalFit:
     ----------
     crossing : UnloadResult
         The unload's crossing result (published at the p* crossing).
-    t, p : ndarray
+    t, p : ndarray or None
         The unload's samples from before its plateau to the end of its tail [s], [Pa
-        absolute] (copies).
+        absolute] (copies); None when they were reduced to bins (``reduced``).
     settings : EstimatorSettings
         The estimator settings of the unload.
     noise_std : float
@@ -53,21 +55,24 @@ class FinalFit:
         Stream index of the sample that completed the unload [-].
     t_complete : float
         Its stamp [s].
+    reduced : Reducer or None
+        A long unload's samples reduced to bins (see :mod:`.reduction`), or None.
     """
 
     crossing: UnloadResult
-    t: FloatArray
-    p: FloatArray
+    t: FloatArray | None
+    p: FloatArray | None
     settings: EstimatorSettings
     noise_std: float
     i_complete: int
     t_complete: float
+    reduced: Reducer | None = None
 
     def run(self) -> UnloadResult | None:
         """The final result (None when the fit fails; see
         :func:`~.refine.final_curve_fit`)."""
         fin = final_curve_fit(self.crossing, self.t, self.p, self.settings,
-                              noise_std=self.noise_std)
+                              noise_std=self.noise_std, reduced=self.reduced)
         if fin is not None:
             fin.i_complete, fin.t_complete = self.i_complete, self.t_complete
         return fin
@@ -87,6 +92,8 @@ def step_tail(st: EstimatorState, i: int) -> list[UnloadResult]:
     if i != st.next_check:
         return []
     st.next_check = i + PERIOD
+    if reduce_due(st, i):  # a long tail: its old samples to bins
+        i -= reduce_unload(st, i)
     u = st.unload
     res = u.pending
     cs = st.buf.cs
@@ -124,7 +131,7 @@ def scan_tail(st: EstimatorState, i: int, end: int) -> int:
     m = block_mean(cs, ks)
     low_prev = running_low(u.tail_low, m)
     event = rose(m, low_prev, rise_threshold(st.sigma, u.p10, u.atm))
-    event |= st.stuck(ks)
+    event |= st.stuck(ks) | reduce_due(st, ks)
     if u.pending is not None:
         event |= _flat_tail(st, cs, ks, u.pending.tau_exp)
     hit = np.flatnonzero(event)
@@ -177,11 +184,10 @@ def finish_tail(st: EstimatorState, i: int, ended: bool, decided: int | None = N
         res.t_end = float(st.buf.t[i])
         s = st.settings
         if s.curve_fit:
-            tv, pv = st.buf.views(i + 1)
-            lo = max(st.arm_index, u.i0 - 2 * PLATEAU)
-            job = FinalFit(res, np.array(tv[lo:i + 1]), st.to_pa_array(pv[lo:i + 1]), s,
+            t, p, reduced = fit_window(st, i)
+            job = FinalFit(res, None if t is None else np.array(t), p, s,
                            abs(st.sigma * s.signal_gain), dec + st.buf.shift,
-                           float(st.buf.t[dec]))
+                           float(st.buf.t[dec]), reduced)
             if st.defer_final_fit:
                 st.final_fits.append(job)
             else:

@@ -23,6 +23,7 @@ from pneumatic_unload.estimation.decisions import (
     settled_at_end,
     stalled,
 )
+from pneumatic_unload.estimation.reduction import reduce_due, reduce_unload
 from pneumatic_unload.estimation.refine import (
     crossing_budgets,
     crossing_wall_std,
@@ -213,6 +214,8 @@ def step_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
         return complete_crossing(st, i)
     if i == st.next_check:
         st.next_check = i + PERIOD
+        if reduce_due(st, i):  # a long unload: its old samples to bins
+            i -= reduce_unload(st, i)
         if st.stuck(i):
             return on_stuck(st, i)
         if not math.isfinite(u.pstar):
@@ -232,7 +235,7 @@ def scan_unloading(st: EstimatorState, i: int, end: int) -> int:
         return j
     event = st.stuck(ks)
     if st.unload.refined:
-        event = event | stalled_at(st, ks)
+        event = event | stalled_at(st, ks) | reduce_due(st, ks)
     hit = np.flatnonzero(event)
     if hit.size:
         st.next_check = int(ks[int(hit[0])])
@@ -288,8 +291,9 @@ def complete_crossing(st: EstimatorState, i: int, settle_index: int | None = Non
     tv, pv = st.buf.views(n)
     lvl_hi = u.pstar + u.half
     # last sample above the upper bound before i
-    above = np.flatnonzero(pv[u.i0:n] > lvl_hi)
-    j_lo = u.i0 + (int(above[-1]) if above.size else 0)
+    i0 = max(u.i0, 0)  # negative: the unload's first samples were reduced (.reduction)
+    above = np.flatnonzero(pv[i0:n] > lvl_hi)
+    j_lo = i0 + (int(above[-1]) if above.size else 0)
     tw, pw = tv[j_lo:n], pv[j_lo:n]
     if tw.size < 5:
         tw, pw = tv[max(u.i0, n - 5):n], pv[max(u.i0, n - 5):n]

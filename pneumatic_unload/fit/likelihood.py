@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, fields
 
 import numpy as np
 from numpy.typing import NDArray
@@ -88,6 +89,62 @@ def uniform_bins(n: int, max_bins: int) -> IntArray:
     return np.unique(np.round(np.linspace(0, n, m + 1)).astype(np.int64))
 
 
+@dataclass(frozen=True)
+class BinStats:
+    """What the binned likelihood needs of each bin of a trace (one element per bin, in time
+    order; times relative to any origin [s], values [Pa]): a trace can be reduced to these
+    while it streams (:mod:`pneumatic_unload.fit.reduced`) and fitted without its samples.
+
+    Attributes
+    ----------
+    count : ndarray
+        Samples [-].
+    y_sum, y_first, y_last : ndarray
+        Sum of the signal, its first and its last sample [Pa].
+    t_first, t_mid, t_last : ndarray
+        Instants of the first sample, of one near the middle and of the last [s] (the
+        quadrature nodes; a bin of at most EXACT_BIN samples has all its samples there).
+    t_mean, t_var : ndarray
+        Mean [s] and variance [s^2] of the bin's sample instants.
+    """
+
+    count: IntArray
+    y_sum: FloatArray
+    y_first: FloatArray
+    y_last: FloatArray
+    t_first: FloatArray
+    t_mid: FloatArray
+    t_last: FloatArray
+    t_mean: FloatArray
+    t_var: FloatArray
+
+    @property
+    def n(self) -> int:
+        """Samples [-]."""
+        return int(np.sum(self.count))
+
+    @staticmethod
+    def concat(parts: Sequence[BinStats]) -> BinStats:
+        """The bins of consecutive pieces of a trace, in order."""
+        return BinStats(*(np.concatenate([getattr(p, f.name) for p in parts])
+                          for f in fields(BinStats)))
+
+
+def bin_stats(t: FloatArray, y: FloatArray, edges: IntArray) -> BinStats:
+    """:class:`BinStats` of samples t [s], y [Pa] over bins with edges (strictly increasing
+    sample indices from 0 to n; the middle node is sample (i0 + i1 - 1) // 2)."""
+    e = np.asarray(edges, dtype=np.int64)
+    t, y = t[e[0]:e[-1]], y[e[0]:e[-1]]
+    e = e - e[0]
+    i0, i1 = e[:-1], e[1:]
+    cnt = i1 - i0
+    tc = np.add.reduceat(t, i0) / cnt
+    dev = t - np.repeat(tc, cnt)
+    m2 = np.add.reduceat(dev * dev, i0) / cnt
+    return BinStats(cnt, np.add.reduceat(y, i0), y[i0], y[i1 - 1], t[i0],
+                    t[(i0 + i1 - 1) // 2], t[i1 - 1], tc, m2)
+
+
 ModelAt = Callable[[FloatArray], FloatArray]
 
 
@@ -115,13 +172,52 @@ class BinnedLikelihood:
         self.rho = noise.rho
         self._first = math.sqrt(max(1.0 - self.rho**2, 1e-6))
         self._norm = noise.innovation_sigma * np.sqrt(self.counts)
+        self._n = int(self.y.size)
         self._sy = self.binsum(self.whiten(self.y))
         self._setup_nodes()
+
+    @classmethod
+    def from_stats(cls, stats: BinStats, noise: NoiseModel) -> BinnedLikelihood:
+        """The likelihood of a trace given by its bins' :class:`BinStats` (no sample held:
+        the model is evaluated at the bins' nodes only, also in a wide bin holding a valve
+        event; the sample-level methods are not available)."""
+        self = cls.__new__(cls)
+        self.t = self.y = None
+        self.noise = noise
+        cnt = np.asarray(stats.count, dtype=np.int64)
+        self.edges = np.concatenate(([0], np.cumsum(cnt))).astype(np.int64)
+        self.counts = cnt.astype(float)
+        self._n = int(self.edges[-1])
+        self.rho = noise.rho
+        self._first = math.sqrt(max(1.0 - self.rho**2, 1e-6))
+        self._norm = noise.innovation_sigma * np.sqrt(self.counts)
+        y_sum = np.asarray(stats.y_sum, dtype=float)
+        self._sy = self._whitened(y_sum, np.asarray(stats.y_first, dtype=float),
+                                  np.asarray(stats.y_last, dtype=float))
+        # nodes of each bin: its first, middle (3 samples or more) and last (2 or more)
+        take = np.column_stack((np.ones(cnt.size, bool), cnt >= 3, cnt >= 2))
+        node_t = np.column_stack((stats.t_first, stats.t_mid, stats.t_last))[take]
+        per = take.sum(axis=1)
+        self.node_index = None
+        self.node_t = node_t
+        self._pos_last = np.cumsum(per).astype(np.int64) - 1
+        self._pos_first = self._pos_last - per + 1
+        vals = np.ones((cnt.size, 3))
+        wb = np.flatnonzero(cnt > EXACT_BIN)
+        ta, tm, tb = stats.t_first[wb], stats.t_mid[wb], stats.t_last[wb]
+        mu, var, nw = stats.t_mean[wb], stats.t_var[wb], cnt[wb].astype(float)
+        vals[wb] = np.column_stack([(var + (mu - u) * (mu - v)) / ((tj - u) * (tj - v)) * nw
+                                    for tj, u, v in ((ta, tm, tb), (tm, ta, tb),
+                                                     (tb, ta, tm))])
+        self._q_rows = np.repeat(np.arange(cnt.size, dtype=np.int64), per)
+        self._q_cols = np.arange(node_t.size, dtype=np.int64)
+        self._q_vals = vals[take]
+        return self
 
     @property
     def n(self) -> int:
         """Samples in the trace [-]."""
-        return int(self.y.size)
+        return self._n
 
     @property
     def n_bins(self) -> int:
@@ -200,7 +296,12 @@ class BinnedLikelihood:
         """
         t = self.t
         e = self.edges
-        ev_bins = set()
+        ev_bins: set[int] = set()
+        if t is None:  # from BinStats: the nodes only
+            mv = np.asarray(model_at(self.node_t), dtype=float)
+            sums = np.bincount(self._q_rows, weights=self._q_vals * mv[self._q_cols],
+                               minlength=self.n_bins)
+            return self._whitened(sums, mv[self._pos_first], mv[self._pos_last])
         for ev in events:
             if t[0] < ev <= t[-1]:
                 k = int(np.searchsorted(t, ev))  # first sample at or after ev
@@ -231,8 +332,12 @@ class BinnedLikelihood:
         for b in ev_bins:
             j0, j1 = np.searchsorted(idx, [e[b], e[b + 1]])
             sums[b] = float(np.sum(vals[j0:j1]))
-        m_first = mv[self._pos_first]
-        m_last = mv[self._pos_last]
+        return self._whitened(sums, mv[self._pos_first], mv[self._pos_last])
+
+    def _whitened(self, sums: FloatArray, m_first: FloatArray, m_last: FloatArray
+                  ) -> FloatArray:
+        """Prewhitened bin sums from the plain bin sums of a series and its first and last
+        value in each bin [unit of the series]."""
         if self.rho == 0.0 and self._first == 1.0:
             return sums
         prev_last = np.concatenate(([0.0], m_last[:-1]))

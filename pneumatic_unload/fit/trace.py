@@ -16,7 +16,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.fit.likelihood import BinnedLikelihood, make_bins
+from pneumatic_unload.fit.likelihood import BinnedLikelihood, BinStats, make_bins
 from pneumatic_unload.fit.lsq import FitResult, minimize
 from pneumatic_unload.fit.noise import NoiseModel
 from pneumatic_unload.fit.params import Parameters
@@ -71,6 +71,17 @@ class Trace:
         #: :func:`time.monotonic` instant [s] after which an evaluation raises
         #: :class:`FitTimeout` (None: no deadline); one evaluation is the granularity.
         self.deadline: float | None = None
+
+    @classmethod
+    def from_stats(cls, stats: BinStats, noise: NoiseModel) -> Trace:
+        """A trace given by its bins (:class:`~pneumatic_unload.fit.likelihood.BinStats`,
+        times relative to any origin [s]) instead of its samples (``t`` and ``y`` None)."""
+        self = cls.__new__(cls)
+        self.t = self.y = None
+        self.noise = noise
+        self.lik = BinnedLikelihood.from_stats(stats, noise)
+        self.deadline = None
+        return self
 
     @property
     def n(self) -> int:
