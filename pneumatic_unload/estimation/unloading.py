@@ -131,6 +131,14 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     lo = max(st.arm_index, trig - back - HINGE_PLATEAU)
     t_lo = float(tv[max(st.arm_index, trig - back)])
     t0, p10, slope, _curv, rms = hinge_fit(tv[lo:n], pv[lo:n], t_lo, float(tv[trig]))
+    if trig < i and (t0 >= float(tv[trig - 1]) or not slope > 0.0):
+        # the start pinned at the trigger (or no fall found before it): the trigger came
+        # before the opening (a noise dip confirmed against a plateau of a few samples,
+        # whose level and noise are then off), so the start is searched up to the sample
+        # 10 % down, and the better fit kept
+        alt = hinge_fit(tv[lo:n], pv[lo:n], t_lo, float(tv[i]))
+        if alt[4] < rms:
+            t0, p10, slope, _curv, rms = alt
     pre = pv[lo:int(np.searchsorted(tv, t0))]
     sig_pre = rms_sigma(pre) if pre.size > 3 else rms
     if pre.size >= 8:
