@@ -161,9 +161,10 @@ def chunks(items: Sequence[tuple[int, str]], workers: int
 
 
 class _Writer:
-    """Done inputs written to the database in the order given, many per transaction: when
-    :data:`FLUSH_FILES` are ready in order or :data:`FLUSH_SECONDS` have passed; the rest
-    (in the order given) by :meth:`flush` with ``everything`` (the end, or Ctrl-C)."""
+    """Done inputs written to the database in the order given, many per transaction: the
+    first at once, then when :data:`FLUSH_FILES` are ready in order or
+    :data:`FLUSH_SECONDS` have passed; the rest (in the order given) by :meth:`flush` with
+    ``everything`` (the end, or Ctrl-C)."""
 
     def __init__(self, con: Any, n: int, replace: bool,
                  on_done: Callable[[FileRecord], None] | None) -> None:
@@ -172,7 +173,7 @@ class _Writer:
         self.pos = 0  # inputs before it are written (or skipped)
         self.written: dict[int, FileRecord] = {}
         self.skipped: set[int] = set()
-        self.last = time.monotonic()
+        self.last = -math.inf  # the first input done is written at once
 
     def add(self, k: int, rec: FileRecord | None) -> None:
         self.ready[k] = rec
