@@ -96,9 +96,9 @@ def discover(paths: Sequence[str | Path], pattern: str = "") -> list[str]:
             continue
         found: list[Path] = []
         cands = sorted(p.glob(pattern) if pattern else p.rglob("*"))
-        bags = [c for c in cands if is_bag_dir(c)]
+        bags = {c for c in cands if c.is_dir() and is_bag_dir(c)}
         for c in cands:
-            if any(b in c.parents for b in bags):
+            if any(b in bags for b in c.parents):  # a set: linear in the inputs
                 continue  # a bag folder's own files
             if c in bags or (c.is_file() and c.suffix.lower() in INPUT_SUFFIXES):
                 found.append(c)
