@@ -1,19 +1,24 @@
 """Benchmark of the test line (#14): many generated bags through ``batch``.
 
-``python bench/bench_testline.py [--n 1000] [--dir DIR] [--workers 2]`` (project venv,
-``PYTHONPATH`` at the repo root). Makes ``n`` bags (or reuses those in ``DIR``): 45 %
-clean discharges, 45 % with wall heat transfer (tanks 1-5 L, C 2e-9 .. 2e-8 m^3/(s Pa),
-parts of 3 runs each), 10 % bad inputs (a CSV log without settings, a bag truncated as
-by a killed writer); then runs ``batch`` serially (``--workers 1``) and on a
-local Dask cluster (``--workers``), each into a fresh database, in one run, and prints:
-files/s of each, the speed-up (target >= 1.7x on 2 cores), whether the two databases hold
-the same numbers, the peak RSS of each worker process, and the time headless chromium
-takes to open the report of the database (``--dump-dom``, page loaded and its script run).
+``python bench/bench_testline.py [--n 1000 | --quick] [--dir DIR] [--workers 2]
+[--repeat R]`` (project venv, ``PYTHONPATH`` at the repo root). Makes ``n`` bags (or
+reuses those in ``DIR``): 45 % clean discharges, 45 % with wall heat transfer (tanks
+1-5 L, C 2e-9 .. 2e-8 m^3/(s Pa), parts of 3 runs each), 10 % bad inputs (a CSV log
+without settings, a bag truncated as by a killed writer); then runs ``batch`` serially
+(``--workers 1``) and on a local Dask cluster (``--workers``), each into a fresh database,
+in one run, and prints:
+files/s of each (the workers' with and without the local cluster's start and close), the
+speed-up (target >= 1.7x on 2 cores), whether the two databases hold the same numbers, the
+peak RSS of each worker process of the batch, the time headless chromium takes to open the
+report of the database (``--dump-dom``, page loaded and its script run), and the load
+average (the machine may be shared: each ratio comes from one serial / workers pair run
+back to back; ``--repeat`` pairs).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import sqlite3
 import subprocess
@@ -59,58 +64,65 @@ def make_inputs(folder: Path, n: int) -> None:
             mcap.write_bytes(data[: len(data) // 3])
 
 
-def peak_rss_mib() -> float:
-    """Peak RSS of this process [MiB] (ru_maxrss is in KiB on Linux)."""
-    import resource
+def load() -> str:
+    """The 1-minute load average of the machine (shared: say what it was)."""
+    return f"{os.getloadavg()[0]:.1f}"
 
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+def same_numbers(db_a: Path, db_b: Path) -> bool:
+    """The two databases hold the same unload rows (but for ids and times)."""
+    def rows(db: Path) -> list[dict[str, object]]:
+        con = open_db(db)
+        try:
+            return [{k: v for k, v in u.items() if k not in ("id", "file_id", "analysed_at")}
+                    for u in sorted(unload_rows(con), key=lambda u: u["path"])]
+        finally:
+            con.close()
+    return rows(db_a) == rows(db_b)
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--n", type=int, default=1000)
+    ap.add_argument("--n", type=int, help="inputs (default 1000; --quick: 120)")
+    ap.add_argument("--quick", action="store_true", help="a smaller run (120 inputs)")
     ap.add_argument("--dir", help="folder of the generated inputs (kept); default: a temp")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="serial / workers pairs measured (each ratio from one pair)")
     args = ap.parse_args(argv)
     from pneumatic_unload.testline.spec import parse_spec
 
+    n = args.n or (120 if args.quick else 1000)
     tmp = Path(tempfile.mkdtemp(prefix="bench-testline-"))
     folder = Path(args.dir) if args.dir else tmp / "inputs"
     folder.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    make_inputs(folder, args.n)
-    paths = discover([folder])[: args.n]
-    print(f"{len(paths)} inputs in {folder} ({time.perf_counter() - t0:.0f} s to make)\n")
+    make_inputs(folder, n)
+    paths = discover([folder])[:n]
+    print(f"{len(paths)} inputs in {folder} ({time.perf_counter() - t0:.0f} s to make); "
+          f"{os.cpu_count()} cores\n")
     opts = InputOptions(part_regex=r"(P\d+)_", spec=parse_spec(SPEC))
-    rows = []
-    for workers in (1, args.workers):
-        db = tmp / f"w{workers}.sqlite"
-        t1 = time.perf_counter()
-        res = run_batch(paths, opts, db_path=db, workers=workers)
-        wall = time.perf_counter() - t1
-        rows.append((workers, wall, res, db))
-        print(f"workers {workers}: {wall:.1f} s, {len(paths) / wall:.2f} files/s, "
-              f"{sum(r.status == 'ok' for r in res.records)} ok, "
-              f"{sum(r.status != 'ok' for r in res.records)} without C")
-    speed_up = rows[0][1] / rows[1][1]
-    same = [{k: v for k, v in u.items() if k not in ("id", "file_id", "analysed_at")}
-            for u in sorted(unload_rows(open_db(rows[0][3])), key=lambda u: u["path"])] == \
-        [{k: v for k, v in u.items() if k not in ("id", "file_id", "analysed_at")}
-         for u in sorted(unload_rows(open_db(rows[1][3])), key=lambda u: u["path"])]
-    # peak RSS of the workers: a fresh cluster analysing a sample of the inputs
-    from distributed import Client, LocalCluster
-
-    with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None, silence_logs=40) as cluster, \
-            Client(cluster) as client:
-        from pneumatic_unload.testline.job import analyze_file
-
-        client.gather([client.submit(analyze_file, p, opts, pure=False)
-                       for p in paths[: min(len(paths), 100)]])
-        rss = client.run(peak_rss_mib)
+    pairs = []
+    for rep in range(args.repeat):
+        runs = []
+        for workers in (1, args.workers):
+            db = tmp / f"r{rep}w{workers}.sqlite"
+            la = load()
+            t1 = time.perf_counter()
+            res = run_batch(paths, opts, db_path=db, workers=workers)
+            wall = time.perf_counter() - t1
+            runs.append((wall, res, db))
+            print(f"run {rep}, workers {workers}: {wall:.1f} s ({res.cluster_seconds:.1f} s "
+                  f"starting and closing the cluster), {len(paths) / wall:.2f} files/s; "
+                  f"{sum(r.status == 'ok' for r in res.records)} ok, "
+                  f"{sum(r.status != 'ok' for r in res.records)} without C; "
+                  f"load {la} -> {load()}")
+        (w1, _r1, db1), (w2, r2, db2) = runs
+        pairs.append((w1, w2, w2 - r2.cluster_seconds, r2, same_numbers(db1, db2)))
+    db = tmp / f"r{args.repeat - 1}w{args.workers}.sqlite"
     report = tmp / "report.html"
     t2 = time.perf_counter()
-    html_report(rows[1][3], report)
+    html_report(db, report)
     t_write = time.perf_counter() - t2
     browser = shutil.which("chromium")
     t_open = float("nan")
@@ -120,16 +132,23 @@ def main(argv: list[str] | None = None) -> int:
                         f"--user-data-dir={tmp / 'chr'}", "--dump-dom", report.as_uri()],
                        capture_output=True, timeout=300, check=True)
         t_open = time.perf_counter() - t3
-    n_rows = sqlite3.connect(rows[1][3]).execute("SELECT count(*) FROM unloads").fetchone()[0]
+    n_rows = sqlite3.connect(db).execute("SELECT count(*) FROM unloads").fetchone()[0]
+    k = len(paths)
     print("\n| measure | value |\n|---|---|")
-    print(f"| inputs | {len(paths)} ({n_rows} unloads) |")
-    print(f"| serial | {len(paths) / rows[0][1]:.2f} files/s |")
-    print(f"| {args.workers} workers | {len(paths) / rows[1][1]:.2f} files/s |")
-    print(f"| speed-up | {speed_up:.2f}x (target >= 1.7x) |")
-    print(f"| same numbers serial / workers | {same} |")
-    print("| peak RSS per worker | " + ", ".join(f"{v:.0f} MiB" for v in rss.values()) + " |")
+    print(f"| inputs | {k} ({n_rows} unloads) |")
+    for rep, (w1, w2, w2x, r2, same) in enumerate(pairs):
+        tag = f" (run {rep})" if len(pairs) > 1 else ""
+        print(f"| serial{tag} | {k / w1:.2f} files/s |")
+        print(f"| {args.workers} workers{tag}, with / without the cluster's start and close "
+              f"| {k / w2:.2f} / {k / w2x:.2f} files/s |")
+        print(f"| speed-up{tag}, with / without the cluster's start and close | "
+              f"{w1 / w2:.2f}x / {w1 / w2x:.2f}x (target >= 1.7x) |")
+        print(f"| same numbers serial / workers{tag} | {same} |")
+        print(f"| peak RSS per worker{tag} | "
+              + ", ".join(f"{v:.0f} MiB" for v in r2.worker_peak_rss.values()) + " |")
     print(f"| report: write / open in chromium | {t_write:.1f} s / {t_open:.1f} s "
           f"({report.stat().st_size / 2**20:.1f} MiB) |")
+    print(f"| load average (1 min) at the end | {load()} |")
     shutil.rmtree(tmp, ignore_errors=True)
     return 0
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import os
 import signal
 import sqlite3
 import subprocess
@@ -30,6 +31,7 @@ from pneumatic_unload.testline import (
     unload_rows,
     write_file,
 )
+from pneumatic_unload.testline.batch import CHUNK_MAX, WORKER_ENV, chunks, start_client
 from pneumatic_unload.testline.db import SCHEMA_VERSION, file_rows
 
 SPEC = {"part_types": {"g14": {"match": "^V14-", "conductance": [4.5e-9, 5.5e-9],
@@ -73,6 +75,14 @@ def test_batch_on_a_local_cluster_equals_the_serial_batch(inputs: Path, tmp_path
     assert [r.path for r in serial.records] == [r.path for r in dask.records] == paths
     assert [r.unloads for r in serial.records] == [r.unloads for r in dask.records]
     assert _rows(tmp_path / "s.sqlite") == _rows(tmp_path / "d.sqlite")
+    for db in ("s.sqlite", "d.sqlite"):  # written in the order given, whatever completed first
+        con = open_db(tmp_path / db)
+        assert [f["path"] for f in file_rows(con)] == paths
+        con.close()
+    assert len(dask.worker_peak_rss) == 2 and dask.cluster_seconds > 0
+    # a rerun on the cluster: each input hashed on a worker, found, skipped
+    again = run_batch(paths, _options(), db_path=tmp_path / "d.sqlite", workers=2)
+    assert again.skipped == paths and not again.records
     # a bad file is a row with its reason, never the end of the batch
     bad = serial.records[-1]
     assert bad.status == "error" and "--volume" in bad.reason
@@ -82,6 +92,21 @@ def test_batch_on_a_local_cluster_equals_the_serial_batch(inputs: Path, tmp_path
     assert "outside" in parts["V14-002"]["verdict_reason"]
     assert parts["V14-001"]["conductance_mean"] == pytest.approx(5e-9, rel=0.02)
     assert parts["V14-001"]["conductance_std"] > 0
+
+
+def test_local_cluster_workers_run_one_thread_each_and_tasks_are_chunks():
+    client, cluster = start_client(1, "")
+    try:
+        assert list(client.nthreads().values()) == [1]
+        env = client.run(lambda: {k: os.environ.get(k) for k in WORKER_ENV})
+        assert list(env.values()) == [{k: str(v) for k, v in WORKER_ENV.items()}]
+    finally:
+        client.close()
+        cluster.close()
+    items = [(k, f"f{k}") for k in range(1000)]
+    cut = chunks(items, 2)
+    assert [x for c in cut for x in c] == items and max(len(c) for c in cut) == CHUNK_MAX
+    assert len(chunks(items[:5], 2)) == 5  # a few inputs: one task each
 
 
 def test_rerun_skips_what_is_done_and_force_replaces(inputs: Path, tmp_path: Path):

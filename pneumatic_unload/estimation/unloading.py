@@ -131,7 +131,17 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     back = i - trig + 4 * CONFIRM
     lo = max(st.arm_index, trig - back - HINGE_PLATEAU)
     t_lo = float(tv[max(st.arm_index, trig - back)])
-    t0, p10, slope, _curv, rms = hinge_fit(tv[lo:n], pv[lo:n], t_lo, float(tv[trig]))
+    t_hi = float(tv[trig])
+    t0, p10, slope, _curv, rms = hinge_fit(tv[lo:n], pv[lo:n], t_lo, t_hi)
+    if trig < i and (t_hi - t0 < 0.01 * (t_hi - float(tv[trig - 1])) or not slope > 0.0):
+        # the start pinned at the trigger (within 1 % of a sample) or no fall found before
+        # it: the trigger came before the opening (a noise dip confirmed against a plateau
+        # of a few samples, whose level and noise are then off). The start is searched up
+        # to the sample 10 % down, and taken from there only when it lies after the
+        # trigger and fits better.
+        alt = hinge_fit(tv[lo:n], pv[lo:n], t_lo, float(tv[i]))
+        if alt[0] > t_hi and alt[4] < rms:
+            t0, p10, slope, _curv, rms = alt
     pre = pv[lo:int(np.searchsorted(tv, t0))]
     sig_pre = rms_sigma(pre) if pre.size > 3 else rms
     if pre.size >= 8:

@@ -1,13 +1,16 @@
 """Batch analysis of many inputs on Dask, results kept in the results database.
 
-:func:`run_batch` hashes each input, skips those already in the database with the same
-content and options (unless ``force``), analyses the rest with
-:func:`~.job.analyze_file` - in this process, on a local cluster of worker processes
-(``dask.distributed.LocalCluster``, the default with ``workers`` > 1) or on a running
-``dask.distributed`` scheduler (``scheduler`` address) - and writes each input's rows in
-one transaction as it completes. The result lists the inputs in the order given, whatever
-the number of workers or the order of completion: the numbers of an input do not depend on
-where it ran. Ctrl-C (KeyboardInterrupt) stops the batch and keeps what was written.
+:func:`run_batch` reads the content hashes the database holds for these options (one
+query), then runs :func:`~.job.analyze_chunk` on consecutive chunks of the inputs - in this
+process, on a local cluster of worker processes (``dask.distributed.LocalCluster``, the
+default with ``workers`` > 1; one thread each, BLAS pools of one thread) or on a running
+``dask.distributed`` scheduler (``scheduler`` address): each input is hashed where it is
+read, skipped when analysed before (unless ``force``), analysed otherwise. The done inputs
+are written in the order given, many per transaction (each input whole: a batch killed at
+any instant leaves whole inputs, and a rerun skips them), at least every
+:data:`FLUSH_SECONDS`. The result lists the inputs in the order given, whatever the number
+of workers or the order of completion: the numbers of an input do not depend on where it
+ran. Ctrl-C (KeyboardInterrupt) stops the batch and writes what was done.
 
 :func:`part_summary` gives one row per part: the mean recommended C, the repeatability
 standard deviation of its unloads and their number, and the verdict against the
@@ -19,13 +22,14 @@ from __future__ import annotations
 import math
 import statistics
 import sys
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from pneumatic_unload.testline.db import FileRecord, has_file, open_db, write_file
-from pneumatic_unload.testline.job import InputOptions, analyze_file, content_hash, options_hash
+from pneumatic_unload.testline.db import FileRecord, known_contents, open_db, write_files
+from pneumatic_unload.testline.job import InputOptions, analyze_chunk, options_hash
 
 #: Suffixes of the inputs a batch picks up in a folder (plus bag folders).
 INPUT_SUFFIXES = (".mcap", ".csv", ".txt")
@@ -49,12 +53,19 @@ class BatchResult:
         The batch was stopped (Ctrl-C); what was written stays.
     workers : int
         Worker processes used (0: this process).
+    cluster_seconds : float
+        Time spent starting and closing the local cluster (or connecting to the
+        scheduler) [s]; 0 in this process.
+    worker_peak_rss : dict
+        Peak resident memory of each worker process at the end of the batch [MiB].
     """
 
     records: list[FileRecord] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
     interrupted: bool = False
     workers: int = 0
+    cluster_seconds: float = 0.0
+    worker_peak_rss: dict[str, float] = field(default_factory=dict)
 
 
 def is_bag_dir(p: Path) -> bool:
@@ -85,9 +96,9 @@ def discover(paths: Sequence[str | Path], pattern: str = "") -> list[str]:
             continue
         found: list[Path] = []
         cands = sorted(p.glob(pattern) if pattern else p.rglob("*"))
-        bags = [c for c in cands if is_bag_dir(c)]
+        bags = {c for c in cands if c.is_dir() and is_bag_dir(c)}
         for c in cands:
-            if any(b in c.parents for b in bags):
+            if any(b in bags for b in c.parents):  # a set: linear in the inputs
                 continue  # a bag folder's own files
             if c in bags or (c.is_file() and c.suffix.lower() in INPUT_SUFFIXES):
                 found.append(c)
@@ -95,17 +106,103 @@ def discover(paths: Sequence[str | Path], pattern: str = "") -> list[str]:
     return list(dict.fromkeys(out))
 
 
-def _client(workers: int, scheduler: str) -> tuple[Any, Any]:
-    from distributed import Client, LocalCluster  # local: distributed costs ~1 s to import
+#: Environment of a local cluster's worker processes, set before they start (numpy's
+#: BLAS and OpenMP pools: one thread per worker, which runs one task at a time).
+WORKER_ENV = {"OMP_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1, "MKL_NUM_THREADS": 1}
+#: Most done inputs written in one database transaction [-] (one commit, one disk sync).
+FLUSH_FILES = 64
+#: Longest a done input waits to be written [s].
+FLUSH_SECONDS = 1.0
+#: Tasks per worker a batch is cut into, at least [-]: the inputs of a task run one after
+#: the other on one worker (fewer scheduler round trips), the last ones still balance.
+TASKS_PER_WORKER = 8
+#: Most inputs per task [-].
+CHUNK_MAX = 16
+
+
+def peak_rss_mib() -> float:
+    """Peak resident memory of this process [MiB] (Linux: ru_maxrss in KiB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def start_client(workers: int, scheduler: str) -> tuple[Any, Any]:
+    """A Dask client of the scheduler at ``scheduler``, or of a new local cluster of
+    ``workers`` processes (one thread each, :data:`WORKER_ENV`); returns (client, cluster
+    or None).
+
+    Raises
+    ------
+    BatchError
+        No scheduler at that address.
+    """
+    import dask  # local: distributed costs ~1 s to import
+    from distributed import Client, LocalCluster
 
     if scheduler:
         try:
             return Client(scheduler, timeout=30), None
         except OSError as exc:
             raise BatchError(f"no Dask scheduler at {scheduler}: {exc}") from exc
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=40)
+    env = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_ENV}
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=40)
     return Client(cluster), cluster
+
+
+def chunks(items: Sequence[tuple[int, str]], workers: int
+           ) -> list[Sequence[tuple[int, str]]]:
+    """The inputs cut into consecutive tasks: at least :data:`TASKS_PER_WORKER` per worker
+    (when there are enough inputs), at most :data:`CHUNK_MAX` inputs each."""
+    size = max(1, min(CHUNK_MAX, len(items) // max(1, workers * TASKS_PER_WORKER)))
+    return [items[j:j + size] for j in range(0, len(items), size)]
+
+
+class _Writer:
+    """Done inputs written to the database in the order given, many per transaction: the
+    first at once, then when :data:`FLUSH_FILES` are ready in order or
+    :data:`FLUSH_SECONDS` have passed; the rest (in the order given) by :meth:`flush` with
+    ``everything`` (the end, or Ctrl-C)."""
+
+    def __init__(self, con: Any, n: int, replace: bool,
+                 on_done: Callable[[FileRecord], None] | None) -> None:
+        self.con, self.n, self.replace, self.on_done = con, n, replace, on_done
+        self.ready: dict[int, FileRecord | None] = {}  # None: skipped
+        self.pos = 0  # inputs before it are written (or skipped)
+        self.written: dict[int, FileRecord] = {}
+        self.skipped: set[int] = set()
+        self.last = -math.inf  # the first input done is written at once
+
+    def add(self, k: int, rec: FileRecord | None) -> None:
+        self.ready[k] = rec
+        if rec is None:
+            self.skipped.add(k)
+        elif self.on_done is not None:
+            self.on_done(rec)
+        in_order = 0
+        while self.pos + in_order < self.n and self.pos + in_order in self.ready:
+            in_order += 1
+        if in_order >= FLUSH_FILES or time.monotonic() - self.last >= FLUSH_SECONDS:
+            self.flush()
+
+    def flush(self, everything: bool = False) -> None:
+        ks: list[int] = []
+        pos = self.pos
+        while pos < self.n and pos in self.ready:
+            ks.append(pos)
+            pos += 1
+        if everything:
+            ks += sorted(k for k in self.ready if k >= pos)
+        recs = [r for k in ks if (r := self.ready[k]) is not None]
+        write_files(self.con, recs, replace=self.replace)  # state kept if interrupted
+        for k in ks:
+            rec = self.ready.pop(k)
+            if rec is not None:
+                self.written[k] = rec
+        self.pos = pos
+        self.last = time.monotonic()
 
 
 def run_batch(paths: Sequence[str], options: InputOptions, *, db_path: str | Path,
@@ -128,7 +225,8 @@ def run_batch(paths: Sequence[str], options: InputOptions, *, db_path: str | Pat
     force : bool
         Analyse and replace inputs already in the database.
     on_done : callable, optional
-        Called with each input's record as it is written (a progress bar).
+        Called with each analysed input's record as it completes (a progress bar); it is
+        written within :data:`FLUSH_SECONDS`.
 
     Raises
     ------
@@ -138,63 +236,64 @@ def run_batch(paths: Sequence[str], options: InputOptions, *, db_path: str | Pat
     if not paths:
         raise BatchError("no inputs to analyse")
     con = open_db(db_path)
-    ohash = options_hash(options)
-    todo: list[tuple[int, str, str | None]] = []
+    known = known_contents(con, options_hash(options)) if not force else frozenset()
+    items = list(enumerate(paths))
+    out = _Writer(con, len(items), force, on_done)
     res = BatchResult()
-    for k, path in enumerate(paths):
-        try:
-            chash: str | None = content_hash(path)
-        except OSError:
-            chash = None  # the job reports it as an unreadable input
-        if chash is not None and not force and has_file(con, chash, ohash):
-            res.skipped.append(path)
-            continue
-        todo.append((k, path, chash))
-    done: dict[int, FileRecord] = {}
-
-    def keep(k: int, rec: FileRecord) -> None:
-        write_file(con, rec, replace=force)
-        done[k] = rec
-        if on_done is not None:
-            on_done(rec)
-
     try:
-        if (workers <= 1 and not scheduler) or not todo:
-            for k, path, chash in todo:
-                keep(k, analyze_file(path, options, chash))
-        else:
-            from distributed import as_completed
-
-            client, cluster = _client(workers, scheduler)
-            res.workers = len(client.scheduler_info().get("workers", {}))
-            try:
-                futs = {client.submit(analyze_file, path, options, chash, pure=False,
-                                      key=f"analyze-{k}-{ohash[:8]}-{chash or k}"): k
-                        for k, path, chash in todo}
-                for fut in as_completed(futs):
-                    k = futs[fut]
-                    try:
-                        rec = fut.result()
-                    except Exception as exc:  # a worker died: the input's row says so
-                        rec = FileRecord(path=todo_path(todo, k), content_hash=f"failed:{k}",
-                                         settings_hash=ohash, part_id="", status="error",
-                                         reason=f"worker failed: {type(exc).__name__}: {exc}")
-                    keep(k, rec)
-            finally:
-                client.close()
-                if cluster is not None:
-                    cluster.close()
+        try:
+            if workers <= 1 and not scheduler:
+                for k, path in items:
+                    for j, rec in analyze_chunk([(k, path)], options, known, force):
+                        out.add(j, rec)
+            else:
+                _on_dask(items, options, known, force, workers, scheduler, out.add, res)
+        finally:
+            out.flush(everything=True)
     except KeyboardInterrupt:
         res.interrupted = True
     finally:
         con.close()
-    res.records = [done[k] for k in sorted(done)]
+    res.records = [out.written[k] for k in sorted(out.written)]
+    res.skipped = [paths[k] for k in sorted(out.skipped)]
     return res
 
 
-def todo_path(todo: list[tuple[int, str, str | None]], k: int) -> str:
-    """The path of job k of a batch's list."""
-    return next(p for j, p, _h in todo if j == k)
+def _on_dask(items: list[tuple[int, str]], options: InputOptions, known: frozenset[str],
+             force: bool, workers: int, scheduler: str,
+             add: Callable[[int, FileRecord | None], None], res: BatchResult) -> None:
+    """Run the batch's chunks on Dask, passing each input's outcome to ``add`` as its
+    chunk completes; sets the workers, the cluster's time and the workers' memory in
+    ``res``."""
+    from distributed import as_completed
+
+    t0 = time.perf_counter()
+    client, cluster = start_client(workers, scheduler)
+    res.cluster_seconds = time.perf_counter() - t0
+    try:
+        n_workers = res.workers = len(client.scheduler_info().get("workers", {}))
+        # the hashes of the inputs done are sent once to every worker, not with each task
+        known_arg: Any = client.scatter([known], broadcast=True)[0] if known else known
+        futs = {client.submit(analyze_chunk, chunk, options, known_arg, force, pure=False):
+                chunk for chunk in chunks(items, n_workers or workers)}
+        for fut in as_completed(futs):
+            try:
+                done = fut.result()
+            except Exception as exc:  # a worker died: each input's row says so
+                ohash = options_hash(options)
+                done = [(k, FileRecord(
+                    path=path, content_hash=f"failed:{k}", settings_hash=ohash, part_id="",
+                    status="error", reason=f"worker failed: {type(exc).__name__}: {exc}"))
+                    for k, path in futs[fut]]
+            for k, rec in done:
+                add(k, rec)
+        res.worker_peak_rss = client.run(peak_rss_mib)
+    finally:
+        t1 = time.perf_counter()
+        client.close()
+        if cluster is not None:
+            cluster.close()
+        res.cluster_seconds += time.perf_counter() - t1
 
 
 PART_COLUMNS = ("part_id", "part_type", "n", "conductance_mean", "conductance_std",

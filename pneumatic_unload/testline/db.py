@@ -4,8 +4,9 @@ Every analysed input is a row of ``files`` (path, content hash, settings hash, p
 type, status and reason, the settings, the package version, when, written by whom) and
 every unload a row of ``unloads`` (its estimates with their budgets, status and reason,
 the verdict against the part's specification). A file's rows are written in one
-transaction: a batch killed at any instant leaves whole files or nothing, and a rerun skips
-the files already there (same content and settings) without duplicates.
+transaction (a batch writes many files in one, :func:`write_files`): a batch killed at any
+instant leaves whole files or nothing, and a rerun skips the files already there (same
+content and settings) without duplicates.
 
 Several writers at once (two estimator nodes, a batch) lose nothing: the database runs in
 WAL mode, each write takes the write lock up front (``BEGIN IMMEDIATE``) and waits for it
@@ -211,6 +212,14 @@ def has_file(con: sqlite3.Connection, content_hash: str, settings_hash: str) -> 
     return row is not None
 
 
+def known_contents(con: sqlite3.Connection, settings_hash: str) -> frozenset[str]:
+    """Content hashes of the inputs analysed with these settings (one query: what a batch
+    skips, decided where each input is hashed)."""
+    rows = con.execute("SELECT content_hash FROM files WHERE settings_hash = ?",
+                       (settings_hash,)).fetchall()
+    return frozenset(r[0] for r in rows)
+
+
 def _num(x: Any) -> Any:
     if isinstance(x, bool):
         return int(x)
@@ -219,8 +228,67 @@ def _num(x: Any) -> Any:
     return x
 
 
+def _insert(c: sqlite3.Connection, rec: FileRecord, now: str, replace: bool) -> bool:
+    """One input and its unloads, inside the caller's transaction (see :func:`write_files`)."""
+    old = c.execute("SELECT id FROM files WHERE content_hash = ? AND settings_hash = ?",
+                    (rec.content_hash, rec.settings_hash)).fetchone()
+    if old is not None:
+        if not replace:
+            return False
+        c.execute("DELETE FROM unloads WHERE file_id = ?", (old[0],))
+        c.execute("DELETE FROM files WHERE id = ?", (old[0],))
+    cur = c.execute(
+        "INSERT INTO files (path, content_hash, settings_hash, part_id, part_type, "
+        "status, reason, n_unloads, settings_json, package_version, analysed_at, "
+        "writer) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+        (rec.path, rec.content_hash, rec.settings_hash, rec.part_id, rec.part_type,
+         rec.status, rec.reason, len(rec.unloads),
+         json.dumps(rec.settings, sort_keys=True, default=str), rec.package_version,
+         now, rec.writer))
+    fid = cur.lastrowid
+    names = [n for n, _t in UNLOAD_COLUMNS]
+    sql = (f"INSERT INTO unloads (file_id, unload_index, part_id, {', '.join(names)}, "
+           "verdict, verdict_reason, budget_json, curve_json, result_json) VALUES "
+           f"({', '.join('?' * (len(names) + 8))})")
+    c.executemany(sql, [
+        (fid, k, rec.part_id, *[_num(u.get(n)) for n in names],
+         u.get("verdict"), u.get("verdict_reason"),
+         json.dumps(u.get("budget")) if u.get("budget") else None,
+         json.dumps(u["curve"]) if u.get("curve") else None,
+         json.dumps({key: v for key, v in u.items() if key != "curve"}, sort_keys=True))
+        for k, u in enumerate(rec.unloads)])
+    return True
+
+
+def write_files(con: sqlite3.Connection, recs: Sequence[FileRecord], *,
+                replace: bool = False) -> list[bool]:
+    """Write inputs with their unloads, in the order given, in one transaction: each input
+    whole or not at all, and one commit (one sync to disk) for many inputs.
+
+    Returns
+    -------
+    list of bool
+        Per input: True when written; False when the same content and settings are
+        already there and ``replace`` is False (nothing changed).
+
+    Raises
+    ------
+    ResultsDBError
+        The database cannot be written (busy beyond :data:`BUSY_TIMEOUT`, disk full, ...).
+    """
+    if not recs:
+        return []
+    now = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    try:
+        return list(_write(con, lambda c: [_insert(c, r, now, replace) for r in recs]))
+    except sqlite3.DatabaseError as exc:
+        raise ResultsDBError(f"results database: writing {recs[0].path}"
+                             + (f" and {len(recs) - 1} more" if len(recs) > 1 else "")
+                             + f": {exc}") from exc
+
+
 def write_file(con: sqlite3.Connection, rec: FileRecord, *, replace: bool = False) -> bool:
-    """Write one input with its unloads in one transaction.
+    """Write one input with its unloads in one transaction (see :func:`write_files`).
 
     Returns
     -------
@@ -228,42 +296,7 @@ def write_file(con: sqlite3.Connection, rec: FileRecord, *, replace: bool = Fals
         True when written; False when the same content and settings are already there
         and ``replace`` is False (nothing changed).
     """
-    now = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
-
-    def body(c: sqlite3.Connection) -> bool:
-        old = c.execute("SELECT id FROM files WHERE content_hash = ? AND settings_hash = ?",
-                        (rec.content_hash, rec.settings_hash)).fetchone()
-        if old is not None:
-            if not replace:
-                return False
-            c.execute("DELETE FROM unloads WHERE file_id = ?", (old[0],))
-            c.execute("DELETE FROM files WHERE id = ?", (old[0],))
-        cur = c.execute(
-            "INSERT INTO files (path, content_hash, settings_hash, part_id, part_type, "
-            "status, reason, n_unloads, settings_json, package_version, analysed_at, "
-            "writer) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (rec.path, rec.content_hash, rec.settings_hash, rec.part_id, rec.part_type,
-             rec.status, rec.reason, len(rec.unloads),
-             json.dumps(rec.settings, sort_keys=True, default=str), rec.package_version,
-             now, rec.writer))
-        fid = cur.lastrowid
-        names = [n for n, _t in UNLOAD_COLUMNS]
-        sql = (f"INSERT INTO unloads (file_id, unload_index, part_id, {', '.join(names)}, "
-               "verdict, verdict_reason, budget_json, curve_json, result_json) VALUES "
-               f"({', '.join('?' * (len(names) + 8))})")
-        for k, u in enumerate(rec.unloads):
-            result = {key: v for key, v in u.items() if key != "curve"}
-            c.execute(sql, (fid, k, rec.part_id, *[_num(u.get(n)) for n in names],
-                            u.get("verdict"), u.get("verdict_reason"),
-                            json.dumps(u.get("budget")) if u.get("budget") else None,
-                            json.dumps(u["curve"]) if u.get("curve") else None,
-                            json.dumps(result, sort_keys=True)))
-        return True
-
-    try:
-        return bool(_write(con, body))
-    except sqlite3.DatabaseError as exc:
-        raise ResultsDBError(f"results database: writing {rec.path}: {exc}") from exc
+    return write_files(con, [rec], replace=replace)[0]
 
 
 def unload_rows(con: sqlite3.Connection, part_id: str | None = None

@@ -13,6 +13,7 @@ import hashlib
 import json
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -197,3 +198,23 @@ def analyze_file(path: str, options: InputOptions, chash: str | None = None
         status = "no_estimate" if reason else "ok"
     return FileRecord(content_hash=chash, status=status, reason=reason, unloads=unloads,
                       settings=sj, **base)
+
+
+def analyze_chunk(items: Sequence[tuple[int, str]], options: InputOptions,
+                  known: frozenset[str] = frozenset(), force: bool = False
+                  ) -> list[tuple[int, FileRecord | None]]:
+    """A batch's job on some inputs (k, path): each hashed where it is read (on the worker,
+    not on the batch's client) and analysed with :func:`analyze_file`, unless its content
+    hash is in ``known`` (analysed before with these options) and not ``force``: then
+    (k, None). Never raises for a bad input (see :func:`analyze_file`)."""
+    out: list[tuple[int, FileRecord | None]] = []
+    for k, path in items:
+        try:
+            chash: str | None = content_hash(path)
+        except OSError:
+            chash = None  # analyze_file reports it as an unreadable input
+        if chash is not None and chash in known and not force:
+            out.append((k, None))
+        else:
+            out.append((k, analyze_file(path, options, chash)))
+    return out
