@@ -9,17 +9,14 @@ SI units: s, Pa absolute, K.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.curve_fit_result import CurveFit
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.heat import RA_TURBULENT, rayleigh
-
-if TYPE_CHECKING:
-    from pneumatic_unload.fitting import CurveFit
 
 FloatArray = NDArray[np.float64]
 

@@ -138,7 +138,7 @@ class EstimatorNode(Node):
         gc.collect()
         gc.freeze()
         # live: a node (re)started mid-unload skips that unload (no bogus estimate)
-        self._est = StreamingEstimator(self._settings, live=True, defer_final_fit=True)
+        self._est = self._new_core()
         self._lock = threading.Lock()  # the core (executor thread, parameter changes)
         self._pub_lock = threading.Lock()  # the published results (executor and fit worker)
         #: Final curve fits to run, with the arrival [s, monotonic] of the completing sample.
@@ -313,6 +313,11 @@ class EstimatorNode(Node):
                 self._diagnose(level, dg.message)
             self._n_diag = est.diagnostics.total
 
+    def _new_core(self) -> StreamingEstimator:
+        """A streaming estimator with the node's settings: live (a stream joined mid-unload
+        skips that unload), its final fits handed to the worker."""
+        return StreamingEstimator(self._settings, live=True, defer_final_fit=True)
+
     def _restart_core(self, exc: Exception) -> None:
         """An internal error of the core: say so and go on with a fresh estimator, which
         skips the unload under way (live) and analyses the next ones."""
@@ -320,7 +325,7 @@ class EstimatorNode(Node):
                                f"skipped): {type(exc).__name__}: {exc}")
         self._state, self._why = "error", f"internal error: {exc}"
         with self._lock:
-            self._est = StreamingEstimator(self._settings, live=True, defer_final_fit=True)
+            self._est = self._new_core()
             self._n_diag = 0
 
     def _work(self) -> None:
