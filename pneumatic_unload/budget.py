@@ -171,6 +171,46 @@ class Budget:
         return out
 
 
+@dataclass(frozen=True)
+class ScaledBudget:
+    """A budget prepared before its C is known, for a C that differs only in scale.
+
+    At fixed pressures (p10, p_atm, p*) every type B and model-limits line of a crossing's
+    budget is proportional to C: the sensitivities come from eq 39 and the isentropic
+    inversion, both exactly C = f(p10, p_atm, p*, V, T10) / tau, so that a relative
+    sensitivity does not depend on tau. The live estimator computes the budget once, half
+    way to p* (:func:`input_terms` at a reference C), and scales it at the crossing: a few
+    microseconds instead of the formulae's hundred (issue #10's crossing latency).
+
+    Attributes
+    ----------
+    ref : Budget
+        The budget computed at the reference C (``ref.value``) [m^3/(s Pa)].
+    free : tuple of str
+        Names of the lines that are not proportional to C, given at :meth:`at` (the type A
+        line, the wall temperature's line).
+    """
+
+    ref: Budget
+    free: tuple[str, ...]
+
+    def at(self, c: float, given: dict[str, BudgetTerm | None]) -> Budget:
+        """The budget of ``c`` [m^3/(s Pa)]: the proportional lines scaled from the reference,
+        the free ones as ``given`` (None or absent: the line is left out)."""
+        k = abs(c) / abs(self.ref.value)
+        free = self.free
+        terms = []
+        for t in self.ref.terms:
+            if t.name in free:
+                g = given.get(t.name)
+                if g is not None:
+                    terms.append(g)
+            else:
+                terms.append(BudgetTerm(t.name, t.kind, t.value, t.input_std, t.unit,
+                                        t.std * k, t.note))
+        return Budget(c, tuple(terms))
+
+
 def with_terms(d: dict[str, Any], terms: list[BudgetTerm]) -> dict[str, Any]:
     """A budget given as :meth:`Budget.to_dict` with further lines (e.g. one known only
     after the fit that produced it), its combined values recomputed."""
@@ -346,6 +386,19 @@ def wall_sensitivity(settings: EstimatorSettings, tau: float, *, p10: float, p_a
     return abs(out[0] - out[1]) / 2.0
 
 
+def record_term(name: str, std: float) -> BudgetTerm:
+    """The type A line of a model-based C: its standard uncertainty from the record
+    ``std`` [m^3/(s Pa)] (``name``: how it was obtained)."""
+    return BudgetTerm(name, "A", math.nan, math.nan, "", std)
+
+
+def tau_term(c: float, tau: float, tau_std: float) -> BudgetTerm:
+    """The type A line of eq 39's C [m^3/(s Pa)]: the unloading time tau [s] and its
+    1-sigma from the record [s] (C is proportional to 1/tau)."""
+    return BudgetTerm("unloading time (noise)", "A", tau, tau_std, "s",
+                      abs(c) * tau_std / tau if tau > 0 else math.nan)
+
+
 def model_budget(settings: EstimatorSettings, c: float, *, type_a_std: float,
                  type_a_name: str, model_form_std: float, tau: float, p10: float,
                  p_atm: float, p_star: float, atmosphere_measured: bool,
@@ -370,7 +423,7 @@ def model_budget(settings: EstimatorSettings, c: float, *, type_a_std: float,
     extra_terms : tuple of BudgetTerm
         Further type B lines (e.g. a given initial pressure's, a fitted wall's).
     """
-    terms = [BudgetTerm(type_a_name, "A", math.nan, math.nan, "", type_a_std)]
+    terms = [record_term(type_a_name, type_a_std)]
     terms += input_terms(settings, c, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
                          atmosphere_measured=atmosphere_measured, wall_std=wall_std,
                          wall_input=wall_input)
@@ -400,8 +453,7 @@ def eq39_budget(settings: EstimatorSettings, c: float, *, tau: float, tau_std: f
     p10, p_atm, p_star, atmosphere_measured
         See :func:`input_terms`.
     """
-    terms = [BudgetTerm("unloading time (noise)", "A", tau, tau_std, "s",
-                        abs(c) * tau_std / tau if tau > 0 else math.nan)]
+    terms = [tau_term(c, tau, tau_std)]
     terms += input_terms(settings, c, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
                          atmosphere_measured=atmosphere_measured, eq39=True)
     return Budget(c, tuple(terms))

@@ -9,6 +9,7 @@ s, Pa absolute, K, m^3, m^3/(s Pa).
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import functools
 import math
@@ -276,18 +277,29 @@ class InversionTable:
     rel_b: float
     rel_wall: float = math.nan
 
+    def __post_init__(self) -> None:
+        # the grid as Python floats: the lookup runs inside the live crossing's latency,
+        # where numpy's per-call cost on 7 points exceeds the arithmetic
+        object.__setattr__(self, "_ys", [float(v) for v in self.log_t])
+        object.__setattr__(self, "_neg", [-float(v) for v in self.log_t])  # ascending
+        object.__setattr__(self, "_xs", [float(v) for v in self.log_c])
+        ends = self.log_c[[0, self.log_c.size // 2, -1]] if self.log_c.size else ()
+        object.__setattr__(self, "_heat", ([float(v) for v in ends],
+                                           [float(v) for v in self.rel_heat]))
+
     def covers(self, tau: float) -> bool:
         """True when tau [s] lies inside the tabulated range."""
         return bool(math.isfinite(tau) and tau > 0
-                    and self.log_t[-1] <= math.log(tau) <= self.log_t[0])
+                    and self._ys[-1] <= math.log(tau) <= self._ys[0])
 
     def _interpolate(self, tau: float) -> tuple[float, float]:
         """log C and d log C / d log t at the crossing time tau [s] (Lagrange cubic)."""
         y = math.log(tau)
-        k = int(np.searchsorted(-self.log_t, -y))
-        j = min(max(k - 2, 0), self.log_t.size - 4)
-        ys = self.log_t[j:j + 4].tolist()
-        xs = self.log_c[j:j + 4].tolist()
+        ys_all: list[float] = self._ys  # type: ignore[attr-defined]
+        k = bisect.bisect_left(self._neg, -y)  # type: ignore[attr-defined]
+        j = min(max(k - 2, 0), len(ys_all) - 4)
+        ys = ys_all[j:j + 4]
+        xs = self._xs[j:j + 4]  # type: ignore[attr-defined]
         x, dxdy = 0.0, 0.0
         for a in range(4):  # Lagrange cubic x(y) and its derivative
             others = [ys[b] for b in range(4) if b != a]
@@ -297,23 +309,28 @@ class InversionTable:
             dxdy += xs[a] * (d1 * d2 + d0 * d2 + d0 * d1) / den
         return x, dxdy
 
-    def invert(self, tau: float, tau_std: float) -> tuple[float, float]:
-        """C and its 1-sigma [m^3/(s Pa)] for a measured tau_exp and its 1-sigma [s]."""
+    def lookup(self, tau: float, tau_std: float) -> tuple[float, float, float]:
+        """C, its 1-sigma and its standard uncertainty from the wall temperature (NaN when
+        adiabatic) [m^3/(s Pa)] for a measured tau_exp and its 1-sigma [s]: one
+        interpolation for the three (see :meth:`invert` and :meth:`wall_std`)."""
         x, dxdy = self._interpolate(tau)
         c = math.exp(x)
-        ends = self.log_c[[0, self.log_c.size // 2, -1]]
-        rel_heat = float(np.interp(x, ends, self.rel_heat))
+        ends, heat = self._heat  # type: ignore[attr-defined]
+        rel_heat = float(np.interp(x, ends, heat))
         var = (c * dxdy * tau_std / tau) ** 2 + (c * self.rel_b) ** 2 + (c * rel_heat) ** 2
-        return c, math.sqrt(var)
+        wall = c * abs(dxdy) * self.rel_wall if math.isfinite(self.rel_wall) else math.nan
+        return c, math.sqrt(var), wall
+
+    def invert(self, tau: float, tau_std: float) -> tuple[float, float]:
+        """C and its 1-sigma [m^3/(s Pa)] for a measured tau_exp and its 1-sigma [s]."""
+        c, std, _wall = self.lookup(tau, tau_std)
+        return c, std
 
     def wall_std(self, tau: float) -> float:
         """C's standard uncertainty from the wall temperature [m^3/(s Pa)] at the crossing
         time tau [s]: the crossing time's relative change (:attr:`rel_wall`) through the
         slope of log C in log t; NaN when adiabatic."""
-        if not math.isfinite(self.rel_wall):
-            return math.nan
-        x, dxdy = self._interpolate(tau)
-        return math.exp(x) * abs(dxdy) * self.rel_wall
+        return self.lookup(tau, 0.0)[2]
 
 
 def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_star: float,

@@ -18,7 +18,6 @@ import numpy as np
 from pneumatic_unload import physics
 from pneumatic_unload.budget import (
     WALL_TERM,
-    eq39_budget,
     fitted_wall_term,
     model_budget,
     term_std,
@@ -66,51 +65,6 @@ def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> boo
 
     return settings.heat_model != "adiabatic" or may_turn_subsonic(settings, p_atm, p_star)
 
-
-
-def crossing_budgets(settings: EstimatorSettings, *, c39: float, c_model: float,
-                     c_model_std: float, tau: float, tau_std: float, p10: float,
-                     p_atm: float, p_star: float, wall_std: float = math.nan
-                     ) -> tuple[float, float, dict[str, Any]]:
-    """Uncertainty budgets of the crossing estimate (closed-form sensitivities: a few
-    microseconds, inside the live crossing latency).
-
-    Parameters
-    ----------
-    settings : EstimatorSettings
-        Inputs and their stated uncertainties.
-    c39, c_model, c_model_std : float
-        eq 39's C, the model-based C and its record-only 1-sigma [m^3/(s Pa)].
-    tau, tau_std : float
-        Unloading time and its 1-sigma [s].
-    p10, p_atm, p_star : float
-        Pressures [Pa absolute].
-    wall_std : float
-        The model C's standard uncertainty from the wall temperature (see
-        :func:`crossing_wall_std`) [m^3/(s Pa)]; NaN: no such term (no heat law).
-
-    Returns
-    -------
-    tuple
-        (eq 39's combined 1-sigma, the model C's combined 1-sigma [m^3/(s Pa)], the
-        ``extra`` entries 'budget' and 'budget_eq39').
-    """
-    measured = settings.atmosphere is None
-    extra: dict[str, Any] = {}
-    c39_std = math.nan
-    if math.isfinite(c39) and c39 > 0 and math.isfinite(tau_std):
-        b39 = eq39_budget(settings, c39, tau=tau, tau_std=tau_std, p10=p10, p_atm=p_atm,
-                          p_star=p_star, atmosphere_measured=measured)
-        c39_std = b39.combined_std
-        extra["budget_eq39"] = b39.to_dict()
-    if math.isfinite(c_model) and c_model > 0 and math.isfinite(c_model_std):
-        bm = model_budget(settings, c_model, type_a_std=c_model_std,
-                          type_a_name="crossing time (noise), b prior, heat correlation",
-                          model_form_std=0.0, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
-                          atmosphere_measured=measured, wall_std=wall_std)
-        c_model_std = bm.combined_std
-        extra["budget"] = bm.to_dict()
-    return c39_std, c_model_std, extra
 
 
 def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
@@ -238,19 +192,40 @@ def model_inversion(settings: EstimatorSettings, tau: float, tau_std: float, p10
     tuple
         (C [m^3/(s Pa)], its 1-sigma [m^3/(s Pa)], method name).
     """
+    c, std, method, _wall = crossing_inversion(settings, tau, tau_std, p10, p_atm, p_star,
+                                               c_isen, table=table, wall=False)
+    return c, std, method
 
+
+def crossing_inversion(settings: EstimatorSettings, tau: float, tau_std: float, p10: float,
+                       p_atm: float, p_star: float, c_isen: float, table: Any = None,
+                       wall: bool = True) -> tuple[float, float, str, float]:
+    """:func:`model_inversion` and, with ``wall``, C's standard uncertainty from the wall
+    temperature (:func:`crossing_wall_std`; NaN without a heat law) [m^3/(s Pa)]: one
+    table lookup for both when the table covers tau [s].
+
+    Returns
+    -------
+    tuple
+        (C, its 1-sigma, method name, the wall's standard uncertainty) [m^3/(s Pa)].
+    """
     if settings.heat_model == "adiabatic" and not may_turn_subsonic(settings, p_atm, p_star):
         # choked up to p*: the isentropic closed form is the adiabatic model's exact inverse
         c = c_isen
         std = c * tau_std / tau
-        return c, std, "eq39+isentropic-inversion"
-    if table is not None and table.covers(tau):
-        c, std = table.invert(tau, tau_std)
-    else:
-        c, std = invert_crossing(tau, tau_std, p10=p10, p_atm=p_atm, p_star=p_star,
-                                 settings=settings, c_start=c_isen)
+        return c, std, "eq39+isentropic-inversion", math.nan
     law = "natural-convection" if settings.heat_model == "natural" else "adiabatic"
-    return c, std, f"eq39+model-inversion({law})"
+    method = f"eq39+model-inversion({law})"
+    if table is not None and table.covers(tau):
+        c, std, wall_std = table.lookup(tau, tau_std)
+        if not (wall and settings.heat_model == "natural" and math.isfinite(c) and c > 0):
+            wall_std = math.nan
+        return c, std, method, wall_std
+    c, std = invert_crossing(tau, tau_std, p10=p10, p_atm=p_atm, p_star=p_star,
+                             settings=settings, c_start=c_isen)
+    wall_std = crossing_wall_std(settings, None, tau, p10=p10, p_atm=p_atm, p_star=p_star,
+                                 c=c) if wall else math.nan
+    return c, std, method, wall_std
 
 
 def final_curve_fit(res: UnloadResult, t: FloatArray | None, p: FloatArray | None,

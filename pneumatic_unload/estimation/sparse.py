@@ -35,12 +35,8 @@ from numpy.typing import ArrayLike
 from pneumatic_unload import physics
 from pneumatic_unload.budget import BudgetTerm, with_terms
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.estimation.refine import (
-    crossing_budgets,
-    crossing_wall_std,
-    model_inversion,
-    refine_with_curve_fit,
-)
+from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
+from pneumatic_unload.estimation.refine import refine_with_curve_fit
 from pneumatic_unload.estimation.types import UnloadResult
 
 #: Fewest samples from the opening on [-].
@@ -182,23 +178,16 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings
 def _crossing(s: EstimatorSettings, *, tau: float, tau_std: float, p10: float,
               p_atm: float, p_star: float, t_open: float, t_cross: float, n: int, k: int,
               interp_err: float) -> UnloadResult:
-    gas = s.gas
-    c39 = physics.conductance_eq39(tau, p10, p_atm, s.volume, s.initial_temperature, gas)
-    c_isen = physics.conductance_isentropic_inversion(tau, p_star, p10, s.volume,
-                                                      s.initial_temperature, gas)
-    c_model, c_model_std, method = model_inversion(s, tau, tau_std, p10, p_atm, p_star,
-                                                   c_isen)
-    wall_std = crossing_wall_std(s, None, tau, p10=p10, p_atm=p_atm, p_star=p_star,
-                                 c=c_model)
-    c39_std, c_model_std, budgets = crossing_budgets(
-        s, c39=c39, c_model=c_model, c_model_std=c_model_std, tau=tau, tau_std=tau_std,
-        p10=p10, p_atm=p_atm, p_star=p_star, wall_std=wall_std)
+    plan = plan_crossing(s, p10=p10, p_atm=p_atm, p_star=p_star, tau_ref=tau)
+    est = crossing_estimate(plan, tau, tau_std)
+    c39, c_isen, c_model = est.conductance, est.conductance_isentropic, \
+        est.conductance_model
+    c39_std, c_model_std, budgets, method = est.conductance_std, \
+        est.conductance_model_std, est.extra, est.method
     status, text = "ok", (f"start given; p* crossing interpolated log-linearly between "
                           f"samples {k - 1} and {k} (interpolation error {interp_err:.3g} s)")
-    if s.critical_ratio > 0 and p_star < p_atm / s.critical_ratio:
-        status, text = "not_choked", text + (
-            f"; flow subsonic before p* (p* = {p_star:.0f} Pa < p_atm/b = "
-            f"{p_atm / s.critical_ratio:.0f} Pa): eq 39 assumes choked flow")
+    if plan.subsonic is not None:
+        status, text = "not_choked", text + "; " + plan.subsonic
     return UnloadResult(
         index=0, status=status, status_text=text, t_start=t_open, t_cross=t_cross,
         tau_exp=tau, tau_exp_std=tau_std, p10=p10, p_atm=p_atm, p_star=p_star,

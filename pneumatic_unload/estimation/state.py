@@ -71,9 +71,9 @@ class UnloadState:
         Last recovery fit (:func:`pneumatic_unload.recovery.fit_recovery`), or None.
     mid_pending : bool
         The inversion table is still to be built, when the pressure is half way to p*.
-    table : Any
-        The model's crossing times tabulated half way to p*
-        (:class:`pneumatic_unload.fitting.InversionTable`), or None.
+    plan : Any
+        The crossing estimate prepared half way to p* (the model's crossing times
+        tabulated, the budgets scaled to C: :class:`.crossing.CrossingPlan`), or None.
     noisy : bool
         The pre-step plateau had noise (so identical samples later mean a stuck sensor).
     skip_since : int
@@ -109,7 +109,7 @@ class UnloadState:
     rec_span: int = 0
     rec_fit: Any = None
     mid_pending: bool = False
-    table: Any = None
+    plan: Any = None
     noisy: bool = False
     skip_since: int = -1
     skip_rise: float = math.nan

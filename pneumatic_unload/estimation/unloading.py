@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from pneumatic_unload import physics
+from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.decisions import (
     CONFIRM,
     HINGE_PLATEAU,
@@ -20,18 +20,12 @@ from pneumatic_unload.estimation.decisions import (
     first_below,
     flat,
     flat_window,
+    last_above,
     settled_at_end,
     stalled,
 )
 from pneumatic_unload.estimation.reduction import reduce_due, reduce_unload
-from pneumatic_unload.estimation.refine import (
-    crossing_budgets,
-    crossing_wall_std,
-    model_inversion,
-    needs_model,
-    prepare_inversion,
-    pressure_problem,
-)
+from pneumatic_unload.estimation.refine import needs_model
 from pneumatic_unload.estimation.regression import crossing_fit, hinge_fit, rms_sigma
 from pneumatic_unload.estimation.sse import on_abort
 from pneumatic_unload.estimation.state import TAIL, EstimatorState
@@ -179,12 +173,14 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
 
 
 def prepare_crossing(st: EstimatorState, i: int) -> list[UnloadResult]:
-    """Half way to p* (index i): tabulate the model's crossing time, then wait for p*."""
+    """Half way to p* (index i): prepare the crossing estimate (the model's crossing time
+    tabulated, the budgets scaled to C: :mod:`.crossing`), then wait for p*."""
     u = st.unload
     u.mid_pending = False
     t_mid = float(st.buf.t[i]) - u.t0
-    u.table = prepare_inversion(st.settings, t_mid, st.to_pa(float(st.buf.p[i])),
-                                st.to_pa(u.p10), st.to_pa(u.atm), st.to_pa(u.pstar))
+    u.plan = plan_crossing(st.settings, p10=st.to_pa(u.p10), p_atm=st.to_pa(u.atm),
+                           p_star=st.to_pa(u.pstar), t_mid=t_mid,
+                           p_mid=st.to_pa(float(st.buf.p[i])))
     st.level = u.pstar - u.half
     return []
 
@@ -302,8 +298,7 @@ def complete_crossing(st: EstimatorState, i: int, settle_index: int | None = Non
     lvl_hi = u.pstar + u.half
     # last sample above the upper bound before i
     i0 = max(u.i0, 0)  # negative: the unload's first samples were reduced (.reduction)
-    above = np.flatnonzero(pv[i0:n] > lvl_hi)
-    j_lo = i0 + (int(above[-1]) if above.size else 0)
+    j_lo = max(last_above(pv, i0, n, lvl_hi), i0)
     tw, pw = tv[j_lo:n], pv[j_lo:n]
     if tw.size < 5:
         tw, pw = tv[max(u.i0, n - 5):n], pv[max(u.i0, n - 5):n]
@@ -331,58 +326,39 @@ def complete_crossing(st: EstimatorState, i: int, settle_index: int | None = Non
 def crossing_result(st: EstimatorState, i: int, t_cross: float, t_std: float, gap: bool
                     ) -> UnloadResult:
     """Result of an unload from its crossing instant t_cross and its 1-sigma t_std [s]:
-    eq 39, the isentropic inversion and the model inversion; completed at index i."""
+    eq 39, the isentropic inversion and the model inversion with their budgets (prepared
+    half way to p*, :mod:`.crossing`); completed at index i."""
     s, u = st.settings, st.unload
-    gas = s.gas
-    p10 = st.to_pa(u.p10)
-    p_atm = st.to_pa(u.atm)
-    p_star = st.to_pa(u.pstar)
+    plan = u.plan
+    if plan is None:  # p* found late (p_atm from the final plateau): prepared now
+        plan = plan_crossing(s, p10=st.to_pa(u.p10), p_atm=st.to_pa(u.atm),
+                             p_star=st.to_pa(u.pstar), tau_ref=t_cross - u.t0)
+    p10, p_atm, p_star = plan.p10, plan.p_atm, plan.p_star
     tau = t_cross - u.t0
     tau_std = math.hypot(t_std, u.t0_std)
+    est = crossing_estimate(plan, tau, tau_std)
     status, text, quality = "ok", "p* crossing found", 1.0
-    c39 = physics.conductance_eq39(tau, p10, p_atm, s.volume, s.initial_temperature, gas)
-    problem = pressure_problem(p10, p_atm, p_star)
-    if problem is None and not math.isfinite(tau):
-        problem = "no p* crossing time: the samples around p* are flat or degenerate"
-    elif problem is None and not math.isfinite(tau_std):
-        problem = ("tau_exp has no uncertainty (the start fit found no falling slope): the "
-                   "start of the unload is undetermined")
-    elif problem is None and not tau > 0:
-        problem = (f"p* crossed {tau:.6g} s after the start: time runs backwards in the "
-                   f"unload (a clock step or unsorted stamps?)")
-    if problem is not None:
-        # no model of C from such numbers: eq 39 as it is, with the reason
-        st.diag("error", problem, t_cross)
-        status, text, quality = "bad_data", problem, 0.0
-        c_isen, c_model, c_model_std, method = math.nan, math.nan, math.nan, "eq39"
-    else:
-        c_isen = physics.conductance_isentropic_inversion(
-            tau, p_star, p10, s.volume, s.initial_temperature, gas)
-        if s.critical_ratio > 0 and p_star < p_atm / s.critical_ratio:
-            status, text = "not_choked", (
-                f"flow subsonic before p* (p* = {p_star:.0f} Pa < p_atm/b = "
-                f"{p_atm / s.critical_ratio:.0f} Pa): eq 39 assumes choked flow")
-            quality = 0.5
-        c_model, c_model_std, method = model_inversion(s, tau, tau_std, p10, p_atm, p_star,
-                                                       c_isen, table=u.table)
+    if est.problem is not None:
+        st.diag("error", est.problem, t_cross)
+        status, text, quality = "bad_data", est.problem, 0.0
+    elif plan.subsonic is not None:
+        status, text, quality = "not_choked", plan.subsonic, 0.5
     if gap or st.gap_in_unload:
         text += "; gap in the samples during the unload"
         quality = min(quality, 0.5)
-    if problem is None and not tau_std <= 0.01 * tau:
+    if est.problem is None and not tau_std <= 0.01 * tau:
         quality = min(quality, 0.5)
-    wall_std = crossing_wall_std(s, u.table, tau, p10=p10, p_atm=p_atm, p_star=p_star,
-                                 c=c_model) if problem is None else math.nan
-    c39_std, c_model_std, budgets = crossing_budgets(
-        s, c39=c39, c_model=c_model, c_model_std=c_model_std, tau=tau, tau_std=tau_std,
-        p10=p10, p_atm=p_atm, p_star=p_star, wall_std=wall_std)
+    c39, c_model = est.conductance, est.conductance_model
     shift = st.buf.shift
     res = UnloadResult(
         index=st.n_unloads, status=status, status_text=text, t_start=u.t0,
         t_cross=t_cross, tau_exp=tau, tau_exp_std=tau_std, p10=p10, p_atm=p_atm,
-        p_star=p_star, initial_temperature=s.initial_temperature, volume=s.volume,
-        conductance=c39, conductance_model=c_model, conductance_model_std=c_model_std,
-        conductance_std=c39_std, extra=budgets,
-        conductance_isentropic=c_isen, quality=quality, method=method,
+        p_star=p_star, initial_temperature=plan.settings.initial_temperature,
+        volume=plan.settings.volume, conductance=c39, conductance_model=c_model,
+        conductance_model_std=est.conductance_model_std,
+        conductance_std=est.conductance_std, extra=est.extra,
+        conductance_isentropic=est.conductance_isentropic, quality=quality,
+        method=est.method,
         noise_std=abs(st.sigma * s.signal_gain), i_start=u.i0 + shift,
         i_cross=shift + int(np.searchsorted(st.buf.views(i + 1)[0], t_cross)),
         i_complete=i + shift, t_complete=float(st.buf.t[i]))

@@ -1,0 +1,219 @@
+"""The p* crossing's estimate from the crossing time, prepared before the crossing.
+
+Everything of the crossing estimate but the crossing time tau_exp is known once p10, p_atm
+and p* are: the check of the pressures, whether the flow may turn subsonic before p*, the
+model inversion's table t(C) (a few model integrations) and the budgets' lines, which are
+proportional to C at fixed pressures (:class:`~pneumatic_unload.budget.ScaledBudget`).
+:func:`plan_crossing` prepares all of it when the pressure is half way to p*;
+:func:`crossing_estimate` turns (tau_exp, its 1-sigma) into the numbers at the sample that
+completes the crossing: eq 39 and the isentropic inversion (closed forms), a table lookup
+and a few multiplications (issue #10: the crossing published within a millisecond of its
+sample). Where no plan was made in time (p_atm found from the final plateau; a start given
+on a sparse record) the same functions run at the crossing: the same numbers, later.
+
+SI units: s, Pa absolute, m^3/(s Pa), K.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from pneumatic_unload import physics
+from pneumatic_unload.budget import (
+    WALL_TERM,
+    BudgetTerm,
+    ScaledBudget,
+    eq39_budget,
+    model_budget,
+    record_term,
+    tau_term,
+    wall_term,
+)
+from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
+from pneumatic_unload.estimation.refine import (
+    crossing_inversion,
+    prepare_inversion,
+    pressure_problem,
+)
+
+#: The type A line of the crossing's model-based C.
+MODEL_TYPE_A = "crossing time (noise), b prior, heat correlation"
+
+
+@dataclass(frozen=True)
+class CrossingPlan:
+    """What the crossing estimate needs besides the crossing time.
+
+    Attributes
+    ----------
+    settings : EstimatorSettings
+        The settings it was prepared with.
+    p10, p_atm, p_star : float
+        Initial, atmospheric and crossing pressures [Pa absolute].
+    problem : str or None
+        Why no C can come from these pressures (see
+        :func:`~pneumatic_unload.estimation.refine.pressure_problem`), or None.
+    subsonic : str or None
+        The status text when the flow turns subsonic before p* (eq 39 assumes it choked).
+    table : InversionTable or None
+        The model's crossing times around the expected C (None: the inversion iterates).
+    eq39, model : ScaledBudget or None
+        eq 39's and the model C's budgets at a reference C, scaled at the crossing.
+    wall : tuple
+        The wall temperature's standard uncertainty [K] and where it comes from.
+    """
+
+    settings: EstimatorSettings
+    p10: float
+    p_atm: float
+    p_star: float
+    problem: str | None
+    subsonic: str | None
+    table: Any
+    eq39: ScaledBudget | None
+    model: ScaledBudget | None
+    wall: tuple[float, str]
+
+
+@dataclass(frozen=True)
+class CrossingEstimate:
+    """The numbers of a crossing estimate (see :func:`crossing_estimate`).
+
+    Attributes
+    ----------
+    problem : str or None
+        Why there is no model C (bad pressures, no crossing time, time running backwards).
+    conductance, conductance_std : float
+        eq 39's C and its combined 1-sigma [m^3/(s Pa)].
+    conductance_isentropic : float
+        The isentropic inversion's C [m^3/(s Pa)].
+    conductance_model, conductance_model_std : float
+        The model-based C and its combined 1-sigma [m^3/(s Pa)].
+    method : str
+        How the model-based C was computed.
+    extra : dict
+        The budgets ('budget', 'budget_eq39'), as :meth:`~pneumatic_unload.budget.Budget.
+        to_dict`.
+    """
+
+    problem: str | None
+    conductance: float
+    conductance_std: float
+    conductance_isentropic: float
+    conductance_model: float
+    conductance_model_std: float
+    method: str
+    extra: dict[str, Any]
+
+
+def plan_crossing(settings: EstimatorSettings, *, p10: float, p_atm: float, p_star: float,
+                  t_mid: float = math.nan, p_mid: float = math.nan,
+                  tau_ref: float = math.nan) -> CrossingPlan:
+    """Prepare a crossing estimate.
+
+    Parameters
+    ----------
+    settings : EstimatorSettings
+        Tank, gas, heat model and the inputs' uncertainties.
+    p10, p_atm, p_star : float
+        Pressures [Pa absolute].
+    t_mid, p_mid : float
+        Time from the start [s] and pressure [Pa absolute] half way to p*: the expected C
+        for the inversion table (NaN: no table).
+    tau_ref : float
+        A crossing time for the budgets' reference [s] (NaN: the table's middle, else
+        t_mid); the lines are proportional to C whatever it is.
+    """
+    s = settings
+    problem = pressure_problem(p10, p_atm, p_star)
+    subsonic = None
+    if s.critical_ratio > 0 and p_star < p_atm / s.critical_ratio:
+        subsonic = (f"flow subsonic before p* (p* = {p_star:.0f} Pa < p_atm/b = "
+                    f"{p_atm / s.critical_ratio:.0f} Pa): eq 39 assumes choked flow")
+    table = None
+    if problem is None and math.isfinite(t_mid) and math.isfinite(p_mid):
+        table = prepare_inversion(s, t_mid, p_mid, p10, p_atm, p_star)
+    if not (math.isfinite(tau_ref) and tau_ref > 0):
+        tau_ref = math.exp(float(table.log_t[table.log_t.size // 2])) if table is not None \
+            else t_mid
+    eq39 = model = None
+    wall = wall_uncertainty(s)
+    if problem is None and math.isfinite(tau_ref) and tau_ref > 0:
+        gas = s.gas
+        measured = s.atmosphere is None
+        c39 = physics.conductance_eq39(tau_ref, p10, p_atm, s.volume, s.initial_temperature,
+                                       gas)
+        c_isen = physics.conductance_isentropic_inversion(
+            tau_ref, p_star, p10, s.volume, s.initial_temperature, gas)
+        if math.isfinite(c39) and c39 > 0:
+            eq39 = ScaledBudget(eq39_budget(s, c39, tau=tau_ref, tau_std=0.0, p10=p10,
+                                            p_atm=p_atm, p_star=p_star,
+                                            atmosphere_measured=measured),
+                                free=(tau_term(c39, tau_ref, 0.0).name,))
+        if math.isfinite(c_isen) and c_isen > 0:
+            # the wall's line is a placeholder here: its value comes from the table
+            model = ScaledBudget(model_budget(
+                s, c_isen, type_a_std=0.0, type_a_name=MODEL_TYPE_A, model_form_std=0.0,
+                tau=tau_ref, p10=p10, p_atm=p_atm, p_star=p_star,
+                atmosphere_measured=measured,
+                wall_std=0.0 if s.heat_model == "natural" else math.nan),
+                free=(MODEL_TYPE_A, WALL_TERM))
+    return CrossingPlan(s, p10, p_atm, p_star, problem, subsonic, table, eq39, model, wall)
+
+
+def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> CrossingEstimate:
+    """eq 39, the isentropic and the model-based C with their budgets for a crossing time
+    tau [s] and its 1-sigma tau_std [s] (see :func:`plan_crossing`)."""
+    s = plan.settings
+    p10, p_atm, p_star = plan.p10, plan.p_atm, plan.p_star
+    gas = s.gas
+    c39 = physics.conductance_eq39(tau, p10, p_atm, s.volume, s.initial_temperature, gas)
+    problem = plan.problem
+    if problem is None and not math.isfinite(tau):
+        problem = "no p* crossing time: the samples around p* are flat or degenerate"
+    elif problem is None and not math.isfinite(tau_std):
+        problem = ("tau_exp has no uncertainty (the start fit found no falling slope): the "
+                   "start of the unload is undetermined")
+    elif problem is None and not tau > 0:
+        problem = (f"p* crossed {tau:.6g} s after the start: time runs backwards in the "
+                   f"unload (a clock step or unsorted stamps?)")
+    extra: dict[str, Any] = {}
+    c39_std = math.nan
+    if problem is not None:
+        # no model of C from such numbers: eq 39 as it is
+        if math.isfinite(c39) and c39 > 0 and math.isfinite(tau_std):
+            c39_std = _eq39(plan, c39, tau, tau_std, extra)
+        return CrossingEstimate(problem, c39, c39_std, math.nan, math.nan, math.nan, "eq39",
+                                extra)
+    c_isen = physics.conductance_isentropic_inversion(tau, p_star, p10, s.volume,
+                                                      s.initial_temperature, gas)
+    c_model, c_model_std, method, wall_std = crossing_inversion(
+        s, tau, tau_std, p10, p_atm, p_star, c_isen, table=plan.table)
+    if math.isfinite(c39) and c39 > 0 and math.isfinite(tau_std):
+        c39_std = _eq39(plan, c39, tau, tau_std, extra)
+    if math.isfinite(c_model) and c_model > 0 and math.isfinite(c_model_std):
+        wall = wall_term(s, c_model, wall_std, *plan.wall) if math.isfinite(wall_std) \
+            else None
+        given: dict[str, BudgetTerm | None] = {
+            MODEL_TYPE_A: record_term(MODEL_TYPE_A, c_model_std), WALL_TERM: wall}
+        bm = plan.model.at(c_model, given) if plan.model is not None else model_budget(
+            s, c_model, type_a_std=c_model_std, type_a_name=MODEL_TYPE_A,
+            model_form_std=0.0, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
+            atmosphere_measured=s.atmosphere is None, wall_std=wall_std)
+        extra["budget"] = bm.to_dict()
+        c_model_std = bm.combined_std
+    return CrossingEstimate(None, c39, c39_std, c_isen, c_model, c_model_std, method, extra)
+
+
+def _eq39(plan: CrossingPlan, c39: float, tau: float, tau_std: float,
+          extra: dict[str, Any]) -> float:
+    """eq 39's budget into ``extra``; its combined 1-sigma [m^3/(s Pa)]."""
+    s = plan.settings
+    a = tau_term(c39, tau, tau_std)
+    b = plan.eq39.at(c39, {a.name: a}) if plan.eq39 is not None else eq39_budget(
+        s, c39, tau=tau, tau_std=tau_std, p10=plan.p10, p_atm=plan.p_atm,
+        p_star=plan.p_star, atmosphere_measured=s.atmosphere is None)
+    extra["budget_eq39"] = b.to_dict()
+    return b.combined_std

@@ -1,0 +1,125 @@
+"""The crossing estimate prepared half way to p* (issue #10's live latency) gives the numbers
+the formulae give at the crossing: the budgets scaled from a reference C equal the budgets
+computed at the crossing time (their lines are proportional to C at fixed pressures), one
+table lookup equals the inversion and the wall term, and the backward window search finds
+the same sample as a scan of the whole unload."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pneumatic_unload import physics
+from pneumatic_unload.budget import WALL_TERM, eq39_budget, model_budget, wall_term
+from pneumatic_unload.config.estimator import wall_uncertainty
+from pneumatic_unload.estimation import EstimatorSettings
+from pneumatic_unload.estimation.crossing import (
+    MODEL_TYPE_A,
+    crossing_estimate,
+    plan_crossing,
+)
+from pneumatic_unload.estimation.decisions import last_above
+from pneumatic_unload.estimation.refine import crossing_inversion
+
+
+def _cases() -> list[tuple[EstimatorSettings, float, float, float]]:
+    rng = np.random.default_rng(7)
+    out = []
+    for k in range(12):
+        s = EstimatorSettings(
+            volume=float(rng.uniform(2e-4, 2e-2)),
+            initial_temperature=float(rng.uniform(280.0, 320.0)),
+            heat_model=("natural", "adiabatic")[k % 2],
+            atmosphere=None if k % 3 == 0 else float(rng.uniform(9.6e4, 1.03e5)),
+            gas_constant=(287.05, 296.8, 2077.0)[k % 3], gamma=(1.4, 1.4, 1.667)[k % 3],
+            volume_uncertainty=float(rng.uniform(0, 1e-5)) if k % 4 == 1 else None,
+            pressure_uncertainty=float(rng.uniform(10, 900)) if k % 4 == 2 else None,
+            atmosphere_uncertainty=float(rng.uniform(5, 300)),
+            temperature_uncertainty=float(rng.uniform(0.1, 3.0)))
+        p_atm = s.atmosphere or 101325.0
+        out.append((s, float(rng.uniform(2.5e5, 9e5)), p_atm, float(rng.uniform(0.5, 1.6))))
+    return out
+
+
+@pytest.mark.parametrize("case", range(12))
+def test_scaled_budgets_equal_the_budgets_computed_at_the_crossing(case: int) -> None:
+    s, p10, p_atm, rel = _cases()[case]
+    p_star = physics.p_star(p10, p_atm)
+    # the isentropic times to p_mid and p* for a C of 8e-9 per litre; the real crossing
+    # ``rel`` times the latter (the table spans exp(+-0.7) around the expected C)
+    c_true = 8e-9 * s.volume / 1e-3
+    p_mid = 0.5 * (p10 + p_star)
+
+    def t_isen(p: float) -> float:
+        return physics.conductance_isentropic_inversion(
+            1.0, p, p10, s.volume, s.initial_temperature, s.gas) / c_true
+
+    t_mid = t_isen(p_mid)
+    plan = plan_crossing(s, p10=p10, p_atm=p_atm, p_star=p_star, t_mid=t_mid, p_mid=p_mid)
+    tau = rel * t_isen(p_star)
+    tau_std = 1e-4 * tau
+    est = crossing_estimate(plan, tau, tau_std)
+    assert est.problem is None
+    gas = s.gas
+    c39 = physics.conductance_eq39(tau, p10, p_atm, s.volume, s.initial_temperature, gas)
+    measured = s.atmosphere is None
+    b39 = eq39_budget(s, c39, tau=tau, tau_std=tau_std, p10=p10, p_atm=p_atm,
+                      p_star=p_star, atmosphere_measured=measured).to_dict()
+    c_isen = physics.conductance_isentropic_inversion(tau, p_star, p10, s.volume,
+                                                      s.initial_temperature, gas)
+    c, c_std, _m, wall_std = crossing_inversion(s, tau, tau_std, p10, p_atm, p_star, c_isen,
+                                                table=plan.table)
+    bm = model_budget(s, c, type_a_std=c_std, type_a_name=MODEL_TYPE_A, model_form_std=0.0,
+                      tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
+                      atmosphere_measured=measured, wall_std=wall_std).to_dict()
+    for got, want in ((est.extra["budget_eq39"], b39), (est.extra["budget"], bm)):
+        assert [t["name"] for t in got["terms"]] == [t["name"] for t in want["terms"]]
+        for a, b in zip(got["terms"], want["terms"], strict=True):
+            if b["std"] is None:
+                assert a["std"] is None
+            else:
+                assert a["std"] == pytest.approx(b["std"], rel=1e-11, abs=1e-30), a["name"]
+            assert a["note"] == b["note"] or a["name"] == WALL_TERM
+        assert got["combined_std"] == pytest.approx(want["combined_std"], rel=1e-11)
+        assert got["largest"] == want["largest"]
+    assert est.conductance_std == pytest.approx(b39["combined_std"], rel=1e-11)
+    assert est.conductance_model_std == pytest.approx(bm["combined_std"], rel=1e-11)
+    # a plan made at the crossing (no table) gives the same numbers
+    late = crossing_estimate(plan_crossing(s, p10=p10, p_atm=p_atm, p_star=p_star,
+                                           tau_ref=tau), tau, tau_std)
+    assert late.conductance_std == pytest.approx(est.conductance_std, rel=1e-11)
+    assert late.conductance_model == pytest.approx(est.conductance_model, rel=1e-6)
+
+
+def test_the_wall_line_is_the_budget_modules() -> None:
+    s = EstimatorSettings(volume=1e-3)
+    line = wall_term(s, 5e-9, 2e-11, *wall_uncertainty(s))
+    assert line.name == WALL_TERM and line.std == 2e-11 and "assumed" in line.note
+
+
+def test_one_table_lookup_equals_the_inversion_and_the_wall_term() -> None:
+    s = EstimatorSettings(volume=1e-3, heat_model="natural")
+    p10, p_atm = 6e5, 101325.0
+    p_star = physics.p_star(p10, p_atm)
+    plan = plan_crossing(s, p10=p10, p_atm=p_atm, p_star=p_star, t_mid=0.05,
+                         p_mid=0.5 * (p10 + p_star))
+    table = plan.table
+    assert table is not None
+    for tau in np.exp(np.linspace(table.log_t[-1], table.log_t[0], 9))[1:-1]:
+        c, sd, wall = table.lookup(float(tau), 1e-4)
+        assert (c, sd) == table.invert(float(tau), 1e-4)
+        assert wall == table.wall_std(float(tau)) and math.isfinite(wall) and wall > 0
+
+
+def test_last_above_finds_the_sample_a_whole_scan_finds() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        n = int(rng.integers(1, 5000))
+        pv = rng.normal(size=n)
+        lo = int(rng.integers(0, n))
+        level = float(rng.uniform(-1.0, 4.0))
+        hit = np.flatnonzero(pv[lo:n] > level)
+        want = lo + int(hit[-1]) if hit.size else -1
+        assert last_above(pv, lo, n, level) == want
