@@ -208,11 +208,11 @@ class StreamingEstimator:
         if t.size == 0:
             return []
         st = self._st
-        # vectorised validity: finite, strictly increasing against the last accepted stamp
-        fin_p = np.isfinite(p)
-        prev_max = np.maximum.accumulate(np.concatenate(([st.last_t], t[:-1])))
-        ok_t = (t - prev_max >= MIN_STAMP_STEP) & (np.abs(t) <= MAX_ABS_STAMP)
-        if not (ok_t.all() and fin_p.all()):
+        # vectorised validity: finite, each stamp at least MIN_STAMP_STEP after the one
+        # before (the last accepted stamp for the first): then the steps are the gaps too
+        d = np.diff(t, prepend=st.last_t)
+        if not ((d >= MIN_STAMP_STEP).all() and np.isfinite(p).all()
+                and max(abs(float(t[0])), abs(float(t[-1]))) <= MAX_ABS_STAMP):
             return self._push_slow(t, p)
         out: list[UnloadResult] = []
         k, size = 0, t.size
@@ -222,8 +222,7 @@ class StreamingEstimator:
                 out += self.push(float(t[k]), float(p[k]))
                 k += 1
                 continue
-            prev = np.concatenate(([st.last_t], t[k:size - 1]))
-            gaps = np.flatnonzero(t[k:] - prev > st.gap_limit)
+            gaps = np.flatnonzero(d[k:] > st.gap_limit)
             if gaps.size and gaps[0] == 0:
                 out += self.push(float(t[k]), float(p[k]))  # diagnoses the gap
                 k += 1

@@ -163,6 +163,9 @@ class EstimatorNode(Node):
         #: [s] CPU time of the fit worker's thread for each final fit (against its share of
         #: the latency: what the fit costs, and what waiting for the CPU or the GIL adds)
         self.fit_cpu: deque[float] = deque(maxlen=100_000)
+        #: [s] the core's share of each crossing latency: the push (of the block) that
+        #: completed it; the rest is the node's (callback, message fill, publication)
+        self.crossing_push: deque[float] = deque(maxlen=100_000)
         self.received = 0
         #: The last RESULTS_KEPT results published (all are in ~/estimate and the bag):
         #: bounded, a node runs for days.
@@ -283,6 +286,7 @@ class EstimatorNode(Node):
         try:
             with self._lock:
                 prev = est.state
+                pushed = time.monotonic()
                 if isinstance(p, np.ndarray):  # a PressureBlock
                     if not p.size:
                         return
@@ -292,6 +296,7 @@ class EstimatorNode(Node):
                 else:
                     out = est.push(common.ns_to_seconds(ns), p)
                     self.received += 1
+                pushed = time.monotonic() - pushed
                 state = est.state
                 jobs = est.take_final_fits()
         except Exception as exc:  # never silent, never fatal: report and start afresh
@@ -299,6 +304,8 @@ class EstimatorNode(Node):
             return
         self._last_pressure = p
         for r in out:
+            if not r.final:
+                self.crossing_push.append(pushed)
             self._publish_result(r, arrived)
         if not out and state != prev:
             self._on_state(state)
@@ -573,7 +580,8 @@ class EstimatorNode(Node):
                  "results": self.n_results,
                  "latencies_ms": [round(x * 1e3, 4) for x in self.latencies],
                  "final_latencies_ms": [round(x * 1e3, 4) for x in self.final_latencies],
-                 "final_fit_cpu_ms": [round(x * 1e3, 4) for x in self.fit_cpu]}
+                 "final_fit_cpu_ms": [round(x * 1e3, 4) for x in self.fit_cpu],
+                 "crossing_push_ms": [round(x * 1e3, 4) for x in self.crossing_push]}
         self.get_logger().info(f"stats {json.dumps(stats)}")
 
 
