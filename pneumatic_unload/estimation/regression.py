@@ -134,33 +134,42 @@ def crossing_fit(t: FloatArray, p: FloatArray, level: float
     if t.size == 0:
         return math.nan, math.inf, 0.0
     tm = float(t.sum()) / t.size  # np.mean's dispatch costs more than the sum here
-    x = t - tm
     # normal equations of [1, u, u^2] in the centred, scaled time u = x / w and the
     # centred pressure (well conditioned; 3x3 by Cramer's rule: a crossing is published
-    # at the sample that completes it, so no LAPACK call overhead here)
-    w = float(np.abs(x).max())
+    # at the sample that completes it, so no LAPACK call overhead here; the moments from
+    # one product of the 3 x n design matrix with itself and with q)
+    t_first, t_last = float(t[0]), float(t[-1])
+    # the half-width: at an end for sorted stamps (a NaN stamp gives NaN, refused below)
+    w = max(tm - t_first, t_last - tm) if t_last >= t_first \
+        else float(np.abs(t - tm).max())
     p_ref = float(p.sum()) / p.size
     if not (w > 1e-12 * max(1.0, abs(tm)) and math.isfinite(w) and math.isfinite(p_ref)):
         # a window of no duration (stamps closer than a picosecond, or than the float
         # resolution of the stamps): no slope, no crossing
         return math.nan, math.inf, 0.0
-    u = x / w
+    a = np.empty((3, t.size))
+    a[0] = 1.0
+    np.subtract(t, tm, out=a[1])
+    a[1] /= w
+    np.multiply(a[1], a[1], out=a[2])
     q = p - p_ref
-    u2 = u * u
-    su, su2, su3, su4 = float(u.sum()), float(u2.sum()), float(u2 @ u), float(u2 @ u2)
-    n = float(u.size)
-    m = ((n, su, su2), (su, su2, su3), (su2, su3, su4))
-    sol = solve3(m, (float(q.sum()), float(q @ u), float(q @ u2)))
+    mm = (a @ a.T).tolist()
+    b = (a @ q).tolist()
+    m = ((mm[0][0], mm[0][1], mm[0][2]), (mm[1][0], mm[1][1], mm[1][2]),
+         (mm[2][0], mm[2][1], mm[2][2]))
+    sol = solve3(m, (b[0], b[1], b[2]))
     if sol is None:  # fewer than three distinct instants: no curve through them
         return math.nan, math.inf, 0.0
-    r = q - (sol[0] + sol[1] * u + sol[2] * u2)
+    r = q - np.array(sol) @ a
     dof = max(p.size - 3, 1)
     s2 = float(r @ r) / dof
+    x_first, x_last = t_first - tm, t_last - tm
     c0, c1, c2 = sol[0] + p_ref, sol[1] / w, sol[2] / (w * w)
     # root of c2 x^2 + c1 x + (c0 - level) nearest the window centre
     if c1 == 0.0 and c2 == 0.0:  # flat (stuck or degenerate samples): no crossing
         return math.nan, math.inf, 0.0
-    if abs(c2) < 1e-30 or abs(c2 * (x[-1] - x[0]) ** 2) < 1e-12 * abs(c1 * (x[-1] - x[0])):
+    if abs(c2) < 1e-30 or abs(c2 * (x_last - x_first) ** 2) < 1e-12 * abs(
+            c1 * (x_last - x_first)):
         xr = (level - c0) / c1 if c1 != 0.0 else math.nan
     else:
         disc = c1 * c1 - 4.0 * c2 * (c0 - level)
