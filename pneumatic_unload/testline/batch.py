@@ -1,16 +1,19 @@
 """Batch analysis of many inputs on Dask, results kept in the results database.
 
 :func:`run_batch` reads the content hashes the database holds for these options (one
-query), then runs :func:`~.job.analyze_chunk` on consecutive chunks of the inputs - in this
-process, on a local cluster of worker processes (``dask.distributed.LocalCluster``, the
-default with ``workers`` > 1; one thread each, BLAS pools of one thread) or on a running
-``dask.distributed`` scheduler (``scheduler`` address): each input is hashed where it is
-read, skipped when analysed before (unless ``force``), analysed otherwise. The done inputs
-are written in the order given, many per transaction (each input whole: a batch killed at
-any instant leaves whole inputs, and a rerun skips them), at least every
-:data:`FLUSH_SECONDS`. The result lists the inputs in the order given, whatever the number
-of workers or the order of completion: the numbers of an input do not depend on where it
-ran. Ctrl-C (KeyboardInterrupt) stops the batch and writes what was done.
+query), then runs :func:`~.job.analyze_chunk` on consecutive chunks of the inputs (large
+first, shrinking towards the end) - in this process, on a local cluster of worker processes
+(``dask.distributed.LocalCluster``, the default with ``workers`` > 1; one thread each, BLAS
+pools of one thread, Dask's profiler off and its monitors slowed: :data:`CLUSTER_CONFIG`)
+or on a running ``dask.distributed`` scheduler (``scheduler`` address): each input is
+hashed where it is read, skipped when analysed before (unless ``force``), analysed
+otherwise. The done inputs are written in the order given, many per transaction (each input
+whole: a batch killed at any instant leaves whole inputs, and a rerun skips them), at least
+every :data:`FLUSH_SECONDS`. The result lists the inputs in the order given, whatever the
+number of workers or the order of completion: the numbers of an input do not depend on
+where it ran. Ctrl-C (KeyboardInterrupt) stops the batch and writes what was done. The result says
+where the CPU time went (:mod:`~.accounting`: the analysis, the workers' start and
+housekeeping, this process's threads; the workers' idle time).
 
 :func:`part_summary` gives one row per part: the mean recommended C, the repeatability
 standard deviation of its unloads and their number, and the verdict against the
