@@ -12,7 +12,13 @@ speed-up (target >= 1.7x on 2 cores), whether the two databases hold the same nu
 peak RSS of each worker process of the batch, the time headless chromium takes to open the
 report of the database (``--dump-dom``, page loaded and its script run), and the load
 average (the machine may be shared: each ratio comes from one serial / workers pair run
-back to back; ``--repeat`` pairs).
+back to back; ``--repeat`` pairs). For each pair it also prints the accounting of
+:mod:`pneumatic_unload.testline.accounting`: the CPU seconds per 1000 inputs by component
+(the analysis; the workers' start and housekeeping; the client's main thread and Dask
+event loop), serial and on the workers, each worker's idle time (before its first task,
+between tasks, after its last), and the speed-up those CPU seconds allow on this machine's
+cores. CPU seconds depend little on the load; read the wall-clock ratios only from a quiet
+machine.
 """
 
 from __future__ import annotations
