@@ -17,8 +17,9 @@ back to back; ``--repeat`` pairs). For each pair it also prints the accounting o
 (the analysis; the workers' start and housekeeping; the client's main thread and Dask
 event loop), serial and on the workers, each worker's idle time (before its first task,
 between tasks, after its last), and the speed-up those CPU seconds allow on this machine's
-cores. CPU seconds depend little on the load; read the wall-clock ratios only from a quiet
-machine.
+cores. CPU seconds depend less on the load than wall time does, but not nothing: at a load
+of 11-13 the CPU time of the same 60 analyses varied by up to 30 % from one minute to the
+next; read the ratios from a quiet machine.
 """
 
 from __future__ import annotations
