@@ -11,9 +11,9 @@ otherwise. The done inputs are written in the order given, many per transaction 
 whole: a batch killed at any instant leaves whole inputs, and a rerun skips them), at least
 every :data:`FLUSH_SECONDS`. The result lists the inputs in the order given, whatever the
 number of workers or the order of completion: the numbers of an input do not depend on
-where it ran. Ctrl-C (KeyboardInterrupt) stops the batch and writes what was done. The result says
-where the CPU time went (:mod:`~.accounting`: the analysis, the workers' start and
-housekeeping, this process's threads; the workers' idle time).
+where it ran. Ctrl-C (KeyboardInterrupt) stops the batch and writes what was done. The
+result says where the CPU time went (:mod:`~.accounting`: the analysis, the workers' start
+and housekeeping, this process's threads; the workers' idle time).
 
 :func:`part_summary` gives one row per part: the mean recommended C, the repeatability
 standard deviation of its unloads and their number, and the verdict against the
