@@ -93,7 +93,10 @@ def test_batch_on_a_local_cluster_equals_the_serial_batch(inputs: Path, tmp_path
     assert os.getpid() not in acc.workers and {t.pid for t in ser.tasks} == {os.getpid()}
     cw, cs = acc.components(), ser.components()
     assert 0 < cw["analysis"] < cw["total"] and cw["worker start"] > 0
-    assert cs["worker start"] == cs["worker rest"] == 0 and 0 < cs["analysis"] <= cs["total"]
+    # per-thread CPU times come in clock ticks (10 ms): the process's total may read a few
+    # ticks under the analysis timed by the task itself
+    assert cs["worker start"] == cs["worker rest"] == 0 and 0 < cs["analysis"]
+    assert cs["total"] > cs["analysis"] - 0.05
     assert cw["total"] == pytest.approx(sum(v for k, v in cw.items() if k != "total"))
     for idle in acc.idle().values():
         assert idle["busy"] > 0 and min(idle.values()) >= 0

@@ -13,7 +13,9 @@ on the load. A batch records (in :class:`Accounting`):
 * the serial run: the same per-task figures in this process.
 
 Times [s]: CPU seconds (user + system) and wall stamps of ``time.time()`` (one clock for
-every process of the machine).
+every process of the machine). A process's and its threads' CPU times come in clock ticks
+(10 ms on Linux); a task's (``time.thread_time``) to the nanosecond: a difference of the
+two may be off by a few ticks.
 """
 
 from __future__ import annotations
