@@ -12,7 +12,14 @@ speed-up (target >= 1.7x on 2 cores), whether the two databases hold the same nu
 peak RSS of each worker process of the batch, the time headless chromium takes to open the
 report of the database (``--dump-dom``, page loaded and its script run), and the load
 average (the machine may be shared: each ratio comes from one serial / workers pair run
-back to back; ``--repeat`` pairs).
+back to back; ``--repeat`` pairs). For each pair it also prints the accounting of
+:mod:`pneumatic_unload.testline.accounting`: the CPU seconds per 1000 inputs by component
+(the analysis; the workers' start and housekeeping; the client's main thread and Dask
+event loop), serial and on the workers, each worker's idle time (before its first task,
+between tasks, after its last), and the speed-up those CPU seconds allow on this machine's
+cores. CPU seconds depend less on the load than wall time does, but not nothing: at a load
+of 11-13 the CPU time of the same 60 analyses varied by up to 30 % from one minute to the
+next; read the ratios from a quiet machine.
 """
 
 from __future__ import annotations
@@ -32,7 +39,14 @@ import numpy as np
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.physics import tau_exp_eq38
 from pneumatic_unload.runs import write_simulated_bag
-from pneumatic_unload.testline import InputOptions, discover, open_db, run_batch, unload_rows
+from pneumatic_unload.testline import (
+    BatchResult,
+    InputOptions,
+    discover,
+    open_db,
+    run_batch,
+    unload_rows,
+)
 from pneumatic_unload.testline.report import html_report
 
 SPEC = {"part_types": {"valves": {"match": "^P", "conductance": [1e-9, 3e-8]}}}
@@ -81,6 +95,36 @@ def same_numbers(db_a: Path, db_b: Path) -> bool:
     return rows(db_a) == rows(db_b)
 
 
+def accounting_table(serial: BatchResult, par: BatchResult, n: int, workers: int) -> None:
+    """Print where the CPU seconds of a serial / workers pair went and the workers' idle
+    time, per 1000 inputs [s] (CPU time: what the machine's load does not change much)."""
+    scale = 1000.0 / n
+    cs, cw = serial.accounting.components(), par.accounting.components()
+    names = {"analysis": "analysis (the per-input job: hash, read, fit, judge)",
+             "worker start": "workers' start (spawn, imports, until the first task)",
+             "worker rest": "workers' event loop, comms, (de)serialisation, monitors",
+             "client main thread": "client main thread (database writes, waiting)",
+             "client event loop": "client Dask loop (cluster start, scheduler, nannies)",
+             "client other threads": "client other threads",
+             "total": "**total**"}
+    print(f"\n| CPU per 1000 inputs [s] | serial | {workers} workers | extra |\n|---|---|---|---|")
+    for key, label in names.items():
+        a, b = cs[key] * scale, cw[key] * scale
+        print(f"| {label} | {a:.1f} | {b:.1f} | {b - a:+.1f} |")
+    idle = par.accounting.idle()
+    print("\n| worker (pid) | tasks | busy [s] | idle before first / between / after last "
+          "task [s] |\n|---|---|---|---|")
+    for pid, i in idle.items():
+        k = sum(t.pid == pid for t in par.accounting.tasks)
+        print(f"| {pid} | {k} | {i['busy']:.1f} | {i['before']:.1f} / {i['between']:.1f} / "
+              f"{i['after']:.1f} |")
+    idle_s = sum(i["before"] + i["between"] + i["after"] for i in idle.values())
+    print(f"\nanalysis CPU on the workers / in serial: {cw['analysis'] / cs['analysis']:.3f}; "
+          f"cluster CPU / serial CPU: {cw['total'] / cs['total']:.3f}; the speed-up these "
+          f"CPU seconds allow on {os.cpu_count()} cores (serial CPU / ((cluster CPU + workers' "
+          f"idle) / cores)): {cs['total'] / ((cw['total'] + idle_s) / (os.cpu_count() or 1)):.2f}x")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, help="inputs (default 1000; --quick: 120)")
@@ -117,8 +161,10 @@ def main(argv: list[str] | None = None) -> int:
                   f"{sum(r.status == 'ok' for r in res.records)} ok, "
                   f"{sum(r.status != 'ok' for r in res.records)} without C; "
                   f"load {la} -> {load()}")
-        (w1, _r1, db1), (w2, r2, db2) = runs
+        (w1, r1, db1), (w2, r2, db2) = runs
         pairs.append((w1, w2, w2 - r2.cluster_seconds, r2, same_numbers(db1, db2)))
+        accounting_table(r1, r2, len(paths), args.workers)
+        print()
     db = tmp / f"r{args.repeat - 1}w{args.workers}.sqlite"
     report = tmp / "report.html"
     t2 = time.perf_counter()

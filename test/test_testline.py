@@ -31,7 +31,13 @@ from pneumatic_unload.testline import (
     unload_rows,
     write_file,
 )
-from pneumatic_unload.testline.batch import CHUNK_MAX, WORKER_ENV, chunks, start_client
+from pneumatic_unload.testline.batch import (
+    CHUNK_MAX,
+    NOT_IN_WORKER_ENV,
+    WORKER_ENV,
+    chunks,
+    start_client,
+)
 from pneumatic_unload.testline.db import SCHEMA_VERSION, file_rows
 
 SPEC = {"part_types": {"g14": {"match": "^V14-", "conductance": [4.5e-9, 5.5e-9],
@@ -80,6 +86,20 @@ def test_batch_on_a_local_cluster_equals_the_serial_batch(inputs: Path, tmp_path
         assert [f["path"] for f in file_rows(con)] == paths
         con.close()
     assert len(dask.worker_peak_rss) == 2 and dask.cluster_seconds > 0
+    # the accounting: every task stamped where it ran, every worker's CPU by thread
+    acc, ser = dask.accounting, serial.accounting
+    assert sum(t.n for t in acc.tasks) == sum(t.n for t in ser.tasks) == len(paths)
+    assert {t.pid for t in acc.tasks} <= set(acc.workers) and len(acc.workers) == 2
+    assert os.getpid() not in acc.workers and {t.pid for t in ser.tasks} == {os.getpid()}
+    cw, cs = acc.components(), ser.components()
+    assert 0 < cw["analysis"] < cw["total"] and cw["worker start"] > 0
+    # per-thread CPU times come in clock ticks (10 ms): the process's total may read a few
+    # ticks under the analysis timed by the task itself
+    assert cs["worker start"] == cs["worker rest"] == 0 and 0 < cs["analysis"]
+    assert cs["total"] > cs["analysis"] - 0.05
+    assert cw["total"] == pytest.approx(sum(v for k, v in cw.items() if k != "total"))
+    for idle in acc.idle().values():
+        assert idle["busy"] > 0 and min(idle.values()) >= 0
     # a rerun on the cluster: each input hashed on a worker, found, skipped
     again = run_batch(paths, _options(), db_path=tmp_path / "d.sqlite", workers=2)
     assert again.skipped == paths and not again.records
@@ -98,14 +118,23 @@ def test_local_cluster_workers_run_one_thread_each_and_tasks_are_chunks():
     client, cluster = start_client(1, "")
     try:
         assert list(client.nthreads().values()) == [1]
-        env = client.run(lambda: {k: os.environ.get(k) for k in WORKER_ENV})
-        assert list(env.values()) == [{k: str(v) for k, v in WORKER_ENV.items()}]
+        env = client.run(lambda: {k: os.environ.get(k) for k in (*WORKER_ENV,
+                                                                  *NOT_IN_WORKER_ENV)})
+        assert list(env.values()) == [{**{k: str(v) for k, v in WORKER_ENV.items()},
+                                       **dict.fromkeys(NOT_IN_WORKER_ENV)}]
+        # the batch's own cluster: no profiler, the monitors slowed (CLUSTER_CONFIG)
+        pcs = client.run(lambda dask_worker: {
+            k: pc.callback_time for k, pc in dask_worker.periodic_callbacks.items()})
+        (pc,) = pcs.values()
+        assert "profile" not in pc and pc["tick"] >= 1000 and pc["memory_monitor"] >= 1000
     finally:
         client.close()
         cluster.close()
     items = [(k, f"f{k}") for k in range(1000)]
     cut = chunks(items, 2)
     assert [x for c in cut for x in c] == items and max(len(c) for c in cut) == CHUNK_MAX
+    sizes = [len(c) for c in cut]  # large first, one input each at the end: a short tail
+    assert sizes == sorted(sizes, reverse=True) and sizes[-4:] == [1] * 4
     assert len(chunks(items[:5], 2)) == 5  # a few inputs: one task each
 
 

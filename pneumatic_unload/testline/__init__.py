@@ -5,6 +5,8 @@ specifications parts are judged against.
   schema): one row per input and per unload, export to CSV and Parquet;
 * :mod:`~pneumatic_unload.testline.spec` - part types' C, b and sigma limits (YAML);
 * :mod:`~pneumatic_unload.testline.job` - one input: read, analyse, judge (a worker's job);
+* :mod:`~pneumatic_unload.testline.accounting` - where a batch's CPU seconds and idle time
+  go (per task, per process and thread);
 * :mod:`~pneumatic_unload.testline.batch` - the batch: skip what is done, run on Dask,
   write as it completes; the parts table (mean, repeatability, verdict).
 """

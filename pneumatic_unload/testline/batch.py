@@ -1,16 +1,19 @@
 """Batch analysis of many inputs on Dask, results kept in the results database.
 
 :func:`run_batch` reads the content hashes the database holds for these options (one
-query), then runs :func:`~.job.analyze_chunk` on consecutive chunks of the inputs - in this
-process, on a local cluster of worker processes (``dask.distributed.LocalCluster``, the
-default with ``workers`` > 1; one thread each, BLAS pools of one thread) or on a running
-``dask.distributed`` scheduler (``scheduler`` address): each input is hashed where it is
-read, skipped when analysed before (unless ``force``), analysed otherwise. The done inputs
-are written in the order given, many per transaction (each input whole: a batch killed at
-any instant leaves whole inputs, and a rerun skips them), at least every
-:data:`FLUSH_SECONDS`. The result lists the inputs in the order given, whatever the number
-of workers or the order of completion: the numbers of an input do not depend on where it
-ran. Ctrl-C (KeyboardInterrupt) stops the batch and writes what was done.
+query), then runs :func:`~.job.analyze_chunk` on consecutive chunks of the inputs (large
+first, shrinking towards the end) - in this process, on a local cluster of worker processes
+(``dask.distributed.LocalCluster``, the default with ``workers`` > 1; one thread each, BLAS
+pools of one thread, Dask's profiler off and its monitors slowed: :data:`CLUSTER_CONFIG`)
+or on a running ``dask.distributed`` scheduler (``scheduler`` address): each input is
+hashed where it is read, skipped when analysed before (unless ``force``), analysed
+otherwise. The done inputs are written in the order given, many per transaction (each input
+whole: a batch killed at any instant leaves whole inputs, and a rerun skips them), at least
+every :data:`FLUSH_SECONDS`. The result lists the inputs in the order given, whatever the
+number of workers or the order of completion: the numbers of an input do not depend on
+where it ran. Ctrl-C (KeyboardInterrupt) stops the batch and writes what was done. The
+result says where the CPU time went (:mod:`~.accounting`: the analysis, the workers' start
+and housekeeping, this process's threads; the workers' idle time).
 
 :func:`part_summary` gives one row per part: the mean recommended C, the repeatability
 standard deviation of its unloads and their number, and the verdict against the
@@ -28,8 +31,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pneumatic_unload.testline.accounting import (
+    Accounting,
+    cpu_delta,
+    thread_cpu,
+    timed_chunk,
+    worker_snapshot,
+)
 from pneumatic_unload.testline.db import FileRecord, known_contents, open_db, write_files
-from pneumatic_unload.testline.job import InputOptions, analyze_chunk, options_hash
+from pneumatic_unload.testline.job import InputOptions, options_hash
 
 #: Suffixes of the inputs a batch picks up in a folder (plus bag folders).
 INPUT_SUFFIXES = (".mcap", ".csv", ".txt")
@@ -58,6 +68,8 @@ class BatchResult:
         scheduler) [s]; 0 in this process.
     worker_peak_rss : dict
         Peak resident memory of each worker process at the end of the batch [MiB].
+    accounting : Accounting
+        Where the batch's CPU time and the workers' idle time went [s].
     """
 
     records: list[FileRecord] = field(default_factory=list)
@@ -66,6 +78,7 @@ class BatchResult:
     workers: int = 0
     cluster_seconds: float = 0.0
     worker_peak_rss: dict[str, float] = field(default_factory=dict)
+    accounting: Accounting = field(default_factory=Accounting)
 
 
 def is_bag_dir(p: Path) -> bool:
@@ -109,28 +122,41 @@ def discover(paths: Sequence[str | Path], pattern: str = "") -> list[str]:
 #: Environment of a local cluster's worker processes, set before they start (numpy's
 #: BLAS and OpenMP pools: one thread per worker, which runs one task at a time).
 WORKER_ENV = {"OMP_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1, "MKL_NUM_THREADS": 1}
+#: Dask's default worker environment left out: a fixed malloc trim threshold (64 KiB) turns
+#: off glibc's adaptive one, so that each large numpy array of an analysis is mapped and
+#: unmapped again (about 8 times the page faults of a plain process).
+NOT_IN_WORKER_ENV = ("MALLOC_TRIM_THRESHOLD_",)
+#: Dask settings of a batch's own local cluster (not of a scheduler given by address): the
+#: housekeeping of the scheduler, nannies and workers that takes CPU from the analysis on a
+#: small machine, made rare. No statistical profiler (it samples the task thread's stack
+#: every 10 ms on the worker's event loop, holding the GIL); the event-loop tick, the
+#: system monitor and the memory monitors (worker, nanny) wake every second or so instead
+#: of every 20-500 ms; no work stealing (the tasks wait on the scheduler until a worker is
+#: free, so nothing is left to steal).
+CLUSTER_CONFIG: dict[str, Any] = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.admin.system-monitor.disk": False,
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.scheduler.work-stealing": False,
+}
 #: Most done inputs written in one database transaction [-] (one commit, one disk sync).
 FLUSH_FILES = 64
 #: Longest a done input waits to be written [s].
 FLUSH_SECONDS = 1.0
-#: Tasks per worker a batch is cut into, at least [-]: the inputs of a task run one after
-#: the other on one worker (fewer scheduler round trips), the last ones still balance.
-TASKS_PER_WORKER = 8
+#: A task takes at most 1 / (TASKS_PER_WORKER x workers) of the inputs left [-]: the inputs
+#: of a task run one after the other on one worker (fewer scheduler round trips), and the
+#: tasks shrink towards the end so that the last ones still balance.
+TASKS_PER_WORKER = 4
 #: Most inputs per task [-].
 CHUNK_MAX = 16
 
 
-def peak_rss_mib() -> float:
-    """Peak resident memory of this process [MiB] (Linux: ru_maxrss in KiB)."""
-    import resource
-
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
 def start_client(workers: int, scheduler: str) -> tuple[Any, Any]:
     """A Dask client of the scheduler at ``scheduler``, or of a new local cluster of
-    ``workers`` processes (one thread each, :data:`WORKER_ENV`); returns (client, cluster
-    or None).
+    ``workers`` processes (one thread each, :data:`WORKER_ENV`, :data:`CLUSTER_CONFIG`);
+    returns (client, cluster or None).
 
     Raises
     ------
@@ -145,8 +171,10 @@ def start_client(workers: int, scheduler: str) -> tuple[Any, Any]:
             return Client(scheduler, timeout=30), None
         except OSError as exc:
             raise BatchError(f"no Dask scheduler at {scheduler}: {exc}") from exc
-    env = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_ENV}
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+    env = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
+           if k not in NOT_IN_WORKER_ENV}
+    env.update(WORKER_ENV)
+    with dask.config.set({**CLUSTER_CONFIG, "distributed.nanny.pre-spawn-environ": env}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=None, silence_logs=40)
     return Client(cluster), cluster
@@ -154,10 +182,17 @@ def start_client(workers: int, scheduler: str) -> tuple[Any, Any]:
 
 def chunks(items: Sequence[tuple[int, str]], workers: int
            ) -> list[Sequence[tuple[int, str]]]:
-    """The inputs cut into consecutive tasks: at least :data:`TASKS_PER_WORKER` per worker
-    (when there are enough inputs), at most :data:`CHUNK_MAX` inputs each."""
-    size = max(1, min(CHUNK_MAX, len(items) // max(1, workers * TASKS_PER_WORKER)))
-    return [items[j:j + size] for j in range(0, len(items), size)]
+    """The inputs cut into consecutive tasks, each at most 1 / (:data:`TASKS_PER_WORKER` x
+    ``workers``) of the inputs left and at most :data:`CHUNK_MAX` inputs: large tasks
+    first (fewer round trips), then smaller and smaller ones down to one input, so that
+    the workers finish together (a short tail)."""
+    out: list[Sequence[tuple[int, str]]] = []
+    j, share = 0, max(1, workers * TASKS_PER_WORKER)
+    while j < len(items):
+        size = max(1, min(CHUNK_MAX, (len(items) - j) // share))
+        out.append(items[j:j + size])
+        j += size
+    return out
 
 
 class _Writer:
@@ -240,12 +275,19 @@ def run_batch(paths: Sequence[str], options: InputOptions, *, db_path: str | Pat
     items = list(enumerate(paths))
     out = _Writer(con, len(items), force, on_done)
     res = BatchResult()
+    acc = res.accounting
+    cpu0 = thread_cpu()
     try:
         try:
             if workers <= 1 and not scheduler:
+                acc.ready = time.time()
                 for k, path in items:
-                    for j, rec in analyze_chunk([(k, path)], options, known, force):
+                    done, stamp = timed_chunk([(k, path)], options, known, force)
+                    acc.tasks.append(stamp)
+                    for j, rec in done:
                         out.add(j, rec)
+                acc.done = time.time()
+                acc.client = cpu_delta(cpu0, thread_cpu())
             else:
                 _on_dask(items, options, known, force, workers, scheduler, out.add, res)
         finally:
@@ -268,17 +310,21 @@ def _on_dask(items: list[tuple[int, str]], options: InputOptions, known: frozens
     from distributed import as_completed
 
     t0 = time.perf_counter()
+    cpu0 = thread_cpu()
     client, cluster = start_client(workers, scheduler)
     res.cluster_seconds = time.perf_counter() - t0
+    acc = res.accounting
+    acc.ready = time.time()
     try:
         n_workers = res.workers = len(client.scheduler_info().get("workers", {}))
         # the hashes of the inputs done are sent once to every worker, not with each task
         known_arg: Any = client.scatter([known], broadcast=True)[0] if known else known
-        futs = {client.submit(analyze_chunk, chunk, options, known_arg, force, pure=False):
+        futs = {client.submit(timed_chunk, chunk, options, known_arg, force, pure=False):
                 chunk for chunk in chunks(items, n_workers or workers)}
         for fut in as_completed(futs):
             try:
-                done = fut.result()
+                done, stamp = fut.result()
+                acc.tasks.append(stamp)
             except Exception as exc:  # a worker died: each input's row says so
                 ohash = options_hash(options)
                 done = [(k, FileRecord(
@@ -287,7 +333,11 @@ def _on_dask(items: list[tuple[int, str]], options: InputOptions, known: frozens
                     for k, path in futs[fut]]
             for k, rec in done:
                 add(k, rec)
-        res.worker_peak_rss = client.run(peak_rss_mib)
+        acc.done = time.time()
+        snaps = client.run(worker_snapshot)
+        res.worker_peak_rss = {a: s["peak_rss_mib"] for a, s in snaps.items()}
+        acc.workers = {s["pid"]: s["threads"] for s in snaps.values()}
+        acc.client = cpu_delta(cpu0, thread_cpu())
     finally:
         t1 = time.perf_counter()
         client.close()
