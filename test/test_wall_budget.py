@@ -61,15 +61,13 @@ def run(t10: float, t_wall: float, tau_heat: float, *, volume: float = 4e-3,
         conductance: float = 5e-9, b: float = 0.4, p10: float = 7e5, seed: int = 1,
         **given: float | None) -> tuple[float, dict, dict]:
     """One Newton-cooling discharge analysed with the wall not given: (C error [-], the
-    budget, the curve fit) (SI units). t10 and p10 are the gas's state at the opening, as
-    the estimator's T10 and p10 are (stated exact): a gas away from the wall has exchanged
-    heat in the closed tank during the 0.2 s plateau before it (dT/dt = (Tw - T)/tau_h),
-    so the record starts from the state that relaxes to them."""
+    budget, the curve fit) (SI units). t10 and p10 are the gas's state at the record's
+    first sample, where the estimator's model starts too (a gas away from the wall then
+    exchanges heat in the closed tank during the 0.2 s plateau, in both models)."""
     tau0 = volume / (1.4 * 1e5 * conductance)  # eq 28 [s]
     t = np.arange(0.0, 0.2 + 8.0 * tau0, 1e-3)
-    t_first = t_wall + (t10 - t_wall) * math.exp(0.2 / tau_heat)  # at t = 0 [K]
-    p = discharge(t, volume=volume, conductance=conductance, b=b, p10=p10 * t_first / t10,
-                  t10=t_first, p_atm=101325.0, tau_heat=tau_heat, t_open=0.2, t_wall=t_wall)
+    p = discharge(t, volume=volume, conductance=conductance, b=b, p10=p10, t10=t10,
+                  p_atm=101325.0, tau_heat=tau_heat, t_open=0.2, t_wall=t_wall)
     y = p + np.random.default_rng(seed).normal(0.0, 1000.0, t.size)
     s = EstimatorSettings(volume=volume, initial_temperature=t10,
                           **{**EXACT_BUT_THE_WALL, **given})
