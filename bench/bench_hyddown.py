@@ -41,6 +41,13 @@ Measured on the full grid (24 cases, hyddown 0.50.0):
   sigma, 24/24 (100 %) within 2: too wide at 2 sigma on a grid whose wall is exactly at T10
   (the truth at the centre of the assumed spread), as the default intends for rigs whose
   wall is not known.
+* branch h11c (the hot start screens a strong exchange and is taken near T10 when it
+  whitens what every law with the wall at T10 leaves structured; load ~14 on 2 cores):
+  unchanged, 0.816 %, 0.248 %, 24/24 within 2 %, 16/24 (67 +- 10 %) within 1 sigma,
+  23/24 (96 +- 4 %) within 2. With ``--wall-assumed``: 19/24 (79 %) and 24/24 (100 %),
+  the same. The two pairs are two questions, not a conflict: the GUM coverage of this
+  grid is the first (HydDown's wall is at T10, an input as exact as V); the second
+  states a 2-5.8 K wall uncertainty that the grid does not have, so it over-covers.
 
 ``python bench/bench_hyddown.py --discrepancy [FOLDER]``: the discrepancy workflow's verdict
 on each trace instead (issue 12's peer line: heat transfer, or an ambiguity containing it,

@@ -98,13 +98,13 @@ CURVE_FIT_LAWS: tuple[str, ...] = ("natural", "fixed", "density", "natural+turbu
 HOT_START_INFLATION = 1.5
 #: Delta-BIC below which another law counts as fitting about as well [-].
 LAW_BIC_THRESHOLD = 10.0
-#: The wall temperatures the model takes [K] (TankSpec's bounds): an assumed wall moved by
-#: its uncertainty stays inside.
 #: Largest wall-temperature uncertainty [K] whose effect on C is taken from the fit's
 #: linear response (two model evaluations); above it the chosen law is refitted with the
 #: wall moved (the response is not linear over 10-20 K). Measured at 2-5 K: see
 #: test_wall_budget.
 WALL_LINEAR_MAX = 5.0
+#: The wall temperatures the model takes [K] (TankSpec's bounds): an assumed wall moved by
+#: its uncertainty stays inside.
 WALL_RANGE: tuple[float, float] = next(
     (float(f.metadata["min"]), float(f.metadata["max"]))
     for f in dataclasses.fields(TankSpec) if f.name == "wall_temperature")
@@ -247,13 +247,12 @@ def fit_curve(
             and (min(f[0].inflation for f in fits.values()) > HOT_START_INFLATION
                  or abs(settings.initial_temperature - AMBIENT_TEMPERATURE)
                  > math.sqrt(3.0) * WALL_ASSUMED_STD)):
-        # the wall was assumed at T10 and every law leaves structure, or T10 is far from a
-        # room's temperature (a gas warmed or cooled by the charge: the density law can
-        # take up a wall away from T10 with white residuals and a C several % off): a gas
-        # hot (or cold) after charging is a model of its own, the wall temperature fitted,
-        # from each law's fit; the information criterion below decides whether the record
-        # carries it (the one-parameter laws only: a wall and an exponent both fitted are
-        # not told apart on one discharge)
+        # the wall assumed at T10 and every law leaves structure, or T10 far from a room's
+        # temperature (a gas warmed or cooled by the charge: the density law can take up a
+        # wall away from T10 with white residuals and C several % off): a hot (or cold)
+        # start is a model of its own, the wall fitted from each one-parameter law's fit (a
+        # wall and an exponent are not told apart on one discharge); the criterion decides
+        least_inflation = min(f[0].inflation for f in fits.values())
         for law in [k for k in ("natural", "fixed") if k in fits]:
             base = fits[law][0]
             if not math.isfinite(base.conductance):
@@ -266,12 +265,13 @@ def fit_curve(
                 conductance=conductance, fit_heat=True, profile_heat=False, law=law,
                 start={k: v for k, v in start_w.items() if math.isfinite(v)},
                 max_nfev=120, trace=trace, hold=hold, fit_wall=True)
-            # a hot start is a claim about the rig: only a wall clearly away from T10
-            # (3 of the temperature's uncertainties, at least 3 K) makes it; a wall found
-            # within that only absorbs other model error (measured on HydDown: a wall
-            # 2.4 K off the truth moved C by +0.25 %)
+            # a hot start is a claim about the rig: a wall clearly away from T10 (3 of the
+            # temperature's uncertainties, at least 3 K) makes it, or one nearer that turns
+            # the structure every law with the wall at T10 leaves into white residuals; else
+            # it absorbs other model error (HydDown: a wall 2.4 K off moved C by +0.25 %)
             gap = abs(hot[0].wall_temperature - settings.initial_temperature)
-            if gap > 3.0 * max(settings.temperature_uncertainty, 1.0):
+            if gap > 3.0 * max(settings.temperature_uncertainty, 1.0) or \
+                    least_inflation > HOT_START_INFLATION >= hot[0].inflation:
                 fits[f"{law}+wall"] = hot
     # information criterion on residuals normalised by the best law's residual variance
     # (inflated when structured: correlated residuals carry less information)
@@ -425,7 +425,7 @@ def _fit_law(
         See :func:`fit_curve`.
     fit_wall : bool
         Fit the wall temperature too (hot-start variant; starts screened 10 and 30 K below
-        T10).
+        T10 and, with a constant hA, a strong exchange from 10 K below and 5 K above).
     keep : dict, optional
         Receives the fit's :class:`~pneumatic_unload.fit.lsq.FitResult` ('result') and
         model ('model'), for :func:`_wall_linear`.
@@ -448,7 +448,8 @@ def _fit_law(
     starts = [{"tau_heat": 5.0 * tau}] if law != "natural" and start is None else None
     if fit_wall:
         t10 = settings.initial_temperature
-        starts = [{"t_wall": t10 - 10.0}, {"t_wall": t10 - 30.0}]
+        starts = [{"t_wall": t10 - 10.0}, {"t_wall": t10 - 30.0}] + ([] if law == "natural" else [
+            {"t_wall": t10 + d, "tau_heat": 0.1 * tau} for d in (-10.0, 5.0)])  # strong
     if explore and natural and fit_heat:
         starts = ([{"heat_scale": 30.0}, {"heat_scale": 0.1}] if law.startswith("natural") else
                   [{"tau_heat": 0.05 * tau}, {"tau_heat": 20.0 * tau}])

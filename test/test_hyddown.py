@@ -22,7 +22,7 @@ in 90-98 % of trials and <= 1 sigma in 55-80 %. Where a case misses a target it 
   their terms are 0. Measured: |z| 0.11-1.70, 6 of 6 within 2 sigma, 4 of 6 within 1.
   The 0.3 % is the RMS error over these same six cases (0.33 %): a calibration, checked
   independently by the Newton-cooling model (test_foreign_models) and the 24-case grid of
-  ``bench/bench_hyddown.py`` (not used to calibrate: RMS error 0.34 %, 62 % within 1 sigma,
+  ``bench/bench_hyddown.py`` (not used to calibrate: RMS error 0.34 %, 67 % within 1 sigma,
   96 % within 2).
 * With the density law (hA ~ rho^n) in the family, the constant-h case v2l_ld4_d2_h2 is
   fitted better by n = 0.20 +- 0.03 (delta-BIC 37 against constant hA) and C moves from

@@ -145,9 +145,10 @@ def wall_uncertainty(settings: EstimatorSettings,
     * assumed = T10 with ``wall_temperature_uncertainty`` stated: that;
     * assumed, from the record: the largest of :data:`WALL_ASSUMED_STD`, and, for each gap
       the record shows between the gas at the start and where the wall may be, the gap over
-      sqrt(3) (the wall anywhere within +- the gap of T10, a rectangular distribution, GUM
-      4.3.7): T10 against a room's :data:`AMBIENT_TEMPERATURE`, and T10 against the walls
-      fitted by the hot-start variants of the curve fit (``hot_walls`` [K]).
+      sqrt(3) (the wall anywhere between T10 and the other temperature, uniformly: its
+      root-mean-square distance from the assumed T10 is the gap over sqrt(3), GUM 4.3.7):
+      T10 against a room's :data:`AMBIENT_TEMPERATURE`, and T10 against the walls fitted by
+      the hot-start variants of the curve fit (``hot_walls`` [K]).
     """
     s = settings
     if s.wall_temperature is not None:
