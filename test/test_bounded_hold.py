@@ -1,16 +1,22 @@
-"""An aborted unload's recovery is followed for a bounded number of samples.
+"""Phases that hold samples until something happens are bounded: an aborted unload's
+recovery, and an unload whose p_atm is to come from its final plateau.
 
 A re-heating that never settles (here a 10 L tank whose recovery time constant is about
 20 min) is closed after :data:`~pneumatic_unload.estimation.sse.RECOVERY_MAX` samples, as at
-the end of a stream, with the reason: the buffer never holds more. The bound is lowered so
-that the test runs in seconds; the per-sample and block paths must agree bit for bit.
+the end of a stream, with the reason: the buffer never holds more. An unload analysed with
+p_atm auto holds its samples until its final plateau: past
+:data:`~pneumatic_unload.estimation.reduction.AUTO_HOLD_MAX` samples it is closed with the
+reason and the fix (give the atmosphere). The bounds are lowered so that the tests run in
+seconds; the per-sample and block paths must agree bit for bit.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.estimation import StreamingEstimator, sse
-from pneumatic_unload.model import simulate
+from pneumatic_unload.estimation import StreamingEstimator, reduction, sse
+from pneumatic_unload.model import default_duration, simulate
 from pneumatic_unload.physics import orifice_conductance
 from pneumatic_unload.runs import settings_for
 
@@ -57,3 +63,33 @@ def test_the_bound_is_above_any_recovery_the_package_measures():
     # 4 M samples: 7 min at 10 kHz (three thermal time constants of a 50 L tank are a few
     # minutes), 128 MiB of buffer at 32 B a sample
     assert sse.RECOVERY_MAX == 1 << 22
+
+
+def test_an_unload_without_final_plateau_is_closed_at_the_auto_bound(monkeypatch):
+    # p_atm from the final plateau (atmosphere None): the unload is held until that
+    # plateau; one that lasts longer than the bound is closed with the reason and the fix
+    monkeypatch.setattr(reduction, "AUTO_HOLD_MAX", 50_000)
+    cfg = RigConfig(rate=5000.0, pre_time=1.0, seed=4, noise_std=300.0)
+    cfg = dataclasses.replace(cfg, conductance=cfg.conductance * default_duration(cfg) / 30.0)
+    sim = simulate(cfg)
+    settings = dataclasses.replace(settings_for(cfg), atmosphere=None)
+    est = StreamingEstimator(settings)
+    out, held = [], 0
+    for k in range(0, sim.t.size, 1000):
+        out += est.push_block(sim.t[k:k + 1000], sim.measured[k:k + 1000])
+        held = max(held, len(est.buffer))
+    out += est.finish()
+    assert [(r.index, r.status, r.final) for r in out] == [(0, "aborted", True)], out
+    assert "p_atm unknown within the memory bound" in out[0].status_text
+    assert "--atmosphere" in out[0].status_text
+    assert held < 50_000 + 3 * 16384 + 1000 < sim.t.size
+    one = StreamingEstimator(settings)
+    seq = [r for ti, pi in zip(sim.t.tolist(), sim.measured.tolist(), strict=True)
+           for r in one.push(ti, pi)] + one.finish()
+    assert [(r.status, r.status_text, r.i_complete) for r in seq] == [
+        (r.status, r.status_text, r.i_complete) for r in out]
+
+
+def test_the_auto_bound_keeps_ordinary_unloads():
+    # 8 M samples: 14 min at 10 kHz, 256 MiB of buffer
+    assert reduction.AUTO_HOLD_MAX == 1 << 23
