@@ -17,7 +17,9 @@ Cases (``--case``, default all):
   samples, and at 10 kHz a discharge of 2000 s falls about 0.3 Pa per sample at its start
   (with 1 kPa of noise the 20 M-row one is not detected: "no unload", with the reason).
   The estimator holds the unload from its start to the end of its tail (its final plateau
-  judged flat): about 37 % of the rows, the table's "longest unload" column; above
+  judged flat): about 47 % of the rows, the table's "longest unload" column (37 % before
+  the final-plateau test scaled its capped windows to half tau; at 50 M rows the tail was
+  then judged level about tau after the start and the rest gave a phantom unload); above
   ``REDUCE_FROM`` (4 M) of them its old samples are reduced to bins
   (:mod:`pneumatic_unload.estimation.reduction`).
 

@@ -248,10 +248,14 @@ def stalled(cs: FloatArray, tv: FloatArray, k: Index, *, i0: int, sigma: float,
     return ok & (drop < 0.05 * slope0 * dt) & (drop < 4.0 * se)
 
 
+#: Widest window of the final-plateau test [-] (see :func:`flat_window`).
+FLAT_MAX = 16384
+
+
 def flat_window(tau: float, dt_nominal: float) -> int:
-    """Window of the final-plateau test: half the time scale tau [s], 128..16384 [-]."""
+    """Window of the final-plateau test: half the time scale tau [s], 128..FLAT_MAX [-]."""
     dt = dt_nominal if math.isfinite(dt_nominal) else DT_DEFAULT
-    return int(min(max(128, 0.5 * tau / dt), 16384))
+    return int(min(max(128, 0.5 * tau / dt), FLAT_MAX))
 
 
 def flat(cs: FloatArray, k: Index, *, i0: int, tau: float, dt_nominal: float,
@@ -260,6 +264,12 @@ def flat(cs: FloatArray, k: Index, *, i0: int, tau: float, dt_nominal: float,
 
     The means of the last two windows differ by less than 4 noise deviations or 0.2 % of
     the drop from p10 [signal units]; the unload must be older than tau plus two windows.
+    When half of tau is longer than FLAT_MAX samples, the windows stay FLAT_MAX long and
+    their change is scaled to half tau (``tau / (2 dt FLAT_MAX)``, the slope projected
+    over the window the test is defined on) before the 0.2 % limit: the test does not
+    depend on the sample rate. Without the scaling a slow discharge (tau of 10^6 samples
+    and more) passed for level about tau after its start, and the rest of it gave a
+    phantom second unload (bench/bench_memory.py, stream case).
     """
     dt = dt_nominal if math.isfinite(dt_nominal) else DT_DEFAULT
     w = flat_window(tau, dt_nominal)
@@ -269,7 +279,9 @@ def flat(cs: FloatArray, k: Index, *, i0: int, tau: float, dt_nominal: float,
     dp_total = np.abs(p10 - b)
     change = np.abs(a - b)
     se = sigma * math.sqrt(2.0 / w)
-    return ok & (change < np.maximum(4.0 * se, 0.002 * dp_total))
+    half = 0.5 * tau / dt  # [-]
+    scale = half / w if half > FLAT_MAX else 1.0
+    return ok & (change < np.maximum(4.0 * se, 0.002 * dp_total / scale))
 
 
 def settled_at_end(cs: FloatArray, i: int, *, i0: int, p10: float, dp_guess: float) -> bool:

@@ -81,7 +81,6 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
                     "charge since: not a new unload", float(buf.t[i]))
         st.level = -math.inf
         return []
-    st.rearm_floor = -math.inf
     st.unload = UnloadState(trigger=i)
     st.mode = CONFIRM
     st.next_check = i + PERIOD
@@ -129,6 +128,10 @@ def step_confirm(st: EstimatorState, i: int) -> list[UnloadResult]:
     """Confirmation PERIOD samples after the trigger: start the unload, or wait again."""
     u, t = st.unload, st.buf.t
     if confirmed(st.buf.cs, u.trigger, i, st.plateau_level, st.sigma):
+        # a new unload: the floor of the last one's creeping tail goes (kept through an
+        # unconfirmed trigger, which a creeping tail's noise gives; else the next one
+        # would start a phantom unload)
+        st.rearm_floor = -math.inf
         st.mode = UNLOADING
         st.diag("ok", "unload step detected", float(t[u.trigger]))
         return start_unloading(st, i)

@@ -37,6 +37,12 @@ REDUCE_FROM = 1 << 22
 #: Newest samples always kept when reducing [-]: more than any decision looks back (the
 #: abort's corner fit 6 x 8192, the final-plateau test 2 x 16384).
 KEEP_RAW = 1 << 20
+#: Most samples of one unload held while p_atm is to come from its final plateau
+#: (``atmosphere`` None) [-]: the crossing can be found only then, so nothing is reduced
+#: before it; 32 B each in the buffer: 256 MiB (14 min at 10 kHz). A longer unload without
+#: a final plateau is closed with the reason (give the atmospheric pressure), see
+#: :func:`~.unloading.step_unloading`.
+AUTO_HOLD_MAX = 1 << 23
 #: Crossing half-widths above p* below which nothing more is reduced before the crossing [-]
 #: (an exponential fall takes longer from p* + 5 half to p* + half than through the window).
 APPROACH = 5.0

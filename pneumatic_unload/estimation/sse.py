@@ -32,6 +32,12 @@ from pneumatic_unload.model.heat import thermal_time_constant
 #: Relative 1-sigma of eq 23 itself [-]: it assumes an isentropic unload (wall heat flow
 #: during the unload shifts it by up to ~0.5 %) and writes p_N for rho_N R T_N (0.28 %).
 SSE_MODEL_REL_STD = 0.01
+#: Most samples a recovery is followed for after the closing [-] (the buffer holds them, 32 B
+#: each: 128 MiB; 7 min at 10 kHz, 70 min at 1 kHz, several thermal time constants of any
+#: tank this package is meant for). A re-heating still not settled then is closed as at the
+#: end of a stream (its SSE extrapolated when the fit allows), so that memory stays bounded
+#: whatever the record.
+RECOVERY_MAX = 1 << 22
 
 
 def on_abort(st: EstimatorState, i: int) -> list[UnloadResult]:
@@ -166,6 +172,8 @@ def step_recovery(st: EstimatorState, i: int) -> list[UnloadResult]:
     u.rec_high = max(u.rec_high, float(m))
     if fell or charged:
         return interrupt_recovery(st, i, bool(fell))
+    if i - u.i_close >= RECOVERY_MAX:
+        return _recovery_too_long(st, i)
     if not recovery_due(i, u.i_close, u.rec_span):
         return []
     span = i - u.i_close
@@ -194,6 +202,23 @@ def step_recovery(st: EstimatorState, i: int) -> list[UnloadResult]:
     return []
 
 
+def _recovery_too_long(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """The recovery has lasted RECOVERY_MAX samples at index i: close the aborted unload as
+    at the end of a stream (SSE extrapolated when the fit allows, see
+    :func:`abort_result`), with the reason, and wait for the next unload."""
+    u = st.unload
+    secs = float(st.buf.t[i]) - u.t_close
+    text = (f"valve closed before p*; the recovery was followed for {RECOVERY_MAX} samples "
+            f"({secs:.1f} s, the memory bound) without settling")
+    st.diag("warn", text, float(st.buf.t[i]))
+    res = abort_result(st, i, recovered=False, text=text)
+    if text not in res.status_text:  # an extrapolated SSE value: say why it was taken
+        res.status_text += "; " + text[len("valve closed before p*; "):]
+    res.final = True
+    st.to_waiting(i + 1)
+    return [res]
+
+
 def _end_without_sse(st: EstimatorState, i: int, text: str) -> list[UnloadResult]:
     """Close an aborted unload at index i with its final result and no SSE value
     (``text``: why), and wait for the next unload."""
@@ -212,7 +237,8 @@ def scan_recovery(st: EstimatorState, i: int, end: int) -> int:
     m = block_mean(st.buf.sums()[0], ks)
     high_prev = np.maximum.accumulate(np.concatenate(([u.rec_high], m)))[:-1]
     fell, charged, _m = recovery_events(st, ks, high_prev)
-    hit = np.flatnonzero(recovery_due(ks, u.i_close, u.rec_span) | fell | charged)
+    hit = np.flatnonzero(recovery_due(ks, u.i_close, u.rec_span) | fell | charged
+                         | (ks - u.i_close >= RECOVERY_MAX))
     k = int(hit[0]) if hit.size else ks.size
     if k > 0:
         u.rec_high = float(max(high_prev[k - 1], m[k - 1]))

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from pneumatic_unload.estimation import reduction
 from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.decisions import (
     CONFIRM,
@@ -24,10 +25,10 @@ from pneumatic_unload.estimation.decisions import (
     settled_at_end,
     stalled,
 )
-from pneumatic_unload.estimation.reduction import reduce_due, reduce_unload
+from pneumatic_unload.estimation.reduction import reduce_due, reduce_unload, window_start
 from pneumatic_unload.estimation.refine import needs_model
 from pneumatic_unload.estimation.regression import crossing_fit, hinge_fit, rms_sigma
-from pneumatic_unload.estimation.sse import on_abort
+from pneumatic_unload.estimation.sse import abort_result, on_abort
 from pneumatic_unload.estimation.state import TAIL, EstimatorState
 from pneumatic_unload.estimation.tail import finish_tail
 from pneumatic_unload.estimation.types import STUCK_TEXT, FloatArray, UnloadResult
@@ -225,6 +226,8 @@ def step_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
         if st.stuck(i):
             return on_stuck(st, i)
         if not math.isfinite(u.pstar):
+            if i + 1 - window_start(st) > reduction.AUTO_HOLD_MAX:
+                return auto_too_long(st, i)
             return check_final_plateau_auto(st, i)
         if stalled_at(st, i):
             return on_abort(st, i)
@@ -257,6 +260,20 @@ def end_plateau_auto(st: EstimatorState, i: int) -> bool:
     if not u.refined or math.isfinite(u.pstar):
         return False
     return settled_at_end(st.buf.cs, i, i0=u.i0, p10=u.p10, dp_guess=u.dp_guess)
+
+
+def auto_too_long(st: EstimatorState, i: int) -> list[UnloadResult]:
+    """p_atm auto: the unload holds AUTO_HOLD_MAX samples at index i and has no final
+    plateau yet (memory bound): close it as aborted with the reason and the fix, and skip
+    the rest of it (one physical unload, one result)."""
+    n = reduction.AUTO_HOLD_MAX
+    text = (f"no final plateau after {n} samples of the unload ({st.dt * n:.0f} s): p_atm "
+            "unknown within the memory bound (give the atmospheric pressure, --atmosphere)")
+    st.diag("warn", text, float(st.buf.t[i]))
+    res = abort_result(st, i, recovered=False, text=text)
+    res.final = True
+    st.to_skip(i)
+    return [res]
 
 
 def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
