@@ -48,6 +48,8 @@ from pneumatic_unload.physics import conductance_eq39, conductance_isentropic_in
 
 #: Name of the wall temperature's line in a budget.
 WALL_TERM = "wall temperature"
+#: Name of the model-form line (the heat laws' spread) of a model-based C's budget.
+MODEL_FORM_TERM = "model form (heat laws)"
 #: Coverage factor of the expanded uncertainty [-] (about 95 % for a normal distribution).
 COVERAGE_FACTOR = 2.0
 #: Default standard uncertainty of V, relative [-] (volume by water weighing or drawing).
@@ -392,6 +394,12 @@ def record_term(name: str, std: float) -> BudgetTerm:
     return BudgetTerm(name, "A", math.nan, math.nan, "", std)
 
 
+def model_form_term(std: float, note: str = "") -> BudgetTerm:
+    """The model-form line of a model-based C: the spread of the heat laws the record cannot
+    tell apart [m^3/(s Pa)] (``note``: which laws and how)."""
+    return BudgetTerm(MODEL_FORM_TERM, "model", math.nan, math.nan, "", std, note)
+
+
 def tau_term(c: float, tau: float, tau_std: float) -> BudgetTerm:
     """The type A line of eq 39's C [m^3/(s Pa)]: the unloading time tau [s] and its
     1-sigma from the record [s] (C is proportional to 1/tau)."""
@@ -428,8 +436,7 @@ def model_budget(settings: EstimatorSettings, c: float, *, type_a_std: float,
                          atmosphere_measured=atmosphere_measured, wall_std=wall_std,
                          wall_input=wall_input)
     terms += list(extra_terms)
-    terms.append(BudgetTerm("model form (heat laws)", "model", math.nan, math.nan, "",
-                            model_form_std))
+    terms.append(model_form_term(model_form_std))
     terms.append(BudgetTerm("model limits (ideal gas, uniform state)", "model", math.nan,
                             math.nan, "", abs(c) * settings.model_uncertainty,
                             f"model_uncertainty {100 * settings.model_uncertainty:g} %"))

@@ -6,15 +6,23 @@ the same sample as a scan of the whole unload."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from pneumatic_unload import physics
-from pneumatic_unload.budget import WALL_TERM, eq39_budget, model_budget, wall_term
+from pneumatic_unload.budget import (
+    MODEL_FORM_TERM,
+    WALL_TERM,
+    eq39_budget,
+    model_budget,
+    wall_term,
+)
+from pneumatic_unload.config import RigConfig
 from pneumatic_unload.config.estimator import wall_uncertainty
-from pneumatic_unload.estimation import EstimatorSettings
+from pneumatic_unload.estimation import EstimatorSettings, analyze
 from pneumatic_unload.estimation.crossing import (
     MODEL_TYPE_A,
     crossing_estimate,
@@ -22,6 +30,7 @@ from pneumatic_unload.estimation.crossing import (
 )
 from pneumatic_unload.estimation.decisions import last_above
 from pneumatic_unload.estimation.refine import crossing_inversion
+from pneumatic_unload.model import simulate
 
 
 def _cases() -> list[tuple[EstimatorSettings, float, float, float]]:
@@ -71,26 +80,49 @@ def test_scaled_budgets_equal_the_budgets_computed_at_the_crossing(case: int) ->
                                                       s.initial_temperature, gas)
     c, c_std, _m, wall_std = crossing_inversion(s, tau, tau_std, p10, p_atm, p_star, c_isen,
                                                 table=plan.table)
-    bm = model_budget(s, c, type_a_std=c_std, type_a_name=MODEL_TYPE_A, model_form_std=0.0,
-                      tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
+    # the model-form line: C against the adiabatic C (iterated here, a table there)
+    form = 0.0
+    if s.heat_model == "natural":
+        c_adi, *_ = crossing_inversion(dataclasses.replace(s, heat_model="adiabatic"), tau,
+                                       0.0, p10, p_atm, p_star, c_isen, wall=False)
+        form = abs(c - c_adi) / math.sqrt(3.0)
+    bm = model_budget(s, c, type_a_std=c_std, type_a_name=MODEL_TYPE_A,
+                      model_form_std=form, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
                       atmosphere_measured=measured, wall_std=wall_std).to_dict()
     for got, want in ((est.extra["budget_eq39"], b39), (est.extra["budget"], bm)):
         assert [t["name"] for t in got["terms"]] == [t["name"] for t in want["terms"]]
         for a, b in zip(got["terms"], want["terms"], strict=True):
             if b["std"] is None:
                 assert a["std"] is None
+            elif a["name"] == MODEL_FORM_TERM:  # a table against the iteration: 1e-6
+                assert a["std"] == pytest.approx(b["std"], rel=1e-3, abs=1e-7 * c), a["name"]
             else:
                 assert a["std"] == pytest.approx(b["std"], rel=1e-11, abs=1e-30), a["name"]
-            assert a["note"] == b["note"] or a["name"] == WALL_TERM
-        assert got["combined_std"] == pytest.approx(want["combined_std"], rel=1e-11)
-        assert got["largest"] == want["largest"]
+            assert a["note"] == b["note"] or a["name"] in (WALL_TERM, MODEL_FORM_TERM)
+        assert got["combined_std"] == pytest.approx(want["combined_std"], rel=1e-6)
     assert est.conductance_std == pytest.approx(b39["combined_std"], rel=1e-11)
-    assert est.conductance_model_std == pytest.approx(bm["combined_std"], rel=1e-11)
+    assert est.conductance_model_std == pytest.approx(bm["combined_std"], rel=1e-6)
     # a plan made at the crossing (no table) gives the same numbers
     late = crossing_estimate(plan_crossing(s, p10=p10, p_atm=p_atm, p_star=p_star,
                                            tau_ref=tau), tau, tau_std)
     assert late.conductance_std == pytest.approx(est.conductance_std, rel=1e-11)
     assert late.conductance_model == pytest.approx(est.conductance_model, rel=1e-6)
+
+
+def test_a_slow_adiabatic_discharge_is_within_the_crossings_sigma() -> None:
+    """Up to p* the record has not shown the heat law: the crossing's C (made with the
+    natural-convection correlation) carries the adiabatic C as its model-form neighbour.
+    A 20 L tank through C = 2e-9 (tau_exp ~60 s) simulated adiabatic was +23 % off at 13
+    sigma before that line (1.7 sigma with it); the curve fit then finds the law."""
+    cfg = RigConfig(volume=2e-2, conductance=2e-9, noise_std=300.0, seed=3, rate=100.0,
+                    pre_time=2.0)
+    sim = simulate(cfg)
+    (r,) = analyze(sim.t, sim.measured, EstimatorSettings(volume=2e-2, curve_fit=False))
+    z = (r.conductance_model - cfg.conductance) / r.conductance_model_std
+    assert abs(z) <= 2.0, z
+    (line,) = [x for x in r.extra["budget"]["terms"] if x["name"] == MODEL_FORM_TERM]
+    assert line["std"] > 0.1 * cfg.conductance and "adiabatic" in line["note"]
+    assert r.extra["budget"]["largest"] == MODEL_FORM_TERM
 
 
 def test_the_wall_line_is_the_budget_modules() -> None:

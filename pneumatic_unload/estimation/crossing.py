@@ -16,17 +16,20 @@ SI units: s, Pa absolute, m^3/(s Pa), K.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
 
 from pneumatic_unload import physics
 from pneumatic_unload.budget import (
+    MODEL_FORM_TERM,
     WALL_TERM,
     BudgetTerm,
     ScaledBudget,
     eq39_budget,
     model_budget,
+    model_form_term,
     record_term,
     tau_term,
     wall_term,
@@ -37,9 +40,13 @@ from pneumatic_unload.estimation.refine import (
     prepare_inversion,
     pressure_problem,
 )
+from pneumatic_unload.inversion import may_turn_subsonic
 
 #: The type A line of the crossing's model-based C.
 MODEL_TYPE_A = "crossing time (noise), b prior, heat correlation"
+#: What the crossing's model-form line stands for.
+HEAT_NOT_SEEN = ("heat law not yet seen: the exchange before p* taken uniform between none "
+                 "(adiabatic) and twice the correlation's, +-|C - C_adiabatic|/sqrt 3")
 
 
 @dataclass(frozen=True)
@@ -63,6 +70,10 @@ class CrossingPlan:
         eq 39's and the model C's budgets at a reference C, scaled at the crossing.
     wall : tuple
         The wall temperature's standard uncertainty [K] and where it comes from.
+    adiabatic : Any
+        With a heat law: how the adiabatic C is found at the crossing, for the model-form
+        line ('isentropic': the closed form, the flow choked to p*; an InversionTable of
+        the adiabatic model; None: its inversion iterates at the crossing); '' without.
     """
 
     settings: EstimatorSettings
@@ -75,6 +86,7 @@ class CrossingPlan:
     eq39: ScaledBudget | None
     model: ScaledBudget | None
     wall: tuple[float, str]
+    adiabatic: Any = ""
 
 
 @dataclass(frozen=True)
@@ -135,6 +147,14 @@ def plan_crossing(settings: EstimatorSettings, *, p10: float, p_atm: float, p_st
     table = None
     if problem is None and math.isfinite(t_mid) and math.isfinite(p_mid):
         table = prepare_inversion(s, t_mid, p_mid, p10, p_atm, p_star)
+    adiabatic: Any = ""
+    if problem is None and s.heat_model != "adiabatic":
+        if not may_turn_subsonic(s, p_atm, p_star):
+            adiabatic = "isentropic"
+        elif math.isfinite(t_mid) and math.isfinite(p_mid):
+            adiabatic = prepare_inversion(_adiabatic(s), t_mid, p_mid, p10, p_atm, p_star)
+        else:
+            adiabatic = None
     if not (math.isfinite(tau_ref) and tau_ref > 0):
         tau_ref = math.exp(float(table.log_t[table.log_t.size // 2])) if table is not None \
             else t_mid
@@ -159,8 +179,9 @@ def plan_crossing(settings: EstimatorSettings, *, p10: float, p_atm: float, p_st
                 tau=tau_ref, p10=p10, p_atm=p_atm, p_star=p_star,
                 atmosphere_measured=measured,
                 wall_std=0.0 if s.heat_model == "natural" else math.nan),
-                free=(MODEL_TYPE_A, WALL_TERM))
-    return CrossingPlan(s, p10, p_atm, p_star, problem, subsonic, table, eq39, model, wall)
+                free=(MODEL_TYPE_A, WALL_TERM, MODEL_FORM_TERM))
+    return CrossingPlan(s, p10, p_atm, p_star, problem, subsonic, table, eq39, model, wall,
+                        adiabatic)
 
 
 def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> CrossingEstimate:
@@ -196,11 +217,13 @@ def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> Crossin
     if math.isfinite(c_model) and c_model > 0 and math.isfinite(c_model_std):
         wall = wall_term(s, c_model, wall_std, *plan.wall) if math.isfinite(wall_std) \
             else None
+        form = _heat_not_seen(plan, tau, c_isen, c_model)
         given: dict[str, BudgetTerm | None] = {
-            MODEL_TYPE_A: record_term(MODEL_TYPE_A, c_model_std), WALL_TERM: wall}
+            MODEL_TYPE_A: record_term(MODEL_TYPE_A, c_model_std), WALL_TERM: wall,
+            MODEL_FORM_TERM: form}
         bm = plan.model.at(c_model, given) if plan.model is not None else model_budget(
             s, c_model, type_a_std=c_model_std, type_a_name=MODEL_TYPE_A,
-            model_form_std=0.0, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
+            model_form_std=form.std, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
             atmosphere_measured=s.atmosphere is None, wall_std=wall_std)
         extra["budget"] = bm.to_dict()
         c_model_std = bm.combined_std
@@ -217,3 +240,29 @@ def _eq39(plan: CrossingPlan, c39: float, tau: float, tau_std: float,
         p_star=plan.p_star, atmosphere_measured=s.atmosphere is None)
     extra["budget_eq39"] = b.to_dict()
     return b.combined_std
+
+
+def _adiabatic(settings: EstimatorSettings) -> EstimatorSettings:
+    """The settings without the heat law [-]."""
+    return dataclasses.replace(settings, heat_model="adiabatic")
+
+
+def _heat_not_seen(plan: CrossingPlan, tau: float, c_isen: float, c_model: float
+                   ) -> BudgetTerm:
+    """The crossing's model-form line [m^3/(s Pa)]: up to p* the record has not shown how
+    much heat the wall gives the gas (the curve fit sees it later), so the model C made
+    with the correlation has the adiabatic C as a plausible neighbour. On a fast discharge
+    the two agree (a line of ~0); on a slow one the correlation's heat moves C by tens of
+    per cent, which the correlation's +-30 % in the type A line does not span."""
+    a = plan.adiabatic
+    if a == "":
+        return model_form_term(0.0, "no heat law")
+    if a == "isentropic":
+        c_adi = c_isen
+    else:
+        c_adi, _sd, _m, _w = crossing_inversion(
+            _adiabatic(plan.settings), tau, 0.0, plan.p10, plan.p_atm, plan.p_star, c_isen,
+            table=a, wall=False)
+    if not (math.isfinite(c_adi) and c_adi > 0):
+        return model_form_term(math.nan, "adiabatic C not found")
+    return model_form_term(abs(c_model - c_adi) / math.sqrt(3.0), HEAT_NOT_SEEN)
