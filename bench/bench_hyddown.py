@@ -117,8 +117,10 @@ def discrepancy_row(trace: Trace) -> tuple[str, bool, float]:
 
     m = trace.meta
     t, y = record(trace, zlib.crc32(trace.name.encode()))
-    s = DiscrepancySettings(volume=m["volume"], initial_temperature=m["t10"],
-                            atmosphere=P_ATM, profile=False)
+    s = DiscrepancySettings(
+        volume=m["volume"], length_diameter_ratio=m["length_diameter_ratio"],
+        initial_temperature=m["t10"], atmosphere=P_ATM, profile=False,
+        model_uncertainty=EXACT_INPUTS_FOREIGN_MODEL["model_uncertainty"])
     t0 = time.process_time()
     res = find_discrepancy(t, y, s)
     cpu = time.process_time() - t0
