@@ -109,7 +109,8 @@ def fit_quality(prob: Problem, fit: Fit) -> Diagnostics:
                        corr_pressure=math.nan, corr_rate=math.nan)
 
 
-def fit_candidate(prob: Problem, base: Fit, neutral: list[Values], cand: str) -> Fit:
+def fit_candidate(prob: Problem, base: Fit, neutral: list[Values], cand: str,
+                  heat_law: str | None = None) -> Fit:
     """The current model with ``cand`` added, fitted from several starts.
 
     Starts: the current fit and the neutral baseline values, each with a small and a large
@@ -121,10 +122,14 @@ def fit_candidate(prob: Problem, base: Fit, neutral: list[Values], cand: str) ->
     parameter (:func:`extension_offered`), from the fit of the law it extends (nested:
     never worse than it) and with the second parameter at its centre; the law
     with the lowest BIC is kept (chi^2 + k ln n: a second parameter must pay for itself).
+    ``heat_law`` given: that law only (the hot start takes heat transfer's law, so that it
+    extends heat transfer by the wall temperature alone: :data:`NESTED`).
     """
     effects = (*base.effects, cand)
     if cand not in ("heat_transfer", HOT_START):
         return _fit_law(prob, base, neutral, effects, cand, base.model.heat_law)
+    if heat_law is not None:
+        return _fit_law(prob, base, neutral, effects, cand, heat_law)
     by_law = {law: _fit_law(prob, base, neutral, effects, cand, law)
               for law, e in HEAT_VARIANTS.items() if len(e.params) == 1}
     for law, (sub, nested) in HEAT_EXTENSIONS.items():
@@ -177,7 +182,8 @@ def extension_offered(prob: Problem, fit: Fit, law: str) -> bool:
 def run_round(prob: Problem, base: Fit, neutral: list[Values], candidates: list[str],
               progress: Callable[[int, int, str, float], None] | None = None
               ) -> dict[str, Fit]:
-    """Fit every candidate added to ``base`` (multi-start) [-].
+    """Fit every candidate added to ``base`` (multi-start) [-]; the hot start with the
+    heat law chosen for heat transfer when both are candidates.
 
     Parameters
     ----------
@@ -193,9 +199,13 @@ def run_round(prob: Problem, base: Fit, neutral: list[Values], candidates: list[
         Called after each candidate with (its number from 1, how many, name, seconds).
     """
     out: dict[str, Fit] = {}
-    for i, cand in enumerate(candidates):
+    # heat transfer first: the hot start takes its law (one parameter more, the wall)
+    order = sorted(candidates, key=lambda c: c == HOT_START)
+    for i, cand in enumerate(order):
         t0 = time.perf_counter()
-        out[cand] = fit_candidate(prob, base, neutral, cand)
+        law = out["heat_transfer"].model.heat_law if (
+            cand == HOT_START and "heat_transfer" in out) else None
+        out[cand] = fit_candidate(prob, base, neutral, cand, law)
         if progress is not None:
             progress(i + 1, len(candidates), cand, time.perf_counter() - t0)
     return out
