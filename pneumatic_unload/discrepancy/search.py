@@ -122,19 +122,20 @@ def fit_candidate(prob: Problem, base: Fit, neutral: list[Values], cand: str,
     parameter (:func:`extension_offered`), from the fit of the law it extends (nested:
     never worse than it) and with the second parameter at its centre; the law
     with the lowest BIC is kept (chi^2 + k ln n: a second parameter must pay for itself).
-    ``heat_law`` given: that law only (the hot start takes heat transfer's law, so that it
-    extends heat transfer by the wall temperature alone: :data:`NESTED`).
+    ``heat_law`` given (the hot start, with heat transfer's law): the one-parameter laws
+    and that one, no other two-parameter law, so that the hot start never has more than
+    the wall temperature beyond heat transfer's parameters (:data:`NESTED`).
     """
     effects = (*base.effects, cand)
     if cand not in ("heat_transfer", HOT_START):
         return _fit_law(prob, base, neutral, effects, cand, base.model.heat_law)
-    if heat_law is not None:
-        return _fit_law(prob, base, neutral, effects, cand, heat_law)
     by_law = {law: _fit_law(prob, base, neutral, effects, cand, law)
               for law, e in HEAT_VARIANTS.items() if len(e.params) == 1}
     for law, (sub, nested) in HEAT_EXTENSIONS.items():
         f1 = by_law.get(sub)
-        if f1 is not None and extension_offered(prob, f1, law):
+        offered = law == heat_law if heat_law is not None else \
+            f1 is not None and extension_offered(prob, f1, law)
+        if f1 is not None and offered:
             model = prob.model(effects, heat_law=law)
             centre = {q.name: q.centre(prob.start) for q in HEAT_VARIANTS[law].params
                       if q.name in nested}
@@ -183,7 +184,7 @@ def run_round(prob: Problem, base: Fit, neutral: list[Values], candidates: list[
               progress: Callable[[int, int, str, float], None] | None = None
               ) -> dict[str, Fit]:
     """Fit every candidate added to ``base`` (multi-start) [-]; the hot start with the
-    heat law chosen for heat transfer when both are candidates.
+    one-parameter heat laws and the law chosen for heat transfer when both are candidates.
 
     Parameters
     ----------
@@ -199,7 +200,8 @@ def run_round(prob: Problem, base: Fit, neutral: list[Values], candidates: list[
         Called after each candidate with (its number from 1, how many, name, seconds).
     """
     out: dict[str, Fit] = {}
-    # heat transfer first: the hot start takes its law (one parameter more, the wall)
+    # heat transfer first: the hot start takes its law or a one-parameter one (at most one
+    # parameter more, the wall)
     order = sorted(candidates, key=lambda c: c == HOT_START)
     for i, cand in enumerate(order):
         t0 = time.perf_counter()

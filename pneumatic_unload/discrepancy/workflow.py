@@ -19,8 +19,8 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
    two-parameter laws where the record carries their second parameter, and the law with
    the lowest BIC kept (:func:`~pneumatic_unload.discrepancy.search.fit_candidate`), so
    that a further effect is tested against the best heat law, not one of them; the hot
-   start takes heat transfer's law (it extends heat transfer by the wall temperature
-   alone).
+   start is fitted with the one-parameter laws and heat transfer's law, no other
+   two-parameter one (it extends heat transfer by the wall temperature alone).
 3. **Decision** by BIC = chi^2 + k ln(n): an effect is claimed only if it beats the
    current model by more than ``bic_threshold`` (10); it is named alone only if the
    runner-up is more than 10 behind, otherwise the ambiguity set is reported with the
