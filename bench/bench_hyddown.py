@@ -65,8 +65,12 @@ the estimator's rows above; the natural law's Rayleigh number needs it).
   (natural+turbulent, heat_turbulent 1.22); full02 hot_start +0.39 % (round 2 had taken an
   orifice_leak_downstream with b_leak at its bound 0.02, delta-BIC 10.0, C -7.4 %: now
   refused); full19 heat_transfer +0.48 % (a hot start free to take the density law took
-  it with a wall 19 K below T10: C -2.3 %). Worst |C error| 1.34 % (full04), median 0.3 %.
-  CPU up to 45 s per trace (full08, 15 L, calc). The committed six: 6/6.
+  it with a wall 19 K below T10: C -2.3 %). Worst |C error| 1.34 % (full04), median 0.30 %.
+  CPU up to 87 s per trace (full08, 15 L, calc; loaded). The committed six: 5/6 (6/6 on
+  main): v5l (T10 303 K) names hot_start (natural+turbulent, wall 311 K), then round 2 is
+  the ambiguity leak / leak_downstream (delta-BIC 50.6 / 49.9; orifice_leak_downstream
+  refused at its bound) and the stand-in leak moves C to -3.3 % (the C range, 0.48-1.008
+  of the truth, holds it): open.
 """
 
 from __future__ import annotations
