@@ -437,10 +437,18 @@ def model_budget(settings: EstimatorSettings, c: float, *, type_a_std: float,
                          wall_input=wall_input)
     terms += list(extra_terms)
     terms.append(model_form_term(model_form_std))
-    terms.append(BudgetTerm("model limits (ideal gas, uniform state)", "model", math.nan,
-                            math.nan, "", abs(c) * settings.model_uncertainty,
-                            f"model_uncertainty {100 * settings.model_uncertainty:g} %"))
+    terms.append(model_limits_term(c, settings.model_uncertainty))
     return Budget(c, tuple(terms))
+
+
+def model_limits_term(c: float, model_uncertainty: float) -> BudgetTerm:
+    """The model-limits line of a model-based C: ``model_uncertainty`` [-] (relative
+    standard uncertainty from the discharge model's own limits: ideal gas, uniform state,
+    heat-law family; see :class:`~pneumatic_unload.config.estimator.EstimatorSettings`)
+    times |c| [m^3/(s Pa)]."""
+    return BudgetTerm("model limits (ideal gas, uniform state)", "model", math.nan,
+                      math.nan, "", abs(c) * model_uncertainty,
+                      f"model_uncertainty {100 * model_uncertainty:g} %")
 
 
 def eq39_budget(settings: EstimatorSettings, c: float, *, tau: float, tau_std: float,

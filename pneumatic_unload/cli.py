@@ -402,7 +402,8 @@ def add_discrepancy_parser(sub: Any) -> None:
                     help="tank L/D [-], one for all runs or one per PATH")
     adapters.add_options(dc, DiscrepancySettings,
                          only=("fit_wall_temperature", "profile", "bic_threshold",
-                               "resolution", "candidates", "time_limit"))
+                               "resolution", "candidates", "time_limit",
+                               "model_uncertainty"))
     dc.add_argument("--max-effects", type=int, default=None, choices=(1, 2, 3),
                     help="add at most this many effects (greedy), default 3")
     add_input_options(dc)

@@ -145,14 +145,14 @@ def test_discrepancy_names_heat_transfer_on_hyddown_with_c_within_2_percent(name
     m = trace.meta
     t, y = record(trace, zlib.crc32(name.encode()))
     res = find_discrepancy(t, y, DiscrepancySettings(
-        volume=m["volume"], initial_temperature=m["t10"], atmosphere=101325.0,
-        profile=False))
+        volume=m["volume"], length_diameter_ratio=m["length_diameter_ratio"],
+        initial_temperature=m["t10"], atmosphere=101325.0, profile=False))
     print(f"{name}: {res.verdict}")
     assert any(e in HEAT for e in [res.effect, *res.ambiguous_with]), res.verdict
     assert all(e in HEAT for e in res.named) and all(e in HEAT for e in res.effects), \
         res.verdict
     assert abs(res.conductance / m["truth_conductance"] - 1.0) < TOLERANCE
-    # the range's high end is C + 3 sigma with the fit's noise-only sigma: it need not
-    # reach a foreign model's truth (the budget's model-limits term is not in it)
+    # the range's ends are C -+ 3 sigma, sigma the noise's and the model limits' (0.3 %
+    # by default, the budget's term)
     lo, hi = res.conductance_range
     assert lo <= m["truth_conductance"] <= hi * (1.0 + TOLERANCE)

@@ -32,7 +32,8 @@ therefore always reaches down to the component's C with such a leak of up to
 plugged removes that caveat.
 
 The range spans the members' C values and their 3-sigma intervals (C +- 3 sigma, clipped
-at zero) and the parallel-leak bound.
+at zero; sigma the noise's and the model limits' combined, the budget's term
+:func:`~pneumatic_unload.budget.model_limits_term`) and the parallel-leak bound.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from pneumatic_unload.budget import model_limits_term
 from pneumatic_unload.discrepancy.types import NRMS_LIMIT, Diagnostics, Fit, Round
 from pneumatic_unload.model.effects import (
     DOWNSTREAM_LEAKS,
@@ -148,8 +150,8 @@ def _within_noise(d: Diagnostics | None) -> bool:
 
 
 def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold: float,
-                          quality: Callable[[Fit], Diagnostics] | None = None
-                          ) -> ConductanceAmbiguity:
+                          quality: Callable[[Fit], Diagnostics] | None = None,
+                          model_uncertainty: float = 0.0) -> ConductanceAmbiguity:
     """Collect the models whose C competes with the final model's.
 
     Parameters
@@ -165,6 +167,10 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
     quality : callable, optional
         Diagnostics of a fit (residual whiteness and normalised RMS); without it the
         white-fits rule is not applied.
+    model_uncertainty : float
+        Relative standard uncertainty of C from the model's own limits [-]: it widens the
+        range's 3-sigma ends (the budget's model-limits term), not the comparison of
+        members, which share the model's limits.
     """
     c0, s0 = final.theta["C"], _std(final)
     members: dict[tuple[str, ...], tuple[Fit, str, float]] = {}
@@ -210,7 +216,12 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
             round_base = r.fits[r.winner]
     down = [e for e in final.effects if e in DOWNSTREAM_LEAKS]
     out = ConductanceAmbiguity()
-    s0_ = s0 if math.isfinite(s0) else 0.0
+
+    def total(c: float, s: float) -> float:
+        return math.hypot(s if math.isfinite(s) else 0.0,
+                          model_limits_term(c, model_uncertainty).std)
+
+    s0_ = total(c0, s0)
     out.parallel_low = max(c0 - K_RANGE * s0_, 0.0) / (1.0 + PARALLEL_LEAK_MAX)
     out.low, out.high = out.parallel_low, c0 + K_RANGE * s0_
     plugged = f"C vs a leak in parallel with the component: {PLUGGED_RUN}"
@@ -223,7 +234,7 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
     rows = [(final, why_final, 0.0), *members.values()]
     for f, why, dbic in rows:
         c, s = f.theta["C"], _std(f)
-        s = s if math.isfinite(s) else 0.0
+        s = total(c, s)
         out.low = min(out.low, max(c - K_RANGE * s, 0.0))
         out.high = max(out.high, c + K_RANGE * s)
         out.members.append({"effects": list(f.effects), "conductance": c,

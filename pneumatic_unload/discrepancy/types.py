@@ -72,6 +72,12 @@ class DiscrepancySettings(TankSpec):
         Check the linear intervals with the profile likelihood.
     resolution : float
         Relative bin width of the likelihood [-] (smaller: slower, a little more power).
+    model_uncertainty : float
+        Relative standard uncertainty of the model-based C from the discharge model's own
+        limits [-], as the estimator's (default 0.3 %, the RMS error of the model C against
+        the HydDown peer simulator; 0 only for data made by the package's own model): in
+        :meth:`DiscrepancyResult.conductance_std` and the C range, through the budget's
+        model-limits term (:func:`pneumatic_unload.budget.model_limits_term`).
     time_limit : float or None
         Wall-clock cap of the fits [s] (None: none); see
         :func:`~pneumatic_unload.discrepancy.workflow.find_discrepancy` for what happens
@@ -85,6 +91,9 @@ class DiscrepancySettings(TankSpec):
                                   "delta-BIC needed to claim an effect and to name it alone")
     profile: bool = flag(True, "check the linear intervals with profile likelihoods")
     resolution: float = number(0.03, "-", 1e-3, 0.5, "relative bin width of the likelihood")
+    model_uncertainty: float = number(
+        0.003, "-", 0.0, 0.5, "relative standard uncertainty of the model-based C from the "
+        "model's own limits (ideal gas, uniform state, heat-law family)")
     time_limit: float | None = optional(
         600.0, "s", 1.0, 1e6, "wall-clock cap of the search: the fit under way stops at "
         "its next model evaluation (round 1 unfinished: an error; later: the effects "
@@ -122,8 +131,10 @@ class Fit:
 
     @property
     def heat_law(self) -> str | None:
-        """Heat-transfer law fitted ('natural', 'fixed'), None without heat transfer."""
-        return self.model.heat_law if "heat_transfer" in self.model.effects else None
+        """Heat-transfer law fitted (a key of
+        :data:`~pneumatic_unload.model.effects.HEAT_VARIANTS`, the hot start's too), None
+        without heat transfer."""
+        return self.model.heat_law if "heat_transfer" in self.model.config_effects else None
 
     @property
     def theta(self) -> dict[str, float]:
@@ -329,7 +340,17 @@ class DiscrepancyResult:
         return self.final.theta["C"]
 
     def conductance_std(self) -> float:
-        """1-sigma of C of the final model from the Jacobian [m^3/(s Pa)]."""
+        """1-sigma of C of the final model [m^3/(s Pa)]: the noise's (from the Jacobian,
+        :meth:`conductance_std_noise`) and the model limits' (the budget's term,
+        ``settings.model_uncertainty`` times C) combined."""
+        from pneumatic_unload.budget import model_limits_term  # the settings stay light
+
+        u = self.settings.model_uncertainty if self.settings is not None else 0.0
+        return math.hypot(self.conductance_std_noise(),
+                          model_limits_term(self.conductance, u).std)
+
+    def conductance_std_noise(self) -> float:
+        """1-sigma of C of the final model from the noise alone (Jacobian) [m^3/(s Pa)]."""
         return self.final.std("C")
 
     def to_dict(self) -> dict[str, Any]:
@@ -353,6 +374,7 @@ class DiscrepancyResult:
             "noise": self.noise.to_dict(),
             "baseline": theta(self.baseline), "final_model": theta(self.final),
             "conductance": self.conductance, "conductance_std": self.conductance_std(),
+            "conductance_std_noise": self.conductance_std_noise(),
             "conductance_range": None if self.conductance_ambiguity is None
             else self.conductance_ambiguity.to_dict(),
             "diagnostics_before": self.before.to_dict(),

@@ -14,7 +14,13 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
    (pre-step, choked, subsonic, plateau).
 2. **Candidates.** For each effect, the whole model is refitted with the effect added,
    from several starts: from the baseline fit *and* from the neutral (unloading-time)
-   values of the baseline parameters, each with small and large effect sizes.
+   values of the baseline parameters, each with small and large effect sizes. Heat
+   transfer (and the hot start) is fitted with the engine's whole law family, the
+   two-parameter laws where the record carries their second parameter, and the law with
+   the lowest BIC kept (:func:`~pneumatic_unload.discrepancy.search.fit_candidate`), so
+   that a further effect is tested against the best heat law, not one of them; the hot
+   start is fitted with the one-parameter laws and heat transfer's law, no other
+   two-parameter one (it extends heat transfer by the wall temperature alone).
 3. **Decision** by BIC = chi^2 + k ln(n): an effect is claimed only if it beats the
    current model by more than ``bic_threshold`` (10); it is named alone only if the
    runner-up is more than 10 behind, otherwise the ambiguity set is reported with the
@@ -36,15 +42,18 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
    noise model refitted on its residual; when the effects named leave a residual at the
    noise level that is only not white, a further effect must also leave it white (else it
    fits the model's limits and the residual is reported as unexplained:
-   :func:`~pneumatic_unload.discrepancy.search.structure_refusals`); the effects named and
+   :func:`~pneumatic_unload.discrepancy.search.structure_refusals`); a further effect that
+   beats them only with a parameter of its own at a bound of its range is refused too
+   (:func:`~pneumatic_unload.discrepancy.search.bound_refusals`); the effects named and
    their look-alikes (the same physics in another law or place, the round's ambiguity
    set) are not tried again.
 7. **Temperature.** A logged gas temperature is compared with the models; a final model
    that contradicts it is flagged with the likely reason (e.g. the wall temperature).
 
 **Time bound.** A run is bounded in evaluations: at most ``max_effects`` (3) rounds of at
-most 10 candidates, each fitted from at most 10 starts (two heat laws x 5) screened for at
-most 12 Levenberg-Marquardt iterations and one full search of at most 100, an iteration
+most 11 candidates, each fitted from at most 10 starts (two one-parameter heat laws x 5,
+and two starts for each of the two two-parameter laws) screened for at most 12
+Levenberg-Marquardt iterations and one full search per law of at most 100, an iteration
 costing at most (free parameters + 12) model evaluations, each evaluation bounded by the
 integrator's step budget (:data:`pneumatic_unload.model.ode.MAX_STEPS` per segment); the
 profiles add a fixed number of constrained fits per reported parameter. In seconds, the
@@ -76,6 +85,7 @@ from pneumatic_unload.discrepancy.intervals import (
 from pneumatic_unload.discrepancy.multirun import GeometryLaw, fit_geometry_law
 from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.search import (
+    bound_refusals,
     decide,
     diagnose,
     fit_quality,
@@ -188,6 +198,9 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
             delta, _, _ = decide(base_k, fits, thr, refused)
             refused.update(structure_refusals(prob, current_diag, {
                 k: f for k, f in fits.items() if k not in refused}, delta, thr))
+            # ... and with parameters of its own inside their range
+            refused.update(bound_refusals(base_k, {
+                k: f for k, f in fits.items() if k not in refused}, delta, thr))
         delta, win, amb = decide(base_k, fits, thr, refused)
         rounds.append(Round(base_effects=current.effects, base_bic=base_k.bic, fits=fits,
                             delta_bic=delta, winner=win, ambiguous_with=amb, base=base_k,
@@ -235,7 +248,8 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
             quality[id(f)] = after if f is current else fit_quality(prob, f)
         return quality[id(f)]
 
-    c_amb = conductance_ambiguity(base, rounds, current, thr, fit_quality_of)
+    c_amb = conductance_ambiguity(base, rounds, current, thr, fit_quality_of,
+                                  settings.model_uncertainty)
     if c_amb.ambiguous:
         verdict += "; " + describe(c_amb)
         extra += [x for x in c_amb.separating if x not in extra]
