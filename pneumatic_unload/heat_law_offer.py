@@ -34,6 +34,21 @@ DENSITY_LAW_MIN_TAU_REL_SD = 0.2
 DENSITY_LAW_MAX_EXPONENT_SD = 0.2
 
 
+def both_regimes(share: float) -> bool:
+    """The record carries the turbulent branch apart: the share of its time after the
+    opening with Ra >= RA_TURBULENT [-] leaves at least :data:`TURBULENT_MIN_SHARE` in
+    each regime (the rule of the curve fit and of the discrepancy search alike)."""
+    return min(share, 1.0 - share) >= TURBULENT_MIN_SHARE
+
+
+def exchange_determined(tau_heat: float, tau_heat_std: float) -> bool:
+    """The record determines the heat exchange: the constant-hA law's tau_heat [s] within
+    :data:`DENSITY_LAW_MIN_TAU_REL_SD` (relative 1-sigma; tau_heat_std [s]), as the density
+    law needs (the rule of the curve fit and of the discrepancy search alike)."""
+    rel = tau_heat_std / tau_heat if tau_heat > 0 else math.nan
+    return bool(math.isfinite(rel) and rel <= DENSITY_LAW_MIN_TAU_REL_SD)
+
+
 def turbulent_law_problem(natural: CurveFit | None, settings: EstimatorSettings,
                           t_last: float) -> str | None:
     """Why the record cannot carry the natural law's turbulent branch apart (None: offer
@@ -49,7 +64,7 @@ def turbulent_law_problem(natural: CurveFit | None, settings: EstimatorSettings,
     except ValueError as exc:
         return f"the natural fit's model could not be integrated ({exc})"
     share = float(np.mean(rayleigh(cfg, pp, tg) >= RA_TURBULENT))
-    if min(share, 1.0 - share) < TURBULENT_MIN_SHARE:
+    if not both_regimes(share):
         return (f"the record stays in one regime of the correlation (turbulent share "
                 f"{100 * share:.0f} %)")
     return None
@@ -62,8 +77,8 @@ def density_law_problem(fixed: CurveFit | None) -> str | None:
     dependence on density)."""
     if fixed is None:
         return "no constant-hA fit to start from"
-    rel = fixed.tau_heat_std / fixed.tau_heat if fixed.tau_heat > 0 else math.nan
-    if not (math.isfinite(rel) and rel <= DENSITY_LAW_MIN_TAU_REL_SD):
+    if not exchange_determined(fixed.tau_heat, fixed.tau_heat_std):
+        rel = fixed.tau_heat_std / fixed.tau_heat if fixed.tau_heat > 0 else math.nan
         return (f"the record does not determine the heat exchange (tau_heat 1-sigma "
                 f"{100 * rel:.3g} % > {100 * DENSITY_LAW_MIN_TAU_REL_SD:g} %)")
     return None

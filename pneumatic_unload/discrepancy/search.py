@@ -18,7 +18,7 @@ from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.types import NRMS_LIMIT, WHITE_P, Diagnostics, Fit
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
 from pneumatic_unload.fit.trace import Trace
-from pneumatic_unload.heat_law_offer import DENSITY_LAW_MIN_TAU_REL_SD, TURBULENT_MIN_SHARE
+from pneumatic_unload.heat_law_offer import both_regimes, exchange_determined
 from pneumatic_unload.model.effects import HEAT_VARIANTS, HOT_START
 from pneumatic_unload.model.heat import RA_TURBULENT, rayleigh
 
@@ -171,12 +171,10 @@ def extension_offered(prob: Problem, fit: Fit, law: str) -> bool:
             return False
         share = float(np.mean(rayleigh(fit.model.config(th), st[:, 0], st[:, 1])
                               >= RA_TURBULENT))
-        return min(share, 1.0 - share) >= TURBULENT_MIN_SHARE
+        return both_regimes(share)
     if law == "density":
-        if "tau_heat" not in fit.result.params.free:
-            return False
-        rel = fit.std("tau_heat") / th["tau_heat"]
-        return bool(math.isfinite(rel) and rel <= DENSITY_LAW_MIN_TAU_REL_SD)
+        return "tau_heat" in fit.result.params.free and \
+            exchange_determined(th["tau_heat"], fit.std("tau_heat"))
     return False
 
 
