@@ -10,6 +10,7 @@ must stay bounded.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from pneumatic_unload.estimation import (
     analyze,
     decisions,
     reduction,
+    state,
 )
 from pneumatic_unload.fit.likelihood import BinnedLikelihood, bin_stats, make_bins
 from pneumatic_unload.fit.noise import NoiseModel
@@ -130,3 +132,58 @@ def test_merged_bins_are_make_bins_bins():
     chi2 = np.sum(exact.residuals_at(model) ** 2)
     chi2_red = np.sum(BinnedLikelihood.from_stats(bins, unit).residuals_at(model) ** 2)
     assert chi2_red == pytest.approx(chi2, rel=1e-6)
+
+
+def test_crossing_half_width_closed_form():
+    cap_samples = state.CROSSING_WINDOW_MAX
+    # an ordinary discharge: 5 % of the drop, the cap far away
+    assert state.crossing_half_width(6e5, 500.0, 1e6, 1e-4) == pytest.approx(3e4)
+    # six noise sigmas win over 5 % of a small drop
+    assert state.crossing_half_width(1e4, 300.0, 1e6, 1e-4) == pytest.approx(1800.0)
+    # an hours-long discharge: the window at the slope bound spans CROSSING_WINDOW_MAX
+    slope0, dt = 50.0, 1e-4
+    half = state.crossing_half_width(6e5, 20.0, slope0, dt)
+    assert half < 3e4
+    assert 2.0 * half / (state.SLOPE_AT_PSTAR * slope0 * dt) == pytest.approx(cap_samples)
+    # ...but never below six sigmas (a sample below p* - half is no noise excursion)
+    assert state.crossing_half_width(6e5, 1e3, slope0, dt) == pytest.approx(6e3)
+    # unknown period or slope: no cap
+    assert state.crossing_half_width(6e5, 20.0, math.nan, dt) == pytest.approx(3e4)
+    assert state.crossing_half_width(6e5, 20.0, slope0, math.nan) == pytest.approx(3e4)
+
+
+def test_capped_crossing_window_keeps_the_crossing(slow_unload, monkeypatch):
+    # the window capped at 4096 samples (about 0.3 of its natural 13 k at this rate): the
+    # crossing window spans at most that many samples at the true slope at p*, the
+    # crossing agrees with the uncapped one within its sigma, the paths stay bit-identical
+    t, p, settings, cfg = slow_unload
+    full = analyze(t, p, settings)
+    monkeypatch.setattr(state, "CROSSING_WINDOW_MAX", 4096)
+    halves: list[float] = []
+    width = state.crossing_half_width
+
+    def recorded(*args: float) -> float:
+        halves.append(width(*args))
+        return halves[-1]
+
+    monkeypatch.setattr(state, "crossing_half_width", recorded)
+    est = StreamingEstimator(settings)
+    capped = []
+    for k in range(0, t.size, 5000):
+        capped += est.push_block(t[k:k + 5000], p[k:k + 5000])
+    capped += est.finish()
+    assert [r.to_dict() for r in analyze(t, p, settings)] == [r.to_dict() for r in capped]
+    c_full, c_cap = full[0], capped[0]
+    assert c_full.status == c_cap.status == "ok"
+    assert c_cap.t_cross != c_full.t_cross  # the window did change
+    both = math.hypot(c_full.tau_exp_std, c_cap.tau_exp_std)
+    assert abs(c_cap.tau_exp - c_full.tau_exp) < 3.0 * both
+    sd = min(c_full.conductance_model_std, c_cap.conductance_model_std)
+    assert abs(c_cap.conductance_model - c_full.conductance_model) < 0.1 * sd
+    # the window's samples at the true slope at p*: the pressure falls 2 half through it
+    sim = simulate(cfg)
+    k = int(np.searchsorted(-sim.pressure, -c_cap.p_star))
+    slope = abs(float(np.gradient(sim.pressure, sim.t)[k]))
+    half = halves[-1]
+    assert half < 0.05 * (c_cap.p10 - c_cap.p_atm)  # the cap binds
+    assert 2.0 * half / (slope / cfg.rate) <= 4096

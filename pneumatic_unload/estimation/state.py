@@ -34,6 +34,33 @@ WAITING, CONFIRM, UNLOADING, TAIL, RECOVERY, SKIP = (
     "waiting", "confirming", "unloading", "tail", "recovery", "skipping")
 
 
+#: Most samples in the crossing fit's window [-] (2 half-widths at the expected slope at
+#: p*): a window of 0.05 (p10 - p_atm) either side of p* spans 0.27 tau, millions of
+#: samples on a discharge of hours; 2^20 samples (105 s at 10 kHz) already give the
+#: crossing time to a few parts per million of tau, and bound what is held before the
+#: crossing (issue #13: memory bounded whatever the length of one unload).
+CROSSING_WINDOW_MAX = 1 << 20
+#: The slope at p* taken as this fraction of the initial slope when bounding the window
+#: [-]: P_STAR_FRACTION of it for an exponential fall, halved for the slower fall of a
+#: flow turning subsonic (a lower bound of the slope: a bound on the samples).
+SLOPE_AT_PSTAR = 0.5 * P_STAR_FRACTION
+
+
+def crossing_half_width(drop: float, sigma: float, slope0: float, dt: float) -> float:
+    """Half-width of the crossing window about p* [signal units]: 5 % of the drop
+    ``drop`` = p10 - p_atm, at least 6 noise sigmas ``sigma`` (a sample below p* - half is
+    then no noise excursion); at most what :data:`CROSSING_WINDOW_MAX` samples span at the
+    slope expected at p* (``slope0``: initial fall rate [signal units/s]; ``dt``: sample
+    period [s]; not applied while either is unknown). The noise floor wins over the sample
+    bound: a discharge so slow that 12 sigmas take more than 2^20 samples at p* holds
+    12 sigma / (slope dt) samples."""
+    half = 0.05 * drop
+    cap = 0.5 * CROSSING_WINDOW_MAX * dt * SLOPE_AT_PSTAR * slope0
+    if math.isfinite(cap) and cap > 0:
+        half = min(half, cap)
+    return max(6.0 * sigma, half)
+
+
 @dataclass
 class UnloadState:
     """What the current unload has established so far (signal units, s, buffer indices).
@@ -176,7 +203,7 @@ class EstimatorState:
         u.atm = atm
         dp = u.p10 - atm
         u.pstar = atm + P_STAR_FRACTION * dp
-        u.half = max(6.0 * self.sigma, 0.05 * abs(dp))
+        u.half = crossing_half_width(abs(dp), self.sigma, u.slope0, self.dt_nominal)
         self.level = u.pstar - u.half
 
     def trim(self, n: int) -> None:
