@@ -155,3 +155,43 @@ def test_last_above_finds_the_sample_a_whole_scan_finds() -> None:
         hit = np.flatnonzero(pv[lo:n] > level)
         want = lo + int(hit[-1]) if hit.size else -1
         assert last_above(pv, lo, n, level) == want
+
+
+def test_a_result_is_handed_over_before_the_rest_of_its_block() -> None:
+    # on_result: the crossing is passed on inside the push that completes it, before the
+    # block's later samples are scanned (a node publishes it then); the results are those
+    # a run without it returns
+    from pneumatic_unload.estimation import StreamingEstimator
+
+    cfg = RigConfig(volume=2e-4, conductance=8e-9, noise_std=1000.0, seed=1, rate=10000.0,
+                    pre_time=0.6, duration=1.2)
+    sim = simulate(cfg)
+    settings = EstimatorSettings(volume=2e-4, curve_fit=False)
+    plain = StreamingEstimator(settings, live=True)
+    expected = []
+    for k in range(0, sim.t.size, 1000):
+        expected += plain.push_block(sim.t[k:k + 1000], sim.measured[k:k + 1000])
+    est = StreamingEstimator(settings, live=True)
+    scans = [0]
+    scan = est._scan  # counted: the block's samples looked at after the hand-over
+
+    def counted(i: int, end: int) -> int:
+        scans[0] += 1
+        return scan(i, end)
+
+    est._scan = counted  # type: ignore[method-assign]
+    seen: list[tuple[object, int, str, int]] = []
+    block = [-1]
+    est.on_result = lambda r: seen.append((r, block[0], est.state, scans[0]))
+    returned = []
+    scans_after = []
+    for k in range(0, sim.t.size, 1000):
+        block[0] = k
+        returned += est.push_block(sim.t[k:k + 1000], sim.measured[k:k + 1000])
+        scans_after.append(scans[0])
+    assert len(returned) >= 1 and [x[0] for x in seen] == returned  # the same objects
+    assert [r.to_dict() for r in returned] == [r.to_dict() for r in expected]
+    cross, k_block, state, n_scans = seen[0]
+    assert cross.i_complete // 1000 * 1000 == k_block  # handed over in its own block
+    assert state == "tail"  # ...at the crossing
+    assert scans_after[k_block // 1000] > n_scans  # ...before the rest of it was scanned

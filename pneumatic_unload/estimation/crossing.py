@@ -74,6 +74,9 @@ class CrossingPlan:
         With a heat law: how the adiabatic C is found at the crossing, for the model-form
         line ('isentropic': the closed form, the flow choked to p*; an InversionTable of
         the adiabatic model; None: its inversion iterates at the crossing); '' without.
+    adiabatic_settings : EstimatorSettings or None
+        The settings without the heat law, for that inversion (made here: validating
+        settings costs more than the rest of the crossing estimate).
     """
 
     settings: EstimatorSettings
@@ -87,6 +90,7 @@ class CrossingPlan:
     model: ScaledBudget | None
     wall: tuple[float, str]
     adiabatic: Any = ""
+    adiabatic_settings: EstimatorSettings | None = None
 
 
 @dataclass(frozen=True)
@@ -181,7 +185,8 @@ def plan_crossing(settings: EstimatorSettings, *, p10: float, p_atm: float, p_st
                 wall_std=0.0 if s.heat_model == "natural" else math.nan),
                 free=(MODEL_TYPE_A, WALL_TERM, MODEL_FORM_TERM))
     return CrossingPlan(s, p10, p_atm, p_star, problem, subsonic, table, eq39, model, wall,
-                        adiabatic)
+                        adiabatic, _adiabatic(s) if adiabatic not in ("", "isentropic")
+                        else None)
 
 
 def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> CrossingEstimate:
@@ -261,8 +266,8 @@ def _heat_not_seen(plan: CrossingPlan, tau: float, c_isen: float, c_model: float
         c_adi = c_isen
     else:
         c_adi, _sd, _m, _w = crossing_inversion(
-            _adiabatic(plan.settings), tau, 0.0, plan.p10, plan.p_atm, plan.p_star, c_isen,
-            table=a, wall=False)
+            plan.adiabatic_settings or _adiabatic(plan.settings), tau, 0.0, plan.p10,
+            plan.p_atm, plan.p_star, c_isen, table=a, wall=False)
     if not (math.isfinite(c_adi) and c_adi > 0):
         return model_form_term(math.nan, "adiabatic C not found")
     return model_form_term(abs(c_model - c_adi) / math.sqrt(3.0), HEAT_NOT_SEEN)

@@ -113,6 +113,11 @@ class StreamingEstimator:
         #: The last :data:`~.history.RESULTS_KEPT` results (each was returned by the call
         #: that completed it): memory stays bounded on an endless stream.
         self.results = recent_results()
+        #: Called with each result as soon as it is complete, inside the call that
+        #: completes it, before the rest of a block is processed (a live node publishes
+        #: the crossing estimate without waiting for the block's last sample); the call
+        #: returns it as well. None: results are only returned.
+        self.on_result: Callable[[UnloadResult], None] | None = None
         self._append = self._st.buf.append  # hot path (trimming keeps the buffer object)
 
     # ------------------------------------------------------------------ public API
@@ -182,7 +187,7 @@ class StreamingEstimator:
         if i == st.next_check or p < st.level:
             out = STEPS[st.mode](st, i)
             if out:
-                self.results += out
+                self._emit(out)
             return out
         return []
 
@@ -261,7 +266,7 @@ class StreamingEstimator:
         elif st.mode == TAIL and u.pending is not None:
             out += tail.finish_tail(st, n - 1, ended=True)
         st.to_waiting(n)
-        self.results += out
+        self._emit(out)
         return out
 
     # ------------------------------------------------------------------ block path
@@ -289,11 +294,20 @@ class StreamingEstimator:
                 i = j
                 continue
             shift = buf.shift
-            out += STEPS[st.mode](st, j)
+            done = STEPS[st.mode](st, j)
+            if done:
+                self._emit(done)
+                out += done
             trimmed = buf.shift - shift
             i, end = j + 1 - trimmed, end - trimmed
-        self.results += out
         return out
+
+    def _emit(self, out: list[UnloadResult]) -> None:
+        """Results just completed: kept in :attr:`results`, handed to :attr:`on_result`."""
+        self.results += out
+        if self.on_result is not None:
+            for r in out:
+                self.on_result(r)
 
     def _scan(self, i: int, end: int) -> int:
         """Next index in [i, end) where the phase's step must run (end: none).
@@ -343,7 +357,7 @@ class StreamingEstimator:
                 st.clock_step_at = accepted
                 # the step: from the expected next stamp (one nominal period on) to t
                 out = self._on_clock_step(st.last_t + st.dt_nominal - t, t)
-                self.results += out
+                self._emit(out)
                 return out
         return []
 

@@ -20,8 +20,9 @@ Action
 
 A PressureBlock is fed to the core's
 :class:`~pneumatic_unload.estimation.StreamingEstimator` by the subscription callback at
-once, which publishes the crossing estimate it completes (no hand-over to another thread
-on that path). Single FluidPressure samples (10 kHz: one message each) are only queued by
+once, which publishes the crossing estimate the moment the core completes it, before the
+block's later samples are scanned (:attr:`~pneumatic_unload.estimation.StreamingEstimator.
+on_result`; no hand-over to another thread on that path). Single FluidPressure samples (10 kHz: one message each) are only queued by
 the callback and fed by the worker thread, so that the receiving thread keeps up with the
 message rate. The final curve fit of each unload (tens of ms) is taken off the stream as a
 job (``defer_final_fit``) and run by the worker, so it never blocks the reception of
@@ -138,6 +139,7 @@ class EstimatorNode(Node):
         gc.collect()
         gc.freeze()
         # live: a node (re)started mid-unload skips that unload (no bogus estimate)
+        self._arrived = self._pushed = time.monotonic()  # of the message being fed [s]
         self._est = self._new_core()
         self._lock = threading.Lock()  # the core (executor thread, parameter changes)
         self._pub_lock = threading.Lock()  # the published results (executor and fit worker)
@@ -286,7 +288,8 @@ class EstimatorNode(Node):
         try:
             with self._lock:
                 prev = est.state
-                pushed = time.monotonic()
+                self._arrived = arrived
+                self._pushed = time.monotonic()
                 if isinstance(p, np.ndarray):  # a PressureBlock
                     if not p.size:
                         return
@@ -296,17 +299,12 @@ class EstimatorNode(Node):
                 else:
                     out = est.push(common.ns_to_seconds(ns), p)
                     self.received += 1
-                pushed = time.monotonic() - pushed
                 state = est.state
                 jobs = est.take_final_fits()
         except Exception as exc:  # never silent, never fatal: report and start afresh
             self._restart_core(exc)
             return
-        self._last_pressure = p
-        for r in out:
-            if not r.final:
-                self.crossing_push.append(pushed)
-            self._publish_result(r, arrived)
+        self._last_pressure = p  # the results in ``out`` are published (_on_core_result)
         if not out and state != prev:
             self._on_state(state)
         if jobs:
@@ -322,8 +320,22 @@ class EstimatorNode(Node):
 
     def _new_core(self) -> StreamingEstimator:
         """A streaming estimator with the node's settings: live (a stream joined mid-unload
-        skips that unload), its final fits handed to the worker."""
-        return StreamingEstimator(self._settings, live=True, defer_final_fit=True)
+        skips that unload), its final fits handed to the worker, each result published
+        the moment it is complete (:meth:`_on_core_result`)."""
+        est = StreamingEstimator(self._settings, live=True, defer_final_fit=True)
+        est.on_result = self._on_core_result
+        return est
+
+    def _on_core_result(self, r: UnloadResult) -> None:
+        """A result completed inside the core's push (the block's later samples not yet
+        processed): published now; the core's time to it into :attr:`crossing_push`."""
+        if not r.final:
+            self.crossing_push.append(time.monotonic() - self._pushed)
+        try:
+            self._publish_result(r, self._arrived)
+        except Exception as exc:  # the core's push goes on: report, never fatal
+            self._diagnose(_ERROR, f"could not publish unload {r.index}'s result: "
+                                   f"{type(exc).__name__}: {exc}")
 
     def _restart_core(self, exc: Exception) -> None:
         """An internal error of the core: say so and go on with a fresh estimator, which
