@@ -52,8 +52,10 @@ def crossing_half_width(drop: float, sigma: float, slope0: float, dt: float) -> 
     then no noise excursion); at most what :data:`CROSSING_WINDOW_MAX` samples span at the
     slope expected at p* (``slope0``: initial fall rate [signal units/s]; ``dt``: sample
     period [s]; not applied while either is unknown). The noise floor wins over the sample
-    bound: a discharge so slow that 12 sigmas take more than 2^20 samples at p* holds
-    12 sigma / (slope dt) samples."""
+    bound, but never binds on an unload the detector sees: its trigger needs the mean of
+    the last PERIOD samples a block threshold (3/4 of a sigma) below a plateau that ends
+    LAG samples earlier, a fall of at least 0.0026 sigma per sample at the start, so that
+    12 sigmas span at most 12 / (0.184 x 0.0026) = 25 k samples at p*."""
     half = 0.05 * drop
     cap = 0.5 * CROSSING_WINDOW_MAX * dt * SLOPE_AT_PSTAR * slope0
     if math.isfinite(cap) and cap > 0:
