@@ -247,6 +247,7 @@ def bench_live(tmp: Path, unloads: int, block: int = 0,
     fin = np.asarray(stats.get("final_latencies_ms", []), dtype=float)
     cpu = np.asarray(stats.get("final_fit_cpu_ms", []), dtype=float)
     push = np.asarray(stats.get("crossing_push_ms", []), dtype=float)
+    pre = np.asarray(stats.get("crossing_pre_ms", []), dtype=float)
     seen = {int(i) for i in re.findall(r"\] \[estimator\]: unload (\d+):", text)}
     n_final = len(re.findall(r"\] \[estimator\]: unload \d+:.*\(final\)", text))
     received = int(stats.get("received", 0))
@@ -259,10 +260,14 @@ def bench_live(tmp: Path, unloads: int, block: int = 0,
         print(f"Final fits: CPU time of the fit thread p50 / p99 / max {_pct(cpu)} ms (the rest "
               f"of the final latency is waiting for a core or the GIL, and the publication).")
     if push.size == lat.size and lat.size:
-        print(f"Crossing estimates: the core's push of the completing block p50 / p99 / max "
-              f"{_pct(push)} ms; the node's rest (callback to push, message fill, "
-              f"publication) {_pct(lat - push)} ms: the floor under the latency with no "
-              f"computation.")
+        print(f"Crossing estimates: the core's push of the completing block, to the hand-over "
+              f"of the estimate, p50 / p99 / max {_pct(push)} ms; the node's rest (callback "
+              f"to push, message fill, publication) {_pct(lat - push)} ms: the floor under "
+              f"the latency with no computation.")
+        if pre.size == lat.size:
+            print(f"  of which before the push (arrival to push: conversion, lock) "
+                  f"{_pct(pre)} ms, after the hand-over (fill, publication) "
+                  f"{_pct(lat - push - pre)} ms.")
     p99 = float(np.percentile(lat, 99)) if lat.size else float("nan")
     f99 = float(np.percentile(fin, 99)) if fin.size else float("nan")
     return [{"input": what, "latency": "crossing estimate", "unloads": lat.size,

@@ -22,12 +22,12 @@ A PressureBlock is fed to the core's
 :class:`~pneumatic_unload.estimation.StreamingEstimator` by the subscription callback at
 once, which publishes the crossing estimate the moment the core completes it, before the
 block's later samples are scanned (:attr:`~pneumatic_unload.estimation.StreamingEstimator.
-on_result`; no hand-over to another thread on that path). Single FluidPressure samples (10 kHz: one message each) are only queued by
-the callback and fed by the worker thread, so that the receiving thread keeps up with the
-message rate. The final curve fit of each unload (tens of ms) is taken off the stream as a
-job (``defer_final_fit``) and run by the worker, so it never blocks the reception of
-samples (none is dropped at 10 kHz with the EventsExecutor) and gives the result the
-offline analysis gives.
+on_result`; no hand-over to another thread on that path). Single FluidPressure samples (10
+kHz: one message each) are only queued by the callback and fed by the worker thread, so
+that the receiving thread keeps up with the message rate. The final curve fit of each
+unload (tens of ms) is taken off the stream as a job (``defer_final_fit``) and run by the
+worker, so it never blocks the reception of samples (none is dropped at 10 kHz with the
+EventsExecutor) and gives the result the offline analysis gives.
 """
 
 from __future__ import annotations
@@ -165,9 +165,12 @@ class EstimatorNode(Node):
         #: [s] CPU time of the fit worker's thread for each final fit (against its share of
         #: the latency: what the fit costs, and what waiting for the CPU or the GIL adds)
         self.fit_cpu: deque[float] = deque(maxlen=100_000)
-        #: [s] the core's share of each crossing latency: the push (of the block) that
-        #: completed it; the rest is the node's (callback, message fill, publication)
+        #: [s] the core's share of each crossing latency: from the start of the push (of
+        #: the block) that completed it to the hand-over of the estimate
         self.crossing_push: deque[float] = deque(maxlen=100_000)
+        #: [s] the node's share before that push (the message's arrival to the push: its
+        #: conversion, the core's lock); the rest is the message fill and publication
+        self.crossing_pre: deque[float] = deque(maxlen=100_000)
         self.received = 0
         #: The last RESULTS_KEPT results published (all are in ~/estimate and the bag):
         #: bounded, a node runs for days.
@@ -331,6 +334,7 @@ class EstimatorNode(Node):
         processed): published now; the core's time to it into :attr:`crossing_push`."""
         if not r.final:
             self.crossing_push.append(time.monotonic() - self._pushed)
+            self.crossing_pre.append(self._pushed - self._arrived)
         try:
             self._publish_result(r, self._arrived)
         except Exception as exc:  # the core's push goes on: report, never fatal
@@ -593,7 +597,8 @@ class EstimatorNode(Node):
                  "latencies_ms": [round(x * 1e3, 4) for x in self.latencies],
                  "final_latencies_ms": [round(x * 1e3, 4) for x in self.final_latencies],
                  "final_fit_cpu_ms": [round(x * 1e3, 4) for x in self.fit_cpu],
-                 "crossing_push_ms": [round(x * 1e3, 4) for x in self.crossing_push]}
+                 "crossing_push_ms": [round(x * 1e3, 4) for x in self.crossing_push],
+                 "crossing_pre_ms": [round(x * 1e3, 4) for x in self.crossing_pre]}
         self.get_logger().info(f"stats {json.dumps(stats)}")
 
 
