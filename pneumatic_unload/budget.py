@@ -43,6 +43,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
+from pneumatic_unload.config.tank import wall_pair
 from pneumatic_unload.inversion import invert_crossing
 from pneumatic_unload.physics import conductance_eq39, conductance_isentropic_inversion
 
@@ -375,17 +376,20 @@ def wall_sensitivity(settings: EstimatorSettings, tau: float, *, p10: float, p_a
     (:func:`~pneumatic_unload.config.estimator.wall_uncertainty`); NaN when it cannot be
     computed."""
     u = wall_uncertainty(settings)[0]
+    walls = wall_pair(settings.wall, u)
+    if walls[0] == walls[1]:
+        return 0.0
     out = []
-    for sign in (1.0, -1.0):
-        moved = dataclasses.replace(settings, wall_temperature=settings.wall + sign * u,
-                                    heat_model="natural")
+    for wall in walls:
+        moved = dataclasses.replace(settings, wall_temperature=wall, heat_model="natural")
         try:
             c, _sd = invert_crossing(tau, 0.0, p10=p10, p_atm=p_atm, p_star=p_star,
                                      settings=moved, c_start=c_start)
         except (ValueError, ArithmeticError):
             return math.nan
         out.append(c)
-    return abs(out[0] - out[1]) / 2.0
+    # the slope over the (possibly one-sided, at the range's edge) pair, times u
+    return abs(out[0] - out[1]) / (walls[0] - walls[1]) * u
 
 
 def record_term(name: str, std: float) -> BudgetTerm:

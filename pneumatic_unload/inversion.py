@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
+from pneumatic_unload.config.tank import wall_pair
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import Start
 from pneumatic_unload.model.parametric import ParametricModel
@@ -314,6 +315,8 @@ class InversionTable:
         adiabatic) [m^3/(s Pa)] for a measured tau_exp and its 1-sigma [s]: one
         interpolation for the three (see :meth:`invert` and :meth:`wall_std`)."""
         x, dxdy = self._interpolate(tau)
+        if not (math.isfinite(x) and abs(x) < 700.0):  # no C of a tank there
+            return math.nan, math.nan, math.nan
         c = math.exp(x)
         ends, heat = self._heat  # type: ignore[attr-defined]
         rel_heat = float(np.interp(x, ends, heat))
@@ -366,7 +369,10 @@ def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_
             return None
         times.append(tm)
     log_t = np.log(np.array(times))
-    if not np.all(np.diff(log_t) < 0):
+    # the time falls about as 1/C (slope -1 in log-log): a grid where it falls far less
+    # (a model pinned at the end of its range, e.g. a 0.1 mL tank at 150 K) cannot be
+    # interpolated (near-equal nodes blow the cubic up): no table, the inversion iterates
+    if not np.all(np.diff(log_t) < -0.25 * (log_c[1] - log_c[0])):
         return None
     t_mid = times[TABLE_POINTS // 2]
     rel_b = 0.0
@@ -391,14 +397,17 @@ def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_
         # the wall temperature's term of the budget, tabulated here so that the crossing
         # (and the final fit's budget) need no model run for it
         u = wall_uncertainty(settings)[0]
+        walls = wall_pair(settings.wall, u)
         tw = []
-        for sign in (1.0, -1.0):
-            moved = dataclasses.replace(settings, wall_temperature=settings.wall + sign * u)
+        for wall in walls:
+            moved = dataclasses.replace(settings, wall_temperature=wall)
             cfg = rig_from_settings(moved, conductance=math.exp(log_c[TABLE_POINTS // 2]),
                                     p10=p10, p_atm=p_atm)
             tw.append(model_crossing_time(cfg, p_star, t_mid, rtol=INVERSION_ODE_RTOL))
         if all(math.isfinite(x) for x in tw):
-            rel_wall = abs(tw[0] - tw[1]) / (2.0 * t_mid)
+            # the slope over the (possibly one-sided) pair, times u
+            rel_wall = 0.0 if walls[0] == walls[1] else \
+                abs(tw[0] - tw[1]) / (walls[0] - walls[1]) * u / t_mid
     return InversionTable(log_c=np.asarray(log_c), log_t=log_t, rel_heat=rel_heat,
                           rel_b=rel_b, rel_wall=rel_wall)
 

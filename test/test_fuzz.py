@@ -209,3 +209,26 @@ def test_a_start_without_a_falling_slope_is_bad_data_not_ok_with_infinite_sigma(
     res = analyze(sim.t, sim.measured, est)
     fz.check_results(res)
     assert any("no falling slope" in r.status_text for r in res)
+
+
+def test_a_model_pinned_at_its_range_gives_no_table_not_an_overflow():
+    # bench_fuzz (analyze_wild): a 0.1 mL tank at 150 K, p10 2.9 bar: the adiabatic model's
+    # crossing time was the same at the two smallest C of the table (1.72218965 and
+    # 1.72218964 in log), and the cubic through near-equal nodes gave exp(> 709) at the
+    # crossing (OverflowError in the crossing's model-form line). With the wall at the
+    # range's lower edge (150 K) and its default uncertainty, the table's wall line moved
+    # it to 149 K (a ConfigError out of analyze): now moved one way only.
+    from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
+
+    est = EstimatorSettings(volume=1e-7, length_diameter_ratio=0.1, initial_temperature=150.0,
+                            wall_temperature=150.0, atmosphere=101325.0,
+                            heat_model="natural")
+    plan = plan_crossing(est, p10=291433.0479213432, p_atm=101325.0,
+                         p_star=171284.7616350543, t_mid=2.2719135395706482, p_mid=211000.0)
+    for table in (plan.table, plan.adiabatic):
+        if table is not None and not isinstance(table, str):
+            assert np.all(np.diff(table.log_t) < -0.25 * np.diff(table.log_c)[0])
+    for tau in np.geomspace(1.9, 5.6, 25):
+        res = crossing_estimate(plan, float(tau), 0.01)
+        c, sd = res.conductance_model, res.conductance_model_std
+        assert (math.isnan(c) or c > 0) and not (math.isfinite(c) and not sd > 0)

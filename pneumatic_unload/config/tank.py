@@ -88,3 +88,19 @@ class TankSpec:
     def fields_of(mapping: dict[str, Any]) -> dict[str, Any]:
         """The tank fields present in a mapping (a bag's JSON, parameters) [SI]."""
         return {k: mapping[k] for k in TANK_FIELDS if k in mapping}
+
+
+#: The wall temperatures a tank may have [K] (the ``wall_temperature`` field's range).
+WALL_RANGE: tuple[float, float] = next(
+    (float(f.metadata["min"]), float(f.metadata["max"]))
+    for f in dataclasses.fields(TankSpec) if f.name == "wall_temperature")
+
+
+def wall_pair(wall: float, u: float) -> tuple[float, float]:
+    """The wall temperature ``wall`` [K] moved up and down by its standard uncertainty u
+    [K], each inside :data:`WALL_RANGE`: (upper, lower) [K]. A wall at the edge of the
+    range (150 K) is moved one way only: a sensitivity is then the one-sided difference
+    over (upper - lower), not over 2 u."""
+    lo, hi = WALL_RANGE
+    return min(max(wall + u, lo), hi), min(max(wall - u, lo), hi)
+
