@@ -82,9 +82,10 @@ def test_wall_uncertainty_in_closed_form():
 
 def run(t10: float, t_wall: float, tau_heat: float, *, volume: float = 4e-3,
         conductance: float = 5e-9, b: float = 0.4, p10: float = 7e5, seed: int = 1,
-        **given: float | None) -> tuple[float, dict, dict]:
+        **given: float | None) -> tuple[float, dict, dict, tuple[float, float]]:
     """One Newton-cooling discharge analysed with the wall not given: (C error [-], the
-    budget, the curve fit) (SI units). t10 and p10 are the gas's state at the record's
+    budget, the curve fit, (b error [-], b's stated standard uncertainty [-])) (SI
+    units). t10 and p10 are the gas's state at the record's
     first sample, where the estimator's model starts too (a gas away from the wall then
     exchanges heat in the closed tank during the 0.2 s plateau, in both models)."""
     tau0 = volume / (1.4 * 1e5 * conductance)  # eq 28 [s]
@@ -95,7 +96,8 @@ def run(t10: float, t_wall: float, tau_heat: float, *, volume: float = 4e-3,
     s = EstimatorSettings(volume=volume, initial_temperature=t10,
                           **{**EXACT_BUT_THE_WALL, **given})
     (r,) = merge_final(analyze(t, y, s))
-    return r.conductance_model / conductance - 1.0, r.extra["budget"], r.extra["curve_fit"]
+    return (r.conductance_model / conductance - 1.0, r.extra["budget"], r.extra["curve_fit"],
+            (r.critical_ratio - b, r.critical_ratio_std))
 
 
 def wall_line(budget: dict) -> dict:
@@ -112,7 +114,7 @@ def test_an_assumed_wall_off_by_1p5_of_its_sigma_is_covered_by_the_wall_line(t10
     off, which the wall line covers (the rest of the budget is 0.02-0.04 %: the truth 15-25
     of it away), and its stated |dC/dTw| predicts the error (measured: 0.206, 0.277,
     0.298 %/K against 0.200, 0.293, 0.288 %/K)."""
-    err, bud, cf = run(t10, t_wall, tau_heat)
+    err, bud, cf, _b = run(t10, t_wall, tau_heat)
     w = wall_line(bud)
     assert "assumed = T10" in w["note"] and w["input_std"] == WALL_ASSUMED_STD
     assert not cf["heat_law"].endswith("+wall")
@@ -129,7 +131,7 @@ def test_a_gas_far_from_room_temperature_is_tried_as_a_hot_start():
     hot start was tried only for structured residuals: the density law took up the wall
     with C +2.8 %, sigma 1.7 %): the hot start is tried on that evidence, chosen, and C
     comes back; the wall line shows the fitted wall with 0 (it is in the fit's type A)."""
-    err, bud, cf = run(302.3, 293.8, 4.98)
+    err, bud, cf, _b = run(302.3, 293.8, 4.98)
     assert cf["heat_law"] == "fixed+wall", cf["laws"]
     assert abs(cf["wall_temperature"] - 293.8) < 3.0 * cf["wall_temperature_std"] + 0.2
     assert abs(err) < 0.002
@@ -167,7 +169,7 @@ def coverage(mode: str, n: int, first: int = 0) -> None:
     holds, 293.15 +- 3.46 K), 'warm' (T10 at 288-318 K, a gas warmed by the charge) and
     'room' (T10 at 288-318 K, the wall at a room's temperature)."""
     rng = np.random.default_rng(COVERAGE_SEEDS[mode])
-    zs, errs, b_errs = [], [], []
+    zs, errs, b_errs, b_zs = [], [], [], []
     for k in range(n):
         tau_heat = float(np.exp(rng.uniform(np.log(0.5), np.log(20.0))))
         volume, conductance = float(rng.uniform(2e-3, 8e-3)), float(rng.uniform(3e-9, 1.2e-8))
@@ -179,7 +181,7 @@ def coverage(mode: str, n: int, first: int = 0) -> None:
         if k < first:
             continue
         try:
-            err, bud, cf = run(t10, t_wall, tau_heat, volume=volume,
+            err, bud, cf, (b_err, b_std) = run(t10, t_wall, tau_heat, volume=volume,
                                conductance=conductance, b=b, p10=p10, seed=k)
         except KeyError as exc:
             print(k, "no curve fit or budget:", exc)
@@ -187,23 +189,28 @@ def coverage(mode: str, n: int, first: int = 0) -> None:
         z = err * bud["value"] / bud["combined_std"]
         zs.append(z)
         errs.append(abs(100.0 * err))
-        b_errs.append(abs(cf["critical_ratio"] - b))  # the subsonic tail is recorded
+        b_errs.append(abs(b_err))  # the subsonic tail is recorded
+        b_zs.append(b_err / b_std if b_std > 0 else math.inf)
         w = wall_line(bud)
         print(f"{k:2d} tau_h {tau_heat:5.2f} T10 {t10:6.1f} Tw {t_wall:6.1f} err {100 * err:+.3f} %"
-              f" z {z:+.2f} b {cf['critical_ratio'] - b:+.3f}"
+              f" z {z:+.2f} b {b_err:+.3f} +- {b_std:.3f} (z {b_zs[-1]:+.2f})"
               f" {cf['heat_law']:>17s} wall u {w['input_std']:.2g} K,"
               f" {100 * w['std'] / bud['value']:.3f} %; model form"
               f" {100 * bud['model_form_std'] / bud['value']:.3f} %, type A"
               f" {100 * bud['type_a_std'] / bud['value']:.3f} %", flush=True)
     a = np.abs(np.array(zs))
-    shares = []
+    shares, b_shares = [], []
+    ab = np.abs(np.array(b_zs))
     for k in (1, 2):
         q = float(np.mean(a <= k))
         shares.append(f"within {k} sigma {q:.2f} +- {math.sqrt(q * (1 - q) / a.size):.2f}")
+        q = float(np.mean(ab <= k))
+        b_shares.append(f"{q:.2f} +- {math.sqrt(q * (1 - q) / ab.size):.2f}")
     print(f"{mode}: {a.size} trials, {', '.join(shares)}; |error| worst {max(errs):.3f} %, "
           f"median {float(np.median(errs)):.3f} %, within 2 %: "
           f"{sum(e < 2 for e in errs)}/{len(errs)}; |b error| worst {np.nanmax(b_errs):.3f}, "
-          f"within 0.03: {sum(e <= 0.03 for e in b_errs)}/{len(b_errs)}")
+          f"within 0.03: {sum(e <= 0.03 for e in b_errs)}/{len(b_errs)}; b within 1 / 2 "
+          f"sigma {b_shares[0]} / {b_shares[1]}")
 
 
 if __name__ == "__main__":
