@@ -82,22 +82,31 @@ def test_wall_uncertainty_in_closed_form():
 
 def run(t10: float, t_wall: float, tau_heat: float, *, volume: float = 4e-3,
         conductance: float = 5e-9, b: float = 0.4, p10: float = 7e5, seed: int = 1,
-        **given: float | None) -> tuple[float, dict, dict, tuple[float, float]]:
+        t10_at: str = "opening",
+        **given: float | None) -> tuple[float, dict, dict, tuple[float, float, float]]:
     """One Newton-cooling discharge analysed with the wall not given: (C error [-], the
-    budget, the curve fit, (b error [-], b's stated standard uncertainty [-])) (SI
-    units). t10 and p10 are the gas's state at the record's
-    first sample, where the estimator's model starts too (a gas away from the wall then
-    exchanges heat in the closed tank during the 0.2 s plateau, in both models)."""
+    budget, the curve fit, (b error [-], b's stated standard uncertainty [-], its wall
+    line's |db/dTw| [1/K], NaN without one)) (SI
+    units). t10 and p10 are the gas's state at the record's first sample in the Newton
+    model; a gas away from the wall exchanges heat in the closed tank during the 0.2 s
+    plateau. The estimator is given T10 as it defines it, the gas temperature at the
+    opening (``t10_at`` 'opening', exact for a constant hA: the gap to the wall decays as
+    exp(-t/tau_h)), or, to measure what that changes, the record's first ('record')."""
     tau0 = volume / (1.4 * 1e5 * conductance)  # eq 28 [s]
     t = np.arange(0.0, 0.2 + 8.0 * tau0, 1e-3)
     p = discharge(t, volume=volume, conductance=conductance, b=b, p10=p10, t10=t10,
                   p_atm=101325.0, tau_heat=tau_heat, t_open=0.2, t_wall=t_wall)
     y = p + np.random.default_rng(seed).normal(0.0, 1000.0, t.size)
-    s = EstimatorSettings(volume=volume, initial_temperature=t10,
+    t10_given = t10 if t10_at == "record" else \
+        t_wall + (t10 - t_wall) * math.exp(-0.2 / tau_heat)
+    s = EstimatorSettings(volume=volume, initial_temperature=t10_given,
                           **{**EXACT_BUT_THE_WALL, **given})
     (r,) = merge_final(analyze(t, y, s))
+    walls = [x for x in r.extra.get("budget_b", {}).get("terms", ()) if x["name"] == WALL_TERM
+             and x["input_std"] and x["std"] is not None]
+    per_k = walls[0]["std"] / walls[0]["input_std"] if walls else math.nan
     return (r.conductance_model / conductance - 1.0, r.extra["budget"], r.extra["curve_fit"],
-            (r.critical_ratio - b, r.critical_ratio_std))
+            (r.critical_ratio - b, r.critical_ratio_std, per_k))
 
 
 def wall_line(budget: dict) -> dict:
@@ -162,14 +171,14 @@ def true_wall(mode: str, t10: float, rng: np.random.Generator) -> float:
     return float(rng.uniform(min(t10, AMBIENT_TEMPERATURE), max(t10, AMBIENT_TEMPERATURE)))
 
 
-def coverage(mode: str, n: int, first: int = 0) -> None:
+def coverage(mode: str, n: int, first: int = 0, t10_at: str = "opening") -> None:
     """Print seeded trials ``first`` .. n-1 and the shares within 1 and 2 sigma (with
     their binomial standard errors), the worst and median |error| of C and the worst of b.
     Modes (the true wall: :func:`true_wall`): 'settled' (T10 where the default 2 K
     holds, 293.15 +- 3.46 K), 'warm' (T10 at 288-318 K, a gas warmed by the charge) and
     'room' (T10 at 288-318 K, the wall at a room's temperature)."""
     rng = np.random.default_rng(COVERAGE_SEEDS[mode])
-    zs, errs, b_errs, b_zs = [], [], [], []
+    zs, errs, b_errs, b_zs, b_slopes, b_sigmas = [], [], [], [], [], []
     for k in range(n):
         tau_heat = float(np.exp(rng.uniform(np.log(0.5), np.log(20.0))))
         volume, conductance = float(rng.uniform(2e-3, 8e-3)), float(rng.uniform(3e-9, 1.2e-8))
@@ -181,8 +190,9 @@ def coverage(mode: str, n: int, first: int = 0) -> None:
         if k < first:
             continue
         try:
-            err, bud, cf, (b_err, b_std) = run(t10, t_wall, tau_heat, volume=volume,
-                               conductance=conductance, b=b, p10=p10, seed=k)
+            err, bud, cf, (b_err, b_std, b_per_k) = run(
+                t10, t_wall, tau_heat, volume=volume, conductance=conductance, b=b, p10=p10,
+                seed=k, t10_at=t10_at)
         except KeyError as exc:
             print(k, "no curve fit or budget:", exc)
             continue
@@ -191,9 +201,12 @@ def coverage(mode: str, n: int, first: int = 0) -> None:
         errs.append(abs(100.0 * err))
         b_errs.append(abs(b_err))  # the subsonic tail is recorded
         b_zs.append(b_err / b_std if b_std > 0 else math.inf)
+        b_slopes.append(b_per_k)
+        b_sigmas.append(b_std)
         w = wall_line(bud)
         print(f"{k:2d} tau_h {tau_heat:5.2f} T10 {t10:6.1f} Tw {t_wall:6.1f} err {100 * err:+.3f} %"
-              f" z {z:+.2f} b {b_err:+.3f} +- {b_std:.3f} (z {b_zs[-1]:+.2f})"
+              f" z {z:+.2f} b {b_err:+.3f} +- {b_std:.3f} (z {b_zs[-1]:+.2f},"
+              f" |db/dTw| {b_per_k:.4f} /K)"
               f" {cf['heat_law']:>17s} wall u {w['input_std']:.2g} K,"
               f" {100 * w['std'] / bud['value']:.3f} %; model form"
               f" {100 * bud['model_form_std'] / bud['value']:.3f} %, type A"
@@ -210,8 +223,12 @@ def coverage(mode: str, n: int, first: int = 0) -> None:
           f"median {float(np.median(errs)):.3f} %, within 2 %: "
           f"{sum(e < 2 for e in errs)}/{len(errs)}; |b error| worst {np.nanmax(b_errs):.3f}, "
           f"within 0.03: {sum(e <= 0.03 for e in b_errs)}/{len(b_errs)}; b within 1 / 2 "
-          f"sigma {b_shares[0]} / {b_shares[1]}")
+          f"sigma {b_shares[0]} / {b_shares[1]}; |db/dTw| [1/K] median "
+          f"{np.nanmedian(b_slopes):.4f}, 90th percentile "
+          f"{np.nanpercentile(b_slopes, 90):.4f} over {int(np.sum(np.isfinite(b_slopes)))}"
+          f" trials with an assumed wall; b's stated sigma median "
+          f"{float(np.nanmedian(b_sigmas)):.4f}")
 
 
 if __name__ == "__main__":
-    coverage(sys.argv[1], int(sys.argv[2]), *map(int, sys.argv[3:4]))
+    coverage(sys.argv[1], int(sys.argv[2]), *map(int, sys.argv[3:4]), *sys.argv[4:5])
