@@ -121,9 +121,11 @@ def test_an_assumed_wall_off_by_1p5_of_its_sigma_is_covered_by_the_wall_line(t10
     """The wall 3 K from the gas start, T10 near a room's temperature (no evidence of a gap:
     the default 2 K), a heat exchange too weak for a hot start to be found: C is 0.5-0.9 %
     off, which the wall line covers (the rest of the budget is 0.02-0.04 %: the truth 15-25
-    of it away), and its stated |dC/dTw| predicts the error (measured: 0.206, 0.277,
-    0.298 %/K against 0.200, 0.293, 0.288 %/K)."""
-    err, bud, cf, _b = run(t10, t_wall, tau_heat)
+    of it away), and its stated |dC/dTw| predicts the error (measured, with T10 at the
+    opening: 0.203, 0.299, 0.299 % per K of the wall's offset; before, with T10 at the
+    fit window's first sample, 0.206, 0.277, 0.298 %/K against 0.200, 0.293, 0.288 %/K
+    stated); b's budget likewise."""
+    err, bud, cf, (b_err, b_std, b_per_k) = run(t10, t_wall, tau_heat)
     w = wall_line(bud)
     assert "assumed = T10" in w["note"] and w["input_std"] == WALL_ASSUMED_STD
     assert not cf["heat_law"].endswith("+wall")
@@ -133,6 +135,13 @@ def test_an_assumed_wall_off_by_1p5_of_its_sigma_is_covered_by_the_wall_line(t10
     assert abs(err) * c > 5.0 * rest  # the wall line is what covers it
     per_k = w["std"] / (w["input_std"] * c)
     assert 0.7 < abs(err) / (per_k * abs(t_wall - t10)) < 1.3
+    # b moves with the wall too, by what its budget's wall line states (measured: b off by
+    # -0.0135, +0.0283, -0.0233 against |db/dTw| x the wall's offset of 0.0148, 0.0258,
+    # 0.0260; stated
+    # sigma 0.0099, 0.0173, 0.0261: a wall unknown by 2 K leaves b uncertain by more than
+    # the issue's 0.03 / 2 on two of the three)
+    assert abs(b_err) <= 2.0 * b_std
+    assert 0.7 < abs(b_err) / (b_per_k * abs(t_wall - t10)) < 1.3
 
 
 def test_a_gas_far_from_room_temperature_is_tried_as_a_hot_start():
