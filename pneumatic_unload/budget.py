@@ -223,7 +223,7 @@ def with_terms(d: dict[str, Any], terms: list[BudgetTerm]) -> dict[str, Any]:
 
 
 def format_budget(d: dict[str, Any], unit: float = 1e-9,
-                  unit_name: str = "1e-9 m^3/(s Pa)") -> list[str]:
+                  unit_name: str = "1e-9 m^3/(s Pa)", symbol: str = "C") -> list[str]:
     """Text lines of a budget given as :meth:`Budget.to_dict`: one per term (its share of
     the variance, the input and its uncertainty), then the combined and expanded values."""
     var = d["combined_std"] ** 2 or 1.0
@@ -236,7 +236,8 @@ def format_budget(d: dict[str, Any], unit: float = 1e-9,
         out.append(f"    {t['kind']:5s} {t['name']:46s} {std / unit:9.4f}"
                    f"  {100 * std**2 / var:5.1f} %{given}{note}")
     rel = 100 * d["combined_std"] / d["value"] if d["value"] else math.nan
-    out.append(f"    combined u(C) = {d['combined_std'] / unit:.4f} {unit_name} ({rel:.2f} %),"
+    out.append(f"    combined u({symbol}) = {d['combined_std'] / unit:.4f} {unit_name}"
+               f" ({rel:.2f} %),"
                f" expanded U (k = {d['coverage_factor']:g}) = {d['expanded'] / unit:.4f};"
                f" largest: {d['largest']}")
     return out
@@ -476,3 +477,4 @@ def eq39_budget(settings: EstimatorSettings, c: float, *, tau: float, tau_std: f
     terms += input_terms(settings, c, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
                          atmosphere_measured=atmosphere_measured, eq39=True)
     return Budget(c, tuple(terms))
+

@@ -77,6 +77,13 @@ class CurveFit:
         C's standard uncertainty from that assumed wall [m^3/(s Pa)]: the chosen law
         refitted with the wall moved by +-wall_uncertainty (not in ``conductance_std``);
         NaN otherwise.
+    wall_std_b : float
+        b's standard uncertainty from the wall [-]: assumed (as ``wall_std``) or given (its
+        ``temperature_uncertainty``), the chosen law refitted with the wall moved to first
+        order; NaN when no heat law was fitted, the wall was fitted, or b is not determined.
+    model_form_std_b : float
+        b's model-form 1-sigma [-]: the spread of the b of the laws that fit about as
+        well, weighted as C's (not in ``critical_ratio_std``).
     """
 
     conductance: float
@@ -108,6 +115,8 @@ class CurveFit:
     wall_uncertainty: float = math.nan
     wall_source: str = ""
     wall_std: float = math.nan
+    wall_std_b: float = math.nan
+    model_form_std_b: float = math.nan
 
     def config(self, settings: EstimatorSettings) -> RigConfig:
         """The fitted model's configuration (valve opening at t = 0) [SI]."""

@@ -21,7 +21,6 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.config import TankSpec
 from pneumatic_unload.config.estimator import (
     AMBIENT_TEMPERATURE,
     WALL_ASSUMED_STD,
@@ -49,6 +48,7 @@ from pneumatic_unload.inversion import estimator_model
 from pneumatic_unload.model.effects import Start
 from pneumatic_unload.model.heat import thermal_time_constant
 from pneumatic_unload.physics import tau_exp_eq38
+from pneumatic_unload.wall_moves import WALL_RANGE, spread_b, wall_linear
 
 FloatArray = NDArray[np.float64]
 
@@ -103,12 +103,6 @@ LAW_BIC_THRESHOLD = 10.0
 #: wall moved (the response is not linear over 10-20 K). Measured at 2-5 K: see
 #: test_wall_budget.
 WALL_LINEAR_MAX = 5.0
-#: The wall temperatures the model takes [K] (TankSpec's bounds): an assumed wall moved by
-#: its uncertainty stays inside.
-WALL_RANGE: tuple[float, float] = next(
-    (float(f.metadata["min"]), float(f.metadata["max"]))
-    for f in dataclasses.fields(TankSpec) if f.name == "wall_temperature")
-
 
 def fit_curve(
     t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_start: float,
@@ -290,71 +284,48 @@ def fit_curve(
             w_sum += w
             var_mf += w * (other.conductance - cf.conductance) ** 2
     mf = math.sqrt(var_mf / w_sum) if w_sum > 0 else 0.0
-    table = {law: {"conductance": f[0].conductance, "bic": bic[law], "chi2": f[1] / unit,
+    mf_b = spread_b(fits, bic, best, LAW_BIC_THRESHOLD)
+    table = {law: {"conductance": f[0].conductance, "critical_ratio": f[0].critical_ratio,
+                   "bic": bic[law], "chi2": f[1] / unit,
                    **({"wall_temperature": f[0].wall_temperature,
                        "wall_temperature_std": f[0].wall_temperature_std}
                       if law.endswith("+wall") else {})} for law, f in fits.items()}
     out = dataclasses.replace(
         cf, conductance_std=math.hypot(cf.conductance_std, mf), model_form_std=mf,
-        laws=table, heat_law=best if natural else "none", not_offered=not_offered)
-    if natural and settings.wall_temperature is None and not best.endswith("+wall"):
+        model_form_std_b=mf_b, laws=table, heat_law=best if natural else "none",
+        not_offered=not_offered)
+    if natural and not best.endswith("+wall"):
         # the wall assumed = T10: its uncertainty from the record (the walls of the hot
-        # starts that fit about as well as the chosen law are evidence of a gap), C's from
-        # the chosen law refitted with the wall moved
+        # starts that fit about as well as the chosen law are evidence of a gap), C's and
+        # b's from the chosen law refitted with the wall moved; a given wall: b's only (C's
+        # wall line is the crossing's)
         u, why = wall_uncertainty(settings, hot_walls=[
             f[0].wall_temperature for k, f in fits.items()
             if k.endswith("+wall") and bic[k] - bic[best] < LAW_BIC_THRESHOLD])
         if u == 0.0:
-            wall_std = 0.0
-        elif u <= WALL_LINEAR_MAX and raw.get(best):
-            wall_std = _wall_linear(trace, raw[best], settings, u, law=best)
+            wall_std = wall_std_b = 0.0
+        elif (u <= WALL_LINEAR_MAX or settings.wall_temperature is not None) \
+                and raw.get(best):
+            wall_std, wall_std_b = wall_linear(trace, raw[best], settings, u, law=best)
         else:
-            wall_std = _wall_refit(trace, out, settings, u, law=best,
-                                   fit_heat=bool(fit_heat), hold=hold, span=span)
-        out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why,
-                                  wall_std=wall_std)
+            wall_std, wall_std_b = _wall_refit(trace, out, settings, u, law=best,
+                                               fit_heat=bool(fit_heat), hold=hold, span=span)
+        out = dataclasses.replace(out, wall_std_b=wall_std_b)
+        if settings.wall_temperature is None:
+            out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why,
+                                      wall_std=wall_std)
     return out
 
 
-def _wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
-                 u: float, *, law: str) -> float:
-    """C's standard uncertainty [m^3/(s Pa)] from an assumed wall temperature of standard
-    uncertainty u [K] (at most :data:`WALL_LINEAR_MAX`): the refit of :func:`_wall_refit`
-    to first order, at a cost of two model evaluations instead of two fits. With the wall
-    moved by +-u the residual at the fitted values changes by dr; the refit's parameter
-    shift is the Gauss-Newton step -J^+ dr with the fit's Jacobian J (the fitted values are
-    the minimum of the unmoved problem, J^T r = 0 there); C's moves are root-mean-squared
-    as the refit's are. NaN when it cannot be computed."""
-    fit, model = kept["result"], kept["model"]
-    free = list(fit.params.free)
-    jac = np.asarray(fit.jac, dtype=float)
-    if "C" not in free or jac.shape != (fit.fun.size, len(free)) \
-            or not np.all(np.isfinite(jac)):
-        return math.nan
-    moves = []
-    with np.errstate(all="ignore"):
-        for sign in (1.0, -1.0):
-            wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
-            moved = estimator_model(dataclasses.replace(settings, wall_temperature=wall),
-                                    model.start, heat_law=law)
-            try:
-                dr = np.asarray(trace.residual(moved)(fit.values), dtype=float) - fit.fun
-            except (ValueError, ArithmeticError):
-                return math.nan
-            if not np.all(np.isfinite(dr)):
-                return math.nan
-            dx, *_ = np.linalg.lstsq(jac, -dr, rcond=1e-12)
-            moves.append(fit.params.to_values(fit.x + dx)["C"] - fit.values["C"])
-    return math.sqrt(sum(m * m for m in moves) / 2.0)
-
-
 def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: float, *,
-                law: str, fit_heat: bool, hold: tuple[str, ...], span: CurveSpan) -> float:
-    """C's standard uncertainty [m^3/(s Pa)] from an assumed wall temperature of standard
-    uncertainty u [K]: ``law`` refitted (from ``fit``) with the wall at T10 + u and T10 - u,
-    the root mean square of the two moves of C (the fitted heat exchange takes up part of a
-    move, which the crossing's inversion with the correlation held does not, and may take it
-    up unevenly: the response is not linear over u of 10-20 K); NaN when a refit fails."""
+                law: str, fit_heat: bool, hold: tuple[str, ...],
+                span: CurveSpan) -> tuple[float, float]:
+    """C's and b's standard uncertainties ([m^3/(s Pa)], [-]) from an assumed wall
+    temperature of standard uncertainty u [K]: ``law`` refitted (from ``fit``) with the wall
+    at T10 + u and T10 - u, the root mean square of the two moves (the fitted heat exchange
+    takes up part of a move, which the crossing's inversion with the correlation held does
+    not, and may take it up unevenly: the response is not linear over u of 10-20 K); NaN
+    when a refit fails (b's: also when b is not determined)."""
     out = []
     for sign in (1.0, -1.0):
         wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
@@ -368,10 +339,12 @@ def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: flo
                              profile_heat=False, law=law, start=start, max_nfev=60,
                              trace=trace, hold=hold)[0]
         except (ValueError, FloatingPointError, np.linalg.LinAlgError):
-            return math.nan
-        out.append(again.conductance)
-    return math.sqrt(sum((c - fit.conductance) ** 2 for c in out) / 2.0) \
-        if all(math.isfinite(c) for c in out) else math.nan
+            return math.nan, math.nan
+        out.append((again.conductance, again.critical_ratio))
+    c_std = math.sqrt(sum((c - fit.conductance) ** 2 for c, _b in out) / 2.0) \
+        if all(math.isfinite(c) for c, _b in out) else math.nan
+    b_std = math.sqrt(sum((b - fit.critical_ratio) ** 2 for _c, b in out) / 2.0)
+    return c_std, b_std
 
 
 def _start_from(fit: CurveFit, t0: float, **heat: float) -> dict[str, float]:
@@ -428,7 +401,7 @@ def _fit_law(
         T10 and, with a constant hA, a strong exchange from 10 K below and 5 K above).
     keep : dict, optional
         Receives the fit's :class:`~pneumatic_unload.fit.lsq.FitResult` ('result') and
-        model ('model'), for :func:`_wall_linear`.
+        model ('model'), for :func:`~pneumatic_unload.wall_moves.wall_linear`.
     """
     t_ref = span.t_ref  # relative times: absolute stamps (~1.7e9 s) ruin finite differences
     t_start = t_start - t_ref

@@ -36,7 +36,7 @@ def unload_json(r: UnloadResult) -> dict[str, Any]:
     the record ('model_inadequate': the reason, or '') and the C to report."""
     d = r.to_dict()
     extra = d.pop("extra", None) or {}
-    for key in ("budget", "budget_eq39"):
+    for key in ("budget", "budget_eq39", "budget_b"):
         if key in extra:
             d[key] = extra[key]
     cf = extra.get("curve_fit", {}) if r.final else {}
@@ -102,12 +102,17 @@ def format_result(r: UnloadResult) -> str:
 
 
 def budget_lines(r: UnloadResult) -> list[str]:
-    """The budget of the model-based C, line by line (none when it has no budget)."""
-    if "budget" not in r.extra:
-        return []
-    law = r.extra.get("curve_fit", {}).get("heat_law", "")
-    return ["  uncertainty budget of C (model), 1e-9 m^3/(s Pa), share of variance"
-            + (f"; heat law: {law}" if law else "") + ":", *format_budget(r.extra["budget"])]
+    """The budgets of the model-based C and of b, line by line (none when there is none)."""
+    out: list[str] = []
+    if "budget" in r.extra:
+        law = r.extra.get("curve_fit", {}).get("heat_law", "")
+        out += ["  uncertainty budget of C (model), 1e-9 m^3/(s Pa), share of variance"
+                + (f"; heat law: {law}" if law else "") + ":",
+                *format_budget(r.extra["budget"])]
+    if "budget_b" in r.extra:
+        out += ["  uncertainty budget of b [-], share of variance:",
+                *format_budget(r.extra["budget_b"], unit=1.0, unit_name="-", symbol="b")]
+    return out
 
 
 def report_line(r: UnloadResult) -> list[str]:

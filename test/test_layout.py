@@ -328,6 +328,8 @@ LAYERS: dict[str, int] = {
     "heat_law_offer": 4,  # which heat laws a record can carry (offered to the fit's choice)
     "recovery": 4,  # SSE: the re-heating after an aborted unload
     "budget": 4,  # the uncertainty budget of a C (GUM: type A, type B, model form)
+    "budget_b": 4,  # the budget of b, with C's lines
+    "wall_moves": 4,  # the wall's and the heat laws' moves of the fitted C and b
     "estimation": 5,  # the streaming estimator and batch analysis
     "discrepancy": 6,
     "runs": 6,

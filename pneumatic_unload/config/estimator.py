@@ -115,8 +115,9 @@ class EstimatorSettings(TankSpec):
     atmosphere_uncertainty: float = number(
         100.0, "Pa", 0.0, 1e5, "standard uncertainty of a given atmosphere (barometer)")
     start_time: float | None = optional(
-        None, "s", -1e10, 1e10, "valve opening instant in the record's clock, for records "
-        "that begin at the opening (no plateau): the start is not detected", "detected")
+        None, "s", -1e10, 1e10, "valve opening instant in the record's clock (its time "
+        "stamps), for records that begin at the opening (no plateau): the start is not "
+        "detected (live: the one unload that begins then)", "detected")
     initial_pressure: float | None = optional(
         None, "Pa", 1e3, 1e8, "initial tank pressure p10 (absolute) when the record does not "
         "show it (with start_time)", "the first sample at start_time")

@@ -89,6 +89,9 @@ def _estimator() -> list[ParameterSpec]:
         _str("spec_file", "", "specification of the part types (YAML): the verdict of each "
              "estimate in the log, results_db and ~/measure ('': none)"),
         _double("diagnostics_period", 1.0, "period of /diagnostics reports", "s", 0.05, 60.0),
+        _double("end_timeout", 5.0, "start_time mode: a record that has not settled gets its "
+                "final estimate after this long without a sample (the stream ended)", "s",
+                0.1, 1e6),
     ]
 
 

@@ -45,6 +45,7 @@ from pneumatic_unload.estimation.batch import (
 )
 from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
 from pneumatic_unload.estimation.history import RESULTS_KEPT, DiagnosticLog
+from pneumatic_unload.estimation.opening import OpeningFinal, OpeningStartEstimator
 from pneumatic_unload.estimation.regression import corner_fit, crossing_fit, hinge_fit
 from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
 from pneumatic_unload.estimation.streaming import StreamingEstimator
@@ -73,6 +74,8 @@ __all__ = [
     "EstimatorSettings",
     "FinalFit",
     "FloatArray",
+    "OpeningFinal",
+    "OpeningStartEstimator",
     "StreamingEstimator",
     "UnloadResult",
     "analyze",

@@ -23,7 +23,8 @@ from pneumatic_unload.budget import (
     term_std,
     wall_sensitivity,
 )
-from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.budget_b import ratio_budget
+from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
 from pneumatic_unload.config.rig import RigConfig
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 from pneumatic_unload.fit.uncertainty import inadequacy
@@ -116,6 +117,23 @@ def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
                         atmosphere_measured=settings.atmosphere is None,
                         wall_std=wall_std, wall_input=wall_input,
                         extra_terms=extra_terms).to_dict()
+
+def b_budget(fit: CurveFit, settings: EstimatorSettings,
+             res: UnloadResult) -> dict[str, Any]:
+    """The budget of the curve fit's b [-] (:func:`~pneumatic_unload.budget_b.ratio_budget`)
+    as :meth:`~pneumatic_unload.budget.Budget.to_dict`: the fit's type A, the inputs'
+    lines, the wall's (assumed or given: ``fit.wall_std_b``) and the heat laws' spread."""
+    law = fit.heat_law
+    wall = None
+    if law != "none" and not law.endswith("+wall"):
+        u, why = (fit.wall_uncertainty, fit.wall_source) \
+            if math.isfinite(fit.wall_uncertainty) else wall_uncertainty(settings)
+        wall = (fit.wall_std_b, u, why)
+    return ratio_budget(settings, fit.critical_ratio, type_a_std=fit.critical_ratio_std,
+                        model_form_std=fit.model_form_std_b, p10=fit.p10, p_atm=fit.p_atm,
+                        atmosphere_measured=settings.atmosphere is None, wall=wall,
+                        wall_fitted=law.endswith("+wall")).to_dict()
+
 
 def crossing_wall_std(settings: EstimatorSettings, table: Any, tau: float, *,
                       p10: float, p_atm: float, p_star: float, c: float) -> float:
@@ -319,6 +337,10 @@ def refine_with_curve_fit(
         c_std = budget["combined_std"]
     else:
         c_std = math.hypot(c_std, mf)
+    b_std = fit.critical_ratio_std
+    if math.isfinite(fit.critical_ratio):
+        extra["budget_b"] = b_budget(fit, settings, res)
+        b_std = extra["budget_b"]["combined_std"]
     status, text = res.status, res.status_text
     quality = res.quality if fit.success else min(res.quality, 0.5)
     nrms = fit.rms / noise_std if math.isfinite(noise_std) and noise_std > 0 else math.nan
@@ -342,6 +364,6 @@ def refine_with_curve_fit(
         res, final=True, status=status, status_text=text, conductance_model=fit.conductance,
         conductance_model_std=c_std,
         t_start_model=fit.t_start, tau_exp_model=tau_model,
-        critical_ratio=fit.critical_ratio, critical_ratio_std=fit.critical_ratio_std,
+        critical_ratio=fit.critical_ratio, critical_ratio_std=b_std,
         method=res.method + "+curve-fit", extra=extra,
         quality=quality if why is None else min(quality, INADEQUATE_QUALITY))

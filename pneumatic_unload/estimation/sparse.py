@@ -45,6 +45,57 @@ MIN_POINTS = 10
 FEW_POINTS = 50
 #: Default standard uncertainty of a given initial pressure, relative [-].
 P10_REL_DEFAULT = 0.001
+#: The record has settled (the unload ends) at the first sample after the p* crossing that
+#: closes a run of this many consecutive samples within :data:`SETTLE_FRACTION` of
+#: (p10 - p_atm) from p_atm [-]; later samples are not analysed (offline and live alike).
+SETTLE_POINTS = 10
+#: Half-width of the settled band about p_atm, relative to p10 - p_atm [-].
+SETTLE_FRACTION = 0.005
+
+
+def start_tolerance(t_open: float) -> float:
+    """How far a sample may lie from the start time ``t_open`` [s] and still be the sample
+    at the opening [s]: 1 ns plus the rounding of an absolute clock held in seconds (a bag's
+    stamps near 1.7e9 s: 2e-7 s), not a share of the clock's value."""
+    return 1e-9 + 1e-15 * abs(t_open)
+
+
+def settle_index(p: np.ndarray, k: int, p10: float, p_atm: float) -> int | None:
+    """Index of the sample where the record settles: the first after the crossing sample
+    ``k`` that closes :data:`SETTLE_POINTS` consecutive samples within
+    :data:`SETTLE_FRACTION` (p10 - p_atm) of p_atm (p [Pa absolute], finite); None when it
+    does not."""
+    w = np.abs(np.asarray(p[k + 1:], dtype=float) - p_atm) <= SETTLE_FRACTION * (p10 - p_atm)
+    if w.size < SETTLE_POINTS:
+        return None
+    runs = np.convolve(w.astype(np.int64), np.ones(SETTLE_POINTS, dtype=np.int64), "valid")
+    hit = np.flatnonzero(runs == SETTLE_POINTS)
+    return int(k + 1 + hit[0] + SETTLE_POINTS - 1) if hit.size else None
+
+
+def initial_pressure(ts: np.ndarray, ps: np.ndarray, s: EstimatorSettings
+                     ) -> tuple[float, float, str]:
+    """p10 of a record that begins at the opening ``s.start_time`` (samples from it on: ts
+    [s], ps [Pa absolute]): given (``initial_pressure``, with its standard uncertainty) or
+    the sample at the start time (uncertainty NaN: the fit's residual RMS later); with where
+    it came from ([Pa], [Pa], text).
+
+    Raises
+    ------
+    EstimationError
+        No sample at the start time and no initial pressure given.
+    """
+    t_open = float(s.start_time if s.start_time is not None else math.nan)
+    eps = start_tolerance(t_open)
+    if s.initial_pressure is not None:
+        p10 = float(s.initial_pressure)
+        return (p10, s.initial_pressure_std if s.initial_pressure_std is not None
+                else P10_REL_DEFAULT * p10, "given (initial_pressure)")
+    if ts.size and abs(ts[0] - t_open) <= eps:
+        return float(ps[0]), math.nan, "the sample at the start time"
+    first = f"{ts[0]:g} s" if ts.size else "none"
+    raise EstimationError(f"no sample at the start time {t_open:g} s (the first is at "
+                          f"{first}): give the initial pressure (--initial-pressure)")
 
 
 def interpolated_crossing(t: np.ndarray, p: np.ndarray, p_star: float, p_atm: float
@@ -114,22 +165,13 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings
     if t.size > 1 and np.any(np.diff(t) <= 0):
         raise EstimationError("time stamps must increase strictly")
     t_open = float(s.start_time)
-    eps = 1e-9 * max(1.0, abs(t_open))
+    eps = start_tolerance(t_open)
     keep = t >= t_open - eps
     ts, ps = t[keep], pa[keep]
     if ts.size < MIN_POINTS:
         raise EstimationError(f"{ts.size} sample(s) from the start time {t_open:g} s on; "
                               f"need at least {MIN_POINTS}")
-    if s.initial_pressure is not None:
-        p10 = float(s.initial_pressure)
-        p10_std = s.initial_pressure_std if s.initial_pressure_std is not None \
-            else P10_REL_DEFAULT * p10
-        p10_note = "given (initial_pressure)"
-    elif abs(ts[0] - t_open) <= eps:
-        p10, p10_std, p10_note = float(ps[0]), math.nan, "the sample at the start time"
-    else:
-        raise EstimationError(f"no sample at the start time {t_open:g} s (the first is at "
-                              f"{ts[0]:g} s): give the initial pressure (--initial-pressure)")
+    p10, p10_std, p10_note = initial_pressure(ts, ps, s)
     p_atm = float(s.atmosphere)
     if not p10 > p_atm:
         raise EstimationError(f"p10 ({p10:.0f} Pa) is not above p_atm ({p_atm:.0f} Pa): "
@@ -138,6 +180,9 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings
     if s.initial_pressure is not None and not (abs(ts[0] - t_open) <= eps):
         ts, ps = np.concatenate(([t_open], ts)), np.concatenate(([p10], ps))
     t_cross, interp_err, k = interpolated_crossing(ts, ps, p_star, p_atm)
+    end = settle_index(ps, k, p10, p_atm)
+    if end is not None:  # the unload ends where the record settles (the live node's rule)
+        ts, ps = ts[:end + 1], ps[:end + 1]
     tau = t_cross - t_open
     tau_std = max(interp_err, 1e-9 * tau)
     res = _crossing(s, tau=tau, tau_std=tau_std, p10=p10, p_atm=p_atm, p_star=p_star,

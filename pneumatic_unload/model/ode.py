@@ -180,7 +180,15 @@ class IntegrationError(ArithmeticError):
 
 def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTOL,
               quiet: bool = False) -> FloatArray:
-    """Integrate the discharge from the state (p10, T10) at t[0] and return it at t.
+    """Integrate the discharge whose state at the valve opening is (p10, T10) and return it
+    at t.
+
+    The state holds at t[0] when t[0] is at or after the opening, or when the gas is at the
+    wall's temperature (nothing moves in the closed tank). A gas away from its wall
+    exchanges heat in the closed tank before the opening: from an earlier t[0] the
+    integration starts from the closed-tank state that reaches (p10, T10) at the opening
+    (:func:`_state_before_opening`), so that T10 means the same whatever the record shows
+    before the opening.
 
     Integration runs segment by segment between the valve events of
     :func:`valve_events` with the compiled Dormand-Prince 5(4) of
@@ -216,6 +224,8 @@ def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTO
     atol = y * rtol * 1e-2
     if t.size == 0:
         return np.full((0, y.size), np.nan)
+    if t[0] < t_open and cfg.wall != cfg.initial_temperature and cfg.has("heat_transfer"):
+        y = _state_before_opening(y, float(t[0]), t_open, prm, rtol, atol)
     out = np.empty((t.size, y.size))
     ramp = opening_ramp(cfg)
     cuts = [e for e in valve_events(cfg, t_open) if t[0] < e < t[-1]]
@@ -230,6 +240,52 @@ def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTO
                 f"{y_seg.tolist()}")
         out[done:] = np.nan
     return out
+
+
+#: Iterations [-] and tolerance [K] of :func:`_state_before_opening`.
+BACK_ITERATIONS, BACK_TOL = 6, 1e-7
+
+
+def _state_before_opening(y_open: FloatArray, t0: float, t_open: float, prm: FloatArray,
+                          rtol: float, atol: FloatArray) -> FloatArray:
+    """The closed tank's state at t0 [s] from which it reaches ``y_open`` (p10 [Pa], T10
+    [K], ...) at the opening t_open [s]: the mass is held (p / T constant, and a pipe at the
+    tank's pressure), T(t0) found by secant steps on the forward closed-tank integration
+    (the heat law is monotonic in T - Tw: the map T(t0) -> T(t_open) is increasing and
+    near-linear; exact for a constant hA after one step). A failed integration leaves the
+    state at the opening (as before)."""
+    t10 = float(y_open[1])
+    bounds = np.array([t0, t_open])
+    out = np.empty((2, y_open.size))
+
+    def forward(temp: float) -> float:
+        y = y_open.copy()
+        y[0], y[1] = y_open[0] * temp / t10, temp
+        if y.size > 2:
+            y[2] = y[0]
+        status, *_ = kernel.integrate(y, bounds, bounds, prm, rtol, atol, t_open, 0.0,
+                                      MAX_STEPS, out)
+        return float(out[1, 1]) if status == kernel.OK else math.nan
+
+    a, fa = t10, forward(t10)
+    if not math.isfinite(fa):
+        return y_open
+    wall = float(prm[kernel.T_WALL])
+    # first step: the gap to the wall scales (exact for a constant hA)
+    b = wall + (t10 - wall) * (a - wall) / (fa - wall) if fa != wall else a
+    for _ in range(BACK_ITERATIONS):
+        fb = forward(b)
+        if not math.isfinite(fb):
+            return y_open
+        if abs(fb - t10) < BACK_TOL or fb == fa:
+            break
+        a, fa, b = b, fb, b + (t10 - fb) * (b - a) / (fb - fa)
+    y = y_open.copy()
+    y[0] = y_open[0] * b / t10
+    y[1] = b
+    if y.size > 2:
+        y[2] = y[0]
+    return y
 
 
 _FAILURES = {kernel.TOO_MANY_STEPS: f"more than {MAX_STEPS:,} steps",

@@ -14,6 +14,17 @@ Publishes
         recording reproduces the live estimates offline (``pneumatic-unload analyze``).
     /diagnostics (diagnostic_msgs/DiagnosticArray): state (waiting, unloading, done, error)
         and why, input problems (NaN, stamps going backwards, gaps, wrong frame), latency.
+Start-time mode
+    With ``start_time`` (the valve opening in the record's clock: the message stamps [s])
+    and ``atmosphere`` set, the start is not detected: the node analyses the one unload that
+    begins at start_time with the library's opening-start path (the one ``analyze
+    --start-time`` and bag re-analysis use, so that live and offline give the same numbers;
+    :class:`~pneumatic_unload.estimation.OpeningStartEstimator`). The crossing estimate is
+    published when a sample falls to p*; the final estimate when the record settles (10
+    consecutive samples within 0.5 % of p10 - p_atm from p_atm: the rule the offline
+    analysis applies, on the same samples), or, when it never settles, once no sample has
+    arrived for ``end_timeout`` s (the stream ended; also at shutdown). Later samples are
+    ignored: a new start_time (a parameter change) analyses the next unload.
 Action
     ~/measure (pneumatic_unload_msgs/action/Measure): arm, optionally open the valve through a
         std_srvs/Trigger service, report progress, return the estimate or fail clearly.
@@ -59,6 +70,8 @@ from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
     FinalFit,
+    OpeningFinal,
+    OpeningStartEstimator,
     StreamingEstimator,
     UnloadResult,
     estimate_fields,
@@ -97,7 +110,7 @@ def _warm_up(settings: EstimatorSettings) -> None:
                              noise_std=500.0, seed=0))
     analyze(sim.t, sim.measured, dataclasses.replace(
         settings, volume=1e-3, signal_gain=1.0, signal_offset=0.0, atmosphere=101325.0,
-        initial_temperature=293.15, curve_fit=True))
+        initial_temperature=293.15, curve_fit=True, start_time=None, initial_pressure=None))
 
 
 class EstimatorNode(Node):
@@ -140,11 +153,16 @@ class EstimatorNode(Node):
         gc.freeze()
         # live: a node (re)started mid-unload skips that unload (no bogus estimate)
         self._arrived = self._pushed = time.monotonic()  # of the message being fed [s]
-        self._est = self._new_core()
+        try:
+            self._est = self._new_core()
+        except EstimationError as exc:
+            raise common.StartupError("estimator", f"invalid parameters: {exc}") from exc
         self._lock = threading.Lock()  # the core (executor thread, parameter changes)
         self._pub_lock = threading.Lock()  # the published results (executor and fit worker)
         #: Final curve fits to run, with the arrival [s, monotonic] of the completing sample.
-        self._fits: deque[tuple[FinalFit, float]] = deque()
+        self._fits: deque[tuple[FinalFit | OpeningFinal, float]] = deque()
+        #: Arrival of the last sample [s, monotonic] (start-time mode: the stream's end).
+        self._last_arrival = time.monotonic()
         #: Single samples (FluidPressure input) for the worker: stamp [ns], pressure [Pa],
         #: arrival [s, monotonic].
         self._samples: deque[tuple[int, float, float]] = deque()
@@ -207,7 +225,9 @@ class EstimatorNode(Node):
             f"estimating on {topic}"
             f" ({self._p('input')}, {self._p('qos')}):"
             f" V={self._settings.volume:g} m^3, T10={self._settings.initial_temperature:g} K,"
-            f" p_atm={'auto' if self._settings.atmosphere is None else self._settings.atmosphere}")
+            f" p_atm={'auto' if self._settings.atmosphere is None else self._settings.atmosphere}"
+            + ("" if self._settings.start_time is None else
+               f"; start-time mode: the unload that begins at {self._settings.start_time!r} s"))
 
     # ------------------------------------------------------------------ parameters
     def _p(self, name: str) -> Any:
@@ -228,11 +248,21 @@ class EstimatorNode(Node):
         except EstimationError as exc:
             return str(exc)
         if new != self._settings:
+            opening = new.start_time is not None or self._settings.start_time is not None
             with self._lock:
-                if self._est.state != "waiting":
+                idle = ("waiting", "done", "error") if opening else ("waiting",)
+                if self._est.state not in idle:
                     return "an unload is being analysed; change settings when it is done"
+                old = self._settings
                 self._settings = new
+                try:
+                    # start-time mode: one estimator per start time
+                    self._est = self._new_core() if opening else self._est
+                except EstimationError as exc:
+                    self._settings = old
+                    return str(exc)
                 self._est.settings = new
+                self._n_diag = 0 if opening else self._n_diag
             self._pub_settings.publish(String(data=adapters.to_json(new)))
         return ""
 
@@ -307,7 +337,16 @@ class EstimatorNode(Node):
         except Exception as exc:  # never silent, never fatal: report and start afresh
             self._restart_core(exc)
             return
-        self._last_pressure = p  # the results in ``out`` are published (_on_core_result)
+        self._last_pressure = p
+        self._last_arrival = arrived
+        if not isinstance(est, StreamingEstimator):
+            # start-time mode: its results are returned only (the streaming core's are
+            # published at their hand-over, _on_core_result)
+            for r in out:
+                if not r.final:
+                    self.crossing_push.append(time.monotonic() - self._pushed)
+                    self.crossing_pre.append(self._pushed - arrived)
+                self._publish_result(r, arrived)
         if not out and state != prev:
             self._on_state(state)
         if jobs:
@@ -321,10 +360,13 @@ class EstimatorNode(Node):
                 self._diagnose(level, dg.message)
             self._n_diag = est.diagnostics.total
 
-    def _new_core(self) -> StreamingEstimator:
+    def _new_core(self) -> StreamingEstimator | OpeningStartEstimator:
         """A streaming estimator with the node's settings: live (a stream joined mid-unload
         skips that unload), its final fits handed to the worker, each result published
-        the moment it is complete (:meth:`_on_core_result`)."""
+        the moment it is complete (:meth:`_on_core_result`); with ``start_time``, the
+        estimator of the unload that begins then (start-time mode)."""
+        if self._settings.start_time is not None:
+            return OpeningStartEstimator(self._settings)
         est = StreamingEstimator(self._settings, live=True, defer_final_fit=True)
         est.on_result = self._on_core_result
         return est
@@ -340,6 +382,19 @@ class EstimatorNode(Node):
         except Exception as exc:  # the core's push goes on: report, never fatal
             self._diagnose(_ERROR, f"could not publish unload {r.index}'s result: "
                                    f"{type(exc).__name__}: {exc}")
+
+    def _end_of_stream(self) -> None:
+        """Start-time mode: an unload past p* that has not settled is closed (its final job
+        queued) once no sample has arrived for ``end_timeout`` s, or at shutdown."""
+        with self._lock:
+            est = self._est
+            if not isinstance(est, OpeningStartEstimator) or est.state != "tail":
+                return
+            est.finish()
+            jobs = est.take_final_fits()
+        if jobs:
+            self._fits.extend((job, time.monotonic()) for job in jobs)
+            self._wake.set()
 
     def _restart_core(self, exc: Exception) -> None:
         """An internal error of the core: say so and go on with a fresh estimator, which
@@ -416,7 +471,8 @@ class EstimatorNode(Node):
             if r.status not in ("ok", "aborted_sse"):
                 self._state = "error"
             else:
-                self._state = "done" if self._est.state == "waiting" else "unloading"
+                self._state = "done" if self._est.state in ("waiting", "done") \
+                    else "unloading"
         self.get_logger().info(why)
         self._report()
 
@@ -448,6 +504,9 @@ class EstimatorNode(Node):
         self._send(level, message)
 
     def _report(self) -> None:
+        if self._settings.start_time is not None and \
+                time.monotonic() - self._last_arrival > self._p("end_timeout"):
+            self._end_of_stream()
         level = {"error": _ERROR}.get(self._state, _OK)
         self._send(level, f"{self._state}: {self._why}")
 
@@ -588,7 +647,8 @@ class EstimatorNode(Node):
     # ------------------------------------------------------------------ shutdown
     def close(self) -> None:
         """Feed the samples queued and run the final fits queued (at most 5 s), then stop
-        the worker."""
+        the worker (start-time mode: the stream ends, an unsettled unload is closed)."""
+        self._end_of_stream()
         self._stop.set()
         self._wake.set()
         self._worker.join(timeout=5.0)

@@ -1,0 +1,83 @@
+"""The wall temperature's and the heat laws' moves of the curve fit's C and b, for the
+lines of their budgets (:mod:`pneumatic_unload.budget`).
+
+A wall temperature assumed (= T10) or given has a standard uncertainty; the fitted C and b
+move with it. :func:`wall_linear` takes the move to first order from the fit's Jacobian (two
+model evaluations); the full refit is :func:`pneumatic_unload.fitting.fit_curve`'s.
+:func:`spread_b` is b's model-form spread over the heat laws that fit about equally well
+(C's is computed beside the BIC table in :mod:`pneumatic_unload.fitting`).
+
+SI units: K, m^3/(s Pa); b is a pressure ratio [-].
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+from pneumatic_unload.config import TankSpec
+from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.curve_fit_result import CurveFit
+from pneumatic_unload.fit.trace import Trace
+from pneumatic_unload.inversion import estimator_model
+
+#: The wall temperatures the model takes [K] (TankSpec's bounds): an assumed wall moved by
+#: its uncertainty stays inside.
+WALL_RANGE: tuple[float, float] = next(
+    (float(f.metadata["min"]), float(f.metadata["max"]))
+    for f in dataclasses.fields(TankSpec) if f.name == "wall_temperature")
+
+
+def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
+                u: float, *, law: str) -> tuple[float, float]:
+    """C's and b's standard uncertainties ([m^3/(s Pa)], [-]) from a wall temperature of
+    standard uncertainty u [K]: the curve fit's law refitted with the wall moved, to first
+    order, at a cost of two model evaluations instead of two fits (``kept``: the fit's
+    FitResult 'result' and model 'model'). With the wall moved by +-u the residual at the
+    fitted values changes by dr; the refit's parameter shift is the Gauss-Newton step
+    -J^+ dr with the fit's Jacobian J (the fitted values are the minimum of the unmoved
+    problem, J^T r = 0 there); the moves are root-mean-squared as the refit's are. NaN when
+    it cannot be computed (b's: NaN also when b was not fitted)."""
+    fit, model = kept["result"], kept["model"]
+    free = list(fit.params.free)
+    jac = np.asarray(fit.jac, dtype=float)
+    if "C" not in free or jac.shape != (fit.fun.size, len(free)) \
+            or not np.all(np.isfinite(jac)):
+        return math.nan, math.nan
+    moves, b_moves = [], []
+    with np.errstate(all="ignore"):
+        for sign in (1.0, -1.0):
+            wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
+            moved = estimator_model(dataclasses.replace(settings, wall_temperature=wall),
+                                    model.start, heat_law=law)
+            try:
+                dr = np.asarray(trace.residual(moved)(fit.values), dtype=float) - fit.fun
+            except (ValueError, ArithmeticError):
+                return math.nan, math.nan
+            if not np.all(np.isfinite(dr)):
+                return math.nan, math.nan
+            dx, *_ = np.linalg.lstsq(jac, -dr, rcond=1e-12)
+            v = fit.params.to_values(fit.x + dx)
+            moves.append(v["C"] - fit.values["C"])
+            b_moves.append(v["b"] - fit.values["b"] if "b" in free else math.nan)
+    return (math.sqrt(sum(m * m for m in moves) / 2.0),
+            math.sqrt(sum(m * m for m in b_moves) / 2.0))
+
+
+def spread_b(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, float],
+             best: str, threshold: float = 10.0) -> float:
+    """b's model-form 1-sigma [-]: the spread of the b of the laws within
+    ``threshold`` in BIC (the curve fit's LAW_BIC_THRESHOLD) of ``best`` about its b,
+    weighted as C's (exp(-dBIC/2)); NaN when the chosen law did not determine b."""
+    b0 = fits[best][0].critical_ratio
+    var, w_sum = 0.0, 0.0
+    for law, (other, _chi2, _k) in fits.items():
+        d = bic[law] - bic[best]
+        if d < threshold and math.isfinite(other.critical_ratio):
+            w = math.exp(-0.5 * d)
+            w_sum += w
+            var += w * (other.critical_ratio - b0) ** 2
+    return math.sqrt(var / w_sum) if w_sum > 0 and math.isfinite(b0) else math.nan
