@@ -42,11 +42,11 @@ from pneumatic_unload.heat_law_offer import (
     DENSITY_LAW_MAX_EXPONENT_SD,
     TURBULENT_MAX_LOG_SD,
     density_law_problem,
+    next_law_start,
     turbulent_law_problem,
 )
 from pneumatic_unload.inversion import estimator_model
 from pneumatic_unload.model.effects import Start
-from pneumatic_unload.model.heat import thermal_time_constant
 from pneumatic_unload.physics import tau_exp_eq38
 from pneumatic_unload.wall_moves import WALL_RANGE, spread_b, wall_linear
 
@@ -213,17 +213,9 @@ def fit_curve(
                 continue
         first = fits[law][0]
         if start is None and first.inflation < 2.0 and math.isfinite(first.conductance):
-            # the next law starts from this fit when it is close (white residuals), its heat
-            # exchange expressed as the thermal time constant of the gas 20 K below the
-            # wall; otherwise from the neutral values, with a second start screened
-            cfg = first.config(settings)
-            start = {"C": first.conductance, "t_open": first.t_start - span.t_ref,
-                     "p10": first.p10, "tau_heat": thermal_time_constant(
-                         cfg, first.p10, cfg.wall - 20.0)}
-            if math.isfinite(first.critical_ratio):
-                start["b"] = first.critical_ratio
-            if settings.atmosphere is None:
-                start["p_atm"] = first.p_atm
+            # the next law starts from this fit when it is close (white residuals);
+            # otherwise from the neutral values, with a second start screened
+            start = next_law_start(first, settings, span.t_ref)
     if min(f[0].inflation for f in fits.values()) > 2.0:
         # structured residuals under every law: a basin may have been missed (e.g. a
         # nearly isothermal discharge fitted from the weak-exchange side); explore strong
@@ -430,10 +422,13 @@ def _fit_law(
         lo_t, hi_t = 0.0, math.inf
         if "tau_heat" in model.parameters:
             lo_t, hi_t = model.parameters["tau_heat"].lo, model.parameters["tau_heat"].hi
-        start = {k: (float(np.clip(v, 1.001 * lo_t, 0.999 * hi_t)) if k == "tau_heat" else v)
-                 for k, v in start.items() if math.isfinite(v)}
+        # a time constant inside its bounds (one at the upper bound, no exchange, stays)
+        start = {k: (float(np.clip(v, 1.001 * lo_t, 0.999 * hi_t)) if k == "tau_heat"
+                     and v < hi_t else v) for k, v in start.items() if math.isfinite(v)}
+    # the heat exchange stepped along hA (fade): a law whose exchange the record does not
+    # show walks to none in one or two steps, not a factor e per step along its log
     fit = trace.fit(model, fixed=fixed, start=start, starts=starts, screen_nfev=9,
-                    max_nfev=max_nfev)
+                    max_nfev=max_nfev, fade=True)
     if keep is not None:
         keep.update(result=fit, model=model)
     v = fit.values

@@ -2,6 +2,7 @@
 parameter (the density law's exponent, the natural law's turbulent branch) are offered to
 the information criterion only where the record determines that parameter; elsewhere they
 are not offered, with the reason (:func:`pneumatic_unload.fitting.fit_curve` reports it).
+And where the next law's fit starts from the first law's (:func:`next_law_start`).
 
 SI units: s, Pa absolute, K.
 """
@@ -16,7 +17,8 @@ from numpy.typing import NDArray
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.curve_fit_result import CurveFit
 from pneumatic_unload.model import discharge
-from pneumatic_unload.model.heat import RA_TURBULENT, rayleigh
+from pneumatic_unload.model.effects import HEAT_FIXED, HEAT_NATURAL
+from pneumatic_unload.model.heat import RA_TURBULENT, rayleigh, thermal_time_constant
 
 FloatArray = NDArray[np.float64]
 
@@ -82,3 +84,22 @@ def density_law_problem(fixed: CurveFit | None) -> str | None:
         return (f"the record does not determine the heat exchange (tau_heat 1-sigma "
                 f"{100 * rel:.3g} % > {100 * DENSITY_LAW_MIN_TAU_REL_SD:g} %)")
     return None
+
+
+def next_law_start(first: CurveFit, settings: EstimatorSettings, t0: float
+                   ) -> dict[str, float]:
+    """Starting values [SI] of the next laws' fits from the first law's fit (times relative
+    to t0 [s]): its C, opening, p10, b (and p_atm when fitted), the heat exchange as the
+    thermal time constant of the gas 20 K below the wall; where the natural law's scale
+    sits on its lower bound (the record shows no exchange), the constant-hA law's longest
+    time constant (no exchange either: it then starts converged in that coordinate)."""
+    cfg = first.config(settings)
+    start = {"C": first.conductance, "t_open": first.t_start - t0, "p10": first.p10,
+             "tau_heat": thermal_time_constant(cfg, first.p10, cfg.wall - 20.0)}
+    if first.heat_law == "natural" and first.heat_scale <= 1.001 * HEAT_NATURAL.params[0].lo:
+        start["tau_heat"] = HEAT_FIXED.params[0].hi
+    if math.isfinite(first.critical_ratio):
+        start["b"] = first.critical_ratio
+    if settings.atmosphere is None:
+        start["p_atm"] = first.p_atm
+    return start

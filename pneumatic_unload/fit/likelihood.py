@@ -64,18 +64,37 @@ def make_bins(t: FloatArray, t_open: float, *, resolution: float = 0.03,
     dt = float(np.median(np.diff(t[:100_001]))) if n > 1 else 1.0
     wmax = max(1, n // max_bins_linear)
     k_open = int(np.clip(np.searchsorted(t, t_open), 0, n))
+    # the width at a sample, int(min(max(1, resolution d / dt), wmax)) at its distance d
+    # from the opening, computed at once (the same doubles: one difference, product and
+    # quotient; fmax/fmin keep max/min's answer on a NaN) over the samples nearer than
+    # where the width is surely wmax (t increases: beyond, every bin is wmax wide, added
+    # as a range); the edges are then followed from the opening
+    span = (wmax + 1.0) * dt / resolution if resolution > 0 else math.inf
+    with np.errstate(all="ignore"):
+        k_hi = int(np.searchsorted(t, t_open + span, side="right")) + 1
+        k_lo = max(int(np.searchsorted(t, t_open - span, side="left")) - 1, 0)
+        fwd = np.fmin(np.fmax(1.0, resolution * (t[k_open:k_hi] - t_open) / dt),
+                      wmax).astype(np.int64).item
+        back = np.fmin(np.fmax(1.0, resolution * (t_open - t[k_lo:k_open]) / dt),
+                       wmax).astype(np.int64).item
+    m_fwd = max(min(k_hi, n) - k_open, 0)
     edges = [k_open]
     k = k_open
-    at = t.item  # Python floats: the same doubles, without a numpy scalar per bin
-    while k > 0:  # backwards over the pre-step
-        w = int(min(max(1, resolution * (t_open - at(max(k - 1, 0))) / dt), wmax))
-        k = max(0, k - w)
+    while k > 0:  # backwards over the pre-step: the width at the sample before k
+        if k - 1 < k_lo:
+            edges.extend(range(k - wmax, 0, -wmax))
+            edges.append(0)
+            break
+        k = max(0, k - back(k - 1 - k_lo))
         edges.append(k)
     edges.reverse()
     k = k_open
     while k < n:
-        w = int(min(max(1, resolution * (at(k) - t_open) / dt), wmax))
-        k = min(n, k + w)
+        if k - k_open >= m_fwd:
+            edges.extend(range(k + wmax, n, wmax))
+            edges.append(n)
+            break
+        k = min(n, k + fwd(k - k_open))
         edges.append(k)
     out = np.unique(np.asarray(edges, dtype=np.int64))
     if out[0] != 0:

@@ -36,6 +36,9 @@ POLISH_CHI2_TOL = 1e-3
 #: Gauss-Newton step (its error is second order: measured, the next iteration predicts
 #: < 1e-2 of this) instead of iterating to :data:`POLISH_CHI2_TOL` [-].
 FINAL_STEP_CHI2 = 0.1
+#: Distance [-, scaled coordinates] within which ``hold_outward`` counts a coordinate as
+#: on its bound (a start put there sits a hair inside, see :func:`minimize`).
+ON_BOUND = 1e-6
 #: Residual value returned for parameters where the model cannot be evaluated [-].
 BAD_RESIDUAL = 1e6
 
@@ -158,7 +161,9 @@ def _guarded(residual: Residual, params: Parameters, n_out: list[int]
 
 
 def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
-                        f: FloatArray, lo: FloatArray, hi: FloatArray, *, max_iter: int
+                        f: FloatArray, lo: FloatArray, hi: FloatArray, *, max_iter: int,
+                        move: Callable[[FloatArray, FloatArray], FloatArray] | None = None,
+                        hold_outward: bool = False
                         ) -> tuple[FloatArray, FloatArray, FloatArray, bool, int]:
     """Bounded Levenberg-Marquardt to the exact minimum (scaled coordinates of order one).
 
@@ -171,7 +176,10 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
     or, when it predicts less than :data:`FINAL_STEP_CHI2`, after taking that step (the
     Jacobian returned is the one before it); or,
     in a flat valley of an ill-determined combination, after three accepted steps that
-    each lowered chi^2 by less than that.
+    each lowered chi^2 by less than that. ``move(x, d)`` takes a step d from x (default
+    x + d; :meth:`~pneumatic_unload.fit.params.Parameters.step` for fading effects);
+    ``hold_outward`` also holds a coordinate on a bound that the Gauss-Newton step pushes
+    outward (not only the gradient).
 
     Returns
     -------
@@ -181,6 +189,9 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
     inner_lo = lo + 1e-12 * np.maximum(1.0, np.abs(lo))
     inner_hi = hi - 1e-12 * np.maximum(1.0, np.abs(hi))
     x = np.clip(x, inner_lo, inner_hi)
+    if move is None:
+        def move(x0: FloatArray, d: FloatArray) -> FloatArray:
+            return x0 + d
     cost = float(f @ f)
     nfev = 0
     lam = 1e-3
@@ -198,6 +209,18 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
         s2 = max(cost / max(f.size - x.size, 1), 1e-300)
         jf = jac[:, free]
         gn, *_ = np.linalg.lstsq(jf, -f, rcond=1e-12)
+        if hold_outward:
+            # and those the Gauss-Newton step pushes outward (a faded effect on its bound:
+            # its column is ~0, the gradient's sign is noise, and a step computed with it
+            # free moves the others to compensate a move the bound does not allow)
+            out = np.zeros_like(held)
+            out[free] = ((x[free] <= lo[free] + ON_BOUND) & (gn < 0)) \
+                | ((x[free] >= hi[free] - ON_BOUND) & (gn > 0))
+            if np.any(out):
+                held |= out
+                free = ~held
+                jf = jac[:, free]
+                gn, *_ = np.linalg.lstsq(jf, -f, rcond=1e-12)
         pred = cost - float(np.sum((f + jf @ gn) ** 2))
         if pred / s2 < POLISH_CHI2_TOL:
             return x, f, jac, True, nfev
@@ -207,7 +230,7 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
             # Jacobian more (the one returned is this one, a fraction of a sigma away)
             step = np.zeros_like(x)
             step[free] = gn
-            x_new = np.clip(x + step, inner_lo, inner_hi)
+            x_new = np.clip(move(x, step), inner_lo, inner_hi)
             f_new = fun(x_new)
             nfev += 1
             if float(f_new @ f_new) <= cost:
@@ -223,7 +246,7 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
                 continue
             step = np.zeros_like(x)
             step[free] = d
-            x_new = np.clip(x + step, inner_lo, inner_hi)
+            x_new = np.clip(move(x, step), inner_lo, inner_hi)
             f_new = fun(x_new)
             nfev += 1
             c_new = float(f_new @ f_new)
@@ -247,7 +270,8 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
 
 def minimize(residual: Residual, params: Parameters, *,
              starts: list[dict[str, float]] | None = None, screen_nfev: int = 12,
-             max_nfev: int = 200, n_data: int | None = None) -> FitResult:
+             max_nfev: int = 200, n_data: int | None = None, fade: bool = False
+             ) -> FitResult:
     """Bounded non-linear least squares over named parameters.
 
     Parameters
@@ -266,6 +290,10 @@ def minimize(residual: Residual, params: Parameters, *,
         many iterations) [-]; an iteration costs one evaluation per free parameter plus one.
     n_data : int, optional
         Number of data for the BIC [-] (default: the number of residuals).
+    fade : bool
+        Step the parameters with a ``fade`` power along it
+        (:meth:`~pneumatic_unload.fit.params.Parameters.step`) instead of along their log,
+        and hold a coordinate on its bound when the Gauss-Newton step pushes it outward.
 
     Returns
     -------
@@ -278,6 +306,8 @@ def minimize(residual: Residual, params: Parameters, *,
         eps = np.where(np.isfinite(eps), eps, 1e-9)
         n_out = [0]
         fun = _guarded(residual, params, n_out)
+        fading = fade and any(p.fade and p.vary for p in params)
+        move = params.step if fading else None
         pts = [params.to_x()] + [params.to_x(s) for s in (starts or [])]
         pts = [np.clip(p, lo + eps, hi - eps) for p in pts]
         nfev = 0
@@ -291,7 +321,8 @@ def minimize(residual: Residual, params: Parameters, *,
             for x0 in pts:
                 f0 = fun(x0)
                 xs, fs, _j, _ok, n = levenberg_marquardt(fun, x0, f0, lo, hi,
-                                                         max_iter=max(1, screen_nfev))
+                                                         max_iter=max(1, screen_nfev),
+                                                         move=move, hold_outward=fading)
                 nfev += n + 1
                 scored.append((float(fs @ fs), xs, fs))
             scored.sort(key=lambda c: c[0])
@@ -301,7 +332,8 @@ def minimize(residual: Residual, params: Parameters, *,
             f0 = fun(x0)
             nfev += 1
         x, f, jac, ok, n_lm = levenberg_marquardt(fun, x0, f0, lo, hi,
-                                                  max_iter=max(2, max_nfev // 2))
+                                                  max_iter=max(2, max_nfev // 2), move=move,
+                                                  hold_outward=fading)
         nfev += n_lm
         return FitResult(params=params, values=params.to_values(x), x=x, fun=f, jac=jac,
                          chi2=float(f @ f), success=bool(ok), nfev=nfev,

@@ -47,6 +47,11 @@ class Parameter:
         Free (True) or held at ``value``.
     doc : str
         Physical meaning.
+    fade : float
+        For a log parameter whose effect is about linear in value^p near the end where it
+        fades (p = 1: a multiplier going to 0; p = -1: a time constant going to infinity),
+        p [-]: a step towards that end is taken along value^p (see
+        :meth:`Parameters.step`); 0 (default): along the log.
     """
 
     name: str
@@ -59,6 +64,7 @@ class Parameter:
     centre: float | None = None
     vary: bool = True
     doc: str = ""
+    fade: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate bounds and scale (raises :class:`ParameterError`)."""
@@ -70,6 +76,8 @@ class Parameter:
             raise ParameterError(f"{self.name}: scale must be a positive number")
         if not math.isfinite(self.value):
             raise ParameterError(f"{self.name}: value {self.value!r} is not finite")
+        if self.fade != 0.0 and not self.log:
+            raise ParameterError(f"{self.name}: fade needs a log parameter")
 
     def g(self, value: float) -> float:
         """Fitted coordinate before scaling: log(value) or value."""
@@ -164,6 +172,34 @@ class Parameters:
             out[k] = p.g_inv(p.g_centre + p.scale * float(next(it))) if p.vary else p.value
         return out
 
+    def step(self, x: FloatArray, dx: FloatArray) -> FloatArray:
+        """Scaled coordinates after a step dx from x: x + dx, except for the parameters
+        with a ``fade`` power p moving towards the end where their effect fades (p dg < 0,
+        dg = scale dx their log's change): they move as value^p does under the same
+        first-order change, to value^p (1 + p dg). Gauss-Newton along the log moves such a
+        value by at most a factor e per step (its effect is about linear in value^p there:
+        the step predicts value^p -> 0 at most); along value^p it reaches the optimum in
+        one. A step that would take value^p past 0 is cut where it reaches 0 (every
+        coordinate's move scaled alike): that parameter lands on its bound. Not clipped
+        to the bounds."""
+        x = np.asarray(x, dtype=float)
+        dx = np.asarray(dx, dtype=float)
+        free = [p for p in self._p.values() if p.vary]
+        dg = np.array([p.scale * float(d) for p, d in zip(free, dx, strict=True)])
+        fading = [k for k, p in enumerate(free) if p.fade * dg[k] < 0.0
+                  and abs(p.g_centre + p.scale * float(x[k]) - p.g(_fade_end(p))) > 1e-9]
+        if not fading:  # (one already on its bound stays there: the caller clips)
+            return x + dx
+        cut = min(1.0, *(-1.0 / (free[k].fade * dg[k]) for k in fading))
+        out = x + cut * dx
+        for k in fading:
+            p = free[k]
+            z = 1.0 + p.fade * cut * dg[k]
+            g = p.g(_fade_end(p)) if z <= 1e-12 else \
+                p.g_centre + p.scale * float(x[k]) + math.log(z) / p.fade
+            out[k] = (g - p.g_centre) / p.scale
+        return out
+
     def bounds(self) -> tuple[FloatArray, FloatArray]:
         """Bounds of the scaled coordinates of the free parameters."""
         lo, hi = [], []
@@ -177,3 +213,8 @@ class Parameters:
         """Standard deviation [unit] of a value from that of its scaled coordinate."""
         p = self[name]
         return (value if p.log else 1.0) * p.scale * x_std
+
+
+def _fade_end(p: Parameter) -> float:
+    """The bound [unit] at the end where a fading parameter's effect fades."""
+    return p.lo if p.fade > 0 else p.hi

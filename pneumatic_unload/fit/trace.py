@@ -104,7 +104,7 @@ class Trace:
 
     def fit(self, model: FittableModel, *, starts: list[Values] | None = None,
             fixed: Values | None = None, start: Values | None = None,
-            screen_nfev: int = 12, max_nfev: int = 200) -> FitResult:
+            screen_nfev: int = 12, max_nfev: int = 200, fade: bool = False) -> FitResult:
         """Fit ``model`` to the trace.
 
         Parameters
@@ -119,6 +119,8 @@ class Trace:
             Replaces the parameters' starting values [units].
         screen_nfev, max_nfev : int
             Evaluation budgets [-].
+        fade : bool
+            Step fading effects' parameters along their power (see :func:`minimize`).
         """
         names = set(model.parameters.names)
         params = model.parameters.replace(fixed=fixed or {},
@@ -126,4 +128,5 @@ class Trace:
                                              if k in names and k not in (fixed or {})})
         starts = [{k: v for k, v in s.items() if k in names} for s in (starts or [])]
         return minimize(self.residual(model), params, starts=starts,
-                        screen_nfev=screen_nfev, max_nfev=max_nfev, n_data=self.n)
+                        screen_nfev=screen_nfev, max_nfev=max_nfev, n_data=self.n,
+                        fade=fade)

@@ -106,6 +106,9 @@ class EffectParam:
         Value [unit] at the centre of the fitted coordinate, from the :class:`Start`.
     scale : float
         One unit of the fitted coordinate [unit, or log units].
+    fade : float
+        Power p of the value in which the effect fades to nothing at one end (0: none; see
+        :class:`~pneumatic_unload.fit.params.Parameter`) [-].
     """
 
     name: str
@@ -116,6 +119,7 @@ class EffectParam:
     centre: Callable[[Start], float]
     scale: float
     doc: str
+    fade: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -218,7 +222,7 @@ HEAT_NATURAL = Effect(
     "the tank wall: heat flows from the wall into the cooling gas by natural convection; "
     "heat_scale multiplies the published correlation",
     (EffectParam("heat_scale", "-", True, 1e-4, 100.0, lambda s: 1.0, 0.3,
-                 "multiplier on the natural-convection correlation"),),
+                 "multiplier on the natural-convection correlation", fade=1.0),),
     lambda s: {"heat_scale": 1e-4},
     lambda s: [{"heat_scale": 0.3}, {"heat_scale": 3.0}],
     lambda v, tank: {"heat_transfer_mode": "natural",
@@ -229,7 +233,7 @@ HEAT_FIXED = Effect(
     "the tank wall: heat flows from the wall into the gas through a constant hA (Newton "
     "cooling); tau_heat = m0 c_v/(hA) is the gas's thermal time constant",
     (EffectParam("tau_heat", "s", True, 1e-3, 1e5, lambda s: s.tau, 1.0,
-                 "thermal time constant m0 c_v/(h A) of the gas-wall exchange"),),
+                 "thermal time constant m0 c_v/(h A) of the gas-wall exchange", fade=-1.0),),
     lambda s: {"tau_heat": 1e3 * s.tau},
     lambda s: [{"tau_heat": 0.7 * s.tau}, {"tau_heat": 7.0 * s.tau}],
     _heat_fixed,

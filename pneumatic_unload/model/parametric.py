@@ -98,7 +98,7 @@ class ParametricModel:
             for q in rec.params:
                 c = q.centre(s)
                 ps.append(Parameter(q.name, c, q.lo, q.hi, q.unit, log=q.log, scale=q.scale,
-                                    doc=q.doc))
+                                    doc=q.doc, fade=q.fade))
             if rec.name == "heat_transfer" and self.fit_wall_temperature:
                 q = WALL_TEMPERATURE
                 ps.append(Parameter(q.name, self.tank.wall, q.lo, q.hi, q.unit,
