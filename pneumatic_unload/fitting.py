@@ -27,6 +27,7 @@ from pneumatic_unload.config.estimator import (
     EstimatorSettings,
     wall_uncertainty,
 )
+from pneumatic_unload.config.tank import WALL_RANGE
 from pneumatic_unload.curve_fit_result import CurveFit
 from pneumatic_unload.fit.likelihood import make_bins
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
@@ -48,7 +49,7 @@ from pneumatic_unload.heat_law_offer import (
 from pneumatic_unload.inversion import estimator_model
 from pneumatic_unload.model.effects import Start
 from pneumatic_unload.physics import tau_exp_eq38
-from pneumatic_unload.wall_moves import WALL_RANGE, spread_b, wall_linear
+from pneumatic_unload.wall_moves import spread_b, wall_linear
 
 FloatArray = NDArray[np.float64]
 

@@ -18,17 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from pneumatic_unload.config import TankSpec
 from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.config.tank import WALL_RANGE
 from pneumatic_unload.curve_fit_result import CurveFit
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.inversion import estimator_model
-
-#: The wall temperatures the model takes [K] (TankSpec's bounds): an assumed wall moved by
-#: its uncertainty stays inside.
-WALL_RANGE: tuple[float, float] = next(
-    (float(f.metadata["min"]), float(f.metadata["max"]))
-    for f in dataclasses.fields(TankSpec) if f.name == "wall_temperature")
 
 
 def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
