@@ -6,6 +6,7 @@ The profile is derandomized (the same examples on every run) and small (about 30
 all); the regression tests below pin every failure signature the long run found.
 """
 
+import inspect
 import math
 
 import fuzzcases as fz
@@ -232,3 +233,22 @@ def test_a_model_pinned_at_its_range_gives_no_table_not_an_overflow():
         res = crossing_estimate(plan, float(tau), 0.01)
         c, sd = res.conductance_model, res.conductance_model_std
         assert (math.isnan(c) or c > 0) and not (math.isfinite(c) and not sd > 0)
+
+
+def test_a_fit_evaluation_has_a_step_budget():
+    # bench_fuzz (bag): the natural+turbulent law explored a turbulent ratio of 2.6, where
+    # the correlation jumps 2.5x at Ra = 1e9 and the gas slides along the jump: ~1 M
+    # integrator steps per evaluation, 124 s of CPU for one 3000-sample bag. A fit's
+    # evaluation stops at FIT_MAX_STEPS (NaN: a bad point), the simulator keeps its budget.
+    from pneumatic_unload.model import parametric
+    from pneumatic_unload.model.effects import FIT_MAX_STEPS, FIT_RTOL
+    from pneumatic_unload.model.ode import integrate
+
+    cfg = RigConfig(volume=4.307e-4, length_diameter_ratio=4.25, initial_temperature=273.15,
+                    conductance=1.2557e-10, critical_ratio=0.5, initial_pressure=1.2148e6,
+                    effects=("heat_transfer",), heat_transfer_turbulent_ratio=2.587)
+    t = np.linspace(0.0, 20.0, 200)
+    capped = integrate(cfg, t, 0.1446, rtol=FIT_RTOL, quiet=True, max_steps=FIT_MAX_STEPS)
+    assert np.isnan(capped[-1, 0])  # the budget applies
+    assert "max_steps=FIT_MAX_STEPS" in inspect.getsource(parametric.ParametricModel.signal)
+    assert "max_steps=FIT_MAX_STEPS" in inspect.getsource(parametric.ParametricModel.states)

@@ -47,6 +47,12 @@ __all__ = ["CANDIDATES", "DOWNSTREAM_LEAKS", "HOT_START", "PLUGGED_RUN", "REGIST
 #: p10, well under a Pa) stays far below the noise and below the finite-difference steps of
 #: the engine (:data:`pneumatic_unload.fit.lsq.DIFF_STEP`, ~1e-4 relative).
 FIT_RTOL = 1e-8
+#: Step budget of one segment of a fit's model evaluation [-]: a discharge takes hundreds
+#: to a few thousand steps; a fit exploring an extreme corner (a critical ratio at its lower
+#: bound makes the flow's end a square-root singularity) took up to the simulator's 2 M,
+#: 0.2-0.5 s per evaluation and minutes per fit (bench_fuzz: a 3000-sample bag, 124 s of
+#: CPU). Past it the evaluation is NaN, which the engine treats as a bad point.
+FIT_MAX_STEPS = 50_000
 
 
 @dataclass(frozen=True)

@@ -179,7 +179,7 @@ class IntegrationError(ArithmeticError):
 
 
 def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTOL,
-              quiet: bool = False) -> FloatArray:
+              quiet: bool = False, max_steps: int | None = None) -> FloatArray:
     """Integrate the discharge whose state at the valve opening is (p10, T10) and return it
     at t.
 
@@ -211,6 +211,8 @@ def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTO
     quiet : bool
         A segment that cannot be integrated (fits exploring extreme parameters) leaves NaN
         from where it stopped instead of raising :class:`IntegrationError`.
+    max_steps : int, optional
+        Step budget of one segment [-] (default :data:`MAX_STEPS`).
 
     Returns
     -------
@@ -224,20 +226,22 @@ def integrate(cfg: RigConfig, t: FloatArray, t_open: float, *, rtol: float = RTO
     atol = y * rtol * 1e-2
     if t.size == 0:
         return np.full((0, y.size), np.nan)
+    budget = MAX_STEPS if max_steps is None else int(max_steps)
     if t[0] < t_open and cfg.wall != cfg.initial_temperature and cfg.has("heat_transfer"):
-        y = _state_before_opening(y, float(t[0]), t_open, prm, rtol, atol)
+        y = _state_before_opening(y, float(t[0]), t_open, prm, rtol, atol, budget)
     out = np.empty((t.size, y.size))
     ramp = opening_ramp(cfg)
     cuts = [e for e in valve_events(cfg, t_open) if t[0] < e < t[-1]]
     bounds = np.array([float(t[0]), *cuts, float(t[-1])])
     status, done, seg, y_seg = kernel.integrate(y, bounds, t, prm, rtol, atol, t_open, ramp,
-                                                MAX_STEPS, out)
+                                                budget, out)
     if status != kernel.OK:
         if not quiet:
+            why = f"more than {budget:,} steps" if status == kernel.TOO_MANY_STEPS \
+                else _FAILURES[status]
             raise IntegrationError(
                 f"the discharge ODE could not be integrated from t = {bounds[seg]:g} s to "
-                f"{bounds[seg + 1]:g} s ({_FAILURES[status]}); state at the start "
-                f"{y_seg.tolist()}")
+                f"{bounds[seg + 1]:g} s ({why}); state at the start {y_seg.tolist()}")
         out[done:] = np.nan
     return out
 
@@ -247,7 +251,7 @@ BACK_ITERATIONS, BACK_TOL = 6, 1e-7
 
 
 def _state_before_opening(y_open: FloatArray, t0: float, t_open: float, prm: FloatArray,
-                          rtol: float, atol: FloatArray) -> FloatArray:
+                          rtol: float, atol: FloatArray, max_steps: int) -> FloatArray:
     """The closed tank's state at t0 [s] from which it reaches ``y_open`` (p10 [Pa], T10
     [K], ...) at the opening t_open [s]: the mass is held (p / T constant, and a pipe at the
     tank's pressure), T(t0) found by secant steps on the forward closed-tank integration
@@ -264,7 +268,7 @@ def _state_before_opening(y_open: FloatArray, t0: float, t_open: float, prm: Flo
         if y.size > 2:
             y[2] = y[0]
         status, *_ = kernel.integrate(y, bounds, bounds, prm, rtol, atol, t_open, 0.0,
-                                      MAX_STEPS, out)
+                                      max_steps, out)
         return float(out[1, 1]) if status == kernel.OK else math.nan
 
     a, fa = t10, forward(t10)

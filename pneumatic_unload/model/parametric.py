@@ -16,6 +16,7 @@ from pneumatic_unload.config.fields import with_changes
 from pneumatic_unload.fit.params import Parameter, Parameters
 from pneumatic_unload.model.effects import (
     CANDIDATES,
+    FIT_MAX_STEPS,
     FIT_RTOL,
     HEAT_VARIANTS,
     HOT_START,
@@ -182,13 +183,14 @@ class ParametricModel:
     def states(self, v: Values, t: FloatArray) -> FloatArray:
         """ODE states at instants t (p [Pa], T [K], ...) for parameter values v."""
         return integrate(self.config(v), np.asarray(t, dtype=float), v["t_open"],
-                         rtol=FIT_RTOL, quiet=True)
+                         rtol=FIT_RTOL, quiet=True, max_steps=FIT_MAX_STEPS)
 
     def signal(self, v: Values, t: FloatArray) -> FloatArray:
         """Noise-free sensor output of the model at instants t [Pa]."""
         cfg = self.config(v)
         t = np.asarray(t, dtype=float)
-        p = integrate(cfg, t, v["t_open"], rtol=FIT_RTOL, quiet=True)[:, 0]
+        p = integrate(cfg, t, v["t_open"], rtol=FIT_RTOL, quiet=True,
+                      max_steps=FIT_MAX_STEPS)[:, 0]
         return sensor_response(t, p, cfg)
 
     def temperature(self, v: Values, t: FloatArray) -> FloatArray:
