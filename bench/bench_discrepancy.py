@@ -137,15 +137,21 @@ def main(argv: list[str] | None = None) -> int:
     jobs += [("none", so + 5000 + k, 0.0) for k in range(args.null)]
     jobs += [("none", so + 6000 + k, r) for r in (0.5, 0.9) for k in range(args.ar)]
     t0 = time.perf_counter()
+    # rows are written as they arrive (a run stopped early keeps its trials), then sorted
+    partial = open(args.rows, "w", encoding="utf-8") if args.rows else None
     with Pool(args.workers) as pool:
         rows = []
         for i, r in enumerate(pool.imap_unordered(trial, jobs, chunksize=1)):
             rows.append(r)
+            if partial is not None:
+                partial.write(json.dumps(r, default=float) + "\n")
+                partial.flush()
             if (i + 1) % 20 == 0:
                 print(f"  {i + 1}/{len(jobs)} trials, {time.perf_counter() - t0:.0f} s",
                       file=sys.stderr, flush=True)
     wall = time.perf_counter() - t0
-    if args.rows:
+    if partial is not None:
+        partial.close()
         with open(args.rows, "w", encoding="utf-8") as fh:
             for r in sorted(rows, key=lambda r: (r["effect"], r["rho"], r["seed"])):
                 fh.write(json.dumps(r, default=float) + "\n")
