@@ -186,7 +186,7 @@ def markdown(res: DiscrepancyResult, files: dict[str, str], title: str = "") -> 
                          f"(named: {', '.join(res.named) or 'none'})")
     lines += [f"- Gap: RMS {res.rms_before:.4g} Pa before, {res.rms_after:.4g} Pa after; "
               f"normalised by the noise {res.before.nrms:.3f} -> {res.after.nrms:.3f} "
-              "(1.0 = the noise level)",
+              "(1.0 = the noise level; prewhitened RMS over the AR(1) innovation sigma)",
               f"- Residual white (Ljung-Box p >= 0.01): before {res.before.white} "
               f"(p = {res.before.ljung_box_p:.3g}), after {res.after.white} "
               f"(p = {res.after.ljung_box_p:.3g})",

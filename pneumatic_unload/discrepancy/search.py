@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from pneumatic_unload.discrepancy.ambiguity import at_bounds, same_physics
 from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.types import NRMS_LIMIT, WHITE_P, Diagnostics, Fit
-from pneumatic_unload.fit.noise import NoiseModel, ljung_box
+from pneumatic_unload.fit.noise import NoiseModel, ljung_box, normalised_rms
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.heat_law_offer import both_regimes, exchange_determined
 from pneumatic_unload.model.effects import HEAT_VARIANTS, HOT_START
@@ -92,7 +92,7 @@ def diagnose(prob: Problem, fit: Fit) -> tuple[Diagnostics, FloatArray]:
             return math.nan
         return float(np.corrcoef(a, b_)[0, 1])
 
-    d = Diagnostics(rms=rms, nrms=rms / sigma, ljung_box_p=p_lb,
+    d = Diagnostics(rms=rms, nrms=normalised_rms(r, prob.noise), ljung_box_p=p_lb,
                     white=bool(math.isfinite(p_lb) and p_lb >= WHITE_P), phases=phases,
                     corr_pressure=corr(rb, pb), corr_rate=corr(rb, rate))
     return d, m
@@ -104,7 +104,7 @@ def fit_quality(prob: Problem, fit: Fit) -> Diagnostics:
     r = prob.y - m
     rms = float(np.sqrt(np.mean(r * r)))
     _, p_lb = ljung_box(prob.lik.residuals(m))
-    return Diagnostics(rms=rms, nrms=rms / prob.noise.sigma, ljung_box_p=p_lb,
+    return Diagnostics(rms=rms, nrms=normalised_rms(r, prob.noise), ljung_box_p=p_lb,
                        white=bool(math.isfinite(p_lb) and p_lb >= WHITE_P), phases={},
                        corr_pressure=math.nan, corr_rate=math.nan)
 

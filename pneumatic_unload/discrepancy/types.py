@@ -186,7 +186,9 @@ class Diagnostics:
     rms : float
         Root mean square of the residual y - model [Pa].
     nrms : float
-        rms / sigma [-] (1 when the gap is within noise).
+        RMS of the prewhitened residual over the innovation sigma
+        (:func:`~pneumatic_unload.fit.noise.normalised_rms`; rms / sigma for white noise)
+        [-] (1 when the gap is within noise).
     ljung_box_p : float
         Ljung-Box p-value of the normalised binned residual [-].
     white : bool
