@@ -89,6 +89,7 @@ from pneumatic_unload.discrepancy.search import (
     decide,
     diagnose,
     fit_quality,
+    law_refusals,
     look_alikes,
     residual_noise,
     run_round,
@@ -201,6 +202,9 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
             # ... and with parameters of its own inside their range
             refused.update(bound_refusals(base_k, {
                 k: f for k, f in fits.items() if k not in refused}, delta, thr))
+            # ... and against the named heat transfer with its law at its best
+            refused.update(law_refusals(prob_k, base_k, {
+                k: d for k, d in delta.items() if k not in refused}, thr))
         delta, win, amb = decide(base_k, fits, thr, refused)
         rounds.append(Round(base_effects=current.effects, base_bic=base_k.bic, fits=fits,
                             delta_bic=delta, winner=win, ambiguous_with=amb, base=base_k,
