@@ -119,16 +119,13 @@ def test_a_further_leak_that_another_heat_law_explains_as_well_is_refused():
     """HydDown v5l (5 L, natural convection, T10 303 K): with the hot start named
     (natural+turbulent law), a laminar leak gains about 50 with C -3.3 %; the hot start
     with the density law explains as much with C -0.0 %: the leak is refused as a look-alike
-    of the heat law (``search.law_refusals``)."""
+    of the heat law (``laws.law_refusals``)."""
     import zlib
 
     from foreign.hyddown_data import DATA_DIR, load, record
 
-    from pneumatic_unload.discrepancy.search import (
-        fit_candidate,
-        law_refusals,
-        residual_noise,
-    )
+    from pneumatic_unload.discrepancy.laws import law_refusals
+    from pneumatic_unload.discrepancy.search import fit_candidate, residual_noise
 
     name = "v5l_ld1p5_d1p5_calc_t303"
     path = DATA_DIR / f"{name}.npz"

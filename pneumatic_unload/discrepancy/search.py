@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.discrepancy.ambiguity import at_bounds, same_physics
+from pneumatic_unload.discrepancy.laws import HEAT_EFFECTS
 from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.types import NRMS_LIMIT, WHITE_P, Diagnostics, Fit
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
@@ -35,9 +36,6 @@ HEAT_EXTENSIONS: dict[str, tuple[str, Values]] = {
 #: out from every start when its fit may not be optimal (:func:`refit_contenders`) [-]:
 #: ten BIC thresholds, about five times the most a refit moved a candidate (23).
 REFIT_MARGIN = 100.0
-#: Effects whose heat law is chosen from the engine's family (heat transfer; the hot
-#: start is heat transfer with the wall temperature fitted).
-HEAT_EFFECTS: tuple[str, ...] = ("heat_transfer", HOT_START)
 #: Transducer effects: claimed only with evidence no physics effect can give.
 SENSOR_EFFECTS: tuple[str, ...] = ("sensor_offset", "sensor_gain")
 #: The end of the discharge: where the physics model's pressure is within this fraction
@@ -421,48 +419,4 @@ def bound_refusals(base: Fit, fits: dict[str, Fit], delta: dict[str, float],
             out[k] = (f"its fit beats the effects named (delta-BIC {delta[k]:.1f}) only with "
                       f"{vals} at the bound of its range: it fits the model's limits, not "
                       "a missing effect of its kind")
-    return out
-
-
-
-def law_refusals(prob: Problem, base: Fit, delta: dict[str, float], threshold: float
-                 ) -> dict[str, str]:
-    """Further candidates that another heat law of the family explains as well (name ->
-    reason); ``delta``: the candidates not refused already -> delta-BIC over ``base``.
-
-    When heat transfer (or the hot start) is among the effects named, a further effect
-    must beat them with their heat law at its best, not only with the law its round
-    chose: the named model is refitted on ``prob`` (the further round's noise model) with
-    every other law of :data:`~pneumatic_unload.model.effects.HEAT_VARIANTS`, and a
-    candidate that beats the base by the BIC threshold but not the best of these refits
-    by it is a look-alike of the heat law (its gain is the named effect's law family
-    bending where the chosen law does not), not a missing effect. The refits are only
-    evidence against the candidate: the named model keeps its law (the hot start is named
-    with at most the wall temperature beyond heat transfer's parameters). HydDown v5l
-    (a calc-h 5 L vessel): after hot_start (natural+turbulent), a laminar leak of 5.8 %
-    gained 50.6 with C -3.3 %; the hot start with the density law gains 48.2 with
-    C -0.00 %. Below the threshold nothing is tested (not claimed anyway).
-    """
-    heat = [e for e in base.effects if e in HEAT_EFFECTS]
-    contenders = [k for k, d in delta.items() if d > threshold]
-    if not heat or not contenders:
-        return {}
-    best_law, best_gain = "", -math.inf
-    for law, rec in HEAT_VARIANTS.items():
-        if law == base.model.heat_law:
-            continue
-        model = prob.model(base.effects, heat_law=law)
-        centre = {q.name: q.centre(prob.start) for q in rec.params}
-        try:
-            f = prob.fit(model, [dict(base.theta), {**base.theta, **centre}])
-        except ValueError:
-            continue
-        if base.bic - f.bic > best_gain:
-            best_law, best_gain = law, base.bic - f.bic
-    out: dict[str, str] = {}
-    for k in contenders:
-        if delta[k] - best_gain <= threshold:
-            out[k] = (f"{', '.join(heat)} with the {best_law} heat law explains the trace "
-                      f"about as well (delta-BIC {best_gain:.1f} against {delta[k]:.1f} for "
-                      f"{k}): a look-alike of the heat law's shape, not a missing effect")
     return out
