@@ -174,3 +174,36 @@ def test_a_contender_at_a_degenerate_bound_is_fitted_out_from_every_start():
     fits = run_round(prob, base, neutral, ["pipe_volume", "leak_downstream"])
     assert fits["pipe_volume"].bic < fits["leak_downstream"].bic
     assert fits["pipe_volume"].theta["C"] == pytest.approx(cfg.conductance, rel=0.01)
+
+
+def test_the_tank_l_d_not_stated_is_chosen_by_the_data_and_widens_the_c_range():
+    """A 2 L tank of L/D 6 whose gas crosses Ra = 1e9 (turbulent branch 1.3 times the
+    package's, as HydDown's McAdams correlation): analysed with the default L/D 2 and the
+    L/D not stated, the final model's natural law is refitted at L/D 1 to 7.6
+    (``laws.length_diameter_choice``): an L/D near the truth fits best by the threshold
+    and is taken, C within 0.5 %; stated, nothing is refitted."""
+    from pneumatic_unload.discrepancy.ambiguity import LD_STATED, conductance_ambiguity
+    from pneumatic_unload.discrepancy.laws import length_diameter_choice
+
+    cfg = RigConfig(volume=2.1e-3, length_diameter_ratio=6.0, conductance=6e-9,
+                    critical_ratio=0.5, initial_pressure=5e5, effects=("heat_transfer",),
+                    heat_transfer_mode="natural", heat_transfer_turbulent_ratio=1.3,
+                    noise_std=1000.0, rate=1000.0, pre_time=0.2, seed=5)
+    sim = simulate(cfg)
+    settings = DiscrepancySettings(volume=cfg.volume, atmosphere=101325.0,
+                                   length_diameter_known=False, profile=False,
+                                   model_uncertainty=0.0)
+    prob = Problem(sim.t, sim.measured, settings)
+    fit = prob.fit(prob.model(("heat_transfer",)), [{**prob.neutral_theta(0.5),
+                                                      "heat_scale": 1.0}])
+    taken, members, note = length_diameter_choice(prob, fit, 10.0)
+    assert taken is not fit and "fits best" in note, note
+    assert taken.model.tank.length_diameter_ratio >= 3.4
+    assert taken.theta["C"] == pytest.approx(cfg.conductance, rel=5e-3)
+    amb = conductance_ambiguity(fit, [], taken, 10.0, length_diameter=members)
+    assert amb.low <= cfg.conductance <= amb.high
+    if amb.ambiguous:
+        assert amb.separating[0] == LD_STATED
+    stated = Problem(sim.t, sim.measured, DiscrepancySettings(
+        volume=cfg.volume, atmosphere=101325.0, profile=False))
+    assert length_diameter_choice(stated, fit, 10.0) == (fit, [], "")
