@@ -49,10 +49,11 @@ Measured on the full grid (24 cases, hyddown 0.50.0):
   grid is the first (HydDown's wall is at T10, an input as exact as V); the second
   states a 2-5.8 K wall uncertainty that the grid does not have, so it over-covers.
 
-``python bench/bench_hyddown.py --discrepancy [FOLDER]``: the discrepancy workflow's verdict
-on each trace instead (issue 12's peer line: heat transfer, or an ambiguity containing it,
-with C within 2 %; the hot start counts as heat transfer), with the tank's L/D stated (as
-the estimator's rows above; the natural law's Rayleigh number needs it).
+``python bench/bench_hyddown.py --discrepancy [FOLDER] [--no-ld]``: the discrepancy
+workflow's verdict on each trace instead (issue 12's peer line: heat transfer, or an
+ambiguity containing it, with C within 2 %; the hot start counts as heat transfer), with
+the tank's L/D stated (as the estimator's rows above; the natural law's Rayleigh number
+needs it), or with ``--no-ld`` not given.
 
 * main at d90b0cb (L/D not stated, default 2; one-parameter heat laws only): 22/24, median
   |C error| 0.37 %. Misses: full00 (2.1 L, L/D 6, calc): round 2 names pipe_volume
@@ -78,6 +79,21 @@ the estimator's rows above; the natural law's Rayleigh number needs it).
   the ambiguity leak / leak_downstream (delta-BIC 50.6 / 49.9; orifice_leak_downstream
   refused at its bound) and the stand-in leak moves C to -3.3 % (the C range, 0.48-1.008
   of the truth, holds it): open.
+* branch h12f (a further effect must beat the named heat transfer with every law of its
+  family, ``discrepancy.laws.law_refusals``; contenders whose fit ran out of iterations or
+  ended at a bound of their own fitted out from every start; load 14-16 on 2 cores, CPU
+  per trace as printed): the committed six 5/6 -> **6/6**, worst 0.64 %, median 0.09 %:
+  v5l hot_start alone, C -3.31 -> -0.08 % (the round-2 leak, delta-BIC 50.6, is refused:
+  the hot start with the density law gains 48.2 with C -0.00 %; CPU 24 -> 43 s). Full grid
+  (rows 00-09, 10-16 and 17-23 in three processes) **24/24**, worst 1.34 % (full04),
+  median 0.30 %, every verdict as before (full06 +0.778 -> +0.779 %); CPU 180 s over the
+  19 rows h12d timed (183 s before).
+* ``--discrepancy --no-ld`` (the tank's L/D not given: ``length_diameter_known`` False,
+  the default L/D 2, the natural laws also fitted at L/D 1-7.6): full00 was pipe_volume,
+  C +30.8 %; now round 2's pipe volume (delta-BIC 46.8) is refused (heat transfer with the
+  natural+turbulent law at L/D 5.1 gains 58.8), the final model is taken at L/D 5.1 (59
+  better than at 2), C -0.10 %, range 0.495-1.020 of the truth, and the C range's first
+  separating measurement and the advice say to state the L/D.
 """
 
 from __future__ import annotations
