@@ -207,3 +207,26 @@ def test_the_tank_l_d_not_stated_is_chosen_by_the_data_and_widens_the_c_range():
     stated = Problem(sim.t, sim.measured, DiscrepancySettings(
         volume=cfg.volume, atmosphere=101325.0, profile=False))
     assert length_diameter_choice(stated, fit, 10.0) == (fit, [], "")
+
+
+def test_a_time_limit_in_the_l_d_refits_keeps_the_verdict(monkeypatch):
+    """The time limit passing while the final model is refitted at other L/D values ends
+    with the verdict of the search, the default L/D kept and said so, never a traceback."""
+    from pneumatic_unload.discrepancy import workflow
+    from pneumatic_unload.fit.trace import FitTimeout
+
+    def late(*_args, **_kw):
+        raise FitTimeout("the time limit passed during a fit")
+
+    monkeypatch.setattr(workflow, "length_diameter_choice", late)
+    cfg = RigConfig(volume=2e-3, conductance=7.5e-9, critical_ratio=0.4,
+                    initial_pressure=7e5, rate=1000.0, pre_time=0.2, duration=4.0,
+                    noise_std=1000.0, effects=("heat_transfer",), heat_transfer_mode="fixed",
+                    heat_transfer_coefficient=3.0, seed=1)
+    sim = simulate(cfg)
+    res = workflow.find_discrepancy(sim.t, sim.measured, DiscrepancySettings(
+        volume=cfg.volume, length_diameter_known=False, profile=False,
+        candidates=("heat_transfer", "leak")))
+    assert res.effect == "heat_transfer"
+    assert "time limit" in res.verdict
+    assert any("default L/D is kept" in n for n in res.notes)

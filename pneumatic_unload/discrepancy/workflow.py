@@ -210,8 +210,15 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
             refused.update(bound_refusals(base_k, {
                 k: f for k, f in fits.items() if k not in refused}, delta, thr))
             # ... and against the named heat transfer with its law at its best
-            refused.update(law_refusals(prob_k, base_k, {
-                k: d for k, d in delta.items() if k not in refused}, thr))
+            try:
+                refused.update(law_refusals(prob_k, base_k, {
+                    k: d for k, d in delta.items() if k not in refused}, thr))
+            except FitTimeout:
+                timed_out = (f"time limit of {settings.time_limit:g} s reached in round "
+                             f"{k_round} (refitting the heat law): the greedy search "
+                             "stopped there (the effects named before it stand; "
+                             "intervals linear)")
+                break
         delta, win, amb = decide(base_k, fits, thr, refused)
         rounds.append(Round(base_effects=current.effects, base_bic=base_k.bic, fits=fits,
                             delta_bic=delta, winner=win, ambiguous_with=amb, base=base_k,
@@ -229,7 +236,13 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
         remaining = [c for c in remaining if c not in drop]
         current_diag, _ = diagnose(prob, current)
     # the tank's L/D not stated: the natural heat law at the L/D the data prefer
-    current, ld_members, ld_note = length_diameter_choice(prob_final, current, thr)
+    try:
+        current, ld_members, ld_note = length_diameter_choice(prob_final, current, thr)
+    except FitTimeout:
+        ld_members, ld_note = [], ("the tank's L/D is not stated and the time limit passed "
+                                   "while the natural heat law was refitted at other L/D "
+                                   "values: the default L/D is kept, unchecked")
+        timed_out = timed_out or f"time limit of {settings.time_limit:g} s reached"
     after, m_after = diagnose(prob, current)
     names = [q for q in current.result.params.free if q not in base.result.params.names]
     t_iv = time.perf_counter()
