@@ -49,10 +49,11 @@ Measured on the full grid (24 cases, hyddown 0.50.0):
   grid is the first (HydDown's wall is at T10, an input as exact as V); the second
   states a 2-5.8 K wall uncertainty that the grid does not have, so it over-covers.
 
-``python bench/bench_hyddown.py --discrepancy [FOLDER]``: the discrepancy workflow's verdict
-on each trace instead (issue 12's peer line: heat transfer, or an ambiguity containing it,
-with C within 2 %; the hot start counts as heat transfer), with the tank's L/D stated (as
-the estimator's rows above; the natural law's Rayleigh number needs it).
+``python bench/bench_hyddown.py --discrepancy [FOLDER] [--no-ld]``: the discrepancy
+workflow's verdict on each trace instead (issue 12's peer line: heat transfer, or an
+ambiguity containing it, with C within 2 %; the hot start counts as heat transfer), with
+the tank's L/D stated (as the estimator's rows above; the natural law's Rayleigh number
+needs it), or with ``--no-ld`` not given.
 
 * main at d90b0cb (L/D not stated, default 2; one-parameter heat laws only): 22/24, median
   |C error| 0.37 %. Misses: full00 (2.1 L, L/D 6, calc): round 2 names pipe_volume
@@ -78,6 +79,21 @@ the estimator's rows above; the natural law's Rayleigh number needs it).
   the ambiguity leak / leak_downstream (delta-BIC 50.6 / 49.9; orifice_leak_downstream
   refused at its bound) and the stand-in leak moves C to -3.3 % (the C range, 0.48-1.008
   of the truth, holds it): open.
+* branch h12f (a further effect must beat the named heat transfer with every law of its
+  family, ``discrepancy.laws.law_refusals``; contenders whose fit ran out of iterations or
+  ended at a bound of their own fitted out from every start; load 14-16 on 2 cores, CPU
+  per trace as printed): the committed six 5/6 -> **6/6**, worst 0.64 %, median 0.09 %:
+  v5l hot_start alone, C -3.31 -> -0.08 % (the round-2 leak, delta-BIC 50.6, is refused:
+  the hot start with the density law gains 48.2 with C -0.00 %; CPU 24 -> 43 s). Full grid
+  (rows 00-09, 10-16 and 17-23 in three processes) **24/24**, worst 1.34 % (full04),
+  median 0.30 %, every verdict as before (full06 +0.778 -> +0.779 %); CPU 180 s over the
+  19 rows h12d timed (183 s before).
+* ``--discrepancy --no-ld`` (the tank's L/D not given: ``length_diameter_known`` False,
+  the default L/D 2, the natural laws also fitted at L/D 1-7.6): full00 was pipe_volume,
+  C +30.8 %; now round 2's pipe volume (delta-BIC 46.8) is refused (heat transfer with the
+  natural+turbulent law at L/D 5.1 gains 58.8), the final model is taken at L/D 5.1 (59
+  better than at 2), C -0.10 %, range 0.495-1.020 of the truth, and the C range's first
+  separating measurement and the advice say to state the L/D.
 """
 
 from __future__ import annotations
@@ -136,18 +152,20 @@ def row(trace: Trace, wall_assumed: bool = False) -> tuple[str, float, float]:
 HEAT = ("heat_transfer", "hot_start")
 
 
-def discrepancy_row(trace: Trace) -> tuple[str, bool, float]:
+def discrepancy_row(trace: Trace, ld_stated: bool = True) -> tuple[str, bool, float, bool]:
     """One Markdown row of the discrepancy workflow on a trace: whether the verdict is heat
-    transfer or an ambiguity containing it (and no other effect named), and the reported
-    C's error [-]."""
+    transfer or an ambiguity containing it (and no other effect named), the reported
+    C's error [-] and whether the C range holds the truth; ``ld_stated`` False: the
+    tank's L/D is not given (the default 2 with ``length_diameter_known`` False)."""
     from pneumatic_unload.discrepancy import DiscrepancySettings, find_discrepancy
 
     m = trace.meta
     t, y = record(trace, zlib.crc32(trace.name.encode()))
+    ld = {"length_diameter_ratio": m["length_diameter_ratio"]} if ld_stated else \
+        {"length_diameter_known": False}
     s = DiscrepancySettings(
-        volume=m["volume"], length_diameter_ratio=m["length_diameter_ratio"],
-        initial_temperature=m["t10"], atmosphere=P_ATM, profile=False,
-        model_uncertainty=EXACT_INPUTS_FOREIGN_MODEL["model_uncertainty"])
+        volume=m["volume"], initial_temperature=m["t10"], atmosphere=P_ATM, profile=False,
+        model_uncertainty=EXACT_INPUTS_FOREIGN_MODEL["model_uncertainty"], **ld)
     t0 = time.process_time()
     res = find_discrepancy(t, y, s)
     cpu = time.process_time() - t0
@@ -161,26 +179,32 @@ def discrepancy_row(trace: Trace) -> tuple[str, bool, float]:
             f"{', '.join(res.ambiguous_with) or '-'} | {', '.join(res.effects) or '-'} | "
             f"{', '.join(res.named) or '-'} | {100 * error:+.3f} | "
             f"{lo / truth:.3f} - {hi / truth:.3f} | {res.before.nrms:.3f} -> "
-            f"{res.after.nrms:.3f} | {'yes' if heat else 'NO'} | {cpu:.1f} |"), heat, error
+            f"{res.after.nrms:.3f} | {'yes' if heat else 'NO'} | {cpu:.1f} |"), heat, error, \
+        bool(lo <= truth <= hi)
 
 
-def main_discrepancy(folder: Path) -> int:
+def main_discrepancy(folder: Path, ld_stated: bool = True) -> int:
     """The issue-12 peer line: every trace of ``folder`` through the discrepancy workflow
-    (linear intervals); target: heat transfer or an ambiguity containing it, C within 2 %."""
+    (linear intervals); target: heat transfer or an ambiguity containing it, C within 2 %
+    (with ``ld_stated`` False, the L/D not given: C within 2 %, or a C range holding the
+    truth with the L/D advice)."""
     items = traces(folder)
-    print(f"Discrepancy workflow on HydDown traces in {folder}\n")
+    print(f"Discrepancy workflow on HydDown traces in {folder}"
+          f"{'' if ld_stated else ', the tank L/D not given'}\n")
     print("| case | V [L] | h_inner | effect | ambiguous with | final model | named | "
           "C err [%] | C range / truth | nRMS | heat | CPU [s] |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    ok, errs = 0, []
+    ok, held, errs = 0, 0, []
     for trace in items:
-        line, heat, error = discrepancy_row(trace)
+        line, heat, error, inside = discrepancy_row(trace, ld_stated)
         print(line, flush=True)
         errs.append(error)
         ok += heat and abs(error) <= 0.02
+        held += heat and (abs(error) <= 0.02 or inside)
     e = np.abs(np.asarray(errs))
     print(f"\n{len(items)} cases: heat transfer (or an ambiguity with it) with C within 2 %: "
-          f"{ok}/{len(items)}; worst |C error| {100 * np.max(e):.3f} %, median "
+          f"{ok}/{len(items)}; within 2 % or a C range holding the truth: "
+          f"{held}/{len(items)}; worst |C error| {100 * np.max(e):.3f} %, median "
           f"{100 * np.median(e):.3f} %")
     return 0
 
@@ -189,7 +213,8 @@ def main(argv: list[str]) -> int:
     """Print the table and the summary for the folder ``argv[0]`` (default: small grid);
     with ``--discrepancy`` first, the discrepancy workflow's verdicts instead."""
     if argv and argv[0] == "--discrepancy":
-        return main_discrepancy(Path(argv[1]) if len(argv) > 1 else DATA_DIR)
+        rest = [a for a in argv[1:] if a != "--no-ld"]
+        return main_discrepancy(Path(rest[0]) if rest else DATA_DIR, "--no-ld" not in argv)
     wall_assumed = "--wall-assumed" in argv
     argv = [a for a in argv if a != "--wall-assumed"]
     folder = Path(argv[0]) if argv else DATA_DIR

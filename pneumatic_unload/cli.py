@@ -336,7 +336,11 @@ def cmd_discrepancy(args: argparse.Namespace) -> int:
         cfg.pop("estimator_settings", None)  # the tank and gas only: the fit is its own
         try:
             tank = settings_from(ns, cfg).tank
-            ds = DiscrepancySettings(**tank.tank_fields(), **own)
+            # an L/D neither given nor in the recording is a guess (the default)
+            known = ns.length_diameter_ratio is not None or \
+                "length_diameter_ratio" in TankSpec.fields_of(cfg)
+            ds = DiscrepancySettings(**tank.tank_fields(), **own,
+                                     length_diameter_known=known)
             res = find_discrepancy(t, p, ds, temperature=_load_temperature(ns),
                                    progress=_progress_printer(args, path, len(args.paths)))
         except DiscrepancyError as exc:
@@ -399,7 +403,10 @@ def add_discrepancy_parser(sub: Any) -> None:
     dc.add_argument("--length-diameter-ratio", nargs="+",
                     type=adapters.option_type(adapters.field_of(TankSpec,
                                                                 "length_diameter_ratio")),
-                    help="tank L/D [-], one for all runs or one per PATH")
+                    help="tank L/D [-], one for all runs or one per PATH; not given "
+                         "(and not in the recording): the natural heat law is also fitted "
+                         "at L/D 1 to 7.6, an L/D the data cannot rule out widens the C "
+                         "range, and stating it is advised")
     adapters.add_options(dc, DiscrepancySettings,
                          only=("fit_wall_temperature", "profile", "bic_threshold",
                                "resolution", "candidates", "time_limit",

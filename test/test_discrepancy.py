@@ -595,7 +595,7 @@ def test_an_ambiguity_names_none_of_its_members_and_advises_only_the_separation(
                                         450.0)})
     res = SimpleNamespace(rounds=[r1], conductance_ambiguity=None, temperature_check=None,
                           after=_diag(True, 1.0), notes=[], effect=r1.winner,
-                          before=_diag(False, 3.0))
+                          before=_diag(False, 3.0), effects=[r1.winner], settings=None)
     res.named = DiscrepancyResult.named.fget(res)
     assert res.named == []
     advice = what_next(res)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 
+from pneumatic_unload.discrepancy.ambiguity import LD_STATED
 from pneumatic_unload.discrepancy.types import NRMS_LIMIT, DiscrepancyResult
 from pneumatic_unload.model.effects import separating_data
 
@@ -63,6 +64,12 @@ def what_next(res: DiscrepancyResult) -> list[str]:
     amb = res.conductance_ambiguity
     if amb is not None and amb.separating:
         out.append("**Pin down C**: " + "; ".join(amb.separating))
+    heat = [e for e in res.effects if e in ("heat_transfer", "hot_start")]
+    if heat and res.settings is not None and not res.settings.length_diameter_known and not (
+            amb is not None and LD_STATED in amb.separating):
+        out.append("**Tank L/D**: not stated, and the heat transfer's natural-convection "
+                   "law depends on it (where its correlation changes branch); "
+                   + LD_STATED + ", then rerun")
     # act only on the effects the data name: a member of an ambiguity may not be there
     for e in res.named:
         if e in ACTIONS:

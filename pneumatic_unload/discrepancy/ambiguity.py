@@ -83,6 +83,12 @@ C_NEGLIGIBLE = 1e-3
 AT_BOUND = 1e-3
 
 
+#: The measurement that separates the final model at L/D values the data cannot rule out.
+LD_STATED = ("the tank's L/D stated (--length-diameter-ratio: its length over its inner "
+             "diameter): the natural-convection correlation changes branch at a Rayleigh "
+             "number taken on the tank's length")
+
+
 def same_physics(a: str, b: str) -> bool:
     """True when candidates a and b are the same physics in another law or place."""
     return frozenset({a, b}) in SAME_PHYSICS
@@ -151,7 +157,9 @@ def _within_noise(d: Diagnostics | None) -> bool:
 
 def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold: float,
                           quality: Callable[[Fit], Diagnostics] | None = None,
-                          model_uncertainty: float = 0.0) -> ConductanceAmbiguity:
+                          model_uncertainty: float = 0.0,
+                          length_diameter: list[tuple[Fit, str, float]] | None = None
+                          ) -> ConductanceAmbiguity:
     """Collect the models whose C competes with the final model's.
 
     Parameters
@@ -171,6 +179,11 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
         Relative standard uncertainty of C from the model's own limits [-]: it widens the
         range's 3-sigma ends (the budget's model-limits term), not the comparison of
         members, which share the model's limits.
+    length_diameter : list, optional
+        The final model refitted at tank L/D values the data cannot rule out when the L/D
+        is not stated (fit, why, BIC above the final model [-]:
+        :func:`~pneumatic_unload.discrepancy.laws.length_diameter_choice`): members
+        when their C differs; stating the L/D (:data:`LD_STATED`) separates them.
     """
     c0, s0 = final.theta["C"], _std(final)
     members: dict[tuple[str, ...], tuple[Fit, str, float]] = {}
@@ -180,9 +193,13 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
         comb = math.hypot(s0 if math.isfinite(s0) else 0.0, s if math.isfinite(s) else 0.0)
         return abs(c - c0) > max(comb, C_NEGLIGIBLE * c0)
 
-    def add(f: Fit, why: str, dbic: float) -> None:
-        if f is not final and f.effects != final.effects and differs(f):
-            members.setdefault(f.effects, (f, why, dbic))
+    def add(f: Fit, why: str, dbic: float, key: tuple[str, ...] | None = None) -> None:
+        if f is not final and (key is not None or f.effects != final.effects) and differs(f):
+            members.setdefault(key or f.effects, (f, why, dbic))
+
+    for f, why, dbic in length_diameter or []:
+        add(f, why, dbic, (*f.effects, f"L/D {f.model.tank.length_diameter_ratio:g}"))
+    by_ld = bool(members)
 
     final_white = quality is not None and _within_noise(quality(final))
     round_base = base
@@ -246,6 +263,8 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
         out.separating = [plugged, *specific]
     else:
         out.separating = [*specific, plugged]
+    if by_ld:
+        out.separating.insert(0, LD_STATED)
     return out
 
 

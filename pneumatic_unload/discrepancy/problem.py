@@ -8,6 +8,8 @@ run on the engine's :class:`~pneumatic_unload.fit.trace.Trace`. SI units.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -101,6 +103,13 @@ class Problem:
         """The parametric model with these effects."""
         return ParametricModel(effects, self.tank, self.start, heat_law=heat_law,
                                fit_wall_temperature=self.settings.fit_wall_temperature)
+
+    def with_length_diameter(self, ratio: float) -> Problem:
+        """The same trace and noise with the tank's L/D set to ``ratio`` [-] (the natural
+        heat law's Rayleigh number is taken on the tank's length)."""
+        out = copy.copy(self)
+        out.tank = dataclasses.replace(self.tank, length_diameter_ratio=float(ratio))
+        return out
 
     def fit(self, model: ParametricModel, starts: list[Values], *, screen_nfev: int = 12,
             max_nfev: int = 200) -> Fit:

@@ -78,6 +78,14 @@ class DiscrepancySettings(TankSpec):
         the HydDown peer simulator; 0 only for data made by the package's own model): in
         :meth:`DiscrepancyResult.conductance_std` and the C range, through the budget's
         model-limits term (:func:`pneumatic_unload.budget.model_limits_term`).
+    length_diameter_known : bool
+        The tank's L/D (``length_diameter_ratio``) is stated. False (the command line
+        without ``--length-diameter-ratio``): the default L/D is a guess, and the natural
+        heat laws are also fitted at L/D 1 to 7.6, both in the test of a further effect
+        (:func:`~pneumatic_unload.discrepancy.laws.law_refusals`) and for the final
+        model (:func:`~pneumatic_unload.discrepancy.laws.length_diameter_choice`): the
+        L/D that fits best by the BIC threshold is taken, those within it that give
+        another C enter the C range, and stating the L/D is the advice.
     time_limit : float or None
         Wall-clock cap of the fits [s] (None: none); see
         :func:`~pneumatic_unload.discrepancy.workflow.find_discrepancy` for what happens
@@ -94,6 +102,8 @@ class DiscrepancySettings(TankSpec):
     model_uncertainty: float = number(
         0.003, "-", 0.0, 0.5, "relative standard uncertainty of the model-based C from the "
         "model's own limits (ideal gas, uniform state, heat-law family)")
+    length_diameter_known: bool = flag(True, "the tank's L/D is stated (False: the "
+                                       "natural heat law is also fitted at L/D 1-7.6)")
     time_limit: float | None = optional(
         600.0, "s", 1.0, 1e6, "wall-clock cap of the search: the fit under way stops at "
         "its next model evaluation (round 1 unfinished: an error; later: the effects "

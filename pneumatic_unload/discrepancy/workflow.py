@@ -44,9 +44,16 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
    fits the model's limits and the residual is reported as unexplained:
    :func:`~pneumatic_unload.discrepancy.search.structure_refusals`); a further effect that
    beats them only with a parameter of its own at a bound of its range is refused too
-   (:func:`~pneumatic_unload.discrepancy.search.bound_refusals`); the effects named and
+   (:func:`~pneumatic_unload.discrepancy.search.bound_refusals`), and so is one that the
+   named heat transfer with another law of its family explains about as well
+   (:func:`~pneumatic_unload.discrepancy.laws.law_refusals`); the effects named and
    their look-alikes (the same physics in another law or place, the round's ambiguity
    set) are not tried again.
+   A candidate that beats its round's model by the threshold but whose fit ran out of
+   iterations, or ended with a parameter of its own at a bound, is fitted out from every
+   start first (:func:`~pneumatic_unload.discrepancy.search.refit_contenders`). When the
+   tank's L/D is not stated, the final model's natural heat law is also fitted at other
+   L/D values (:func:`~pneumatic_unload.discrepancy.laws.length_diameter_choice`).
 7. **Temperature.** A logged gas temperature is compared with the models; a final model
    that contradicts it is flagged with the likely reason (e.g. the wall temperature).
 
@@ -82,6 +89,7 @@ from pneumatic_unload.discrepancy.intervals import (
     intervals,
     temperature_check,
 )
+from pneumatic_unload.discrepancy.laws import law_refusals, length_diameter_choice
 from pneumatic_unload.discrepancy.multirun import GeometryLaw, fit_geometry_law
 from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.search import (
@@ -201,6 +209,16 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
             # ... and with parameters of its own inside their range
             refused.update(bound_refusals(base_k, {
                 k: f for k, f in fits.items() if k not in refused}, delta, thr))
+            # ... and against the named heat transfer with its law at its best
+            try:
+                refused.update(law_refusals(prob_k, base_k, {
+                    k: d for k, d in delta.items() if k not in refused}, thr))
+            except FitTimeout:
+                timed_out = (f"time limit of {settings.time_limit:g} s reached in round "
+                             f"{k_round} (refitting the heat law): the greedy search "
+                             "stopped there (the effects named before it stand; "
+                             "intervals linear)")
+                break
         delta, win, amb = decide(base_k, fits, thr, refused)
         rounds.append(Round(base_effects=current.effects, base_bic=base_k.bic, fits=fits,
                             delta_bic=delta, winner=win, ambiguous_with=amb, base=base_k,
@@ -217,6 +235,14 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
         drop = look_alikes(win, amb, remaining)
         remaining = [c for c in remaining if c not in drop]
         current_diag, _ = diagnose(prob, current)
+    # the tank's L/D not stated: the natural heat law at the L/D the data prefer
+    try:
+        current, ld_members, ld_note = length_diameter_choice(prob_final, current, thr)
+    except FitTimeout:
+        ld_members, ld_note = [], ("the tank's L/D is not stated and the time limit passed "
+                                   "while the natural heat law was refitted at other L/D "
+                                   "values: the default L/D is kept, unchecked")
+        timed_out = timed_out or f"time limit of {settings.time_limit:g} s reached"
     after, m_after = diagnose(prob, current)
     names = [q for q in current.result.params.free if q not in base.result.params.names]
     t_iv = time.perf_counter()
@@ -233,7 +259,7 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
     say(f"discrepancy: intervals {time.perf_counter() - t_iv:.1f} s")
     extra = separating_data([first_effect, *first_amb]) if first_amb else []
     geo = geometry_factor_check(prob_final, current)
-    notes = [C_MEANING] + ([timed_out] if timed_out else [])
+    notes = [C_MEANING] + ([timed_out] if timed_out else []) + ([ld_note] if ld_note else [])
     if prob.noise.source == "differences":
         notes.append("no plateau long enough for the noise model: sigma from second "
                      "differences of the whole trace, rho assumed 0")
@@ -249,7 +275,7 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
         return quality[id(f)]
 
     c_amb = conductance_ambiguity(base, rounds, current, thr, fit_quality_of,
-                                  settings.model_uncertainty)
+                                  settings.model_uncertainty, ld_members)
     if c_amb.ambiguous:
         verdict += "; " + describe(c_amb)
         extra += [x for x in c_amb.separating if x not in extra]
