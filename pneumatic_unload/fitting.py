@@ -49,7 +49,7 @@ from pneumatic_unload.heat_law_offer import (
 from pneumatic_unload.inversion import estimator_model
 from pneumatic_unload.model.effects import Start
 from pneumatic_unload.physics import tau_exp_eq38
-from pneumatic_unload.wall_moves import spread_b, wall_linear
+from pneumatic_unload.wall_moves import law_spread, spread_b, wall_linear
 
 FloatArray = NDArray[np.float64]
 
@@ -269,14 +269,7 @@ def fit_curve(
     bic = {law: chi2 / unit + k * log_n for law, (_cf, chi2, k) in fits.items()}
     best = min(bic, key=lambda k: bic[k])
     cf = fits[best][0]
-    var_mf, w_sum = 0.0, 0.0
-    for law, (other, _chi2, _k) in fits.items():
-        d = bic[law] - bic[best]
-        if d < LAW_BIC_THRESHOLD and math.isfinite(other.conductance):
-            w = math.exp(-0.5 * d)
-            w_sum += w
-            var_mf += w * (other.conductance - cf.conductance) ** 2
-    mf = math.sqrt(var_mf / w_sum) if w_sum > 0 else 0.0
+    mf = law_spread(fits, bic, best, LAW_BIC_THRESHOLD, "conductance", empty=0.0)
     mf_b = spread_b(fits, bic, best, LAW_BIC_THRESHOLD)
     table = {law: {"conductance": f[0].conductance, "critical_ratio": f[0].critical_ratio,
                    "bic": bic[law], "chi2": f[1] / unit,

@@ -61,17 +61,29 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
             math.sqrt(sum(m * m for m in b_moves) / 2.0))
 
 
-def spread_b(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, float],
-             best: str, threshold: float = 10.0) -> float:
-    """b's model-form 1-sigma [-]: the spread of the b of the laws within
-    ``threshold`` in BIC (the curve fit's LAW_BIC_THRESHOLD) of ``best`` about its b,
-    weighted as C's (exp(-dBIC/2)); NaN when the chosen law did not determine b."""
-    b0 = fits[best][0].critical_ratio
+def law_spread(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, float],
+               best: str, threshold: float, attr: str, empty: float = math.nan) -> float:
+    """Model-form 1-sigma of a fitted quantity ``attr`` ('conductance' [m^3/(s Pa)],
+    'critical_ratio' [-]): the spread of its values over the laws within ``threshold`` in
+    BIC (the curve fit's LAW_BIC_THRESHOLD) of ``best`` about the best law's value,
+    weighted exp(-dBIC/2); ``empty`` when no law carries a finite value, NaN when the
+    chosen law's value is not finite."""
+    v0 = getattr(fits[best][0], attr)
     var, w_sum = 0.0, 0.0
     for law, (other, _chi2, _k) in fits.items():
         d = bic[law] - bic[best]
-        if d < threshold and math.isfinite(other.critical_ratio):
+        v = getattr(other, attr)
+        if d < threshold and math.isfinite(v):
             w = math.exp(-0.5 * d)
             w_sum += w
-            var += w * (other.critical_ratio - b0) ** 2
-    return math.sqrt(var / w_sum) if w_sum > 0 and math.isfinite(b0) else math.nan
+            var += w * (v - v0) ** 2
+    if not w_sum > 0:
+        return empty
+    return math.sqrt(var / w_sum) if math.isfinite(v0) else math.nan
+
+
+def spread_b(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, float],
+             best: str, threshold: float = 10.0) -> float:
+    """b's model-form 1-sigma [-] (:func:`law_spread` of the critical ratio); NaN when the
+    chosen law did not determine b."""
+    return law_spread(fits, bic, best, threshold, "critical_ratio")
