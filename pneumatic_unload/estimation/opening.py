@@ -29,9 +29,9 @@ from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.history import DiagnosticLog
 from pneumatic_unload.estimation.sparse import (
     SETTLE_FRACTION,
-    SETTLE_POINTS,
     analyze_from_start,
     initial_pressure,
+    settle_scan,
     start_tolerance,
 )
 from pneumatic_unload.estimation.types import Diagnostic, UnloadResult
@@ -148,12 +148,12 @@ class OpeningStartEstimator:
             after = first + int(below[0]) + 1  # the settle rule counts after the crossing
             pa, ok = pa[after - first:], ok[after - first:]
             first = after
-        band = SETTLE_FRACTION * (self._p10 - float(s.atmosphere))  # type: ignore[arg-type]
-        for j in np.flatnonzero(ok):
-            self._run = self._run + 1 if abs(pa[j] - s.atmosphere) <= band else 0
-            if self._run == SETTLE_POINTS:
-                self._close(first + int(j) + 1)
-                break
+        p_atm = float(s.atmosphere)  # type: ignore[arg-type]
+        idx = np.flatnonzero(ok)
+        hit, self._run = settle_scan(pa[idx], SETTLE_FRACTION * (self._p10 - p_atm), p_atm,
+                                     self._run)
+        if hit is not None:
+            self._close(first + int(idx[hit]) + 1)
         return out
 
     def finish(self) -> list[UnloadResult]:

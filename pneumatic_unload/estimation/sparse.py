@@ -60,17 +60,31 @@ def start_tolerance(t_open: float) -> float:
     return 1e-9 + 1e-15 * abs(t_open)
 
 
+def settle_scan(p: np.ndarray, band: float, p_atm: float, run: int = 0
+                ) -> tuple[int | None, int]:
+    """The settle rule over samples p [Pa absolute, finite] that follow ``run``
+    consecutive samples already within ``band`` [Pa] of p_atm [Pa]: (index into p of the
+    sample that closes :data:`SETTLE_POINTS` consecutive samples within the band, or None;
+    the run at p's end) [-]. One scan for the record at once (:func:`settle_index`) and
+    for the samples as they come (a live start-time estimator carries the run)."""
+    w = np.abs(np.asarray(p, dtype=float) - p_atm) <= band
+    if w.size == 0:
+        return None, run
+    pos = np.arange(w.size)
+    last_out = np.maximum.accumulate(np.where(w, -1, pos))  # last sample outside, -1: none
+    runs = pos - last_out + np.where(last_out < 0, run, 0)
+    hit = np.flatnonzero(runs >= SETTLE_POINTS)
+    return (int(hit[0]) if hit.size else None), int(runs[-1])
+
+
 def settle_index(p: np.ndarray, k: int, p10: float, p_atm: float) -> int | None:
     """Index of the sample where the record settles: the first after the crossing sample
     ``k`` that closes :data:`SETTLE_POINTS` consecutive samples within
     :data:`SETTLE_FRACTION` (p10 - p_atm) of p_atm (p [Pa absolute], finite); None when it
     does not."""
-    w = np.abs(np.asarray(p[k + 1:], dtype=float) - p_atm) <= SETTLE_FRACTION * (p10 - p_atm)
-    if w.size < SETTLE_POINTS:
-        return None
-    runs = np.convolve(w.astype(np.int64), np.ones(SETTLE_POINTS, dtype=np.int64), "valid")
-    hit = np.flatnonzero(runs == SETTLE_POINTS)
-    return int(k + 1 + hit[0] + SETTLE_POINTS - 1) if hit.size else None
+    hit, _run = settle_scan(np.asarray(p[k + 1:], dtype=float),
+                            SETTLE_FRACTION * (p10 - p_atm), p_atm)
+    return None if hit is None else k + 1 + hit
 
 
 def initial_pressure(ts: np.ndarray, ps: np.ndarray, s: EstimatorSettings
