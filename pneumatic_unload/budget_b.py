@@ -10,11 +10,12 @@ from __future__ import annotations
 import math
 
 from pneumatic_unload.budget import (
-    MODEL_FORM_TERM,
     WALL_TERM,
     Budget,
     BudgetTerm,
     input_uncertainties,
+    model_form_term,
+    record_term,
 )
 from pneumatic_unload.config.estimator import EstimatorSettings
 
@@ -59,8 +60,7 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
     """
     s = settings
     u = input_uncertainties(s, p10)
-    terms = [BudgetTerm("curve fit (noise, AR(1), residual structure)", "A", math.nan,
-                        math.nan, "", type_a_std),
+    terms = [record_term("curve fit (noise, AR(1), residual structure)", type_a_std),
              BudgetTerm("volume V", "B", s.volume, u["volume"], "m^3", 0.0,
                         "b does not depend on V (the discharge depends on t C/V)")]
     gap_moves = wall is not None and s.wall_temperature is not None and not wall_fitted
@@ -88,6 +88,5 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
         terms.append(BudgetTerm(WALL_TERM, "B", s.wall, uw, "K", std,
                                 f"{why}; |db/dTw| = {per_k:.3g} /K" if math.isfinite(per_k)
                                 else why))
-    terms.append(BudgetTerm(MODEL_FORM_TERM, "model", math.nan, math.nan, "",
-                            model_form_std if math.isfinite(model_form_std) else 0.0))
+    terms.append(model_form_term(model_form_std if math.isfinite(model_form_std) else 0.0))
     return Budget(b, tuple(terms))
