@@ -326,21 +326,40 @@ def test_read_pressure_of_bags_from_other_writers(tmp_path):
 
 
 def test_rates_of_the_fast_paths(tmp_path):
-    """write_pressures >= 150k msg/s; read_pressure clearly faster than rosbags' deserialize."""
-    n = 100_000
+    """The fast paths beat the per-message ones of the same data, as ratios in one run.
+
+    write_pressures against the same messages serialised one by one by rosbags and written
+    with write_raw (measured 8.5x on a quiet machine); read_pressure against rosbags'
+    deserialize of the same bag (measured > 5x). Ratios, not rates: the load of the machine
+    slows both sides of each ratio alike.
+    """
+    n = 50_000
     t_ns, p = _pressure_data(n)
-    path = tmp_path / "rate"
+    with BagRecorder(tmp_path / "warm") as rec:  # first-use costs (imports, type store)
+        rec.write_pressures(t_ns[:10], p[:10])
     start = time.perf_counter()
-    with BagRecorder(path) as rec:
+    with BagRecorder(tmp_path / "rate") as rec:
         rec.write_pressures(t_ns, p)
-    write_rate = n / (time.perf_counter() - start)
-    assert write_rate > 150_000
+    fast_write = time.perf_counter() - start
+    store = make_typestore()
+    types = store.types
+    start = time.perf_counter()
+    with BagRecorder(tmp_path / "slow") as rec:
+        for t, v in zip(t_ns.tolist(), p.tolist(), strict=True):
+            header = types["std_msgs/msg/Header"](stamp=types["builtin_interfaces/msg/Time"](
+                sec=t // 1_000_000_000, nanosec=t % 1_000_000_000), frame_id="")
+            msg = types[MSGTYPE_PRESSURE](header=header, fluid_pressure=v, variance=0.0)
+            rec.write_raw(TOPIC_PRESSURE, MSGTYPE_PRESSURE, t,
+                          bytes(store.serialize_cdr(msg, MSGTYPE_PRESSURE)))
+    slow_write = time.perf_counter() - start
+    assert slow_write / fast_write > 3.0
 
     start = time.perf_counter()
-    t_read, _ = read_pressure(path)
+    t_read, _ = read_pressure(tmp_path / "rate")
     fast = time.perf_counter() - start
     assert t_read.size == n
-    with AnyReader([path]) as reader:
+    assert np.array_equal(t_read, read_pressure(tmp_path / "slow").t_ns)
+    with AnyReader([tmp_path / "rate"]) as reader:
         start = time.perf_counter()
         for conn, _, raw in reader.messages():
             reader.deserialize(raw, conn.msgtype)
