@@ -293,6 +293,11 @@ def fit_curve(
         elif (u <= WALL_LINEAR_MAX or settings.wall_temperature is not None) \
                 and raw.get(best):
             wall_std, wall_std_b = wall_linear(trace, raw[best], settings, u, law=best)
+            if not math.isfinite(wall_std) and settings.wall_temperature is None:
+                # not linear (or not computable) to first order: the two refits
+                wall_std, wall_std_b = _wall_refit(trace, out, settings, u, law=best,
+                                                   fit_heat=bool(fit_heat), hold=hold,
+                                                   span=span)
         else:
             wall_std, wall_std_b = _wall_refit(trace, out, settings, u, law=best,
                                                fit_heat=bool(fit_heat), hold=hold, span=span)

@@ -34,7 +34,8 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
     fitted values changes by dr; the refit's parameter shift is the Gauss-Newton step
     -J^+ dr with the fit's Jacobian J (the fitted values are the minimum of the unmoved
     problem, J^T r = 0 there); the moves are root-mean-squared as the refit's are. NaN when
-    it cannot be computed (b's: NaN also when b was not fitted)."""
+    it cannot be computed, or the step leaves the float range (the response is then not
+    linear: the caller refits); b's NaN also when b was not fitted."""
     fit, model = kept["result"], kept["model"]
     free = list(fit.params.free)
     jac = np.asarray(fit.jac, dtype=float)
@@ -54,7 +55,10 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
             if not np.all(np.isfinite(dr)):
                 return math.nan, math.nan
             dx, *_ = np.linalg.lstsq(jac, -dr, rcond=1e-12)
-            v = fit.params.to_values(fit.x + dx)
+            try:  # a step beyond float range (log coordinates): not to first order
+                v = fit.params.to_values(fit.x + dx)
+            except OverflowError:
+                return math.nan, math.nan
             moves.append(v["C"] - fit.values["C"])
             b_moves.append(v["b"] - fit.values["b"] if "b" in free else math.nan)
     return (math.sqrt(sum(m * m for m in moves) / 2.0),

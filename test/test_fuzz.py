@@ -252,3 +252,32 @@ def test_a_fit_evaluation_has_a_step_budget():
     assert np.isnan(capped[-1, 0])  # the budget applies
     assert "max_steps=FIT_MAX_STEPS" in inspect.getsource(parametric.ParametricModel.signal)
     assert "max_steps=FIT_MAX_STEPS" in inspect.getsource(parametric.ParametricModel.states)
+
+
+def _fuzz_data(name):
+    from pathlib import Path
+
+    return np.load(Path(__file__).parent / "data" / f"{name}.npz")
+
+
+def test_a_wall_move_beyond_float_range_is_refitted_not_an_overflow(tmp_path):
+    # bench_fuzz (bag), session 9: a 50 Hz bag falling to 0.16 Pa (no p_atm given), the
+    # wall assumed: the first-order wall move of the curve fit stepped a log coordinate
+    # past exp's range (OverflowError out of `analyze`). The step is refused there and the
+    # wall's effect refitted; the CLI answers with JSON.
+    d = _fuzz_data("fuzz_bag_wall_step_overflow")
+    case = {"t_ns": d["t_ns"], "p": d["p"], "config": None, "settings": None, "damage": [],
+            "volume": float(d["volume"]), "variance": 0.0}
+    fio.prop_bag(tmp_path, case)
+
+
+def test_a_discrepancy_fit_at_the_upper_bound_of_c_checks_the_geometry_factor():
+    # bench_fuzz (discrepancy), session 9: a straight-line "discharge" over 1.5e10 s fitted
+    # with C at its upper bound (1e-5): the geometry-factor check stepped C up, out of
+    # RigConfig's range (ConfigError out of find_discrepancy). It steps down there.
+    d = _fuzz_data("fuzz_discrepancy_c_at_bound")
+    ds = DiscrepancySettings(volume=0.002334000896952078,
+                             length_diameter_ratio=9.34214040532401, initial_temperature=349.0,
+                             candidates=("orifice_leak", "sensor_lag"), max_effects=1,
+                             profile=False, resolution=0.03)
+    fio.prop_discrepancy(d["t"], d["p"], ds)

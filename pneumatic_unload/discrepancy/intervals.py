@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pneumatic_unload.config.fields import ConfigError
 from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.types import Fit
 from pneumatic_unload.fit.profile import Interval, interval
@@ -49,14 +50,20 @@ def geometry_factor_check(prob: Problem, fit: Fit) -> dict[str, Any]:
     log f and to log C are computed and compared: a correlation of 1 means f is not
     identifiable from one trace (it needs several tank geometries).
     """
-    h = 1e-3
     th = dict(fit.theta)
+    cfg = fit.model.config(th)
+    # a step of 1e-3 in log C and log f, downwards when upwards leaves C's range (a fit
+    # at C's upper bound)
+    h = 1e-3
+    try:
+        cfg_f = cfg.replace(conductance=cfg.conductance * math.exp(h))
+    except ConfigError:
+        h = -h
+        cfg_f = cfg.replace(conductance=cfg.conductance * math.exp(h))
     z0 = prob.residuals(fit.model, th)
     dz_c = prob.residuals(fit.model, {**th, "C": th["C"] * math.exp(h)}) - z0
     # the factor f = e^h applied in the flow law: the configuration the model integrates
-    # holds only the product f C, so the sensitivity is computed through it
-    cfg_f = fit.model.config(th).replace(conductance=fit.model.config(th).conductance
-                                         * math.exp(h))
+    # holds only the product f C, so the sensitivity is computed through it (cfg_f)
     dz_f = prob.trace.lik.residuals_at(
         lambda tt: _signal_of(cfg_f, fit, tt), fit.model.events(th)) - z0
     num = float(dz_c @ dz_f)
