@@ -204,13 +204,16 @@ def score(rows: list[dict], sp_n: tuple[float, int] | None, workers: int, wall: 
         sel = [r for r in big if r["effect"] == e]
         line(f"truth inside reported set: {e}", sum(
             e in [r["claimed"], *r["amb"]] for r in sel), len(sel), 0.95)
-    conf_wrong = 0
-    for r in eff:
-        if r["claimed"] not in ("none", r["effect"]):
-            if r["delta"][r["claimed"]] - r["delta"][r["effect"]] > 10.0:
-                conf_wrong += 1
-    line("confident wrong name (winner > 10 ahead of truth), all effect trials",
-         conf_wrong, len(eff), 0.02, geq=False)
+    # the winner more than 10 ahead of the truth: confident when the verdict does not list
+    # the truth in its ambiguity set (a law variant fitting as well but for the penalty of
+    # its parameters is listed: search.decide); the raw count is printed too
+    ahead = [r for r in eff if r["claimed"] not in ("none", r["effect"])
+             and r["delta"][r["claimed"]] - r["delta"][r["effect"]] > 10.0]
+    line("confident wrong name (winner > 10 ahead of truth, truth not in the reported set), "
+         "all effect trials", sum(r["effect"] not in r["amb"] for r in ahead), len(eff), 0.02,
+         geq=False)
+    lines.append("| (information) winner > 10 ahead of truth, truth in the reported set or "
+                 f"not, all effect trials | {pct(len(ahead), len(eff))} | | | |")
     line("confident wrong name (one name, no ambiguity, wrong), all effect trials",
          sum(r["claimed"] not in ("none", r["effect"]) and not r["amb"] for r in eff),
          len(eff), 0.02, geq=False)
