@@ -156,8 +156,11 @@ def discrepancy_row(trace: Trace, ld_stated: bool = True) -> tuple[str, bool, fl
     """One Markdown row of the discrepancy workflow on a trace: whether the verdict is heat
     transfer or an ambiguity containing it (and no other effect named), the reported
     C's error [-] and whether the C range holds the truth; ``ld_stated`` False: the
-    tank's L/D is not given (the default 2 with ``length_diameter_known`` False)."""
+    tank's L/D is not given (the default 2 with ``length_diameter_known`` False), and
+    the range counts only with the "state the L/D" advice in "what to do next"."""
     from pneumatic_unload.discrepancy import DiscrepancySettings, find_discrepancy
+    from pneumatic_unload.discrepancy.advice import what_next
+    from pneumatic_unload.discrepancy.ambiguity import LD_STATED
 
     m = trace.meta
     t, y = record(trace, zlib.crc32(trace.name.encode()))
@@ -174,13 +177,15 @@ def discrepancy_row(trace: Trace, ld_stated: bool = True) -> tuple[str, bool, fl
     reported = [res.effect, *res.ambiguous_with]
     heat = any(e in HEAT for e in reported) and all(e in HEAT for e in res.named)
     lo, hi = res.conductance_range or (math.nan, math.nan)
+    advice = ld_stated or any(LD_STATED in x for x in what_next(res))
     h = m["h_inner"] if m["h_inner"] == "calc" else f"{m['h_inner']:g}"
     return (f"| {trace.name} | {1e3 * m['volume']:.3g} | {h} | {res.effect} | "
             f"{', '.join(res.ambiguous_with) or '-'} | {', '.join(res.effects) or '-'} | "
             f"{', '.join(res.named) or '-'} | {100 * error:+.3f} | "
             f"{lo / truth:.3f} - {hi / truth:.3f} | {res.before.nrms:.3f} -> "
-            f"{res.after.nrms:.3f} | {'yes' if heat else 'NO'} | {cpu:.1f} |"), heat, error, \
-        bool(lo <= truth <= hi)
+            f"{res.after.nrms:.3f} | {'yes' if heat else 'NO'} | "
+            f"{'-' if ld_stated else ('yes' if advice else 'no')} | {cpu:.1f} |"), heat, \
+        error, bool(lo <= truth <= hi) and advice
 
 
 def main_discrepancy(folder: Path, ld_stated: bool = True) -> int:
@@ -192,8 +197,8 @@ def main_discrepancy(folder: Path, ld_stated: bool = True) -> int:
     print(f"Discrepancy workflow on HydDown traces in {folder}"
           f"{'' if ld_stated else ', the tank L/D not given'}\n")
     print("| case | V [L] | h_inner | effect | ambiguous with | final model | named | "
-          "C err [%] | C range / truth | nRMS | heat | CPU [s] |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "C err [%] | C range / truth | nRMS | heat | L/D advice | CPU [s] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     ok, held, errs = 0, 0, []
     for trace in items:
         line, heat, error, inside = discrepancy_row(trace, ld_stated)
@@ -203,7 +208,8 @@ def main_discrepancy(folder: Path, ld_stated: bool = True) -> int:
         held += heat and (abs(error) <= 0.02 or inside)
     e = np.abs(np.asarray(errs))
     print(f"\n{len(items)} cases: heat transfer (or an ambiguity with it) with C within 2 %: "
-          f"{ok}/{len(items)}; within 2 % or a C range holding the truth: "
+          f"{ok}/{len(items)}; within 2 % or a C range holding the truth"
+          f"{'' if ld_stated else ' with the L/D advice'}: "
           f"{held}/{len(items)}; worst |C error| {100 * np.max(e):.3f} %, median "
           f"{100 * np.median(e):.3f} %")
     return 0
