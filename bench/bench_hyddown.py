@@ -94,6 +94,14 @@ needs it), or with ``--no-ld`` not given.
   natural+turbulent law at L/D 5.1 gains 58.8), the final model is taken at L/D 5.1 (59
   better than at 2), C -0.10 %, range 0.495-1.020 of the truth, and the C range's first
   separating measurement and the advice say to state the L/D.
+* branch h12g (main at 38a1474 merged, plus a law variant of a leak fitting as well in
+  the round's ambiguity set; ``--no-ld``, the "L/D advice" column: "state the L/D" in
+  what to do next; load 3-4 on 2 cores, CPU per trace as printed): the committed six
+  **6/6** heat transfer or hot start within 2 % (worst 0.64 %, v2l; median 0.10 %; v50l
+  69 s of CPU, which h12f's run had lost to a time-limit traceback), every one with the
+  L/D advice and a C range holding the truth; the full grid **24/24** within 2 % (worst
+  +1.90 %, full02: heat transfer without L/D, hot start +0.39 % with it; median 0.34 %),
+  each with the L/D advice and a C range holding the truth.
 """
 
 from __future__ import annotations
