@@ -19,6 +19,10 @@ their combined 1-sigma:
 * **variants**: the runner-up of a round is the same physics in another place or law (a
   leak upstream / downstream of the valve, laminar / orifice: :data:`VARIANTS`), however
   far behind;
+* **the round's ambiguity set**: the candidates the data cannot tell from the round's
+  winner (:attr:`~pneumatic_unload.discrepancy.types.Round.ambiguous_with`; a variant of
+  the winner with a chi^2 within the threshold of its, whatever its BIC:
+  :func:`~pneumatic_unload.discrepancy.search.decide`);
 * **a leak in parallel with the component** (:data:`~pneumatic_unload.model.effects.
   DOWNSTREAM_LEAKS`) in the final model: C is confounded with it; the C interval of that
   fit is the range, and a run with the component plugged separates them.
@@ -229,6 +233,10 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
             if frozenset({r.winner, order[1]}) in VARIANTS:
                 add(runner, f"the same physics as {r.winner} in another place or law",
                     runner.bic - best)
+        for k in r.ambiguous_with if r.winner != "none" else ():
+            add(r.fits[k], f"the data cannot tell it from {r.winner} (same physics, "
+                           "fits as well but for the penalty of its parameters)",
+                r.fits[k].bic - best)
         if r.winner != "none":
             round_base = r.fits[r.winner]
     down = [e for e in final.effects if e in DOWNSTREAM_LEAKS]

@@ -13,7 +13,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.discrepancy.ambiguity import at_bounds, same_physics
+from pneumatic_unload.discrepancy.ambiguity import VARIANTS, at_bounds, same_physics
 from pneumatic_unload.discrepancy.laws import HEAT_EFFECTS
 from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.types import NRMS_LIMIT, WHITE_P, Diagnostics, Fit
@@ -265,6 +265,13 @@ def decide(base: Fit, fits: dict[str, Fit], threshold: float,
     nested extension (:data:`NESTED`: the hot start is heat transfer plus the wall
     temperature) is named only when it beats the effect it extends by the threshold;
     within it, the simpler effect is named and the extension is no ambiguity.
+
+    A variant of the winner (the same leak in another law or place:
+    :data:`~pneumatic_unload.discrepancy.ambiguity.VARIANTS`) is in the set when its
+    chi^2 is within the threshold of the winner's, whatever its BIC: the two are not
+    nested, so the ln(n) per extra parameter is no evidence between the laws (at n >
+    e^10 = 22 k samples one extra parameter alone costs more than the threshold, and an
+    orifice-law leak fitting as well as a laminar one would never be in the set).
     """
     delta = {k: base.bic - f.bic for k, f in fits.items()}
     order = [k for k in sorted(delta, key=lambda k: -delta[k]) if k not in (refused or {})]
@@ -274,7 +281,8 @@ def decide(base: Fit, fits: dict[str, Fit], threshold: float,
     if not order or delta[order[0]] <= threshold:
         return delta, "none", []
     win = order[0]
-    amb = [k for k in order[1:] if delta[win] - delta[k] <= threshold]
+    amb = [k for k in order[1:] if delta[win] - delta[k] <= threshold or (
+        frozenset({win, k}) in VARIANTS and fits[k].chi2 - fits[win].chi2 <= threshold)]
     return delta, win, amb
 
 

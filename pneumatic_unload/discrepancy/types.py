@@ -43,7 +43,8 @@ CANDIDATES: tuple[str, ...] = (*EFFECTS, "hot_start")
 BIC_HELP = ("delta-BIC = BIC(current model) - BIC(current model + candidate), BIC = chi^2 + "
             "k ln(n): positive means the candidate explains the trace better after paying "
             "for its extra parameters. An effect is claimed above 10 and named alone when "
-            "the runner-up is more than 10 behind.")
+            "the runner-up is more than 10 behind (a variant of the same leak in another "
+            "law or place: when its chi^2 is more than 10 above).")
 
 
 class DiscrepancyError(ValueError):

@@ -24,7 +24,10 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
 3. **Decision** by BIC = chi^2 + k ln(n): an effect is claimed only if it beats the
    current model by more than ``bic_threshold`` (10); it is named alone only if the
    runner-up is more than 10 behind, otherwise the ambiguity set is reported with the
-   extra data that would separate its members. A nested extension (the hot start: heat
+   extra data that would separate its members; a variant of the winner (the same leak in
+   another law or place) whose chi^2 is within 10 of the winner's is in the set whatever
+   its BIC (the laws are not nested: its extra parameter's ln n is no evidence between
+   them). A nested extension (the hot start: heat
    transfer with the wall temperature fitted) must beat the effect it extends by 10. A
    transducer effect (offset, gain) is claimed only with evidence no physics effect can
    give: the end level disagreeing with every physics model of the round
