@@ -143,8 +143,17 @@ def row(trace: Trace, wall_assumed: bool = False) -> tuple[str, float, float]:
     z = (r.conductance_model - truth) / r.conductance_model_std
     law = r.extra.get("curve_fit", {}).get("heat_law", "-")
     flag = "inadequate" if r.extra.get("model_inadequate") else "ok"
+    terms = [x for x in r.extra["budget"]["terms"]
+             if x["std"] is not None and math.isfinite(x["std"])]
+    top = max(terms, key=lambda x: x["std"])
+    LARGEST[top["name"]] = LARGEST.get(top["name"], 0) + 1
     return (head + f" {100 * error:+.3f} | {z:+.2f} | {100 * (r.conductance / truth - 1):+.2f} |"
-            f" {r.critical_ratio:.3f} | {law} | {flag} |"), error, z
+            f" {r.critical_ratio:.3f} | {law} | {flag} | {top['name']} "
+            f"({100 * top['std'] / r.conductance_model_std:.0f} %) |"), error, z
+
+
+#: How often each line is the model C's budget's largest (:func:`row`).
+LARGEST: dict[str, int] = {}
 
 
 #: Verdicts that count as heat transfer (the hot start is heat transfer with the wall
@@ -225,8 +234,9 @@ def main(argv: list[str]) -> int:
     print(f"HydDown traces in {folder} (hyddown {items[0].meta['versions']['hyddown']}, "
           f"CoolProp {items[0].meta['versions']['CoolProp']})\n")
     print("| case | V [L] | L/D | d [mm] | Cd | p10 [bar] | h_inner | truth C [dm^3/(s bar)] "
-          "| model C err [%] | z | eq 39 err [%] | b | heat law | model |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| model C err [%] | z | eq 39 err [%] | b | heat law | model | largest line "
+          "(share of sigma) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     errors, zs = [], []
     start = time.perf_counter()
     for trace in items:
@@ -241,7 +251,9 @@ def main(argv: list[str]) -> int:
           f"{100 * np.nanmax(e):.3f} %, median {100 * np.nanmedian(e):.3f} %, "
           f"within 2 %: {np.sum(e < 0.02)}/{n}; within 1 sigma {np.sum(zz <= 1.0)}/{n} "
           f"({100 * np.sum(zz <= 1.0) / n:.0f} %), within 2 sigma {np.sum(zz <= 2.0)}/{n} "
-          f"({100 * np.sum(zz <= 2.0) / n:.0f} %); no result: {int(np.sum(np.isnan(e)))}")
+          f"({100 * np.sum(zz <= 2.0) / n:.0f} %); no result: {int(np.sum(np.isnan(e)))}; "
+          "the budget's largest line: "
+          + ", ".join(f"{k} {v}" for k, v in sorted(LARGEST.items(), key=lambda x: -x[1])))
     return 0
 
 

@@ -203,6 +203,7 @@ def coverage(mode: str, n: int, first: int = 0, t10_at: str = "opening") -> None
     'room' (T10 at 288-318 K, the wall at a room's temperature)."""
     rng = np.random.default_rng(COVERAGE_SEEDS[mode])
     zs, errs, b_errs, b_zs, b_slopes, b_sigmas = [], [], [], [], [], []
+    tops: dict[str, int] = {}
     for k in range(n):
         tau_heat = float(np.exp(rng.uniform(np.log(0.5), np.log(20.0))))
         volume, conductance = float(rng.uniform(2e-3, 8e-3)), float(rng.uniform(3e-9, 1.2e-8))
@@ -228,13 +229,15 @@ def coverage(mode: str, n: int, first: int = 0, t10_at: str = "opening") -> None
         b_slopes.append(b_per_k)
         b_sigmas.append(b_std)
         w = wall_line(bud)
+        top = largest_term(bud)
+        tops[top] = tops.get(top, 0) + 1
         print(f"{k:2d} tau_h {tau_heat:5.2f} T10 {t10:6.1f} Tw {t_wall:6.1f} err {100 * err:+.3f} %"
               f" z {z:+.2f} b {b_err:+.3f} +- {b_std:.3f} (z {b_zs[-1]:+.2f},"
               f" |db/dTw| {b_per_k:.4f} /K)"
               f" {cf['heat_law']:>17s} wall u {w['input_std']:.2g} K,"
               f" {100 * w['std'] / bud['value']:.3f} %; model form"
               f" {100 * bud['model_form_std'] / bud['value']:.3f} %, type A"
-              f" {100 * bud['type_a_std'] / bud['value']:.3f} %", flush=True)
+              f" {100 * bud['type_a_std'] / bud['value']:.3f} %; largest: {top}", flush=True)
     a = np.abs(np.array(zs))
     shares, b_shares = [], []
     ab = np.abs(np.array(b_zs))
@@ -251,7 +254,14 @@ def coverage(mode: str, n: int, first: int = 0, t10_at: str = "opening") -> None
           f"{np.nanmedian(b_slopes):.4f}, 90th percentile "
           f"{np.nanpercentile(b_slopes, 90):.4f} over {int(np.sum(np.isfinite(b_slopes)))}"
           f" trials with an assumed wall; b's stated sigma median "
-          f"{float(np.nanmedian(b_sigmas)):.4f}")
+          f"{float(np.nanmedian(b_sigmas)):.4f}; the budget's largest term: "
+          + ", ".join(f"{name} {m}" for name, m in sorted(tops.items(), key=lambda x: -x[1])))
+
+
+def largest_term(budget: dict) -> str:
+    """The name of a budget's largest line (a Budget's ``to_dict``) [-]."""
+    terms = [x for x in budget["terms"] if x["std"] is not None and math.isfinite(x["std"])]
+    return max(terms, key=lambda x: x["std"])["name"] if terms else "none"
 
 
 if __name__ == "__main__":
