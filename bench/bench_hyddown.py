@@ -49,6 +49,12 @@ Measured on the full grid (24 cases, hyddown 0.50.0):
   grid is the first (HydDown's wall is at T10, an input as exact as V); the second
   states a 2-5.8 K wall uncertainty that the grid does not have, so it over-covers.
 
+* branch h11g (tau_exp's sigma and the start fit's power-law remainder; the full grid
+  re-made with hyddown 0.50.0): worst 0.803 % (main at 38a1474: 0.804 %), median 0.248 %,
+  24/24 within 2 %, 16/24 (67 %) within 1 sigma, 23/24 (96 %) within 2. The budget's
+  largest line: the model limits (0.3 %) on 23 of 24, the heat laws' spread on one; the
+  committed six: 0.662 %, 0.093 %, 4/6 and 5/6, the model limits largest on all six.
+
 ``python bench/bench_hyddown.py --discrepancy [FOLDER] [--no-ld]``: the discrepancy
 workflow's verdict on each trace instead (issue 12's peer line: heat transfer, or an
 ambiguity containing it, with C within 2 %; the hot start counts as heat transfer), with
