@@ -34,14 +34,16 @@ P_ATM = 101325.0
 T0 = 1.7e9
 
 
-def _record(duration: float = 4.0, seed: int = 3) -> tuple[np.ndarray, np.ndarray, float]:
-    """A 1 L tank, C 8e-9 m^3/(s Pa), natural convection, 1 kHz, 1 kPa noise: 0.5 s before
-    the opening, then the unload; stamps on the bag's clock [s], pressures [Pa], the
-    opening [s]."""
-    cfg = RigConfig(volume=1e-3, conductance=8e-9, effects=("heat_transfer",), pre_time=0.5,
-                    rate=1000.0, duration=duration, noise_std=1000.0, seed=seed)
+def _record(duration: float = 4.0, seed: int = 3, conductance: float = 8e-9,
+            clock: float = T0) -> tuple[np.ndarray, np.ndarray, float]:
+    """A 1 L tank, C 8e-9 m^3/(s Pa) (or ``conductance``), natural convection, 1 kHz, 1 kPa
+    noise: 0.5 s before the opening, then the unload; stamps on the bag's clock from
+    ``clock`` [s], pressures [Pa], the opening [s]."""
+    cfg = RigConfig(volume=1e-3, conductance=conductance, effects=("heat_transfer",),
+                    pre_time=0.5, rate=1000.0, duration=duration, noise_std=1000.0,
+                    seed=seed)
     sim = simulate(cfg)
-    t = np.round((T0 + sim.t) * 1e9) * 1e-9
+    t = np.round((clock + sim.t) * 1e9) * 1e-9
     return t, sim.measured, float(t[np.argmin(np.abs(sim.t - 0.5))])
 
 
@@ -153,6 +155,109 @@ def test_start_time_mode_over_dds_equals_analyze_on_the_bag(tmp_path: Path,
             assert (b is None and math.isnan(a)) or a == pytest.approx(b, rel=1e-9, abs=0.0), \
                 key
     assert got[1].conductance_model == pytest.approx(8e-9, rel=0.02)
+
+
+def _bag(path: Path, t: np.ndarray, p: np.ndarray) -> Path:
+    from pneumatic_unload.io.bag import BagRecorder
+
+    with BagRecorder(path) as rec:
+        rec.write_pressures(np.round(t * 1e9).astype(np.int64), p)
+    return path
+
+
+def _offline(venv_python: Path, bag: Path, start: float) -> list[dict[str, Any]]:
+    cli = [str(venv_python), "-m", "pneumatic_unload.cli", "analyze", str(bag), "--json",
+           "--volume", "1e-3", "--atmosphere", str(P_ATM), "--start-time", repr(start),
+           "--initial-pressure", "7e5"]
+    out = subprocess.run(cli, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    published: list[dict[str, Any]] = json.loads(out.stdout)["published"]
+    assert [r["final"] for r in published] == [False, True]
+    return published
+
+
+def test_start_time_changed_at_run_time_analyses_the_next_record(
+        tmp_path: Path, venv_python: Path) -> None:
+    """A running estimator in start-time mode analyses record A (C 8e-9) from its opening;
+    start_time is then set over the parameter service: a value out of range, and the
+    atmosphere taken away (start-time mode needs it), are refused with the reason (the
+    node keeps its settings); the new opening is accepted, and record B (C 5e-9, 60 s later on
+    the same clock) is analysed from it: both of its estimates equal ``analyze
+    --start-time`` on B, as A's equal it on A."""
+    from nodeproc import NodeProcess, spin_until
+    from pneumatic_unload_msgs.msg import UnloadEstimate
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import String
+
+    from pneumatic_unload.nodes.common import LATCHED_QOS
+
+    ta, pa, start_a = _record()
+    tb, pb, start_b = _record(seed=4, conductance=5e-9, clock=T0 + 60.0)
+    bag_a, bag_b = _bag(tmp_path / "a", ta, pa), _bag(tmp_path / "b", tb, pb)
+    offline = _offline(venv_python, bag_a, start_a) + _offline(venv_python, bag_b, start_b)
+
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node(f"observer_{time.time_ns()}", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    got: list[Any] = []
+    settings: list[str] = []
+    node.create_subscription(UnloadEstimate, "/estimator/estimate", got.append, LATCHED_QOS)
+    node.create_subscription(String, "/estimator/settings", lambda m: settings.append(m.data),
+                             LATCHED_QOS)
+    cli = node.create_client(SetParameters, "/estimator/set_parameters")
+
+    def set_params(**values: Any) -> Any:
+        req = SetParameters.Request(
+            parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()])
+        fut = cli.call_async(req)
+        assert spin_until(node, ex, fut.done, 10.0)
+        return fut.result().results
+
+    def replay(bag: Path, n: int) -> None:
+        rep = NodeProcess("replay", {"bag": str(bag), "rate": 0.0,
+                                     "topics": ["/tank/pressure"]}, tmp_path)
+        try:
+            assert spin_until(node, ex, lambda: len(got) >= n, 60.0), (
+                f"{len(got)} estimate(s); estimator said:\n{est.output()[-2000:]}")
+            assert rep.proc.wait(timeout=30) == 0
+        finally:
+            rep.stop()
+
+    est = NodeProcess("estimator", {"volume": 1e-3, "atmosphere": P_ATM, "start_time": start_a,
+                                    "initial_pressure": 7e5, "qos": "reliable"}, tmp_path)
+    try:
+        est.wait_output("start-time mode", 20.0)
+        assert cli.wait_for_service(timeout_sec=15.0)
+        replay(bag_a, 2)
+        (r,) = set_params(start_time=2e10)
+        assert not r.successful and "start_time" in r.reason and "range" in r.reason, r.reason
+        (r,) = set_params(atmosphere=0.0)  # auto p_atm: no start-time mode without it
+        assert not r.successful and "atmosphere" in r.reason, r.reason
+        (r,) = set_params(start_time=start_b)
+        assert r.successful, r.reason
+        assert spin_until(node, ex, lambda: any(
+            json.loads(d).get("start_time") == start_b for d in settings), 10.0), settings
+        replay(bag_b, 4)
+        spin_until(node, ex, lambda: False, 0.5)  # nothing more is published
+    finally:
+        code = est.stop()
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert code == 0
+    assert len(got) == 4, [(g.index, g.method) for g in got]
+    for live, off in zip(got, offline, strict=True):
+        for key in KEYS:
+            a, b = getattr(live, key), off[key]
+            assert (b is None and math.isnan(a)) or a == pytest.approx(b, rel=1e-9, abs=0.0), \
+                key
+    assert got[1].conductance_model == pytest.approx(8e-9, rel=0.02)
+    assert got[3].conductance_model == pytest.approx(5e-9, rel=0.02)
 
 
 if __name__ == "__main__":

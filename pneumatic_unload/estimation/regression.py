@@ -64,12 +64,48 @@ def grid_then_golden(f: Callable[[float], float], t: FloatArray, t_lo: float, t_
     return 0.5 * (a_ + b_)
 
 
-def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
-              ) -> tuple[float, float, float, float, float]:
-    """Fit p = p10 (t < t0), p10 - s u + c u^2 (u = t - t0 >= 0) with t0 in [t_lo, t_hi].
+def power_shape(s: float, c: float, exponent: float, u_max: float
+                ) -> tuple[float, float] | None:
+    """The power-law fall p10 - A (1 - (1 + beta u)^-k) with the initial slope ``s``
+    [Pa/s] and curvature ``c`` [Pa/s^2] of p10 - s u + c u^2 (k = ``exponent`` [-]):
+    (A [Pa], beta [1/s]), or None where it does not apply (no finite exponent, no fall,
+    no convex curvature, or beta u beyond 10 on the window of ``u_max`` [s]).
+
+    A choked discharge from a tank falls as (1 + beta u)^(-2 gamma/(gamma - 1)) at first
+    (adiabatic; faster heat exchange makes it more exponential, k -> inf: the cubic's share
+    moves from 3/4 to 2/3 of c^2/s): its terms beyond the quadratic are the start fit's
+    model form, which leaves a bias of up to two sigmas in the start where few samples
+    span a large part of the drop (a fast discharge at a low sample rate).
+    """
+    if not (math.isfinite(exponent) and exponent > 0.0 and s > 0.0 and c > 0.0):
+        return None
+    beta = 2.0 * c / (s * (exponent + 1.0))
+    if not (math.isfinite(beta) and beta * u_max <= 10.0):
+        return None
+    return s / (exponent * beta), beta
+
+
+def power_remainder(u: FloatArray, shape: tuple[float, float], exponent: float
+                    ) -> FloatArray:
+    """The power-law fall's terms beyond the quadratic at u >= 0 [s] (:func:`power_shape`)
+    [Pa]: A ((1 + beta u)^-k - 1 + k beta u - k (k + 1) (beta u)^2 / 2)."""
+    a, beta = shape
+    x = beta * u
+    k = exponent
+    return a * (np.expm1(-k * np.log1p(x)) + k * x - 0.5 * k * (k + 1.0) * x * x)
+
+
+def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float, *,
+              exponent: float = math.inf) -> tuple[float, float, float, float, float]:
+    """Fit p = p10 (t < t0), p10 - s u + c u^2 + R(u) (u = t - t0 >= 0) with t0 in
+    [t_lo, t_hi].
 
     Sub-sample t0 by minimising the profiled sum of squares (linear in p10, s, c for each
     t0) with a bracketed golden-section search after a grid search on the sample instants.
+    R is the power-law fall's remainder beyond the quadratic (:func:`power_remainder`,
+    exponent k): the quadratic is fitted first (R = 0), then twice more with R made from
+    the previous pass's s and c (without a finite exponent, or where the power law does not
+    apply, R = 0 and one pass).
 
     Parameters
     ----------
@@ -77,6 +113,8 @@ def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
         Window of samples [s], [Pa].
     t_lo, t_hi : float
         Search interval for t0 [s].
+    exponent : float
+        k of the power-law fall [-] (2 gamma/(gamma - 1) for a choked discharge).
 
     Returns
     -------
@@ -88,13 +126,20 @@ def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
     p_ref = float(np.mean(p))
     q = p - p_ref
     n_all = float(q.size)
-    sq_all, s_all = float(q @ q), float(np.sum(q))
 
-    def solve(t0: float) -> tuple[float, FloatArray]:
+    def solve(t0: float, shape: tuple[float, float] | None) -> tuple[float, FloatArray]:
         # normal equations of [1, -u, u^2] from sums over the post-t0 samples (u > 0)
         k = int(np.searchsorted(tc, t0 - t[0], side="right"))
         u = (tc[k:] - (t0 - t[0])) / scale_t
-        qk = q[k:]
+        if shape is None:
+            qk = q[k:]
+            sq_all, s_all = sq0, s0
+        else:
+            rem = power_remainder(u * scale_t, shape, exponent)
+            qk = q[k:] - rem
+            # the sums over all samples with the post-t0 ones corrected
+            sq_all = sq0 - float(q[k:] @ q[k:]) + float(qk @ qk)
+            s_all = s0 - float(rem.sum())
         u2 = u * u
         su, su2, su3, su4 = float(u.sum()), float(u2.sum()), float(u2.dot(u)), \
             float(u2.dot(u2))
@@ -108,10 +153,76 @@ def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
         sse = max(sq_all - (coef[0] * rhs[0] + coef[1] * rhs[1] + coef[2] * rhs[2]), 0.0)
         return sse, np.array((coef[0] + p_ref, coef[1], coef[2]))
 
-    t0 = grid_then_golden(lambda x: solve(x)[0], t, t_lo, t_hi, n_grid=64, rel_tol=1e-3)
-    sse0, coef = solve(t0)
+    sq0, s0 = float(q @ q), float(np.sum(q))
+    shape: tuple[float, float] | None = None
+    for _pass in range(3):
+        t0 = grid_then_golden(lambda x, sh=shape: solve(x, sh)[0], t, t_lo, t_hi, n_grid=64,
+                              rel_tol=1e-3)
+        sse0, coef = solve(t0, shape)
+        slope, curv = float(coef[1]) / scale_t, float(coef[2]) / scale_t**2
+        shape = power_shape(slope, curv, exponent, float(t[-1]) - t0)
+        if shape is None:
+            break
     rms = math.sqrt(sse0 / max(p.size - 4, 1))
-    return t0, float(coef[0]), float(coef[1]) / scale_t, float(coef[2]) / scale_t**2, rms
+    return t0, float(coef[0]), slope, curv, rms
+
+
+def hinge_cov(t: FloatArray, t0: float, slope: float, curv: float, rms: float, *,
+              exponent: float = math.inf) -> tuple[float, float, float]:
+    """Covariance of the hinge fit's start and plateau (:func:`hinge_fit`) from its Fisher
+    information at the fitted values: the model's Jacobian over the window's instants in
+    (t0, p10, and the fall's two shape parameters), times the residual variance.
+
+    The curvature after the start and the continuity at it are part of the model: the
+    start's sigma from a straight line after the start (endpoint variance 4/n) is too
+    narrow when the curvature is free (about 9/n), and the start and the plateau errors
+    are correlated (a plateau fitted low meets the fall later).
+
+    Parameters
+    ----------
+    t : ndarray
+        The window's instants [s].
+    t0, slope, curv, rms : float
+        The fit's start [s], initial fall rate [Pa/s], curvature [Pa/s^2] and residual
+        rms [Pa].
+    exponent : float
+        The power-law fall's k (as given to :func:`hinge_fit`) [-].
+
+    Returns
+    -------
+    tuple
+        (var t0 [s^2], cov(t0, p10) [s Pa], var p10 [Pa^2]); infinite variances when the
+        information is singular.
+    """
+    tc = t - t0
+    post = tc > 0.0
+    scale_t = max(float(t[-1] - t[0]), 1e-12)
+    u = np.where(post, tc, 0.0) / scale_t
+    shape = power_shape(slope, curv, exponent, float(t[-1]) - t0)
+    # columns: d/dt0 (times scale_t), d/dp10, then the fall's shape parameters (scaled)
+    j = np.empty((4, t.size))
+    j[1] = 1.0
+    if shape is None:  # p10 - s u + c u^2: d/d(s scale_t), d/d(c scale_t^2)
+        j[0] = np.where(post, slope * scale_t - 2.0 * curv * scale_t**2 * u, 0.0)
+        j[2] = -u
+        j[3] = u * u
+    else:  # p10 - A (1 - (1 + beta u)^-k): d/dA, d/d(beta scale_t)
+        a, beta = shape
+        x = beta * scale_t * u
+        g = np.exp(-(exponent + 1.0) * np.log1p(x))
+        j[0] = np.where(post, a * exponent * beta * scale_t * g, 0.0)
+        j[2] = np.expm1(-exponent * np.log1p(x))
+        j[3] = -a * exponent * u * g
+    info = j @ j.T
+    try:
+        cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return math.inf, 0.0, math.inf
+    s2 = rms * rms
+    v_t0, c_tp, v_p = float(cov[0, 0]) * s2, float(cov[0, 1]) * s2, float(cov[1, 1]) * s2
+    if not (v_t0 >= 0.0 and v_p >= 0.0 and math.isfinite(v_t0) and math.isfinite(v_p)):
+        return math.inf, 0.0, math.inf
+    return v_t0 * scale_t**2, c_tp * scale_t, v_p
 
 
 def crossing_fit(t: FloatArray, p: FloatArray, level: float

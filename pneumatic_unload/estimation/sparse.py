@@ -33,9 +33,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pneumatic_unload import physics
-from pneumatic_unload.budget import BudgetTerm, with_terms
+from pneumatic_unload.budget import MODEL_FORM_TERM, BudgetTerm, with_terms
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
+from pneumatic_unload.estimation.crossing import HEAT_NOT_SEEN, crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.refine import refine_with_curve_fit
 from pneumatic_unload.estimation.types import UnloadResult
 
@@ -43,6 +43,8 @@ from pneumatic_unload.estimation.types import UnloadResult
 MIN_POINTS = 10
 #: Below this many points the fit-vs-inversion spread is a line of the budget [-].
 FEW_POINTS = 50
+#: The budget line of a heat law held on few points [-].
+HEAT_HELD = "model form (heat law held, not fitted)"
 #: Default standard uncertainty of a given initial pressure, relative [-].
 P10_REL_DEFAULT = 0.001
 #: The record has settled (the unload ends) at the first sample after the p* crossing that
@@ -227,6 +229,16 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings
                     "model form (fit vs crossing inversion)", "model", math.nan, math.nan,
                     "", abs(final.conductance_model - res.conductance_model),
                     f"{ts.size} points"))
+                # and the heat law is held (the correlation as published, not fitted): the
+                # crossing's line for a heat exchange not seen (uniform between none and
+                # twice the correlation's) stays, scaled to the fit's C
+                seen = [x for x in res.extra.get("budget", {}).get("terms", ())
+                        if x["name"] == MODEL_FORM_TERM and x["std"]]
+                if seen:
+                    more.append(BudgetTerm(
+                        HEAT_HELD, "model", math.nan, math.nan, "",
+                        seen[0]["std"] * final.conductance_model / res.conductance_model,
+                        f"{ts.size} points: {HEAT_NOT_SEEN}"))
             if more and "budget" in extra:
                 extra["budget"] = with_terms(extra["budget"], more)
                 std = extra["budget"]["combined_std"]

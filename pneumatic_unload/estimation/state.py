@@ -77,6 +77,9 @@ class UnloadState:
         The start (hinge) fit has run: t0, i0, p10, slope0 are known.
     t0, t0_std : float
         Start instant and its standard deviation [s].
+    p10_var, t0_p10_cov : float
+        The start fit's variance of p10 [signal units^2] and covariance of t0 with p10
+        [s signal units] (p* moves with p10, so the crossing moves with it).
     i0 : int
         First sample at or after t0 [-].
     p10 : float
@@ -86,6 +89,9 @@ class UnloadState:
     atm, pstar, half : float
         p_atm, p* and the half-width of the crossing window [signal units] (NaN until
         known).
+    atm_var : float
+        Variance of p_atm when it is the final plateau's mean [signal units^2]; 0 when
+        given.
     pending : UnloadResult or None
         Crossing result waiting for the end of the tail (curve fit).
     tail_low : float
@@ -124,12 +130,15 @@ class UnloadState:
     refined: bool = False
     t0: float = math.nan
     t0_std: float = math.nan
+    p10_var: float = math.nan
+    t0_p10_cov: float = math.nan
     i0: int = -1
     p10: float = math.nan
     slope0: float = math.nan
     atm: float = math.nan
     pstar: float = math.nan
     half: float = math.nan
+    atm_var: float = 0.0
     pending: UnloadResult | None = None
     tail_low: float = math.inf
     t_close: float = math.nan

@@ -27,11 +27,12 @@ from pneumatic_unload.estimation.decisions import (
 )
 from pneumatic_unload.estimation.reduction import reduce_due, reduce_unload, window_start
 from pneumatic_unload.estimation.refine import needs_model
-from pneumatic_unload.estimation.regression import crossing_fit, hinge_fit, rms_sigma
+from pneumatic_unload.estimation.regression import crossing_fit, hinge_cov, hinge_fit, rms_sigma
 from pneumatic_unload.estimation.sse import abort_result, on_abort
-from pneumatic_unload.estimation.state import TAIL, EstimatorState
+from pneumatic_unload.estimation.state import TAIL, EstimatorState, UnloadState
 from pneumatic_unload.estimation.tail import finish_tail
 from pneumatic_unload.estimation.types import STUCK_TEXT, FloatArray, UnloadResult
+from pneumatic_unload.physics import P_STAR_FRACTION
 
 
 def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
@@ -116,6 +117,13 @@ def first_unload_check(st: EstimatorState, i: int, t: FloatArray, p: FloatArray,
     return False
 
 
+def fall_exponent(gamma: float) -> float:
+    """k of a choked adiabatic discharge's first fall, p ~ (1 + beta u)^-k: 2 gamma/(gamma
+    - 1) [-] (7 for air; the start fit's shape beyond its quadratic, see
+    :func:`~.regression.hinge_fit`)."""
+    return 2.0 * gamma / (gamma - 1.0)
+
+
 def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     """Hinge fit of the valve-opening instant, p10 and the initial slope (index i: first
     sample 10 % down); sets p* when p_atm is given."""
@@ -127,16 +135,17 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     lo = max(st.arm_index, trig - back - HINGE_PLATEAU)
     t_lo = float(tv[max(st.arm_index, trig - back)])
     t_hi = float(tv[trig])
-    t0, p10, slope, _curv, rms = hinge_fit(tv[lo:n], pv[lo:n], t_lo, t_hi)
+    k = fall_exponent(st.settings.gamma)
+    t0, p10, slope, curv, rms = hinge_fit(tv[lo:n], pv[lo:n], t_lo, t_hi, exponent=k)
     if trig < i and (t_hi - t0 < 0.01 * (t_hi - float(tv[trig - 1])) or not slope > 0.0):
         # the start pinned at the trigger (within 1 % of a sample) or no fall found before
         # it: the trigger came before the opening (a noise dip confirmed against a plateau
         # of a few samples, whose level and noise are then off). The start is searched up
         # to the sample 10 % down, and taken from there only when it lies after the
         # trigger and fits better.
-        alt = hinge_fit(tv[lo:n], pv[lo:n], t_lo, float(tv[i]))
+        alt = hinge_fit(tv[lo:n], pv[lo:n], t_lo, float(tv[i]), exponent=k)
         if alt[0] > t_hi and alt[4] < rms:
-            t0, p10, slope, _curv, rms = alt
+            t0, p10, slope, curv, rms = alt
     pre = pv[lo:int(np.searchsorted(tv, t0))]
     sig_pre = rms_sigma(pre) if pre.size > 3 else rms
     if pre.size >= 8:
@@ -151,10 +160,11 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     u.i0 = int(np.searchsorted(tv, t0))
     if st.stream_start and first_unload_check(st, i, tv[lo:u.i0], pv[lo:u.i0], slope):
         return []
-    n_pre, n_post = max(u.i0 - lo, 1), max(n - u.i0, 1)
-    # noise over the initial slope, with the plateau (p10) and post-start samples
-    u.t0_std = (rms / slope * math.sqrt(1.0 / n_pre + 4.0 / n_post)
-                if slope > 0 else math.inf)
+    # the start's and p10's (co)variance from the hinge model's information (its curvature
+    # and continuity included; p* moves with p10, see crossing_result)
+    v_t0, u.t0_p10_cov, u.p10_var = hinge_cov(tv[lo:n], t0, slope, curv, rms, exponent=k) \
+        if slope > 0 else (math.inf, 0.0, math.inf)
+    u.t0_std = math.sqrt(v_t0)
     u.p10 = p10
     u.slope0 = slope
     st.sigma = max(rms, 1e-12)
@@ -286,6 +296,7 @@ def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
     if at_end:
         w = max((i - u.i0) // 8, 8)
         st.set_pstar(st.buf.mean(i - w + 1, i + 1))
+        u.atm_var = st.sigma**2 / w
         j = first_below(pv, u.i0, i + 1, st.level)
         if j > i:
             return []
@@ -299,6 +310,7 @@ def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
     if drop < 0.5 * u.dp_guess:
         return on_abort(st, i)
     st.set_pstar(level)
+    u.atm_var = st.sigma**2 / w
     j = first_below(pv, u.i0, i + 1, st.level)
     if j > i:
         return on_abort(st, i)
@@ -319,17 +331,17 @@ def complete_crossing(st: EstimatorState, i: int, settle_index: int | None = Non
     tw, pw = tv[j_lo:n], pv[j_lo:n]
     if tw.size < 5:
         tw, pw = tv[max(u.i0, n - 5):n], pv[max(u.i0, n - 5):n]
-    t_cross, t_std, _slope = crossing_fit(tw, pw, u.pstar)
+    t_cross, t_std, slope = crossing_fit(tw, pw, u.pstar)
     # second pass on a window symmetric in time about the first estimate: the ends of
     # the first window were chosen by noisy sample values, which biases the fit
     h = float(tv[n - 1]) - t_cross
     if h > 0:
         k0 = int(np.searchsorted(tv, t_cross - h))
         if n - k0 >= 5:
-            t_cross, t_std, _slope = crossing_fit(tv[k0:n], pv[k0:n], u.pstar)
+            t_cross, t_std, slope = crossing_fit(tv[k0:n], pv[k0:n], u.pstar)
     gap = bool(np.any(np.diff(tw) > st.gap_limit)) if tw.size > 1 else False
     k = i if settle_index is None else settle_index
-    res = crossing_result(st, k, t_cross, t_std, gap)
+    res = crossing_result(st, k, t_cross, tau_sigma(u, t_std, slope), gap)
     u.pending = res
     st.mode = TAIL
     u.tail_low = math.inf
@@ -340,11 +352,30 @@ def complete_crossing(st: EstimatorState, i: int, settle_index: int | None = Non
     return [res]
 
 
-def crossing_result(st: EstimatorState, i: int, t_cross: float, t_std: float, gap: bool
-                    ) -> UnloadResult:
-    """Result of an unload from its crossing instant t_cross and its 1-sigma t_std [s]:
-    eq 39, the isentropic inversion and the model inversion with their budgets (prepared
-    half way to p*, :mod:`.crossing`); completed at index i."""
+def tau_sigma(u: UnloadState, t_std: float, slope: float) -> float:
+    """1-sigma of tau_exp = t_cross - t0 [s] from the crossing fit's t_std [s] and its
+    slope at p* [signal units/s], with the start fit's (co)variance of (t0, p10).
+
+    p* = p_atm + P_STAR_FRACTION (p10 - p_atm) is made from the fitted p10 (and p_atm
+    when it is the final plateau's mean), so the crossing moves by dp*/slope with them;
+    a plateau fitted low also starts the fall later (t0 and p10 are correlated), which
+    offsets part of that move: tau's variance is the gradient (-1, f/slope) through
+    the start fit's covariance, not the sum of the two sigmas in quadrature.
+    """
+    if not (slope != 0.0 and math.isfinite(slope)):
+        return math.hypot(t_std, u.t0_std)
+    a = P_STAR_FRACTION / slope
+    var = (t_std * t_std + u.t0_std * u.t0_std - 2.0 * a * u.t0_p10_cov
+           + a * a * u.p10_var + ((1.0 - P_STAR_FRACTION) / slope) ** 2 * u.atm_var)
+    return math.sqrt(var) if var >= 0.0 else math.hypot(t_std, u.t0_std)
+
+
+def crossing_result(st: EstimatorState, i: int, t_cross: float, tau_std: float,
+                    gap: bool) -> UnloadResult:
+    """Result of an unload from its crossing instant t_cross [s] and tau_exp's 1-sigma
+    tau_std [s] (:func:`tau_sigma`): eq 39, the isentropic inversion and the model
+    inversion with their budgets (prepared half way to p*, :mod:`.crossing`); completed
+    at index i."""
     s, u = st.settings, st.unload
     plan = u.plan
     if plan is None:  # p* found late (p_atm from the final plateau): prepared now
@@ -352,7 +383,6 @@ def crossing_result(st: EstimatorState, i: int, t_cross: float, t_std: float, ga
                              p_star=st.to_pa(u.pstar), tau_ref=t_cross - u.t0)
     p10, p_atm, p_star = plan.p10, plan.p_atm, plan.p_star
     tau = t_cross - u.t0
-    tau_std = math.hypot(t_std, u.t0_std)
     est = crossing_estimate(plan, tau, tau_std)
     status, text, quality = "ok", "p* crossing found", 1.0
     if est.problem is not None:
