@@ -437,11 +437,14 @@ def fitted_tau_exp(cfg: RigConfig, t_guess: float) -> float:
         # refine on a fine grid around the first estimate (cubic interpolation error of
         # the coarse grid is ~1e-5 relative)
         tt = np.concatenate(([0.0], np.linspace(0.98 * tc, 1.02 * tc, 801)))
-        pp, _ = discharge(cfg, tt, 0.0, rtol=1e-10)
+        try:
+            pp, _ = discharge(cfg, tt, 0.0, rtol=1e-10)
+        except ArithmeticError:  # the integrator's step budget at the fine tolerance
+            return tc
         k = np.flatnonzero(pp[1:] < ps)
         if k.size == 0 or k[0] == 0:
             return tc
         j = int(k[0]) + 1
         return float(tt[j - 1] + (pp[j - 1] - ps) / (pp[j - 1] - pp[j]) * (tt[j] - tt[j - 1]))
-    except ValueError:
+    except (ValueError, ArithmeticError):  # no crossing of the fitted model computable
         return math.nan
