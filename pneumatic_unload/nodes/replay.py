@@ -331,8 +331,16 @@ def main(argv: list[str] | None = None) -> int:
                 if not plan.loop:
                     break
             for topic in pubs:
+                if not rclpy.ok():  # interrupted: the context is gone, nothing to wait for
+                    break
                 pubs[topic].wait_for_all_acked(Duration(seconds=FINAL_ACK_TIMEOUT))
         except (KeyboardInterrupt, ExternalShutdownException):
+            log.info("interrupted")
+        except RCLError:
+            # SIGINT shuts the context down between a check of rclpy.ok() and a call on a
+            # publisher (the call then fails with "context is invalid"): an interruption
+            if rclpy.ok():
+                raise
             log.info("interrupted")
         except BagError as err:
             print(f"replay: cannot read bag {plan.bag}: {err}", file=sys.stderr, flush=True)
