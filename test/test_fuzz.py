@@ -296,3 +296,14 @@ def test_the_fitted_models_crossing_within_the_integrators_budget(tmp_path):
             "damage": [tuple(x) for x in json.loads(str(d["damage_json"]))],
             "volume": float(d["volume"]), "variance": float(d["variance"])}
     fio.prop_bag(tmp_path, case)
+
+
+def test_a_crossing_without_an_instant_still_ends_its_tail(tmp_path):
+    # bench_fuzz (bag), session 9: a 5 kHz bag of a 60 mL tank whose crossing window
+    # closed with no crossing instant (tau_exp NaN, 'bad_data'): the tail's level test
+    # took int(NaN) (ValueError out of `analyze`). It takes the time the crossing window
+    # took to close then.
+    d = _fuzz_data("fuzz_bag_tail_nan_tau")
+    case = {"t_ns": d["t_ns"], "p": d["p"], "config": None, "settings": None, "damage": [],
+            "volume": float(d["volume"]), "variance": float(d["variance"])}
+    fio.prop_bag(tmp_path, case)

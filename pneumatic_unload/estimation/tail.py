@@ -80,8 +80,16 @@ class FinalFit:
 
 def _flat_tail(st: EstimatorState, cs: np.ndarray, k: int | np.ndarray, tau: float
                ) -> np.bool_ | np.ndarray:
-    """:func:`~.decisions.flat` with the current unload's start, p10 and noise."""
+    """:func:`~.decisions.flat` with the current unload's start, p10 and noise; ``tau``
+    [s] the crossing's tau_exp, or, when that is not finite (a 'bad_data' crossing with no
+    crossing instant), the time from the start to the sample that closed the crossing
+    window."""
     u = st.unload
+    if not math.isfinite(tau):
+        res = u.pending
+        tau = res.t_complete - u.t0 if res is not None else 0.0
+        if not (math.isfinite(tau) and tau > 0.0):
+            tau = 0.0
     return flat(cs, k, i0=u.i0, tau=tau, dt_nominal=st.dt_nominal, p10=u.p10,
                 sigma=st.sigma)
 
