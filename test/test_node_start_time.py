@@ -98,6 +98,47 @@ def test_opening_start_core_refuses_what_it_cannot_use() -> None:
 rclpy = pytest.importorskip("rclpy")
 
 
+def _bag(path: Path, t: np.ndarray, p: np.ndarray) -> Path:
+    from pneumatic_unload.io.bag import BagRecorder
+
+    with BagRecorder(path) as rec:
+        rec.write_pressures(np.round(t * 1e9).astype(np.int64), p)
+    return path
+
+
+def _offline(venv_python: Path, bag: Path, start: float) -> list[dict[str, Any]]:
+    cli = [str(venv_python), "-m", "pneumatic_unload.cli", "analyze", str(bag), "--json",
+           "--volume", "1e-3", "--atmosphere", str(P_ATM), "--start-time", repr(start),
+           "--initial-pressure", "7e5"]
+    out = subprocess.run(cli, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    published: list[dict[str, Any]] = json.loads(out.stdout)["published"]
+    assert [r["final"] for r in published] == [False, True]
+    return published
+
+
+def _observer() -> tuple[Any, Any, Any]:
+    """(context, node, executor) of an observer node in its own rclpy context."""
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node(f"observer_{time.time_ns()}", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    return ctx, node, ex
+
+
+def _assert_same(got: list[Any], offline: list[dict[str, Any]]) -> None:
+    """Each live estimate equals its offline one on every KEY (1e-9 relative)."""
+    for live, off in zip(got, offline, strict=True):
+        for key in KEYS:
+            a, b = getattr(live, key), off[key]
+            assert (b is None and math.isnan(a)) or a == pytest.approx(b, rel=1e-9, abs=0.0), \
+                key
+
+
 def test_start_time_mode_over_dds_equals_analyze_on_the_bag(tmp_path: Path,
                                                             venv_python: Path) -> None:
     """Two processes over real DDS: the replay node publishes a bag, the estimator in
@@ -105,29 +146,14 @@ def test_start_time_mode_over_dds_equals_analyze_on_the_bag(tmp_path: Path,
     the record settles; both equal ``analyze --start-time`` on the bag."""
     from nodeproc import NodeProcess, spin_until
     from pneumatic_unload_msgs.msg import UnloadEstimate
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
 
-    from pneumatic_unload.io.bag import BagRecorder
     from pneumatic_unload.nodes.common import LATCHED_QOS
 
     t, p, start = _record()
-    bag = tmp_path / "opening"
-    with BagRecorder(bag) as rec:
-        rec.write_pressures(np.round(t * 1e9).astype(np.int64), p)
-    cli = [str(venv_python), "-m", "pneumatic_unload.cli", "analyze", str(bag), "--json",
-           "--volume", "1e-3", "--atmosphere", str(P_ATM), "--start-time", repr(start),
-           "--initial-pressure", "7e5"]
-    out = subprocess.run(cli, capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    offline = json.loads(out.stdout)["published"]
-    assert [r["final"] for r in offline] == [False, True]
+    bag = _bag(tmp_path / "opening", t, p)
+    offline = _offline(venv_python, bag, start)
 
-    ctx = Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node(f"observer_{time.time_ns()}", context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
+    ctx, node, ex = _observer()
     got: list[Any] = []
     node.create_subscription(UnloadEstimate, "/estimator/estimate", got.append, LATCHED_QOS)
     est = NodeProcess("estimator", {"volume": 1e-3, "atmosphere": P_ATM, "start_time": start,
@@ -149,31 +175,8 @@ def test_start_time_mode_over_dds_equals_analyze_on_the_bag(tmp_path: Path,
         rclpy.try_shutdown(context=ctx)
     assert code == 0
     assert len(got) == 2 and "curve-fit" in got[1].method and "given-start" in got[0].method
-    for live, off in zip(got, offline, strict=True):
-        for key in KEYS:
-            a, b = getattr(live, key), off[key]
-            assert (b is None and math.isnan(a)) or a == pytest.approx(b, rel=1e-9, abs=0.0), \
-                key
+    _assert_same(got, offline)
     assert got[1].conductance_model == pytest.approx(8e-9, rel=0.02)
-
-
-def _bag(path: Path, t: np.ndarray, p: np.ndarray) -> Path:
-    from pneumatic_unload.io.bag import BagRecorder
-
-    with BagRecorder(path) as rec:
-        rec.write_pressures(np.round(t * 1e9).astype(np.int64), p)
-    return path
-
-
-def _offline(venv_python: Path, bag: Path, start: float) -> list[dict[str, Any]]:
-    cli = [str(venv_python), "-m", "pneumatic_unload.cli", "analyze", str(bag), "--json",
-           "--volume", "1e-3", "--atmosphere", str(P_ATM), "--start-time", repr(start),
-           "--initial-pressure", "7e5"]
-    out = subprocess.run(cli, capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    published: list[dict[str, Any]] = json.loads(out.stdout)["published"]
-    assert [r["final"] for r in published] == [False, True]
-    return published
 
 
 def test_start_time_changed_at_run_time_analyses_the_next_record(
@@ -187,8 +190,6 @@ def test_start_time_changed_at_run_time_analyses_the_next_record(
     from nodeproc import NodeProcess, spin_until
     from pneumatic_unload_msgs.msg import UnloadEstimate
     from rcl_interfaces.srv import SetParameters
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from std_msgs.msg import String
 
@@ -199,11 +200,7 @@ def test_start_time_changed_at_run_time_analyses_the_next_record(
     bag_a, bag_b = _bag(tmp_path / "a", ta, pa), _bag(tmp_path / "b", tb, pb)
     offline = _offline(venv_python, bag_a, start_a) + _offline(venv_python, bag_b, start_b)
 
-    ctx = Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node(f"observer_{time.time_ns()}", context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
+    ctx, node, ex = _observer()
     got: list[Any] = []
     settings: list[str] = []
     node.create_subscription(UnloadEstimate, "/estimator/estimate", got.append, LATCHED_QOS)
@@ -251,11 +248,7 @@ def test_start_time_changed_at_run_time_analyses_the_next_record(
         rclpy.try_shutdown(context=ctx)
     assert code == 0
     assert len(got) == 4, [(g.index, g.method) for g in got]
-    for live, off in zip(got, offline, strict=True):
-        for key in KEYS:
-            a, b = getattr(live, key), off[key]
-            assert (b is None and math.isnan(a)) or a == pytest.approx(b, rel=1e-9, abs=0.0), \
-                key
+    _assert_same(got, offline)
     assert got[1].conductance_model == pytest.approx(8e-9, rel=0.02)
     assert got[3].conductance_model == pytest.approx(5e-9, rel=0.02)
 
