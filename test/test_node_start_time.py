@@ -130,6 +130,15 @@ def _observer() -> tuple[Any, Any, Any]:
     return ctx, node, ex
 
 
+def _close(est: Any, ctx: Any, node: Any, ex: Any) -> int:
+    """Stop the estimator process and the observer; the estimator's exit status."""
+    code: int = est.stop()
+    ex.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown(context=ctx)
+    return code
+
+
 def _assert_same(got: list[Any], offline: list[dict[str, Any]]) -> None:
     """Each live estimate equals its offline one on every KEY (1e-9 relative)."""
     for live, off in zip(got, offline, strict=True):
@@ -169,10 +178,7 @@ def test_start_time_mode_over_dds_equals_analyze_on_the_bag(tmp_path: Path,
         finally:
             rep.stop()
     finally:
-        code = est.stop()
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        code = _close(est, ctx, node, ex)
     assert code == 0
     assert len(got) == 2 and "curve-fit" in got[1].method and "given-start" in got[0].method
     _assert_same(got, offline)
@@ -242,10 +248,7 @@ def test_start_time_changed_at_run_time_analyses_the_next_record(
         replay(bag_b, 4)
         spin_until(node, ex, lambda: False, 0.5)  # nothing more is published
     finally:
-        code = est.stop()
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        code = _close(est, ctx, node, ex)
     assert code == 0
     assert len(got) == 4, [(g.index, g.method) for g in got]
     _assert_same(got, offline)
