@@ -140,38 +140,48 @@ class Budget:
         """JSON-ready: value, combined, expanded (k), parts, largest term, the lines (NaN,
         not applicable, as None). One pass over the terms, the sums in the order of
         :attr:`combined_std` and :meth:`part_std` (it is on the live crossing's path)."""
-        isfinite = math.isfinite
-        total, parts = 0.0, {"A": 0.0, "B": 0.0, "model": 0.0}
-        largest, big = "", -math.inf
-        lines = []
-        for t in self.terms:
-            std = t.std
-            if isfinite(std):
-                v = std**2
-                total += v
-                parts[t.kind] = parts.get(t.kind, 0.0) + v
-                key = std
-            else:
-                key = -1.0
-            if key > big:
-                largest, big = t.name, key
-            value, input_std = t.value, t.input_std
-            lines.append({
-                "name": t.name, "kind": t.kind,
-                "value": value if not isinstance(value, float) or isfinite(value) else None,
-                "input_std": input_std if isfinite(input_std) else None,
-                "unit": t.unit, "std": std if isfinite(std) else None, "note": t.note})
-        combined = math.sqrt(total)
-        out = {"value": self.value, "combined_std": combined,
-               "expanded": COVERAGE_FACTOR * combined, "coverage_factor": COVERAGE_FACTOR,
-               "type_a_std": math.sqrt(parts["A"]), "type_b_std": math.sqrt(parts["B"]),
-               "model_form_std": math.sqrt(parts["model"]), "largest": largest,
-               "terms": lines}
-        for k in ("value", "combined_std", "expanded", "type_a_std", "type_b_std",
-                  "model_form_std"):
-            if not isfinite(out[k]):
-                out[k] = None
-        return out
+        return _budget_dict(self.value, [(t.name, t.kind, t.std, _line(t))
+                                         for t in self.terms])
+
+
+def _line(t: BudgetTerm) -> dict[str, Any]:
+    """A budget line as :meth:`Budget.to_dict` gives it (NaN as None)."""
+    isfinite = math.isfinite
+    value, input_std, std = t.value, t.input_std, t.std
+    return {"name": t.name, "kind": t.kind,
+            "value": value if not isinstance(value, float) or isfinite(value) else None,
+            "input_std": input_std if isfinite(input_std) else None,
+            "unit": t.unit, "std": std if isfinite(std) else None, "note": t.note}
+
+
+def _budget_dict(value: float, rows: list[tuple[str, str, float, dict[str, Any]]]
+                 ) -> dict[str, Any]:
+    """:meth:`Budget.to_dict` of the lines ``rows`` (name, kind, std [m^3/(s Pa)], the
+    line's dict) of the budget of C = ``value`` [m^3/(s Pa)]."""
+    isfinite = math.isfinite
+    total, parts = 0.0, {"A": 0.0, "B": 0.0, "model": 0.0}
+    largest, big = "", -math.inf
+    for name, kind, std, _d in rows:
+        if isfinite(std):
+            v = std**2
+            total += v
+            parts[kind] = parts.get(kind, 0.0) + v
+            key = std
+        else:
+            key = -1.0
+        if key > big:
+            largest, big = name, key
+    combined = math.sqrt(total)
+    out = {"value": value, "combined_std": combined,
+           "expanded": COVERAGE_FACTOR * combined, "coverage_factor": COVERAGE_FACTOR,
+           "type_a_std": math.sqrt(parts["A"]), "type_b_std": math.sqrt(parts["B"]),
+           "model_form_std": math.sqrt(parts["model"]), "largest": largest,
+           "terms": [r[3] for r in rows]}
+    for k in ("value", "combined_std", "expanded", "type_a_std", "type_b_std",
+              "model_form_std"):
+        if not isfinite(out[k]):
+            out[k] = None
+    return out
 
 
 @dataclass(frozen=True)
@@ -197,6 +207,10 @@ class ScaledBudget:
     ref: Budget
     free: tuple[str, ...]
 
+    def __post_init__(self) -> None:
+        # the reference's lines as dicts, copied and scaled by :meth:`dict_at`
+        object.__setattr__(self, "_lines", [_line(t) for t in self.ref.terms])
+
     def at(self, c: float, given: dict[str, BudgetTerm | None]) -> Budget:
         """The budget of ``c`` [m^3/(s Pa)]: the proportional lines scaled from the reference,
         the free ones as ``given`` (None or absent: the line is left out)."""
@@ -212,6 +226,24 @@ class ScaledBudget:
                 terms.append(BudgetTerm(t.name, t.kind, t.value, t.input_std, t.unit,
                                         t.std * k, t.note))
         return Budget(c, tuple(terms))
+
+    def dict_at(self, c: float, given: dict[str, BudgetTerm | None]) -> dict[str, Any]:
+        """``at(c, given).to_dict()``, the same numbers, without making the scaled terms
+        (the live crossing estimate's path) [m^3/(s Pa)]."""
+        k = abs(c) / abs(self.ref.value)
+        free = self.free
+        rows = []
+        for t, template in zip(self.ref.terms, self._lines, strict=True):
+            if t.name in free:
+                g = given.get(t.name)
+                if g is not None:
+                    rows.append((g.name, g.kind, g.std, _line(g)))
+            else:
+                std = t.std * k
+                line = template.copy()
+                line["std"] = std if math.isfinite(std) else None
+                rows.append((t.name, t.kind, std, line))
+        return _budget_dict(c, rows)
 
 
 def with_terms(d: dict[str, Any], terms: list[BudgetTerm]) -> dict[str, Any]:

@@ -319,7 +319,7 @@ class InversionTable:
             return math.nan, math.nan, math.nan
         c = math.exp(x)
         ends, heat = self._heat  # type: ignore[attr-defined]
-        rel_heat = float(np.interp(x, ends, heat))
+        rel_heat = _interp(x, ends, heat)
         var = (c * dxdy * tau_std / tau) ** 2 + (c * self.rel_b) ** 2 + (c * rel_heat) ** 2
         wall = c * abs(dxdy) * self.rel_wall if math.isfinite(self.rel_wall) else math.nan
         return c, math.sqrt(var), wall
@@ -334,6 +334,21 @@ class InversionTable:
         time tau [s]: the crossing time's relative change (:attr:`rel_wall`) through the
         slope of log C in log t; NaN when adiabatic."""
         return self.lookup(tau, 0.0)[2]
+
+
+def _interp(x: float, xs: list[float], ys: list[float]) -> float:
+    """Piecewise-linear interpolation of (xs ascending, ys) at x, held constant beyond the
+    ends (numpy's interp on a few Python floats, without its per-call cost) [unit of ys]."""
+    if not xs:
+        return math.nan
+    if not x > xs[0]:
+        return ys[0] if x == x else math.nan
+    for k in range(1, len(xs)):
+        if x <= xs[k]:
+            x0, x1 = xs[k - 1], xs[k]
+            return ys[k - 1] + (ys[k] - ys[k - 1]) * ((x - x0) / (x1 - x0)) if x1 > x0 \
+                else ys[k]
+    return ys[-1]
 
 
 def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_star: float,

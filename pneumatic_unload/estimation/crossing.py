@@ -226,12 +226,12 @@ def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> Crossin
         given: dict[str, BudgetTerm | None] = {
             MODEL_TYPE_A: record_term(MODEL_TYPE_A, c_model_std), WALL_TERM: wall,
             MODEL_FORM_TERM: form}
-        bm = plan.model.at(c_model, given) if plan.model is not None else model_budget(
+        bm = plan.model.dict_at(c_model, given) if plan.model is not None else model_budget(
             s, c_model, type_a_std=c_model_std, type_a_name=MODEL_TYPE_A,
             model_form_std=form.std, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
-            atmosphere_measured=s.atmosphere is None, wall_std=wall_std)
-        extra["budget"] = bm.to_dict()
-        c_model_std = bm.combined_std
+            atmosphere_measured=s.atmosphere is None, wall_std=wall_std).to_dict()
+        extra["budget"] = bm
+        c_model_std = _combined(bm)
     return CrossingEstimate(None, c39, c39_std, c_isen, c_model, c_model_std, method, extra)
 
 
@@ -240,11 +240,17 @@ def _eq39(plan: CrossingPlan, c39: float, tau: float, tau_std: float,
     """eq 39's budget into ``extra``; its combined 1-sigma [m^3/(s Pa)]."""
     s = plan.settings
     a = tau_term(c39, tau, tau_std)
-    b = plan.eq39.at(c39, {a.name: a}) if plan.eq39 is not None else eq39_budget(
+    b = plan.eq39.dict_at(c39, {a.name: a}) if plan.eq39 is not None else eq39_budget(
         s, c39, tau=tau, tau_std=tau_std, p10=plan.p10, p_atm=plan.p_atm,
-        p_star=plan.p_star, atmosphere_measured=s.atmosphere is None)
-    extra["budget_eq39"] = b.to_dict()
-    return b.combined_std
+        p_star=plan.p_star, atmosphere_measured=s.atmosphere is None).to_dict()
+    extra["budget_eq39"] = b
+    return _combined(b)
+
+
+def _combined(budget: dict[str, Any]) -> float:
+    """The combined standard uncertainty of a budget dict [m^3/(s Pa)] (None: NaN)."""
+    v = budget["combined_std"]
+    return math.nan if v is None else v
 
 
 def _adiabatic(settings: EstimatorSettings) -> EstimatorSettings:

@@ -1,15 +1,19 @@
 """Small regressions of the detector: noise from first differences, the start (hinge) fit,
-the p* crossing fit and the closing-instant (corner) fit. Times in s, pressures in Pa (or
-the input's signal units: every fit is linear in p)."""
+the p* crossing fit (compiled: ``regression.c``) and the closing-instant (corner) fit. Times
+in s, pressures in Pa (or the input's signal units: every fit is linear in p)."""
 
 from __future__ import annotations
 
+import ctypes
 import math
+from array import array
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
 from pneumatic_unload.estimation.types import FloatArray
+from pneumatic_unload.model.kernel import build
 
 
 def rms_sigma(x: FloatArray) -> float:
@@ -229,6 +233,12 @@ def crossing_fit(t: FloatArray, p: FloatArray, level: float
                  ) -> tuple[float, float, float]:
     """Sub-sample time at which a local quadratic regression of p(t) crosses ``level``.
 
+    The regression is ``pu_crossing_fit`` of ``regression.c`` (compiled, the one
+    implementation: the estimator's crossing window, :func:`crossing_window`, runs the same
+    code): the normal equations of [1, u, u^2] in the centred, scaled time u = (t - tm)/w
+    and the centred pressure, by Cramer's rule; the root nearest the window centre; its
+    standard deviation by the delta method with the residual variance.
+
     Parameters
     ----------
     t, p : ndarray
@@ -242,62 +252,63 @@ def crossing_fit(t: FloatArray, p: FloatArray, level: float
         (crossing time [s], its standard deviation [s], slope at the crossing [Pa/s]);
         (NaN, inf, 0) when the fit is flat (no crossing).
     """
-    if t.size == 0:
-        return math.nan, math.inf, 0.0
-    tm = float(t.sum()) / t.size  # np.mean's dispatch costs more than the sum here
-    # normal equations of [1, u, u^2] in the centred, scaled time u = x / w and the
-    # centred pressure (well conditioned; 3x3 by Cramer's rule: a crossing is published
-    # at the sample that completes it, so no LAPACK call overhead here; the moments from
-    # one product of the 3 x n design matrix with itself and with q)
-    t_first, t_last = float(t[0]), float(t[-1])
-    # the half-width: at an end for sorted stamps (a NaN stamp gives NaN, refused below)
-    w = max(tm - t_first, t_last - tm) if t_last >= t_first \
-        else float(np.abs(t - tm).max())
-    p_ref = float(p.sum()) / p.size
-    if not (w > 1e-12 * max(1.0, abs(tm)) and math.isfinite(w) and math.isfinite(p_ref)):
-        # a window of no duration (stamps closer than a picosecond, or than the float
-        # resolution of the stamps): no slope, no crossing
-        return math.nan, math.inf, 0.0
-    a = np.empty((3, t.size))
-    a[0] = 1.0
-    np.subtract(t, tm, out=a[1])
-    a[1] /= w
-    np.multiply(a[1], a[1], out=a[2])
-    q = p - p_ref
-    mm = (a @ a.T).tolist()
-    b = (a @ q).tolist()
-    m = ((mm[0][0], mm[0][1], mm[0][2]), (mm[1][0], mm[1][1], mm[1][2]),
-         (mm[2][0], mm[2][1], mm[2][2]))
-    sol = solve3(m, (b[0], b[1], b[2]))
-    if sol is None:  # fewer than three distinct instants: no curve through them
-        return math.nan, math.inf, 0.0
-    r = q - np.array(sol) @ a
-    dof = max(p.size - 3, 1)
-    s2 = float(r @ r) / dof
-    x_first, x_last = t_first - tm, t_last - tm
-    c0, c1, c2 = sol[0] + p_ref, sol[1] / w, sol[2] / (w * w)
-    # root of c2 x^2 + c1 x + (c0 - level) nearest the window centre
-    if c1 == 0.0 and c2 == 0.0:  # flat (stuck or degenerate samples): no crossing
-        return math.nan, math.inf, 0.0
-    if abs(c2) < 1e-30 or abs(c2 * (x_last - x_first) ** 2) < 1e-12 * abs(
-            c1 * (x_last - x_first)):
-        xr = (level - c0) / c1 if c1 != 0.0 else math.nan
-    else:
-        disc = c1 * c1 - 4.0 * c2 * (c0 - level)
-        if disc < 0:
-            xr = (level - c0) / c1 if c1 != 0.0 else math.nan
-        else:
-            sq = math.sqrt(disc)
-            r1, r2 = (-c1 + sq) / (2 * c2), (-c1 - sq) / (2 * c2)
-            xr = r1 if abs(r1) < abs(r2) else r2
-    slope = c1 + 2.0 * c2 * xr
-    # delta method: var(f(xr)) / slope^2 with f = c0 + c1 x + c2 x^2, var = s2 g' M^-1 g
-    ur = xr / w
-    g = (1.0, ur, ur * ur)
-    mg = solve3(m, g)
-    var_f = s2 * (g[0] * mg[0] + g[1] * mg[1] + g[2] * mg[2]) if mg is not None else math.inf
-    std = math.sqrt(max(var_f, 0.0)) / abs(slope) if slope != 0 else math.inf
-    return tm + xr, std, slope
+    t = np.ascontiguousarray(t, dtype=np.float64)
+    p = np.ascontiguousarray(p, dtype=np.float64)
+    if t.shape != p.shape:
+        raise ValueError(f"t and p differ in length: {t.size} vs {p.size}")
+    out = np.empty(3)
+    _LIB.pu_crossing_fit(t.size, t.ctypes.data, p.ctypes.data, float(level),
+                         out.ctypes.data)
+    return float(out[0]), float(out[1]), float(out[2])
+
+
+def crossing_window(t: array, p: array, lo: int, n: int, level: float, gap_limit: float
+                    ) -> tuple[float, float, float, bool]:
+    """The streaming estimator's p* crossing, its window closed at index n - 1.
+
+    :func:`crossing_fit` on the samples [lo, n), then again on a window symmetric in time
+    about that first estimate (the ends of the first were chosen by noisy sample values,
+    which biases the fit), in one compiled call (``pu_crossing_window``: the crossing
+    estimate is published at the sample that completes it).
+
+    Parameters
+    ----------
+    t, p : array.array of float64
+        The estimator's buffer: stamps [s] and samples [Pa or signal units] from index 0.
+    lo, n : int
+        The first window [lo, n) [-] (0 <= lo < n <= len(t)).
+    level : float
+        The crossing level p* [Pa or signal units].
+    gap_limit : float
+        Largest stamp step that is not a gap [s].
+
+    Returns
+    -------
+    tuple
+        (crossing time [s], its standard deviation [s], slope at the crossing [Pa/s or
+        signal units/s], whether a stamp step of the first window exceeds ``gap_limit``).
+    """
+    if not 0 <= lo < n <= min(len(t), len(p)):
+        raise ValueError(f"crossing window [{lo}, {n}) outside the {len(t)} samples")
+    out = array("d", _OUT_BYTES)
+    _LIB.pu_crossing_window(t.buffer_info()[0], p.buffer_info()[0], lo, n, level,
+                            gap_limit, out.buffer_info()[0])
+    return out[0], out[1], out[2], out[3] != 0.0
+
+
+def _load() -> ctypes.CDLL:
+    lib = ctypes.CDLL(str(build(source=Path(__file__).with_name("regression.c"))))
+    dbl, i64, ptr = ctypes.c_double, ctypes.c_long, ctypes.c_void_p
+    lib.pu_crossing_fit.restype = None
+    lib.pu_crossing_fit.argtypes = [i64, ptr, ptr, dbl, ptr]
+    lib.pu_crossing_window.restype = None
+    lib.pu_crossing_window.argtypes = [ptr, ptr, i64, i64, dbl, dbl, ptr]
+    return lib
+
+
+_LIB = _load()
+#: Initial bytes of :func:`crossing_window`'s output (four doubles).
+_OUT_BYTES = bytes(32)
 
 
 def corner_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float

@@ -27,7 +27,12 @@ from pneumatic_unload.estimation.decisions import (
 )
 from pneumatic_unload.estimation.reduction import reduce_due, reduce_unload, window_start
 from pneumatic_unload.estimation.refine import needs_model
-from pneumatic_unload.estimation.regression import crossing_fit, hinge_cov, hinge_fit, rms_sigma
+from pneumatic_unload.estimation.regression import (
+    crossing_window,
+    hinge_cov,
+    hinge_fit,
+    rms_sigma,
+)
 from pneumatic_unload.estimation.sse import abort_result, on_abort
 from pneumatic_unload.estimation.state import TAIL, EstimatorState, UnloadState
 from pneumatic_unload.estimation.tail import finish_tail
@@ -323,23 +328,16 @@ def complete_crossing(st: EstimatorState, i: int, settle_index: int | None = Non
     result, then the tail (``settle_index``: the tail already settled there)."""
     n = i + 1
     u = st.unload
-    tv, pv = st.buf.views(n)
-    lvl_hi = u.pstar + u.half
+    buf = st.buf
     # last sample above the upper bound before i
     i0 = max(u.i0, 0)  # negative: the unload's first samples were reduced (.reduction)
-    j_lo = max(last_above(pv, i0, n, lvl_hi), i0)
-    tw, pw = tv[j_lo:n], pv[j_lo:n]
-    if tw.size < 5:
-        tw, pw = tv[max(u.i0, n - 5):n], pv[max(u.i0, n - 5):n]
-    t_cross, t_std, slope = crossing_fit(tw, pw, u.pstar)
-    # second pass on a window symmetric in time about the first estimate: the ends of
-    # the first window were chosen by noisy sample values, which biases the fit
-    h = float(tv[n - 1]) - t_cross
-    if h > 0:
-        k0 = int(np.searchsorted(tv, t_cross - h))
-        if n - k0 >= 5:
-            t_cross, t_std, slope = crossing_fit(tv[k0:n], pv[k0:n], u.pstar)
-    gap = bool(np.any(np.diff(tw) > st.gap_limit)) if tw.size > 1 else False
+    lo = max(last_above(np.frombuffer(buf.p, dtype=float), i0, n, u.pstar + u.half), i0)
+    if n - lo < 5:
+        lo = max(u.i0, n - 5)
+        lo = max(lo + n, 0) if lo < 0 else lo  # as a slice's start
+    # the fit, then again on a window symmetric in time about its estimate (the ends of the
+    # first window were chosen by noisy sample values, which biases the fit), compiled
+    t_cross, t_std, slope, gap = crossing_window(buf.t, buf.p, lo, n, u.pstar, st.gap_limit)
     k = i if settle_index is None else settle_index
     res = crossing_result(st, k, t_cross, tau_sigma(u, t_std, slope), gap)
     u.pending = res

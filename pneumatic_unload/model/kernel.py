@@ -82,26 +82,32 @@ class KernelBuildError(RuntimeError):
     """The C kernel could not be compiled or loaded (no C compiler, no writable folder)."""
 
 
-def library_name() -> str:
-    """File name of the built kernel: hash of the source, the flags and the machine."""
-    h = hashlib.sha256(SOURCE.read_bytes())
+def library_name(source: Path | None = None) -> str:
+    """File name of the library built from ``source`` (default: ``kernel.c``): its stem and
+    the hash of the source, the flags and the machine."""
+    source = SOURCE if source is None else source
+    h = hashlib.sha256(source.read_bytes())
     h.update(" ".join(CFLAGS).encode())
     h.update(platform.machine().encode())
-    return f"pneumatic_unload_kernel-{h.hexdigest()[:16]}.so"
+    return f"pneumatic_unload_{source.stem}-{h.hexdigest()[:16]}.so"
 
 
-def library_dirs() -> list[Path]:
-    """Folders searched (and written, first writable one) for the built kernel."""
+def library_dirs(source: Path | None = None) -> list[Path]:
+    """Folders searched (and written, first writable one) for the library built from
+    ``source`` (default: ``kernel.c``)."""
     env = os.environ.get("PNEUMATIC_UNLOAD_KERNEL_DIR")
     if env:
         return [Path(env)]
     cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return [SOURCE.parent / "__pycache__", cache / "pneumatic_unload"]
+    return [(SOURCE if source is None else source).parent / "__pycache__",
+            cache / "pneumatic_unload"]
 
 
-def build(folder: Path | None = None) -> Path:
-    """Compile ``kernel.c`` into ``folder`` (default: the first writable of
-    :func:`library_dirs`) and return the library's path; nothing to do when it exists.
+def build(folder: Path | None = None, source: Path | None = None) -> Path:
+    """Compile ``source`` (default: ``kernel.c``; the package's other C source is the
+    estimator's crossing fit, ``estimation/regression.c``) into ``folder`` (default: the
+    first writable of :func:`library_dirs`) and return the library's path; nothing to do
+    when it exists.
 
     Raises
     ------
@@ -109,18 +115,20 @@ def build(folder: Path | None = None) -> Path:
         No C compiler (``$CC``, ``cc`` or ``gcc``), or the compiler failed, or no folder is
         writable.
     """
-    name = library_name()
-    for d in ([folder] if folder is not None else library_dirs()):
+    source = SOURCE if source is None else source
+    name = library_name(source)
+    dirs = [folder] if folder is not None else library_dirs(source)
+    for d in dirs:
         if (d / name).exists():
             return d / name
     cc = shutil.which(os.environ.get("CC") or "cc") or shutil.which("gcc")
     if not cc:
         raise KernelBuildError(
-            "the discharge model is compiled C (pneumatic_unload/model/kernel.c) and no C "
-            f"compiler was found ({os.environ.get('CC') or 'cc'}, gcc): install gcc (Debian: "
-            "apt install gcc) or set CC")
+            f"the discharge model and the estimator's crossing fit are compiled C ({source})"
+            f" and no C compiler was found ({os.environ.get('CC') or 'cc'}, gcc): install "
+            "gcc (Debian: apt install gcc) or set CC")
     errors = []
-    for d in ([folder] if folder is not None else library_dirs()):
+    for d in dirs:
         try:
             d.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(prefix=".kernel-", suffix=".so", dir=d)
@@ -129,10 +137,10 @@ def build(folder: Path | None = None) -> Path:
             errors.append(f"{d}: {exc}")
             continue
         try:
-            proc = subprocess.run([cc, *CFLAGS, "-o", tmp, str(SOURCE), "-lm"],
+            proc = subprocess.run([cc, *CFLAGS, "-o", tmp, str(source), "-lm"],
                                   capture_output=True, text=True, check=False)
             if proc.returncode != 0:
-                raise KernelBuildError(f"compiling {SOURCE} with {cc} failed:\n"
+                raise KernelBuildError(f"compiling {source} with {cc} failed:\n"
                                        f"{proc.stderr.strip()}")
             os.replace(tmp, d / name)  # atomic: concurrent builders never see half a file
             return d / name

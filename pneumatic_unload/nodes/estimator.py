@@ -166,6 +166,10 @@ class EstimatorNode(Node):
         #: Single samples (FluidPressure input) for the worker: stamp [ns], pressure [Pa],
         #: arrival [s, monotonic].
         self._samples: deque[tuple[int, float, float]] = deque()
+        #: Stamp offsets of a PressureBlock [ns] by (size, sample period [s]).
+        self._offsets: dict[tuple[int, float], np.ndarray] = {}
+        #: A fresh UnloadEstimate made ahead of the next publication.
+        self._spare = [UnloadEstimate()]
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._frame = self._p("frame_id")
@@ -294,9 +298,16 @@ class EstimatorNode(Node):
             self._diagnose(_WARN, f"pressure block with sample_period {period!r} ignored")
             return
         p = np.asarray(msg.pressure, dtype=float)
-        # the stamps of the per-sample path, ns0 + round(k T 1e9), for the whole block
-        ns = ns0 + np.round(np.arange(p.size) * period * 1e9).astype(np.int64)
-        self._feed(ns, p, now)  # the core takes the block vectorised
+        # the stamps of the per-sample path, ns0 + round(k T 1e9), for the whole block (the
+        # offsets kept for the next block of the same size and period)
+        key = (p.size, period)
+        offsets = self._offsets.get(key)
+        if offsets is None:
+            if len(self._offsets) > 8:
+                self._offsets.clear()
+            offsets = self._offsets[key] = np.round(
+                np.arange(p.size) * period * 1e9).astype(np.int64)
+        self._feed(ns0 + offsets, p, now)  # the core takes the block vectorised
 
     def _on_temperature(self, msg: Temperature) -> None:
         t = msg.temperature + 273.15
@@ -447,13 +458,18 @@ class EstimatorNode(Node):
         self._report()
 
     def _publish_result(self, r: UnloadResult, arrived: float) -> None:
-        msg = fill_estimate(self._UnloadEstimate(), r, self._frame or "tank")
+        try:  # a message made ahead: its construction is not on the estimate's latency
+            msg = self._spare.pop()
+        except IndexError:
+            msg = self._UnloadEstimate()
+        fill_estimate(msg, r, self._frame or "tank")
         try:
             self._pub_est.publish(msg)
         except Exception as exc:
             self._diagnose(_ERROR, f"could not publish the estimate: {exc}")
         (self.final_latencies if r.final else self.latencies).append(
             time.monotonic() - arrived)
+        self._spare.append(self._UnloadEstimate())
         self._keep(r)
         if r.status in ("ok", "aborted_sse"):
             why = (f"unload {r.index}: C={r.conductance:.4g} m^3/(s Pa) (eq 39), "
