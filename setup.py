@@ -10,8 +10,9 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
-    # the model's C kernel: compiled with the system's cc on first use (model/kernel.py)
-    package_data={f"{PACKAGE}.model": ["kernel.c"]},
+    # the model's C kernel and the estimator's crossing fit: compiled with the system's cc
+    # on first use (model/kernel.py)
+    package_data={f"{PACKAGE}.model": ["kernel.c"], f"{PACKAGE}.estimation": ["regression.c"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

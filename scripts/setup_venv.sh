@@ -53,9 +53,10 @@ if [ "$(cat "$VENV/.pkg-installed" 2>/dev/null)" != "$PKG_HASH" ]; then
     | { grep -v "is ignored: it is neither a file nor a directory" || true; }
   echo "$PKG_HASH" > "$VENV/.pkg-installed"
 fi
-# The model's C kernel (pneumatic_unload/model/kernel.c), compiled once with cc: importing
-# the model does it too, but ahead of time no test process races to build it.
-"$VPY" -c "from pneumatic_unload.model import kernel; kernel.build()" \
+# The model's C kernel (pneumatic_unload/model/kernel.c) and the estimator's crossing fit
+# (estimation/regression.c), compiled once with cc: importing them does it too, but ahead
+# of time no test process races to build them.
+"$VPY" -c "from pneumatic_unload.model import kernel; kernel.build(); import pneumatic_unload.estimation.regression" \
   || { echo "[setup] building the model kernel failed (is gcc installed?)" >&2; exit 1; }
 "$VPY" -c "import rclpy, pneumatic_unload, pneumatic_unload_msgs.msg" \
   || { echo "[setup] import check failed" >&2; exit 1; }
