@@ -84,10 +84,22 @@ class SampleBuffer:
         """Store a block of samples (t [s], p [signal units]) with the same sums as
         :meth:`append` one by one (cumulative sums in the same order)."""
         prev = self.p[-1] if self.p else float(p[0])
-        d = np.diff(np.concatenate(([prev], p)))
+        n = p.size
+        # [cq[-1], d0^2, d1^2, ...] with d the first differences from prev, summed in place
+        # (np.diff and np.concatenate cost more than the arithmetic on a live block)
+        q = np.empty(n + 1)
+        q[0] = self.cq[-1]
+        q[1] = p[0] - prev
+        np.subtract(p[1:], p[:-1], out=q[2:])
+        np.multiply(q[1:], q[1:], out=q[1:])
+        np.cumsum(q, out=q)
+        s = np.empty(n + 1)
+        s[0] = self.cs[-1]
+        s[1:] = p
+        np.cumsum(s, out=s)
         # frombytes: a memcpy (array.extend would iterate element by element)
-        self.cq = _extended(self.cq, np.cumsum(np.concatenate(([self.cq[-1]], d * d)))[1:])
-        self.cs = _extended(self.cs, np.cumsum(np.concatenate(([self.cs[-1]], p)))[1:])
+        self.cq = _extended(self.cq, q[1:])
+        self.cs = _extended(self.cs, s[1:])
         self.t = _extended(self.t, np.ascontiguousarray(t, dtype=np.float64))
         self.p = _extended(self.p, np.ascontiguousarray(p, dtype=np.float64))
 

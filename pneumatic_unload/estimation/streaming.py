@@ -215,18 +215,26 @@ class StreamingEstimator:
         st = self._st
         # vectorised validity: finite, each stamp at least MIN_STAMP_STEP after the one
         # before (the last accepted stamp for the first): then the steps are the gaps too
-        d = np.diff(t, prepend=st.last_t)
-        if not ((d >= MIN_STAMP_STEP).all() and np.isfinite(p).all()
+        # (np.diff(t, prepend=st.last_t) without its per-call cost: on the live crossing's
+        # path, where the first numpy call after an idle wait pays for cold caches)
+        d = np.empty(t.size)
+        d[0] = t[0] - st.last_t
+        np.subtract(t[1:], t[:-1], out=d[1:])
+        if not (d.min() >= MIN_STAMP_STEP and np.isfinite(p).all()  # a NaN step: not >=
                 and max(abs(float(t[0])), abs(float(t[-1]))) <= MAX_ABS_STAMP):
             return self._push_slow(t, p)
         out: list[UnloadResult] = []
         k, size = 0, t.size
+        longest = d.max()
         while k < size:
             if math.isnan(st.dt_nominal):
                 # sample by sample until the nominal period (and so the gap limit) is known
                 out += self.push(float(t[k]), float(p[k]))
                 k += 1
                 continue
+            if not longest > st.gap_limit:  # no gap in the block
+                out += self._push_fast(t[k:], p[k:])
+                break
             gaps = np.flatnonzero(d[k:] > st.gap_limit)
             if gaps.size and gaps[0] == 0:
                 out += self.push(float(t[k]), float(p[k]))  # diagnoses the gap

@@ -5,6 +5,7 @@ Values in signal units unless stated, times in s, indices in buffer samples.
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -405,7 +406,8 @@ def crossing_result(st: EstimatorState, i: int, t_cross: float, tau_std: float,
         conductance_isentropic=est.conductance_isentropic, quality=quality,
         method=est.method,
         noise_std=abs(st.sigma * s.signal_gain), i_start=u.i0 + shift,
-        i_cross=shift + int(np.searchsorted(st.buf.views(i + 1)[0], t_cross)),
+        i_cross=shift + (bisect.bisect_left(st.buf.t, t_cross, 0, i + 1)
+                         if t_cross == t_cross else i + 1),  # NaN sorts last
         i_complete=i + shift, t_complete=float(st.buf.t[i]))
     st.n_unloads += 1
     return res
