@@ -83,6 +83,9 @@ from pneumatic_unload.testline.live import LiveResults
 
 #: Node states reported on /diagnostics and in the action's feedback.
 STATES = ("waiting", "unloading", "done", "error")
+#: Most queued single samples fed to the core as one block [-] (the queue is drained in
+#: such blocks; a block is the same decisions as its samples one by one).
+MAX_BATCH = 4096
 
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
@@ -153,6 +156,10 @@ class EstimatorNode(Node):
         gc.freeze()
         # live: a node (re)started mid-unload skips that unload (no bogus estimate)
         self._arrived = self._pushed = time.monotonic()  # of the message being fed [s]
+        #: Arrival of each queued single sample being fed [s], and the stream index of the
+        #: first of them [-] (None, -1: a block is being fed).
+        self._arrivals: list[float] | None = None
+        self._base = -1
         try:
             self._est = self._new_core()
         except EstimationError as exc:
@@ -324,15 +331,20 @@ class EstimatorNode(Node):
                     self._pub_settings.publish(String(data=adapters.to_json(self._settings)))
 
     # ------------------------------------------------------------------ the core
-    def _feed(self, ns: Any, p: Any, arrived: float) -> None:
+    def _feed(self, ns: Any, p: Any, arrived: float,
+              arrivals: list[float] | None = None) -> None:
         """Samples into the core (stamps ``ns`` [ns], pressures ``p`` [Pa]: one sample, or
         arrays for a block), the results published at once, final fits to the worker.
-        ``arrived``: monotonic arrival of the message [s]."""
+        ``arrived``: monotonic arrival of the message [s]; ``arrivals``: each sample's
+        [s] when the arrays are single samples queued by the callback (a result's latency
+        is then counted from the arrival of the sample that completed it)."""
         est = self._est
         try:
             with self._lock:
                 prev = est.state
                 self._arrived = arrived
+                self._arrivals = arrivals
+                self._base = est.n_samples if isinstance(est, StreamingEstimator) else -1
                 self._pushed = time.monotonic()
                 if isinstance(p, np.ndarray):  # a PressureBlock
                     if not p.size:
@@ -349,7 +361,7 @@ class EstimatorNode(Node):
             self._restart_core(exc)
             return
         self._last_pressure = p
-        self._last_arrival = arrived
+        self._last_arrival = arrived if arrivals is None else arrivals[-1]
         if not isinstance(est, StreamingEstimator):
             # start-time mode: its results are returned only (the streaming core's are
             # published at their hand-over, _on_core_result)
@@ -361,7 +373,8 @@ class EstimatorNode(Node):
         if not out and state != prev:
             self._on_state(state)
         if jobs:
-            self._fits.extend((job, arrived) for job in jobs)
+            self._fits.extend((job, self._arrival_of(getattr(job, "i_complete", None)))
+                              for job in jobs)
             self._wake.set()
         if est.diagnostics.total > self._n_diag:
             for dg in est.diagnostics.since(self._n_diag):
@@ -385,14 +398,25 @@ class EstimatorNode(Node):
     def _on_core_result(self, r: UnloadResult) -> None:
         """A result completed inside the core's push (the block's later samples not yet
         processed): published now; the core's time to it into :attr:`crossing_push`."""
+        arrived = self._arrival_of(r.i_complete)
         if not r.final:
             self.crossing_push.append(time.monotonic() - self._pushed)
-            self.crossing_pre.append(self._pushed - self._arrived)
+            self.crossing_pre.append(self._pushed - arrived)
         try:
-            self._publish_result(r, self._arrived)
+            self._publish_result(r, arrived)
         except Exception as exc:  # the core's push goes on: report, never fatal
             self._diagnose(_ERROR, f"could not publish unload {r.index}'s result: "
                                    f"{type(exc).__name__}: {exc}")
+
+    def _arrival_of(self, index: int | None) -> float:
+        """Monotonic arrival [s] of the sample of stream index ``index`` [-] in the samples
+        being fed: the message's for a block; for queued single samples their own (a
+        sample ignored as invalid shifts the count: the arrival taken is then an earlier
+        one, never a later one; no index: the first sample's)."""
+        arrivals = self._arrivals
+        if arrivals is None or self._base < 0 or index is None:
+            return self._arrived
+        return arrivals[min(max(index - self._base, 0), len(arrivals) - 1)]
 
     def _end_of_stream(self) -> None:
         """Start-time mode: an unload past p* that has not settled is closed (its final job
@@ -423,8 +447,15 @@ class EstimatorNode(Node):
         samples = self._samples
         while True:
             if samples:
-                while samples:
-                    self._feed(*samples.popleft())
+                # the queued samples as one block: push_block takes the decisions push
+                # takes sample by sample (bit-identical), at a fraction of the cost
+                batch = [samples.popleft() for _ in range(min(len(samples), MAX_BATCH))]
+                if len(batch) == 1:
+                    self._feed(*batch[0])
+                    continue
+                ns, p, arrivals = zip(*batch, strict=True)
+                self._feed(np.array(ns, dtype=np.int64), np.array(p, dtype=float),
+                           arrivals[0], list(arrivals))
                 continue
             if not self._fits:
                 if self._stop.is_set():
