@@ -223,9 +223,24 @@ def confirmed(cs: FloatArray, trigger: int, k: Index, plateau: float, sigma: flo
     return mean < plateau - block_threshold(effective_sigma(sigma, plateau))
 
 
+def _imax(a: Index, b: Index) -> Index:
+    """np.maximum of indices; the builtin on Python ints (one check index: the per-sample
+    path and a block's few checks, where numpy's per-call cost exceeds the arithmetic)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.maximum(a, b)
+    return max(a, b)
+
+
+def _imin(a: Index, b: Index) -> Index:
+    """np.minimum of indices; the builtin on Python ints (see :func:`_imax`)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.minimum(a, b)
+    return min(a, b)
+
+
 def stall_window(span: Index) -> Index:
     """Window of the stall test: a quarter of the unload's span, 32..8192 [-]."""
-    return np.minimum(np.maximum(32, span // 4), 8192)
+    return _imin(_imax(32, span // 4), 8192)
 
 
 def stalled(cs: FloatArray, tv: FloatArray, k: Index, *, i0: int, sigma: float,
@@ -240,11 +255,13 @@ def stalled(cs: FloatArray, tv: FloatArray, k: Index, *, i0: int, sigma: float,
     span = k - i0
     w = stall_window(span)
     ok = (slope0 > 0) & (span >= 2 * w)
-    a = (cs[np.maximum(k - w + 1, 0)] - cs[np.maximum(k - 2 * w + 1, 0)]) / w
-    b = (cs[k + 1] - cs[np.maximum(k - w + 1, 0)]) / w
-    dt = tv[k] - tv[np.maximum(k - w, 0)]
+    mid = _imax(k - w + 1, 0)
+    a = (cs[mid] - cs[_imax(k - 2 * w + 1, 0)]) / w
+    b = (cs[k + 1] - cs[mid]) / w
+    dt = tv[k] - tv[_imax(k - w, 0)]
     drop = a - b
-    se = sigma * np.sqrt(2.0 / w)
+    # w >= 32: math.sqrt and np.sqrt are both correctly rounded
+    se = sigma * (np.sqrt(2.0 / w) if isinstance(w, np.ndarray) else math.sqrt(2.0 / w))
     return ok & (drop < 0.05 * slope0 * dt) & (drop < 4.0 * se)
 
 
@@ -302,7 +319,7 @@ def stuck_run(cq: FloatArray, k: Index, *, first: int) -> Flag:
     from the prefix sums cq [signal units^2]): a stuck transducer, when the signal had noise
     before. ``first``: the earliest index the run may start at (the trigger) [-]."""
     lo = k - STUCK_RUN + 1
-    return (lo >= first) & (cq[k + 1] - cq[np.maximum(lo + 1, 0)] == 0.0)
+    return (lo >= first) & (cq[k + 1] - cq[_imax(lo + 1, 0)] == 0.0)
 
 
 def settle_window(k: Index, origin: int) -> Index:

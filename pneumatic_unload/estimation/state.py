@@ -14,6 +14,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.buffer import SampleBuffer
 from pneumatic_unload.estimation.decisions import (
@@ -246,7 +248,8 @@ class EstimatorState:
         noisy as its pre-step one; only when that plateau had noise (a noiseless, quantised
         signal may repeat a value)."""
         u = self.unload
-        return stuck_run(self.buf.sums()[1], k, first=u.trigger) & u.noisy
+        cq = self.buf.sums()[1] if isinstance(k, np.ndarray) else self.buf.cq
+        return stuck_run(cq, k, first=u.trigger) & u.noisy
 
     def diag(self, level: str, message: str, t: float) -> None:
         """Record a diagnostic ('ok', 'warn', 'error') at sample time t [s]."""

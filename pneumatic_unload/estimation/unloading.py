@@ -205,8 +205,11 @@ def prepare_crossing(st: EstimatorState, i: int) -> list[UnloadResult]:
 def stalled_at(st: EstimatorState, k: int | np.ndarray) -> np.bool_ | np.ndarray:
     """:func:`~.decisions.stalled` with the current unload's start, noise and slope."""
     u = st.unload
-    tv, _pv = st.buf.views()
-    cs, _cq = st.buf.sums()
+    buf = st.buf
+    if isinstance(k, np.ndarray):
+        tv, cs = buf.views()[0], buf.sums()[0]
+    else:  # one index: the buffers themselves (the same doubles, no views made)
+        tv, cs = buf.t, buf.cs
     return stalled(cs, tv, k, i0=u.i0, sigma=st.sigma, slope0=u.slope0)
 
 
@@ -250,14 +253,28 @@ def step_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
     return []
 
 
+#: Most check indices of a scan taken one at a time (a live block of 100 samples holds one
+#: or two; numpy's per-call cost on so few exceeds the arithmetic) [-].
+FEW_CHECKS = 4
+
+
 def scan_unloading(st: EstimatorState, i: int, end: int) -> int:
     """Next index in [i, end) where :func:`step_unloading` decides something (end: none);
     only while p* is known or the start not yet refined."""
     pv = np.frombuffer(st.buf.p, dtype=float)
     j = first_below(pv, i, end, st.level)
-    ks = check_indices(st.next_check, min(j, end))
-    if ks.size == 0:
+    checks = range(st.next_check, min(j, end), PERIOD)
+    if len(checks) == 0:
         return j
+    if len(checks) <= FEW_CHECKS:  # one at a time, as the step takes them
+        refined = st.unload.refined
+        for k in checks:
+            if st.stuck(k) or (refined and (stalled_at(st, k) or reduce_due(st, k))):
+                st.next_check = k
+                return k
+        st.next_check = checks[-1] + PERIOD
+        return j
+    ks = check_indices(st.next_check, min(j, end))
     event = st.stuck(ks)
     if st.unload.refined:
         event = event | stalled_at(st, ks) | reduce_due(st, ks)
