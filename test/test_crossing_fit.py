@@ -19,7 +19,7 @@ def _reference_fit(t: np.ndarray, p: np.ndarray, level: float) -> tuple[float, f
     nearest the centre, its sigma by the delta method with the residual variance."""
     tm = t.mean()
     x = t - tm
-    coef, res, *_ = np.polyfit(x, p, 2, full=True)
+    coef = np.polyfit(x, p, 2)
     c2, c1, c0 = coef
     roots = np.roots([c2, c1, c0 - level])
     roots = roots[np.isreal(roots)].real
@@ -65,10 +65,17 @@ def test_degenerate_windows_give_no_crossing() -> None:
         crossing_fit(t, t[:5], 1.0)
 
 
-def _reference_window(t: np.ndarray, p: np.ndarray, lo: int, n: int, level: float,
-                      gap_limit: float) -> tuple[float, float, float, bool]:
-    """The two passes as the estimator wrote them in numpy before they were compiled."""
+def _reference_window(t: np.ndarray, p: np.ndarray, i0: int, n: int, upper: float,
+                      fallback: int, level: float, gap_limit: float
+                      ) -> tuple[float, float, float, bool, int]:
+    """The window and the two passes as the estimator wrote them in numpy before they
+    were compiled (the window's start from a scan of the whole unload)."""
     tv, pv = t[:n], p[:n]
+    hit = np.flatnonzero(pv[i0:n] > upper)
+    lo = max(i0 + int(hit[-1]) if hit.size else -1, i0)
+    if n - lo < 5:
+        lo = max(fallback, n - 5)
+        lo = max(lo + n, 0) if lo < 0 else lo  # as a slice's start
     tw = tv[lo:n]
     t_cross, t_std, slope = crossing_fit(tw, pv[lo:n], level)
     h = float(tv[n - 1]) - t_cross
@@ -77,10 +84,10 @@ def _reference_window(t: np.ndarray, p: np.ndarray, lo: int, n: int, level: floa
         if n - k0 >= 5:
             t_cross, t_std, slope = crossing_fit(tv[k0:n], pv[k0:n], level)
     gap = bool(np.any(np.diff(tw) > gap_limit)) if tw.size > 1 else False
-    return t_cross, t_std, slope, gap
+    return t_cross, t_std, slope, gap, lo
 
 
-@pytest.mark.parametrize("seed", range(30))
+@pytest.mark.parametrize("seed", range(40))
 def test_crossing_window_is_the_two_pass_fit_bit_for_bit(seed: int) -> None:
     rng = np.random.default_rng(100 + seed)
     total = int(rng.integers(20, 4000))
@@ -90,18 +97,22 @@ def test_crossing_window_is_the_two_pass_fit_bit_for_bit(seed: int) -> None:
         t[total // 2:] += 0.05
     p = 4e5 * np.exp(-(t - 5.0) / (dt * total * 0.5)) + rng.normal(0, 500.0, total)
     n = int(rng.integers(10, total + 1))
-    lo = int(rng.integers(0, n - 5))
-    level = float(p[(lo + n) // 2])
-    got = crossing_window(array("d", t), array("d", p), lo, n, level, 0.01)
-    want = _reference_window(t, p, lo, n, level, 0.01)
-    assert got[:3] == want[:3] or all(math.isnan(a) and math.isnan(b)
-                                      for a, b in zip(got[:1], want[:1], strict=True))
-    assert got[3] == want[3]
+    i0 = int(rng.integers(0, n - 5))
+    level = float(p[(i0 + n) // 2])
+    # an upper level inside the window, above every sample (no window: the fallback), or
+    # just above the last samples (a window of fewer than 5)
+    upper = (level + abs(float(rng.normal(0, 3e3))), float(p.max()) + 1.0,
+             float(p[n - 3:n].max()) - 1e-9)[seed % 3]
+    fallback = (-3, 0, int(rng.integers(-n - 5, n)))[seed % 3 if seed % 2 else 2]
+    got = crossing_window(array("d", t), array("d", p), i0, n, upper, fallback, level, 0.01)
+    want = _reference_window(t, p, i0, n, upper, fallback, level, 0.01)
+    assert got[3:] == want[3:]
+    assert got[:3] == want[:3] or (math.isnan(got[0]) and math.isnan(want[0]))
 
 
 def test_crossing_window_refuses_a_window_outside_the_samples() -> None:
     t = array("d", [0.0, 1.0, 2.0, 3.0])
     with pytest.raises(ValueError, match="outside"):
-        crossing_window(t, t, 2, 9, 1.0, 1.0)
+        crossing_window(t, t, 2, 9, 1.0, 0, 1.0, 1.0)
     with pytest.raises(ValueError, match="outside"):
-        crossing_window(t, t, 3, 3, 1.0, 1.0)
+        crossing_window(t, t, 3, 3, 1.0, 0, 1.0, 1.0)

@@ -1,8 +1,8 @@
 """The crossing estimate prepared half way to p* (issue #10's live latency) gives the numbers
 the formulae give at the crossing: the budgets scaled from a reference C equal the budgets
 computed at the crossing time (their lines are proportional to C at fixed pressures), one
-table lookup equals the inversion and the wall term, and the backward window search finds
-the same sample as a scan of the whole unload."""
+table lookup equals the inversion and the wall term (the crossing window's start against a
+scan of the whole unload: test_crossing_fit)."""
 
 from __future__ import annotations
 
@@ -28,7 +28,6 @@ from pneumatic_unload.estimation.crossing import (
     crossing_estimate,
     plan_crossing,
 )
-from pneumatic_unload.estimation.decisions import last_above
 from pneumatic_unload.estimation.refine import crossing_inversion
 from pneumatic_unload.model import simulate
 
@@ -143,18 +142,6 @@ def test_one_table_lookup_equals_the_inversion_and_the_wall_term() -> None:
         c, sd, wall = table.lookup(float(tau), 1e-4)
         assert (c, sd) == table.invert(float(tau), 1e-4)
         assert wall == table.wall_std(float(tau)) and math.isfinite(wall) and wall > 0
-
-
-def test_last_above_finds_the_sample_a_whole_scan_finds() -> None:
-    rng = np.random.default_rng(3)
-    for _ in range(300):
-        n = int(rng.integers(1, 5000))
-        pv = rng.normal(size=n)
-        lo = int(rng.integers(0, n))
-        level = float(rng.uniform(-1.0, 4.0))
-        hit = np.flatnonzero(pv[lo:n] > level)
-        want = lo + int(hit[-1]) if hit.size else -1
-        assert last_above(pv, lo, n, level) == want
 
 
 def test_a_result_is_handed_over_before_the_rest_of_its_block() -> None:

@@ -79,20 +79,6 @@ def first_below(pv: FloatArray, i: int, hi: int, level: float) -> int:
     return i + int(hit[0]) if hit.size else hi
 
 
-def last_above(pv: FloatArray, lo: int, hi: int, level: float) -> int:
-    """Last index in [lo, hi) whose sample is above ``level``, or -1 [-]: searched back
-    from hi in windows that double (the crossing's window is near hi: its cost does not
-    grow with the length of the unload)."""
-    w = 256
-    while hi > lo:
-        a = max(lo, hi - w)
-        hit = np.flatnonzero(pv[a:hi] > level)
-        if hit.size:
-            return a + int(hit[-1])
-        hi, w = a, 2 * w
-    return -1
-
-
 def nominal_period(tv: FloatArray, n: int) -> float:
     """Nominal sample period: median stamp step of the last 256 of n samples [s]."""
     return float(np.median(np.diff(tv[max(0, n - 256):n])))

@@ -137,14 +137,28 @@ static long search_left(const double *t, long n, double x)
 }
 
 /* The estimator's crossing window, closed at index n - 1 (the first sample below
- * p* - half): the fit on the samples from the last one above p* + half (`lo`, found by the
- * caller), then again on a window symmetric in time about that first estimate (the ends of
- * the first were chosen by noisy sample values), and whether a stamp step of the first
- * window exceeds `gap_limit` [s]. tv, pv: the buffer's stamps [s] and samples from index
- * 0. out: crossing time [s], its standard deviation [s], slope [Pa/s], gap (0 or 1). */
-void pu_crossing_window(const double *tv, const double *pv, long lo, long n, double level,
-                        double gap_limit, double *out)
+ * p* - half). Its first window starts after the last sample above `upper` (p* + half) in
+ * [i0, n) (at i0 when there is none); when that leaves fewer than 5 samples, at `fallback`
+ * (a slice start: negative counts back from n). The fit on that window, then again on a
+ * window symmetric in time about its estimate (the ends of the first were chosen by noisy
+ * sample values), and whether a stamp step of the first window exceeds `gap_limit` [s].
+ * tv, pv: the buffer's stamps [s] and samples from index 0 (at least n of them).
+ * out: crossing time [s], its standard deviation [s], slope [Pa/s], gap (0 or 1), the
+ * first window's start [-]. */
+void pu_crossing_window(const double *tv, const double *pv, long i0, long n, double upper,
+                        long fallback, double level, double gap_limit, double *out)
 {
+    long lo = i0;
+    for (long k = n - 1; k >= i0; k--)
+        if (pv[k] > upper) {
+            lo = k;
+            break;
+        }
+    if (n - lo < 5) {
+        lo = fallback > n - 5 ? fallback : n - 5;
+        if (lo < 0)
+            lo = lo + n > 0 ? lo + n : 0;
+    }
     pu_crossing_fit(n - lo, tv + lo, pv + lo, level, out);
     double h = tv[n - 1] - out[0];
     if (h > 0.0) {
@@ -159,4 +173,5 @@ void pu_crossing_window(const double *tv, const double *pv, long lo, long n, dou
             break;
         }
     out[3] = gap;
+    out[4] = (double)lo;
 }

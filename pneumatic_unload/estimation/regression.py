@@ -262,21 +262,28 @@ def crossing_fit(t: FloatArray, p: FloatArray, level: float
     return float(out[0]), float(out[1]), float(out[2])
 
 
-def crossing_window(t: array, p: array, lo: int, n: int, level: float, gap_limit: float
-                    ) -> tuple[float, float, float, bool]:
+def crossing_window(t: array, p: array, i0: int, n: int, upper: float, fallback: int,
+                    level: float, gap_limit: float) -> tuple[float, float, float, bool, int]:
     """The streaming estimator's p* crossing, its window closed at index n - 1.
 
-    :func:`crossing_fit` on the samples [lo, n), then again on a window symmetric in time
-    about that first estimate (the ends of the first were chosen by noisy sample values,
-    which biases the fit), in one compiled call (``pu_crossing_window``: the crossing
-    estimate is published at the sample that completes it).
+    The first window starts after the last sample above ``upper`` in [i0, n) (at i0 when
+    there is none), or at ``fallback`` when that leaves fewer than 5 samples;
+    :func:`crossing_fit` on it, then again on a window symmetric in time about that first
+    estimate (the ends of the first were chosen by noisy sample values, which biases the
+    fit), in one compiled call (``pu_crossing_window``: the crossing estimate is published
+    at the sample that completes it).
 
     Parameters
     ----------
     t, p : array.array of float64
         The estimator's buffer: stamps [s] and samples [Pa or signal units] from index 0.
-    lo, n : int
-        The first window [lo, n) [-] (0 <= lo < n <= len(t)).
+    i0, n : int
+        The unload's first index and the end of the window (0 <= i0 < n <= len(t)) [-].
+    upper : float
+        The window's upper level, p* + half [Pa or signal units].
+    fallback : int
+        The start of a window of too few samples (a slice start: negative counts back
+        from n) [-].
     level : float
         The crossing level p* [Pa or signal units].
     gap_limit : float
@@ -286,14 +293,15 @@ def crossing_window(t: array, p: array, lo: int, n: int, level: float, gap_limit
     -------
     tuple
         (crossing time [s], its standard deviation [s], slope at the crossing [Pa/s or
-        signal units/s], whether a stamp step of the first window exceeds ``gap_limit``).
+        signal units/s], whether a stamp step of the first window exceeds ``gap_limit``,
+        the first window's start [-]).
     """
-    if not 0 <= lo < n <= min(len(t), len(p)):
-        raise ValueError(f"crossing window [{lo}, {n}) outside the {len(t)} samples")
+    if not 0 <= i0 < n <= min(len(t), len(p)):
+        raise ValueError(f"crossing window [{i0}, {n}) outside the {len(t)} samples")
     out = array("d", _OUT_BYTES)
-    _LIB.pu_crossing_window(t.buffer_info()[0], p.buffer_info()[0], lo, n, level,
-                            gap_limit, out.buffer_info()[0])
-    return out[0], out[1], out[2], out[3] != 0.0
+    _LIB.pu_crossing_window(t.buffer_info()[0], p.buffer_info()[0], i0, n, upper, fallback,
+                            level, gap_limit, out.buffer_info()[0])
+    return out[0], out[1], out[2], out[3] != 0.0, int(out[4])
 
 
 def _load() -> ctypes.CDLL:
@@ -302,13 +310,13 @@ def _load() -> ctypes.CDLL:
     lib.pu_crossing_fit.restype = None
     lib.pu_crossing_fit.argtypes = [i64, ptr, ptr, dbl, ptr]
     lib.pu_crossing_window.restype = None
-    lib.pu_crossing_window.argtypes = [ptr, ptr, i64, i64, dbl, dbl, ptr]
+    lib.pu_crossing_window.argtypes = [ptr, ptr, i64, i64, dbl, i64, dbl, dbl, ptr]
     return lib
 
 
 _LIB = _load()
-#: Initial bytes of :func:`crossing_window`'s output (four doubles).
-_OUT_BYTES = bytes(32)
+#: Initial bytes of :func:`crossing_window`'s output (five doubles).
+_OUT_BYTES = bytes(40)
 
 
 def corner_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float

@@ -22,7 +22,6 @@ from pneumatic_unload.estimation.decisions import (
     first_below,
     flat,
     flat_window,
-    last_above,
     settled_at_end,
     stalled,
 )
@@ -347,15 +346,11 @@ def complete_crossing(st: EstimatorState, i: int, settle_index: int | None = Non
     n = i + 1
     u = st.unload
     buf = st.buf
-    # last sample above the upper bound before i
-    i0 = max(u.i0, 0)  # negative: the unload's first samples were reduced (.reduction)
-    lo = max(last_above(np.frombuffer(buf.p, dtype=float), i0, n, u.pstar + u.half), i0)
-    if n - lo < 5:
-        lo = max(u.i0, n - 5)
-        lo = max(lo + n, 0) if lo < 0 else lo  # as a slice's start
-    # the fit, then again on a window symmetric in time about its estimate (the ends of the
-    # first window were chosen by noisy sample values, which biases the fit), compiled
-    t_cross, t_std, slope, gap = crossing_window(buf.t, buf.p, lo, n, u.pstar, st.gap_limit)
+    # from the last sample above p* + half (u.i0 negative: the unload's first samples were
+    # reduced, .reduction), fitted, then again on a window symmetric in time about the
+    # estimate (the ends of the first window were chosen by noisy sample values), compiled
+    t_cross, t_std, slope, gap, _lo = crossing_window(
+        buf.t, buf.p, max(u.i0, 0), n, u.pstar + u.half, u.i0, u.pstar, st.gap_limit)
     k = i if settle_index is None else settle_index
     res = crossing_result(st, k, t_cross, tau_sigma(u, t_std, slope), gap)
     u.pending = res
