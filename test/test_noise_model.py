@@ -17,7 +17,7 @@ from scipy.signal import lfilter
 from pneumatic_unload.discrepancy import DiscrepancySettings, find_discrepancy
 from pneumatic_unload.discrepancy.synthetic import NOISE_STD, draw_case
 from pneumatic_unload.fit.ar1 import detrended_moments, plateau_ar1
-from pneumatic_unload.fit.noise import NoiseModel, normalised_rms
+from pneumatic_unload.fit.noise import NoiseModel, chi2_sf, normalised_rms
 
 
 def _ar1(rng: np.random.Generator, n: int, rho: float, sigma: float) -> np.ndarray:
@@ -128,3 +128,16 @@ def test_effect_free_rho_0_9_trace_is_within_noise_after_the_search():
     assert res.noise.rho == pytest.approx(0.9, abs=0.02)
     assert res.noise.sigma == pytest.approx(NOISE_STD, rel=0.06)
     assert res.after.nrms <= 1.02 and res.after.white
+
+
+@pytest.mark.parametrize("dof", [1, 2, 3, 7, 20, 41])
+def test_chi2_survival_equals_scipys_incomplete_gamma(dof: int) -> None:
+    """The Ljung-Box p-value's closed form (no scipy.special import on the analyze path)
+    against scipy.special.gammaincc, from the body to the far tail."""
+    from scipy.special import gammaincc
+
+    for x in np.concatenate([np.logspace(-8, 3.5, 200), [0.0, 1e5]]):
+        want = float(gammaincc(0.5 * dof, 0.5 * x))
+        got = chi2_sf(float(x), dof)
+        assert got == pytest.approx(want, rel=1e-12, abs=1e-300), (dof, x)
+    assert math.isnan(chi2_sf(math.nan, dof)) and chi2_sf(math.inf, dof) == 0.0

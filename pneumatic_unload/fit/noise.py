@@ -379,6 +379,31 @@ def ljung_box(x: FloatArray, lags: int = 20) -> tuple[float, float]:
         return math.nan, math.nan
     r = np.array([float(x[k:] @ x[:-k]) / den for k in range(1, h + 1)])
     q = n * (n + 2) * float(np.sum(r * r / (n - np.arange(1, h + 1))))
-    from scipy.special import gammaincc  # local: ~0.3 s to import
+    return q, chi2_sf(q, h)
 
-    return q, float(gammaincc(0.5 * h, 0.5 * q))
+
+def chi2_sf(x: float, dof: int) -> float:
+    """Survival function P(X > x) of the chi-square distribution with an integer number of
+    degrees of freedom ``dof`` [-] at x [-].
+
+    The closed form of the regularised upper incomplete gamma function Q(dof/2, x/2) for
+    integer and half-integer orders (scipy.special.gammaincc's value, to ~1e-14, without
+    its import: about 0.2 s of every ``analyze`` run): e^-y sum_k<m y^k/k! for dof = 2m,
+    erfc(sqrt y) + e^-y sum_k<m y^(k+1/2)/Gamma(k+3/2) for dof = 2m+1 (y = x/2), each
+    term in logarithms (no overflow for large x).
+    """
+    if dof < 1 or x != x:
+        return math.nan
+    if x <= 0.0:
+        return 1.0
+    if x == math.inf:
+        return 0.0
+    y = 0.5 * x
+    log_y = math.log(y)
+    if dof % 2 == 0:
+        total = sum(math.exp(-y + k * log_y - math.lgamma(k + 1.0)) for k in range(dof // 2))
+    else:
+        total = math.erfc(math.sqrt(y)) + sum(
+            math.exp(-y + (k + 0.5) * log_y - math.lgamma(k + 1.5))
+            for k in range((dof - 1) // 2))
+    return min(total, 1.0)
