@@ -450,12 +450,17 @@ class EstimatorNode(Node):
                 # the queued samples as one block: push_block takes the decisions push
                 # takes sample by sample (bit-identical), at a fraction of the cost
                 batch = [samples.popleft() for _ in range(min(len(samples), MAX_BATCH))]
-                if len(batch) == 1:
-                    self._feed(*batch[0])
-                    continue
-                ns, p, arrivals = zip(*batch, strict=True)
-                self._feed(np.array(ns, dtype=np.int64), np.array(p, dtype=float),
-                           arrivals[0], list(arrivals))
+                try:
+                    if len(batch) == 1:
+                        self._feed(*batch[0])
+                        continue
+                    ns, p, arrivals = zip(*batch, strict=True)
+                    self._feed(np.array(ns, dtype=np.int64), np.array(p, dtype=float),
+                               arrivals[0], list(arrivals))
+                except Exception as exc:  # after the core's push: report, the worker lives
+                    self._diagnose(_ERROR, f"could not hand on the results of "
+                                           f"{len(batch)} sample(s): "
+                                           f"{type(exc).__name__}: {exc}")
                 continue
             if not self._fits:
                 if self._stop.is_set():
