@@ -200,8 +200,8 @@ class ScaledBudget:
     ref : Budget
         The budget computed at the reference C (``ref.value``) [m^3/(s Pa)].
     free : tuple of str
-        Names of the lines that are not proportional to C, given at :meth:`at` (the type A
-        line, the wall temperature's line).
+        Names of the lines that are not proportional to C, given at :meth:`dict_at` (the
+        type A line, the wall temperature's line).
     """
 
     ref: Budget
@@ -211,25 +211,10 @@ class ScaledBudget:
         # the reference's lines as dicts, copied and scaled by :meth:`dict_at`
         object.__setattr__(self, "_lines", [_line(t) for t in self.ref.terms])
 
-    def at(self, c: float, given: dict[str, BudgetTerm | None]) -> Budget:
-        """The budget of ``c`` [m^3/(s Pa)]: the proportional lines scaled from the reference,
-        the free ones as ``given`` (None or absent: the line is left out)."""
-        k = abs(c) / abs(self.ref.value)
-        free = self.free
-        terms = []
-        for t in self.ref.terms:
-            if t.name in free:
-                g = given.get(t.name)
-                if g is not None:
-                    terms.append(g)
-            else:
-                terms.append(BudgetTerm(t.name, t.kind, t.value, t.input_std, t.unit,
-                                        t.std * k, t.note))
-        return Budget(c, tuple(terms))
-
     def dict_at(self, c: float, given: dict[str, BudgetTerm | None]) -> dict[str, Any]:
-        """``at(c, given).to_dict()``, the same numbers, without making the scaled terms
-        (the live crossing estimate's path) [m^3/(s Pa)]."""
+        """The budget of ``c`` [m^3/(s Pa)] as :meth:`Budget.to_dict`: the proportional lines
+        scaled from the reference, the free ones as ``given`` (None or absent: the line is
+        left out); the lines' dicts copied from the reference's (the live crossing's path)."""
         k = abs(c) / abs(self.ref.value)
         free = self.free
         rows = []
