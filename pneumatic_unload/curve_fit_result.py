@@ -84,6 +84,13 @@ class CurveFit:
     model_form_std_b : float
         b's model-form 1-sigma [-]: the spread of the b of the laws that fit about as
         well, weighted as C's (not in ``critical_ratio_std``).
+    conductance_reproducibility, critical_ratio_reproducibility : float
+        The fit's numerical reproducibility of C and b [-, relative]: how far they move
+        when the chosen law's search restarts from its minimum displaced by about 1e5
+        machine epsilons (:func:`~pneumatic_unload.fit.lsq.restart_spread`): what
+        last-bit differences (another CPU's BLAS kernel or summation order) may change;
+        1e-12 or less for a well-conditioned record, more in a flat valley (a faded heat
+        exchange). NaN when not measured; b's is 0 when b was held.
     """
 
     conductance: float
@@ -117,6 +124,8 @@ class CurveFit:
     wall_std: float = math.nan
     wall_std_b: float = math.nan
     model_form_std_b: float = math.nan
+    conductance_reproducibility: float = math.nan
+    critical_ratio_reproducibility: float = math.nan
 
     def config(self, settings: EstimatorSettings) -> RigConfig:
         """The fitted model's configuration (valve opening at t = 0) [SI]."""

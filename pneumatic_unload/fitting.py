@@ -30,6 +30,7 @@ from pneumatic_unload.config.estimator import (
 from pneumatic_unload.config.tank import WALL_RANGE
 from pneumatic_unload.curve_fit_result import CurveFit
 from pneumatic_unload.fit.likelihood import make_bins
+from pneumatic_unload.fit.lsq import restart_spread
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
 from pneumatic_unload.fit.profile import valley_std
 from pneumatic_unload.fit.reduced import Reducer
@@ -257,7 +258,8 @@ def fit_curve(
                 span, settings, t_start=t_start, p10=p10, p_atm=p_atm,
                 conductance=conductance, fit_heat=True, profile_heat=False, law=law,
                 start={k: v for k, v in start_w.items() if math.isfinite(v)},
-                max_nfev=120, trace=trace, hold=hold, fit_wall=True)
+                max_nfev=120, trace=trace, hold=hold, fit_wall=True,
+                keep=raw.setdefault(f"{law}+wall", {}))
             # a hot start is a claim about the rig: a wall clearly away from T10 (3 of the
             # temperature's uncertainties, at least 3 K) makes it, or one nearer that turns
             # the structure every law with the wall at T10 leaves into white residuals; else
@@ -286,6 +288,8 @@ def fit_curve(
         cf, conductance_std=math.hypot(cf.conductance_std, mf), model_form_std=mf,
         model_form_std_b=mf_b, laws=table, heat_law=best if natural else "none",
         not_offered=not_offered)
+    if raw.get(best):
+        out = _with_reproducibility(out, trace, raw[best])
     if natural and not best.endswith("+wall"):
         # the wall assumed = T10: its uncertainty from the record (the walls of the hot
         # starts that fit about as well as the chosen law are evidence of a gap), C's and
@@ -312,6 +316,29 @@ def fit_curve(
             out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why,
                                       wall_std=wall_std)
     return out
+
+
+#: Machine epsilon of float64 [-].
+EPS = float(np.finfo(float).eps)
+
+
+def _with_reproducibility(fit: CurveFit, trace: Trace, raw: dict[str, Any]) -> CurveFit:
+    """``fit`` with its numerical reproducibility of C and b [-, relative]: the larger of
+    the restart spread of the chosen law's minimum
+    (:func:`~pneumatic_unload.fit.lsq.restart_spread`) and :data:`CHI2_LOCATED` times the
+    relative standard deviation."""
+    spread = restart_spread(trace.residual(raw["model"]), raw["result"],
+                            fade=bool(raw["fade"]))
+
+    def rep(name: str, value: float, std: float) -> float:
+        if name not in spread:
+            return 0.0
+        rel = std / abs(value) if math.isfinite(std) and value != 0.0 else 0.0
+        return max(spread[name], math.sqrt(raw["result"].fun.size * EPS) * rel)
+
+    return dataclasses.replace(
+        fit, conductance_reproducibility=rep("C", fit.conductance, fit.conductance_std),
+        critical_ratio_reproducibility=rep("b", fit.critical_ratio, fit.critical_ratio_std))
 
 
 def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: float, *,
@@ -434,6 +461,7 @@ def _fit_law(
     # show walks to none in one or two steps, not a factor e per step along its log
     fit = trace.fit(model, fixed=fixed, start=start, starts=starts, screen_nfev=9,
                     max_nfev=max_nfev, fade=True)
+    plain = None
     if residual_inflation(fit.fun) > FADE_RETRY_INFLATION:
         # structured residuals: a false minimum of the fade path, or a model that does not
         # fit; the plain stepping decides (never a worse chi^2)
@@ -442,7 +470,7 @@ def _fit_law(
         if plain.chi2 < fit.chi2:
             fit = plain
     if keep is not None:
-        keep.update(result=fit, model=model)
+        keep.update(result=fit, model=model, fade=fit is not plain)
     v = fit.values
     # residuals are bin sums / sqrt(count): their variance is the per-sample variance
     s2 = fit.chi2 / fit.dof

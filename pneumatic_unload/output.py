@@ -32,8 +32,10 @@ def gives_c(r: UnloadResult) -> bool:
 
 def unload_json(r: UnloadResult) -> dict[str, Any]:
     """JSON of one result: its fields, the budgets, the heat law (with the laws offered,
-    their C and BIC, and those not offered with the reason), whether the model describes
-    the record ('model_inadequate': the reason, or '') and the C to report."""
+    their C and BIC, and those not offered with the reason), the fit's numerical
+    reproducibility of C and b ('reproducibility': relative, what another machine's last
+    bits may change; null when no curve fit), whether the model describes the record
+    ('model_inadequate': the reason, or '') and the C to report."""
     d = r.to_dict()
     extra = d.pop("extra", None) or {}
     for key in ("budget", "budget_eq39", "budget_b"):
@@ -48,6 +50,9 @@ def unload_json(r: UnloadResult) -> dict[str, Any]:
                           "heat_turbulent": cf.get("heat_turbulent"),
                           "wall_temperature": cf.get("wall_temperature"),
                           "wall_temperature_std": cf.get("wall_temperature_std")}
+    d["reproducibility"] = {
+        "conductance_model": cf.get("conductance_reproducibility"),
+        "critical_ratio": cf.get("critical_ratio_reproducibility")} if cf else None
     d["model_inadequate"] = extra.get("model_inadequate", "")
     d["recommended"] = recommended(r)
     return finite_or_none(d)

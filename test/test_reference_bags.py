@@ -24,17 +24,35 @@ def _analyze(bag: Path) -> dict:
     return json.loads(out.stdout)
 
 
+#: Relative tolerance of the crossing estimate's fields against the recorded ones [-]:
+#: compiled C and fixed-order sums (1e-14 relative perturbations of the samples moved them
+#: by at most 4e-15 on these bags, bench/bench_reproducibility.py).
+CROSSING_REL = 1e-12
+#: Smallest relative tolerance of the final curve fit's C [-]; the fit's own reproducibility
+#: (JSON 'reproducibility', measured by a restart of its search) widens it (the bags were
+#: recorded on another machine: another BLAS kernel moves the fit's last bits).
+FINAL_REL = 1e-10
+
+
 @pytest.mark.parametrize("name", sorted(BAGS))
 def test_reference_bag_is_analysed_like_the_live_estimator(name: str) -> None:
-    """analyze reproduces the recorded estimates (1e-9) and finds the true C within 2 %."""
+    """analyze reproduces the recorded estimates (crossing 1e-12; final C within the fit's
+    stated numerical reproducibility, at least 1e-10) and finds the true C within 2 %."""
     bag = REPO / "bags" / name
     cfg = RigConfig.from_dict(read_config(bag))
     recorded = read_estimates(bag)
     result = _analyze(bag)
     assert len(result["published"]) == len(recorded)
+    finals = iter(u for u in result["unloads"] if u["final"])
     for live, off in zip(recorded, result["published"], strict=True):
-        for key in ("conductance", "conductance_model", "tau_exp", "p10", "p_star", "p_atm"):
-            assert off[key] == pytest.approx(live[key], rel=1e-9, abs=0.0), key
+        rel = dict.fromkeys(("conductance", "conductance_model", "tau_exp", "p10", "p_star",
+                             "p_atm"), CROSSING_REL)
+        if off["final"]:
+            rep = next(finals)["reproducibility"]["conductance_model"]
+            assert rep is not None and 0.0 < rep < 1e-8, rep
+            rel["conductance_model"] = max(FINAL_REL, 3.0 * rep)
+        for key, tol in rel.items():
+            assert off[key] == pytest.approx(live[key], rel=tol, abs=0.0), key
     assert len(result["unloads"]) == BAGS[name]
     for u in result["unloads"]:
         # eq 39's choked-flow assumption is judged with the fitted b
