@@ -158,19 +158,29 @@ def test_plot_into_a_missing_folder_is_one_line(tmp_path):
 def test_all_samples_non_finite(record):
     t, _p, st, _ = record
     p = np.full(t.size, np.nan)
-    assert analyze(t, p, st) == []
-    assert "all 7531 samples are non-finite" in explain_no_unload(t, p, st)
+    found = analyze(t, p, st)
+    assert found == [] and "all 7531 samples are non-finite" in found.no_unload_reason
+    assert found.no_unload_reason == explain_no_unload(t, p, st)
+
+
+def test_a_found_unload_has_no_reason(record):
+    t, p, st, _ = record
+    found = analyze(t, p, st)
+    assert len(found) >= 1 and found.no_unload_reason is None
+    assert all(d.level != "error" for d in found.diagnostics)
 
 
 def test_reversed_time_stamps(record):
     t, p, st, _ = record
-    assert analyze(t[::-1], p, st) == []
+    found = analyze(t[::-1], p, st)
+    assert found == [] and "time stamps are not increasing" in found.no_unload_reason
     assert "time stamps are not increasing" in explain_no_unload(t[::-1], p, st)
 
 
 def test_readings_at_or_below_zero_or_p_atm_suggest_gauge(record):
     t, p, st, _ = record
-    assert analyze(t, -p, st) == []
+    found = analyze(t, -p, st)
+    assert found == [] and "at or below 0 Pa" in found.no_unload_reason
     why = explain_no_unload(t, -p, st)
     assert "at or below 0 Pa" in why and "--gauge --atmosphere" in why
     low = np.full(t.size, 0.9 * P_ATM) + np.linspace(0, 1, t.size)
@@ -183,6 +193,7 @@ def test_no_plateau_before_the_drop(record):
     j = int(np.searchsorted(t, t_open + 0.03))
     why = explain_no_unload(t[j:], p[j:], st)
     assert "no plateau before the drop" in why and "min_plateau=32" in why
+    assert "--start-time" in why and "initial_pressure" in why
 
 
 def test_never_dropped_to_p_star(record):
@@ -195,10 +206,15 @@ def test_never_dropped_to_p_star(record):
 
 def test_too_few_samples_and_constant_signal(record):
     t, p, st, _ = record
-    assert analyze(t[:20], p[:20], st) == []
+    found = analyze(t[:20], p[:20], st)
+    assert found == [] and "too few samples: 20" in found.no_unload_reason
+    # what to pass instead for a record that begins at the opening, in both words
+    for option in ("--start-time", "--atmosphere", "--initial-pressure", "start_time",
+                   "initial_pressure"):
+        assert option in found.no_unload_reason
     assert "too few samples: 20" in explain_no_unload(t[:20], p[:20], st)
     flat = np.full(t.size, 5e5)
-    assert analyze(t, flat, st) == []
+    assert "never drops" in analyze(t, flat, st).no_unload_reason
     assert "never drops" in explain_no_unload(t, flat, st)
 
 

@@ -14,13 +14,13 @@ from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.decisions import LAG, PERIOD, PLATEAU, block_threshold
 from pneumatic_unload.estimation.sparse import analyze_from_start
 from pneumatic_unload.estimation.streaming import StreamingEstimator
-from pneumatic_unload.estimation.types import Diagnostic, UnloadResult
+from pneumatic_unload.estimation.types import Analysis, Diagnostic, UnloadResult
 from pneumatic_unload.physics import p_star
 
 
 def analyze(
     t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | None = None
-) -> list[UnloadResult]:
+) -> Analysis:
     """Batch analysis of a trace: every unload found, in order.
 
     Parameters
@@ -34,11 +34,13 @@ def analyze(
 
     Returns
     -------
-    list of UnloadResult
-        Results as the streaming estimator emits them (crossing estimates, then the
-        curve-fit refinement with ``final=True`` when the unload's end was recorded). With
-        ``settings.start_time`` the record begins at the opening: see
-        :func:`~pneumatic_unload.estimation.sparse.analyze_from_start`.
+    Analysis
+        A list of the results as the streaming estimator emits them (crossing estimates,
+        then the curve-fit refinement with ``final=True`` when the unload's end was
+        recorded). With ``settings.start_time`` the record begins at the opening: see
+        :func:`~pneumatic_unload.estimation.sparse.analyze_from_start`. When it is empty,
+        its ``no_unload_reason`` says why (:func:`explain_no_unload`: the reason the CLI
+        prints), and what to pass instead where known.
 
     Raises
     ------
@@ -51,15 +53,19 @@ def analyze(
         raise EstimationError(f"t and p must be 1-D arrays of equal length, got {t.shape} "
                               f"and {p.shape}")
     if settings is not None and settings.start_time is not None:
-        return analyze_from_start(t, p, settings)  # a record that begins at the opening
+        # a record that begins at the opening
+        found = analyze_from_start(t, p, settings)
+        why = None if found else (
+            f"no unload from start_time = {settings.start_time:g} s: the record does not "
+            "fall from there (check start_time, atmosphere and initial_pressure)")
+        return Analysis(found, no_unload_reason=why)
     if t.size < 16:
-        raise EstimationError(f"too few samples ({t.size}); need at least 16 (a record that "
-                              "begins at the valve opening, without a plateau: give "
-                              "start_time and atmosphere)")
+        raise EstimationError(f"too few samples ({t.size}); need at least 16 ({START_HINT})")
     est = StreamingEstimator(settings)
     out = est.push_block(t, p)
     out += est.finish()
-    return out
+    why = None if out else explain_no_unload(t, p, settings, diagnostics=est.diagnostics)
+    return Analysis(out, no_unload_reason=why, diagnostics=est.diagnostics)
 
 
 def merge_final(results: list[UnloadResult]) -> list[UnloadResult]:
@@ -81,6 +87,11 @@ def merge_final(results: list[UnloadResult]) -> list[UnloadResult]:
 GAUGE_FINAL_FRACTION = 0.5
 #: Fewest finite samples beyond ``min_plateau`` that can hold a drop and its crossing [-].
 MIN_UNLOAD_SAMPLES = 16
+#: What to pass for a record that begins at the valve opening, without a plateau
+#: (command line and library).
+START_HINT = ("a record that begins at the valve opening, without a plateau before it: pass "
+              "--start-time S (the opening), --atmosphere PA and --initial-pressure PA; "
+              "library: start_time, atmosphere, initial_pressure")
 #: How to fix gauge readings taken as absolute (command line and library).
 GAUGE_FIX = ("pass --gauge --atmosphere PA (library: add p_atm [Pa] to the readings, or "
              "signal_offset=p_atm)")
@@ -215,7 +226,7 @@ def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | 
     need = s.min_plateau + MIN_UNLOAD_SAMPLES
     if m < need:
         return (f"too few samples: {m} finite of {n}; a pre-trigger plateau of min_plateau="
-                f"{s.min_plateau} samples and the drop need at least {need}")
+                f"{s.min_plateau} samples and the drop need at least {need} (or {START_HINT})")
     dt = np.diff(tt)
     back = int(np.count_nonzero(dt <= 0.0))
     if back > dt.size // 2:
@@ -250,7 +261,7 @@ def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | 
         return (f"no plateau before the drop: the pressure falls from sample {i_drop} "
                 f"(t = {tt[i_drop]:.6g} s), but a pre-trigger plateau of at least min_plateau"
                 f"={s.min_plateau} samples is needed (the record starts at the valve "
-                f"opening?): record from before the valve opens{fix}")
+                f"opening?): record from before the valve opens{fix}; or, for {START_HINT}")
     p10 = float(np.median(pp[:i_drop]))
     p_atm = s.atmosphere if s.atmosphere is not None else _final_level(pp, s)
     ps = p_star(p10, p_atm)

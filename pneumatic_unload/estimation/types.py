@@ -111,6 +111,27 @@ class Diagnostic:
     t: float
 
 
+class Analysis(list[UnloadResult]):
+    """The results of :func:`~pneumatic_unload.estimation.analyze`: a list of
+    :class:`UnloadResult` in order, which also says why it is empty.
+
+    Attributes
+    ----------
+    no_unload_reason : str or None
+        Why the record gave no unload, with what would fix it where known (the words of
+        ``pneumatic-unload analyze``; :func:`~pneumatic_unload.estimation.explain_no_unload`);
+        None when an unload was found.
+    diagnostics : list of Diagnostic
+        The estimator's diagnostics on the record (dropped samples, warnings, errors).
+    """
+
+    def __init__(self, results: list[UnloadResult], *, no_unload_reason: str | None = None,
+                 diagnostics: list[Diagnostic] | None = None) -> None:
+        super().__init__(results)
+        self.no_unload_reason = no_unload_reason
+        self.diagnostics = list(diagnostics or [])
+
+
 def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
     """UnloadEstimate message fields of a result (stamps in ns, NaN kept)."""
     budget = r.extra.get("budget", {})
