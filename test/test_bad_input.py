@@ -182,6 +182,52 @@ def test_clock_step_after_the_crossing_keeps_the_crossing_and_before_the_unload_
     assert [r.status for r in early] == ["ok"]
 
 
+def _without(res, *keys):
+    """Results as dicts without the fields that name sample indices or times of the end."""
+    return [{k: v for k, v in r.to_dict().items() if k not in keys} for r in res]
+
+
+@pytest.mark.parametrize("kind", ["back_10ms", "back_1ms", "duplicate"])
+def test_one_sample_out_of_order_costs_that_sample_alone(kind):
+    """One stamp 10 ms (or 1 ms) back, or a duplicated sample, inside the unload: dropped
+    with a diagnostic, the unload measured as without it; per-sample = block = batch."""
+    _cfg, sim, st = _rig(duration=14.0)
+    k = int(np.searchsorted(sim.t, sim.t_open + 0.02))  # before the p* crossing
+    keep = np.ones(sim.t.size, dtype=bool)
+    keep[k] = False
+    clean = analyze(sim.t[keep], sim.measured[keep], st)
+    t, p = sim.t.copy(), sim.measured.copy()
+    if kind == "duplicate":
+        t, p = np.insert(t, k, t[k - 1]), np.insert(p, k, p[k - 1])
+        clean = analyze(sim.t, sim.measured, st)
+    else:
+        t[k] -= 0.010 if kind == "back_10ms" else 0.001
+    res, msgs = _run(t, p, st)
+    assert [r.status for r in res] == [r.status for r in clean] and res[0].status == "ok"
+    assert _without(res, "index") == _without(clean, "index")
+    assert ("out of order" in msgs) if kind == "back_10ms" else \
+        ("going backwards" in msgs or "duplicate stamp" in msgs)
+    assert "clock stepped" not in msgs
+    est = StreamingEstimator(st)  # per sample
+    single = [r for ti, pi in zip(t.tolist(), p.tolist(), strict=True)
+              for r in est.push(ti, pi)] + est.finish()
+    assert _without(single) == _without(res)
+    assert _without(analyze(t, p, st)) == _without(res)
+
+
+def test_out_of_order_sample_as_the_last_of_a_block_is_decided_by_the_next_block():
+    """The suspect stamp ends one block, the next block decides (live: blocks of samples)."""
+    _cfg, sim, st = _rig(duration=14.0)
+    k = int(np.searchsorted(sim.t, sim.t_open + 0.02))
+    t = sim.t.copy()
+    t[k] -= 0.010
+    whole, _ = _run(t, sim.measured, st)
+    est = StreamingEstimator(st)
+    split = est.push_block(t[:k + 1], sim.measured[:k + 1])
+    split += est.push_block(t[k + 1:], sim.measured[k + 1:]) + est.finish()
+    assert _without(split) == _without(whole) and whole[0].status == "ok"
+
+
 def _clock_step_bag(tmp_path, log_time_is_stamp):
     from pneumatic_unload.io import BagRecorder
 
@@ -216,6 +262,31 @@ def test_cli_bag_whose_clock_steps_back_mid_unload_is_bad_data(tmp_path, log_tim
     assert unloads and all(u["status"] == "bad_data" for u in unloads), unloads
     assert "clock stepped back 10" in unloads[0]["status_text"]
     assert "clock stepped back 10" in data["no_estimate_reason"] and data["exit_status"] == 1
+
+
+def test_cli_bag_with_one_stamp_10ms_back_mid_unload_gives_c(tmp_path):
+    """The bag of the issue: one header stamp 10 ms backwards inside the unload (received in
+    order): the sample is dropped with a diagnostic, the unload gives C."""
+    import json
+    import subprocess
+    import sys
+
+    from pneumatic_unload.io import BagRecorder
+
+    cfg, sim, _st = _rig(duration=14.0)
+    t_ns = np.round((1.7e9 + sim.t) * 1e9).astype(np.int64)
+    stamps = t_ns.copy()
+    stamps[int(np.searchsorted(sim.t, sim.t_open + 0.02))] -= 10_000_000
+    path = tmp_path / "one_back"
+    with BagRecorder(path) as rec:
+        rec.write_pressures(stamps, sim.measured, log_time_ns=t_ns)
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path),
+                           "--volume", str(cfg.volume), "--json"], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    (u,) = json.loads(proc.stdout)["unloads"]
+    assert u["status"] == "ok" and u["conductance_model"] == pytest.approx(cfg.conductance,
+                                                                           rel=0.02)
 
 
 def _csv(path, t, p):

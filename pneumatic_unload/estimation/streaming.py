@@ -118,6 +118,10 @@ class StreamingEstimator:
         #: the crossing estimate without waiting for the block's last sample); the call
         #: returns it as well. None: results are only returned.
         self.on_result: Callable[[UnloadResult], None] | None = None
+        #: A stamp that went back by more than the gap limit [s] (None: none): one sample
+        #: out of order, or the first of a clock step; the next stamp decides
+        #: (:meth:`_resolve_suspect`).
+        self._suspect: float | None = None
         self._append = self._st.buf.append  # hot path (trimming keeps the buffer object)
 
     # ------------------------------------------------------------------ public API
@@ -173,6 +177,8 @@ class StreamingEstimator:
         list of UnloadResult
             Results completed by this sample (usually empty).
         """
+        if self._suspect is not None:
+            return self._push_after_suspect(t, p)
         st = self._st
         if not (t - st.last_t >= MIN_STAMP_STEP and abs(t) <= MAX_ABS_STAMP):  # and NaN
             return self._reject(t, p)
@@ -212,6 +218,8 @@ class StreamingEstimator:
             raise EstimationError(f"t and p differ in length: {t.size} vs {p.size}")
         if t.size == 0:
             return []
+        if self._suspect is not None and t[0] == t[0] and abs(t[0]) <= MAX_ABS_STAMP:
+            return self._resolve_suspect(float(t[0])) + self.push_block(t, p)
         st = self._st
         # vectorised validity: finite, each stamp at least MIN_STAMP_STEP after the one
         # before (the last accepted stamp for the first): then the steps are the gaps too
@@ -254,6 +262,8 @@ class StreamingEstimator:
             The pending unload's result, if any.
         """
         st = self._st
+        if self._suspect is not None:  # the last sample: one out of order
+            self._resolve_suspect(math.inf)
         u = st.unload
         n = len(st.buf)
         out: list[UnloadResult] = []
@@ -358,16 +368,44 @@ class StreamingEstimator:
         elif abs(t - st.last_t) < MIN_STAMP_STEP:
             st.diag("warn", f"duplicate stamp t={t:.9f} s ignored", t)
         else:
-            st.diag("warn", f"stamp going backwards ({t:.9f} s after {st.last_t:.9f} s)"
-                    " ignored", t)
             accepted = len(st.buf) + st.buf.shift
             if st.last_t - t > st.gap_limit and accepted != st.clock_step_at:
-                st.clock_step_at = accepted
-                # the step: from the expected next stamp (one nominal period on) to t
-                out = self._on_clock_step(st.last_t + st.dt_nominal - t, t)
-                self._emit(out)
-                return out
+                self._suspect = t  # one sample out of order, or a clock step: the next decides
+                return []
+            st.diag("warn", f"stamp going backwards ({t:.9f} s after {st.last_t:.9f} s)"
+                    " ignored", t)
         return []
+
+    def _push_after_suspect(self, t: float, p: float) -> list[UnloadResult]:
+        """:meth:`push` of the sample after a suspect stamp: the suspect resolved first
+        (a NaN or out-of-range stamp decides nothing: rejected, the suspect kept)."""
+        if t != t or not abs(t) <= MAX_ABS_STAMP:
+            return self._reject(t, p)
+        out = self._resolve_suspect(t)
+        return out + self.push(t, p)
+
+    def _resolve_suspect(self, t: float) -> list[UnloadResult]:
+        """Decide what the suspect stamp was, from the next stamp t [s] (inf: the stream
+        ended). A next stamp after the last accepted one continues the time base: the
+        suspect was one sample out of order (a best-effort transport, two publishers), and
+        dropping it costs that sample alone. A next stamp behind it too: the clock stepped
+        back (:meth:`_on_clock_step`)."""
+        st = self._st
+        ts = self._suspect
+        assert ts is not None
+        self._suspect = None
+        if t - st.last_t >= MIN_STAMP_STEP:
+            st.diag("warn", f"one sample stamped {st.last_t - ts:.6g} s before its "
+                    f"predecessor (t={ts:.9f} s after {st.last_t:.9f} s) dropped: out of "
+                    "order, the next stamp continues the time base", ts)
+            return []
+        st.diag("warn", f"stamp going backwards ({ts:.9f} s after {st.last_t:.9f} s)"
+                " ignored", ts)
+        st.clock_step_at = len(st.buf) + st.buf.shift
+        # the step: from the expected next stamp (one nominal period on) to ts
+        out = self._on_clock_step(st.last_t + st.dt_nominal - ts, ts)
+        self._emit(out)
+        return out
 
     def _on_clock_step(self, step: float, t: float) -> list[UnloadResult]:
         """The clock stepped back by ``step`` [s] (new stamp t [s]): the samples until it
