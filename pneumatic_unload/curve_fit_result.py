@@ -1,6 +1,6 @@
 """The result of the final curve fit (:func:`pneumatic_unload.fitting.fit_curve`): the
 fitted values of the chosen heat law, their standard deviations, the laws compared, and the
-fitted model's configuration.
+fitted model's configuration; and where the fitted samples lie (:class:`CurveSpan`).
 
 SI units: s, Pa absolute, K, m^3, m^3/(s Pa).
 """
@@ -10,12 +10,24 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.inversion import rig_from_settings
+
+
+class CurveSpan(NamedTuple):
+    """Where the fitted samples lie: first and last instant [s, absolute], duration [s],
+    samples [-] and sample period (median of the first 100 000 intervals) [s]."""
+
+    t_ref: float
+    t_last: float
+    duration: float
+    n: int
+    dt: float
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,9 +28,9 @@ from pneumatic_unload.config.estimator import (
     wall_uncertainty,
 )
 from pneumatic_unload.config.tank import WALL_RANGE
-from pneumatic_unload.curve_fit_result import CurveFit
+from pneumatic_unload.curve_fit_result import CurveFit, CurveSpan
 from pneumatic_unload.fit.likelihood import make_bins
-from pneumatic_unload.fit.lsq import restart_spread
+from pneumatic_unload.fit.lsq import numerical_reproducibility
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
 from pneumatic_unload.fit.profile import valley_std
 from pneumatic_unload.fit.reduced import Reducer
@@ -62,17 +62,6 @@ PROFILE_MIN_SD = 0.1
 CURVE_FIT_RESOLUTION = 0.01
 #: Re-exported: the result of :func:`fit_curve`.
 __all__ = ["CurveFit", "fit_curve"]
-
-
-class CurveSpan(NamedTuple):
-    """Where the fitted samples lie: first and last instant [s, absolute], duration [s],
-    samples [-] and sample period (median of the first 100 000 intervals) [s]."""
-
-    t_ref: float
-    t_last: float
-    duration: float
-    n: int
-    dt: float
 
 
 #: The curve fit's noise model: unit (the residual variance is estimated afterwards).
@@ -288,8 +277,11 @@ def fit_curve(
         cf, conductance_std=math.hypot(cf.conductance_std, mf), model_form_std=mf,
         model_form_std_b=mf_b, laws=table, heat_law=best if natural else "none",
         not_offered=not_offered)
-    if raw.get(best):
-        out = _with_reproducibility(out, trace, raw[best])
+    if raw.get(best):  # the fit's own numerical reproducibility (another machine's bits)
+        rep = numerical_reproducibility(trace.residual(raw[best]["model"]),
+                                        raw[best]["result"], fade=bool(raw[best]["fade"]))
+        out = dataclasses.replace(out, conductance_reproducibility=rep.get("C", math.nan),
+                                  critical_ratio_reproducibility=rep.get("b", 0.0))
     if natural and not best.endswith("+wall"):
         # the wall assumed = T10: its uncertainty from the record (the walls of the hot
         # starts that fit about as well as the chosen law are evidence of a gap), C's and
@@ -316,29 +308,6 @@ def fit_curve(
             out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why,
                                       wall_std=wall_std)
     return out
-
-
-#: Machine epsilon of float64 [-].
-EPS = float(np.finfo(float).eps)
-
-
-def _with_reproducibility(fit: CurveFit, trace: Trace, raw: dict[str, Any]) -> CurveFit:
-    """``fit`` with its numerical reproducibility of C and b [-, relative]: the larger of
-    the restart spread of the chosen law's minimum
-    (:func:`~pneumatic_unload.fit.lsq.restart_spread`) and :data:`CHI2_LOCATED` times the
-    relative standard deviation."""
-    spread = restart_spread(trace.residual(raw["model"]), raw["result"],
-                            fade=bool(raw["fade"]))
-
-    def rep(name: str, value: float, std: float) -> float:
-        if name not in spread:
-            return 0.0
-        rel = std / abs(value) if math.isfinite(std) and value != 0.0 else 0.0
-        return max(spread[name], math.sqrt(raw["result"].fun.size * EPS) * rel)
-
-    return dataclasses.replace(
-        fit, conductance_reproducibility=rep("C", fit.conductance, fit.conductance_std),
-        critical_ratio_reproducibility=rep("b", fit.critical_ratio, fit.critical_ratio_std))
 
 
 def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: float, *,

@@ -32,7 +32,8 @@ crossing), :mod:`.tail` (final plateau, curve fit), :mod:`.sse` (aborted unload,
 eq 23), :mod:`.refine` (every call into :mod:`pneumatic_unload.fitting`),
 :mod:`.regression` (hinge, crossing and corner fits), :mod:`.streaming`
 (:class:`StreamingEstimator`), :mod:`.batch` (:func:`analyze`, :func:`merge_final`) and
-:mod:`.chunked` (:func:`analyze_chunks`: a record of any length, read in pieces).
+:mod:`.chunked` (:func:`analyze_chunks`: a record of any length, read in pieces) and
+:mod:`.loss` (:class:`LossCounter`: samples missing from a live stream, from its stamps).
 """
 
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
@@ -45,6 +46,7 @@ from pneumatic_unload.estimation.batch import (
 )
 from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
 from pneumatic_unload.estimation.history import RESULTS_KEPT, DiagnosticLog
+from pneumatic_unload.estimation.loss import LossCounter
 from pneumatic_unload.estimation.opening import OpeningFinal, OpeningStartEstimator
 from pneumatic_unload.estimation.regression import corner_fit, crossing_fit, hinge_fit
 from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
@@ -76,6 +78,7 @@ __all__ = [
     "EstimatorSettings",
     "FinalFit",
     "FloatArray",
+    "LossCounter",
     "OpeningFinal",
     "OpeningStartEstimator",
     "StreamingEstimator",
