@@ -49,15 +49,18 @@ class LossCounter:
 
     def update(self, stamps_ns: ArrayLike) -> int:
         """Take the next stamps [ns] (in arrival order); return the samples found missing
-        among them [-]. Steps that go backwards or stand still count nothing (the
-        estimator reports those)."""
+        among them [-]. Stamps that go backwards or stand still count nothing (the
+        estimator reports those), and steps are taken from the latest stamp so far."""
         ns = np.asarray(stamps_ns, dtype=np.int64).ravel()
         if ns.size == 0:
             return 0
         self.received += int(ns.size)
-        prev = ns[0] if self._last_ns is None else self._last_ns
-        steps = np.diff(ns, prepend=prev)[0 if self._last_ns is not None else 1:]
-        self._last_ns = int(ns[-1])
+        # steps of the latest stamp so far: a stamp out of order neither counts nor
+        # makes the next one look late
+        first = self._last_ns is None
+        latest = np.maximum.accumulate(ns if first else np.concatenate(([self._last_ns], ns)))
+        steps = np.diff(latest)
+        self._last_ns = int(latest[-1])
         if math.isnan(self.period):
             # the first LEARN_STEPS forward steps, whatever the pieces they came in
             have = sum(a.size for a in self._learn)
