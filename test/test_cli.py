@@ -59,10 +59,8 @@ def test_simulate_then_analyze_reproduces_recorded_estimates(tmp_path, capsys):
     recorded = read_estimates(bag)
     assert len(recorded) == len(published) >= 2
     for rec, pub in zip(recorded, published, strict=True):
-        assert rec["conductance"] == pytest.approx(pub["conductance"], rel=1e-9, abs=0.0)
-        assert rec["conductance_model"] == pytest.approx(pub["conductance_model"], rel=1e-9,
-                                                         abs=0.0)
-        assert rec["tau_exp"] == pytest.approx(pub["tau_exp"], rel=1e-9)
+        for key in ("conductance", "conductance_model", "tau_exp"):  # the same machine
+            assert rec[key] == pub[key], key
     assert json.loads(out)["unloads"][0]["conductance_model"] == pytest.approx(5e-9, rel=0.02)
 
 
