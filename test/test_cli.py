@@ -3,14 +3,13 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
+from realdata import real_file
 
 from pneumatic_unload.cli import main
 from pneumatic_unload.io.bag import read_estimates
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "real-data" / "aerolab"
 RULE_OF_THUMB = {"orifice_0.094in.csv": 0.73e-8, "orifice_0.125in.csv": 1.29e-8}
 
 
@@ -22,9 +21,7 @@ def _run(capsys, *argv):
 
 @pytest.mark.parametrize("name", sorted(RULE_OF_THUMB))
 def test_analyze_real_aerolab_csv_within_30_percent(capsys, name):
-    path = REAL / name
-    if not path.exists():
-        pytest.skip(f"real data not present at {path}")
+    path = real_file(f"aerolab/{name}")
     code, out, _ = _run(capsys, "analyze", str(path), "--volume", "0.125", "--gauge",
                         "--atmosphere", "101500", "--pressure-unit", "kPa", "--json")
     assert code == 0
@@ -76,3 +73,29 @@ def test_unreadable_input_exits_nonzero_with_one_line(tmp_path):
                            str(tmp_path / "missing.csv"), "--volume", "0.001"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "no such file" in proc.stderr
+
+
+def test_analyze_text_says_an_unknown_uncertainty_in_words():
+    # issue "Words, not numbers": a NaN or infinite sigma was printed as '+- nan' / '+- inf'
+    import math
+
+    from pneumatic_unload.estimation import UnloadResult
+    from pneumatic_unload.output import format_result
+
+    r = UnloadResult(index=0, status="ok", status_text="ok", t_start=0.0, t_cross=0.5,
+                     tau_exp=0.5, tau_exp_std=math.nan, p10=7e5, p_atm=101325.0,
+                     p_star=3e5, initial_temperature=293.15, volume=1e-3,
+                     conductance=8e-9, conductance_model=8.1e-9,
+                     conductance_model_std=math.inf, critical_ratio=0.45,
+                     critical_ratio_std=math.nan, final=True)
+    text = format_result(r)
+    assert "nan" not in text and "inf" not in text, text
+    assert "tau_exp        = 0.500000 s  (uncertainty not known)" in text
+    assert "C (model)      = 8.1e-09 m^3/(s Pa) (uncertainty not known) = 0.8100" in text
+    assert "b              = 0.450 (uncertainty not known)" in text
+    assert "REPORT C       = 8.1e-09 m^3/(s Pa) (uncertainty not known) = 0.8100" in text
+    r.conductance_model_std, r.critical_ratio_std, r.tau_exp_std = 2e-11, 0.01, 0.001
+    text = format_result(r)
+    assert "C (model)      = 8.1e-09 +- 2e-11 m^3/(s Pa) = 0.8100" in text
+    assert "b              = 0.450 +- 0.010" in text and "(+- 0.001 s)" in text
+    assert "REPORT C       = 8.1e-09 +- 4e-11 m^3/(s Pa) (k = 2) = 0.8100" in text

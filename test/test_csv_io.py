@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from realdata import real_file
 
 from pneumatic_unload.io import (
     CsvFormatError,
@@ -12,7 +13,7 @@ from pneumatic_unload.io import (
     read_csv_trace,
 )
 
-AEROLAB = Path("/work/shared/real-data/aerolab/orifice_0.094in.csv")
+AEROLAB_FILE = "aerolab/orifice_0.094in.csv"
 ATM = 101_500.0  # [Pa], within the 101.4-101.6 kPa the rig authors state
 
 
@@ -25,9 +26,9 @@ def _write(tmp_path: Path, text: str, name: str = "log.csv") -> Path:
 # ------------------------------------------------------------------ the real AeroLab file
 
 
-@pytest.mark.skipif(not AEROLAB.is_file(), reason="shared real data not available")
 def test_aerolab_file_read_in_place():
-    trace = read_csv_trace(AEROLAB, gauge=True, atmosphere=ATM)
+    aerolab = real_file(AEROLAB_FILE)
+    trace = read_csv_trace(aerolab, gauge=True, atmosphere=ATM)
     assert isinstance(trace, CsvTrace)
     assert trace.t.size == trace.p.size == trace.temperature.size == 242
     assert trace.t[0] == 28.0  # logger clock, not shifted to 0
@@ -35,7 +36,7 @@ def test_aerolab_file_read_in_place():
     assert trace.p[0] == pytest.approx(439_290.0, abs=1e-6)  # 337.79 kPa gauge + 101500 Pa
     assert trace.temperature[0] == pytest.approx(321.79, abs=1e-9)  # 48.64 C
     src = trace.source
-    assert src.path == AEROLAB and src.rows == 242
+    assert src.path == aerolab and src.rows == 242
     assert (src.time_column, src.pressure_column, src.temperature_column) == (
         "Time [s]",
         "Pressure [kPa]",
@@ -49,23 +50,23 @@ def test_aerolab_file_read_in_place():
     assert trace.t_ns[0] == 28_000_000_000
 
 
-@pytest.mark.skipif(not AEROLAB.is_file(), reason="shared real data not available")
 def test_aerolab_without_gauge_flag_fails_clearly():
+    aerolab = real_file(AEROLAB_FILE)
     with pytest.raises(CsvFormatError, match="gauge=True"):
-        read_csv_trace(AEROLAB)  # gauge readings below 0 would be negative absolute
+        read_csv_trace(aerolab)  # gauge readings below 0 would be negative absolute
     with pytest.raises(CsvOptionError, match="atmosphere"):
-        read_csv_trace(AEROLAB, gauge=True)
+        read_csv_trace(aerolab, gauge=True)
 
 
-@pytest.mark.skipif(not AEROLAB.is_file(), reason="shared real data not available")
 def test_explicit_unit_matching_header_is_fine_and_contradicting_is_an_error():
-    trace = read_csv_trace(AEROLAB, pressure_unit="kpa", gauge=True, atmosphere=ATM)
+    aerolab = real_file(AEROLAB_FILE)
+    trace = read_csv_trace(aerolab, pressure_unit="kpa", gauge=True, atmosphere=ATM)
     assert trace.source.pressure_unit_from == "argument"
     assert trace.p[0] == pytest.approx(439_290.0)
     with pytest.raises(CsvOptionError, match="contradicts"):
-        read_csv_trace(AEROLAB, pressure_unit="Pa", gauge=True, atmosphere=ATM)
+        read_csv_trace(aerolab, pressure_unit="Pa", gauge=True, atmosphere=ATM)
     with pytest.raises(CsvOptionError, match="contradicts"):
-        read_csv_trace(AEROLAB, temperature_unit="K", gauge=True, atmosphere=ATM)
+        read_csv_trace(aerolab, temperature_unit="K", gauge=True, atmosphere=ATM)
 
 
 # --------------------------------------------------------------------- units and columns
