@@ -373,8 +373,7 @@ def cmd_discrepancy(args: argparse.Namespace) -> int:
         for name, res in zip(names, results, strict=True):
             print(f"{name}: {res.verdict}")
             for k, v in res.parameters.items():
-                print(f"  {k} = {v.value:.5g} {v.unit}  95 % [{v.low:.4g}, {v.high:.4g}] "
-                      f"({v.method}{'' if v.identifiable else ', NOT identifiable'})")
+                print(f"  {k} = {v.value:.5g} {v.unit}  {v.describe()}")
             print(f"  noise sigma = {res.noise.sigma:.4g} Pa, rho = {res.noise.rho:.3f}")
         if law is not None:
             print(f"geometry law: {law.reason}")

@@ -78,6 +78,15 @@ def json_default(o: object) -> object:
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
+def with_uncertainty(value: str, std: float, unit: str = "", fmt: str = ".2g") -> str:
+    """'value +- std unit' for a finite standard uncertainty, else 'value unit (uncertainty
+    not known)': an uncertainty that is not known is never printed as nan or inf."""
+    u = f" {unit}" if unit else ""
+    if math.isfinite(std):
+        return f"{value} +- {std:{fmt}}{u}"
+    return f"{value}{u} (uncertainty not known)"
+
+
 def format_result(r: UnloadResult) -> str:
     """Human-readable summary of one unload (trade units alongside SI)."""
     def dm3(c: float) -> str:
@@ -85,16 +94,22 @@ def format_result(r: UnloadResult) -> str:
 
     lines = [f"unload {r.index}: {r.status} ({r.status_text})"]
     if math.isfinite(r.tau_exp):
-        lines.append(f"  tau_exp        = {r.tau_exp:.6f} s  (+- {r.tau_exp_std:.2g} s)")
+        tau_u = f"+- {r.tau_exp_std:.2g} s" if math.isfinite(r.tau_exp_std) else \
+            "uncertainty not known"
+        lines.append(f"  tau_exp        = {r.tau_exp:.6f} s  ({tau_u})")
         lines.append(f"  p10 / p_atm / p* = {r.p10:.0f} / {r.p_atm:.0f} / {r.p_star:.0f} Pa")
     lines.append(f"  C (eq 39)      = {r.conductance:.5g} m^3/(s Pa) = {dm3(r.conductance)}")
     if math.isfinite(r.conductance_model):
         lines.append(
-            f"  C (model)      = {r.conductance_model:.5g} +- {r.conductance_model_std:.2g}"
-            f" m^3/(s Pa) = {dm3(r.conductance_model)}  [{r.method}]")
+            "  C (model)      = "
+            + with_uncertainty(f"{r.conductance_model:.5g}", r.conductance_model_std,
+                               "m^3/(s Pa)")
+            + f" = {dm3(r.conductance_model)}  [{r.method}]")
         lines.append(f"  eq 39 - model  = {100 * r.bias:+.2f} %")
     if math.isfinite(r.critical_ratio):
-        lines.append(f"  b              = {r.critical_ratio:.3f} +- {r.critical_ratio_std:.3f}")
+        lines.append("  b              = "
+                     + with_uncertainty(f"{r.critical_ratio:.3f}", r.critical_ratio_std,
+                                        fmt=".3f"))
     elif r.final:
         lines.append("  b              = not identifiable from this record (the flow stayed "
                      "choked, or the subsonic tail is too short or too noisy)")
@@ -126,8 +141,9 @@ def report_line(r: UnloadResult) -> list[str]:
     if not math.isfinite(rec["conductance"]):
         return []
     dm3 = rec["conductance"] / 1e-8
-    return [f"  REPORT C       = {rec['conductance']:.5g} +- {rec['expanded']:.2g}"
-            f" m^3/(s Pa) (k = 2) = {dm3:.4f} dm^3/(s bar)  [{rec['source']}]"]
+    c = with_uncertainty(f"{rec['conductance']:.5g}", rec["expanded"], "m^3/(s Pa)")
+    k = " (k = 2)" if math.isfinite(rec["expanded"]) else ""
+    return [f"  REPORT C       = {c}{k} = {dm3:.4f} dm^3/(s bar)  [{rec['source']}]"]
 
 
 def format_inputs(inputs: dict[str, Any]) -> str:

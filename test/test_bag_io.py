@@ -442,6 +442,108 @@ def test_reader_errors(full_bag, tmp_path):
     assert isinstance(err.value, BagError)
 
 
+# issue "Words, not numbers": a metadata.yaml that is not a mapping gave
+# "string indices must be integers, not 'str'"
+BAD_METADATA = [
+    ("just a string", "it is a string ('just a string'), not a mapping"),
+    ("[1, 2]", "it is a list ([1, 2]), not a mapping"),
+    ("", "it is empty, not a mapping"),
+    ("{}", "it has no key 'rosbag2_bagfile_information' (its keys: none)"),
+    ("rosbag2_bagfile_information: 3",
+     "'rosbag2_bagfile_information' is an integer (3), not a mapping"),
+    ("rosbag2_bagfile_information: {}", "'rosbag2_bagfile_information' has no 'version'"),
+    ("a: [1, 2", "is not valid YAML (line 1, column 9)"),
+]
+
+
+DELETE = object()  # a value of _bag_with_metadata's changes: remove the key
+
+
+def _bag_with_metadata(full_bag: Path, text: str | None = None, **changes: object) -> Path:
+    """``full_bag`` with its metadata.yaml replaced by ``text`` or with ``changes`` made to
+    its rosbag2_bagfile_information mapping (a value DELETE removes the key)."""
+    meta = full_bag / "metadata.yaml"
+    if text is None:
+        doc = yaml.safe_load(meta.read_text())
+        info = doc["rosbag2_bagfile_information"]
+        for key, value in changes.items():
+            if value is DELETE:
+                del info[key]
+            else:
+                info[key] = value
+        text = yaml.safe_dump(doc)
+    meta.write_text(text)
+    return full_bag
+
+
+@pytest.mark.parametrize(("text", "problem"), BAD_METADATA)
+def test_metadata_that_is_not_rosbag2_metadata_is_named_in_words(full_bag, text, problem):
+    bag = _bag_with_metadata(full_bag, text)
+    for read in (read_pressure, read_config, bag_summary):
+        with pytest.raises(BagFormatError) as err:
+            read(bag)
+        msg = str(err.value)
+        assert str(bag / "metadata.yaml") in msg and problem in msg, msg
+        assert "must hold a mapping with the key 'rosbag2_bagfile_information'" in msg
+        assert "'relative_file_paths'" in msg and "'topics_with_message_count'" in msg
+        assert f"pneumatic-unload recover {bag}" in msg and "\n" not in msg
+        assert "indices" not in msg and "subscriptable" not in msg
+
+
+@pytest.mark.parametrize(("changes", "problem"), [
+    ({"version": "nine"}, "'version' is a string ('nine'), not an integer 1 to 9"),
+    ({"storage_identifier": DELETE}, "'rosbag2_bagfile_information' has no 'storage_identifier'"),
+    ({"relative_file_paths": 5}, "'relative_file_paths' is an integer (5), not a list of file"),
+    ({"topics_with_message_count": [1]},
+     "'topics_with_message_count' entry 1 is an integer (1), not a mapping"),
+    ({"message_count": -1}, "'message_count' is an integer (-1), not an integer >= 0"),
+    ({"duration": 4.5}, "'duration' is a number (4.5), not a mapping with 'nanoseconds'"),
+    ({"starting_time": DELETE}, "'rosbag2_bagfile_information' has no 'starting_time'"),
+    ({"compression_mode": None}, "'compression_mode' is empty, not a string"),
+    ({"compression_mode": "file"},
+     "'compression_mode' is 'file' but 'compression_format' is a string (''), not 'zstd'"),
+    ({"custom_data": [1]}, "'custom_data' is a list ([1]), not a mapping"),
+    ({"files": {}}, "'files' is a mapping ({}), not a list"),
+])
+def test_metadata_with_a_field_of_the_wrong_type_is_named_in_words(full_bag, changes, problem):
+    bag = _bag_with_metadata(full_bag, **changes)
+    with pytest.raises(BagFormatError) as err:
+        read_pressure(bag)
+    assert f"{bag / 'metadata.yaml'} is not rosbag2 metadata: {problem}" in str(err.value)
+
+
+def test_metadata_with_a_bad_topic_entry_is_named_in_words(full_bag):
+    doc = yaml.safe_load((full_bag / "metadata.yaml").read_text())
+    topics = doc["rosbag2_bagfile_information"]["topics_with_message_count"]
+    topics[1]["topic_metadata"]["offered_qos_profiles"] = "x"
+    bag = _bag_with_metadata(full_bag, yaml.safe_dump(doc))
+    with pytest.raises(BagFormatError, match=r"'offered_qos_profiles' of "
+                       r"'topics_with_message_count' entry 2 is a string \('x'\), not a list"):
+        read_pressure(bag)
+    del topics[1]["topic_metadata"]["offered_qos_profiles"]
+    del topics[0]["topic_metadata"]["type"]
+    bag = _bag_with_metadata(full_bag, yaml.safe_dump(doc))
+    with pytest.raises(BagFormatError, match=r"'topic_metadata' of "
+                       r"'topics_with_message_count' entry 1 has no 'type' string"):
+        read_pressure(bag)
+
+
+@pytest.mark.parametrize(("text", "problem"), BAD_METADATA[:4])
+def test_cli_metadata_that_is_not_a_mapping_is_one_line_exit_2(tmp_path, capsys, text,
+                                                               problem):
+    from pneumatic_unload.cli import main
+
+    bag = tmp_path / "clean_unload"
+    shutil.copytree(REPO_ROOT / "bags" / "clean_unload", bag)
+    (bag / "metadata.yaml").write_text(text)
+    code = main(["analyze", str(bag)])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert err.startswith(f"pneumatic-unload: error: {bag / 'metadata.yaml'} is not rosbag2 "
+                          f"metadata: {problem}; a rosbag2 metadata.yaml must hold"), err
+    assert "Traceback" not in err and "indices" not in err
+
+
 def test_recorder_errors_and_context_manager(tmp_path):
     path = tmp_path / "r"
     rec = BagRecorder(path, config={"a": 1})

@@ -8,6 +8,7 @@ the CLI (JSON fields, report files, exit codes) and the real AeroLab data end to
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -625,3 +626,150 @@ def test_an_ambiguity_names_none_of_its_members_and_advises_only_the_separation(
                    for a in advice), advice
     res.rounds = [r1, r2]
     assert DiscrepancyResult.named.fget(res) == ["sensor_lag"]
+
+
+# ------------------------------------- words, not numbers, for what cannot be known (issue)
+def _fit_result(jac, *, fun=None, log=True):
+    """A FitResult of a log parameter C and a linear one t_wall with the Jacobian given."""
+    from pneumatic_unload.fit.lsq import FitResult
+    from pneumatic_unload.fit.params import Parameter, Parameters
+
+    params = Parameters([
+        Parameter("C", 8.3e-9, 1e-13, 1e-5, "m^3/(s Pa)", log=log, scale=0.1,
+                  doc="sonic conductance"),
+        Parameter("t_wall", 315.0, 150.0, 600.0, "K", scale=5.0, doc="wall temperature")])
+    jac = np.asarray(jac, dtype=float)
+    fun = np.full(jac.shape[0], 0.5) if fun is None else np.asarray(fun, dtype=float)
+    return FitResult(params=params, values=params.values(), x=params.to_x(), fun=fun, jac=jac,
+                     chi2=float(fun @ fun), success=True, nfev=1, n_data=fun.size)
+
+
+def _no_number_for_the_unknown(iv):
+    """The interval's text, JSON and report row carry no open or overflowed end."""
+    from pneumatic_unload.discrepancy.types import interval_dict
+
+    d = interval_dict(iv)
+    assert d["identifiable"] is False and d["ci_low"] is None and d["ci_high"] is None
+    assert d["reason"] == iv.reason and iv.reason
+    text = iv.describe()
+    assert "e+30" not in text and "inf" not in text.replace("information", "")
+    assert "[" not in text and "nan" not in text
+    json.dumps(d, allow_nan=False)
+    return text
+
+
+def test_a_flat_direction_is_named_in_words_with_what_would_identify_it():
+    # the trace changes with C exactly as with t_wall: the covariance is singular, the
+    # linear interval of the log parameter C was [0, 1.014e+304] and said 'NOT identifiable'
+    from pneumatic_unload.fit.profile import interval
+
+    col = np.linspace(1.0, 2.0, 20)
+    fit = _fit_result(np.column_stack([col, -2.0 * col]))
+    iv = interval(None, None, fit, "C", math.inf, check=False)
+    assert not iv.identifiable and iv.computed
+    assert math.isnan(iv.low) and math.isnan(iv.high)
+    text = _no_number_for_the_unknown(iv)
+    assert text.startswith("not identifiable from this record: the trace changes with C "
+                           "exactly as with a combination of t_wall"), text
+    assert "what would identify it: C or t_wall fixed by a separate measurement" in text
+    # a linear parameter with an infinite sigma was 'identifiable' with [-inf, inf]
+    iv = interval(None, None, fit, "t_wall", math.inf, check=False)
+    assert not iv.identifiable and "combination of C" in _no_number_for_the_unknown(iv)
+
+
+def test_a_failed_evaluation_next_to_the_fit_is_not_called_a_property_of_the_record():
+    # the AeroLab 0.094 in run: a step of C made the integration fail (BAD_RESIDUAL)
+    from pneumatic_unload.fit.lsq import BAD_RESIDUAL, DIFF_STEP
+    from pneumatic_unload.fit.profile import interval
+
+    fun = np.full(20, 0.5)
+    fit = _fit_result(np.column_stack([(BAD_RESIDUAL - fun) / DIFF_STEP,
+                                       np.linspace(1.0, 2.0, 20)]), fun=fun)
+    for name in ("C", "t_wall"):
+        iv = interval(None, None, fit, name, math.inf, check=False)
+        assert not iv.identifiable and not iv.computed
+        text = _no_number_for_the_unknown(iv)
+        assert text.startswith("uncertainty not known: the model could not be evaluated "
+                               "next to the fit (a small step of C made the integration "
+                               "fail)"), text
+        assert "not a property of the record" in text
+
+
+def test_a_too_wide_linear_interval_of_a_log_parameter_is_words_not_a_factor_of_1e304():
+    from pneumatic_unload.fit.profile import interval
+
+    fit = _fit_result(np.eye(20)[:, :2])
+    iv = interval(None, None, fit, "C", 3.0e3, check=False)
+    text = _no_number_for_the_unknown(iv)
+    assert "the likelihood is nearly flat in C: its linear 95 % range spans more than a " \
+           "factor of a million either side of the estimate" in text, text
+    iv = interval(None, None, fit, "C", 25.0, check=False)  # e^(1.96 * 2.5) = 134
+    assert "spans a factor of 134 either side" in _no_number_for_the_unknown(iv)
+    ok = interval(None, None, fit, "C", 0.5, check=False)
+    assert ok.identifiable and ok.reason == "" and ok.computed
+    assert ok.describe() == f"95 % [{ok.low:.4g}, {ok.high:.4g}] (linear)"
+    assert ok.low < 8.3e-9 < ok.high
+
+
+def test_real_aerolab_unidentifiable_c_is_reported_in_words(tmp_path, capsys, monkeypatch):
+    # issue: 'C = 8.3084e-09 m^3/(s Pa)  95 % [0, 1.014e+304] (linear, NOT identifiable)'
+    import pneumatic_unload.discrepancy.report as report
+    import pneumatic_unload.discrepancy.workflow as workflow
+
+    path = REAL / "orifice_0.094in.csv"
+    if not path.exists():
+        pytest.skip(f"real data not present at {path}")
+    results = []
+
+    def keep(*args, **kwargs):
+        results.append(find_discrepancy(*args, **kwargs))
+        return results[-1]
+
+    monkeypatch.setattr(workflow, "find_discrepancy", keep)
+    monkeypatch.setattr(report, "write_plots",  # the text only: fast
+                        lambda res, out: out.mkdir(parents=True, exist_ok=True) or {})
+    rep = tmp_path / "rep"
+    code = main(["discrepancy", str(path), "--volume", "0.125", "--gauge", "--atmosphere",
+                 "101500", "--pressure-unit", "kPa", "--fit-wall-temperature", "--no-profile",
+                 "--max-effects", "1", "--report", str(rep)])
+    out = capsys.readouterr().out
+    assert code == 0
+    md = (rep / "report.md").read_text()
+    doc = json.dumps(results[0].to_dict(), allow_nan=False)
+    for text in (out, md, doc):
+        assert "e+30" not in text and not re.search(r"\b-?inf\b", text), text
+    for iv in results[0].to_dict()["parameters"].values():
+        assert iv["identifiable"] or (iv["ci_low"] is None and iv["ci_high"] is None
+                                      and iv["reason"]), iv
+    (c_line,) = [x for x in out.splitlines() if x.startswith("  C = ")]
+    assert re.fullmatch(r"  C = \S+ m\^3/\(s Pa\)  95 % \[\S+, \S+\] \(linear\)", c_line) or \
+        "not identifiable from this record: " in c_line or \
+        "uncertainty not known: " in c_line, c_line
+
+
+def test_a_profile_open_at_one_end_keeps_the_closed_end_and_says_where_it_is_flat(
+        monkeypatch):
+    # an open profile end was 'inf' (text) or 'unbounded' (report): now the closed end is
+    # kept and the flat stretch named, up to the end of the parameter's range
+    import pneumatic_unload.fit.profile as profile
+    from pneumatic_unload.discrepancy.types import interval_dict
+
+    fit = _fit_result(np.eye(20)[:, :2])
+    g0 = math.log(8.3e-9)
+
+    def chi2(trace, model, fit_, name, value, **kw):  # flat above C = 8.3e-9, steep below
+        g = math.log(value) - g0
+        return fit_.chi2 + (100.0 * g * g if g < 0 else 0.0), None
+
+    monkeypatch.setattr(profile, "profile_chi2", chi2)
+    iv = profile.interval(None, None, fit, "C", 0.5)
+    assert iv.method == "profile" and not iv.identifiable and iv.computed
+    assert 0.8 * 8.3e-9 < iv.low < 8.3e-9 and math.isnan(iv.high)
+    d = interval_dict(iv)
+    assert d["ci_low"] == iv.low and d["ci_high"] is None
+    text = iv.describe()
+    assert text.startswith(f"not identifiable from this record: its 95 % lower end is "
+                           f"{iv.low:.4g} m^3/(s Pa); the likelihood is flat in C (chi^2 "
+                           "within 3.84 of its minimum) from the estimate 8.3e-09 m^3/(s Pa) "
+                           "to the upper end of its range, 1e-05 m^3/(s Pa)"), text
+    assert "what would identify it: " in text

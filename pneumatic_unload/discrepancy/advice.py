@@ -120,9 +120,15 @@ def which_c(res: DiscrepancyResult) -> list[str]:
                  "more credible than the others until the measurement under 'What to do "
                  "next' is made."]
         return lines
-    rel = s / c if c > 0 and math.isfinite(s) else math.nan
-    lines = [f"**Report C = {c:.5g} m^3/(s Pa) = {c / dm3:.4g} dm^3/(s bar), sigma "
-             f"{s:.2g} m^3/(s Pa) ({100 * rel:.2g} %)**, from {model}."]
+    if c > 0 and math.isfinite(s):
+        lines = [f"**Report C = {c:.5g} m^3/(s Pa) = {c / dm3:.4g} dm^3/(s bar), sigma "
+                 f"{s:.2g} m^3/(s Pa) ({100 * s / c:.2g} %)**, from {model}."]
+    else:
+        iv = res.parameters.get("C")
+        why = iv.describe() if iv is not None and not iv.identifiable else \
+            "the fit gives no finite standard error of C"
+        lines = [f"**Report C = {c:.5g} m^3/(s Pa) = {c / dm3:.4g} dm^3/(s bar)**, from "
+                 f"{model}, **without a sigma**: {why}."]
     if res.effect == "none":
         lines.append("Why: no candidate effect improves the fit by the BIC threshold, so "
                      "the unloading-time model itself is the one to report.")

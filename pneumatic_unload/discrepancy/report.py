@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +22,9 @@ from pneumatic_unload.discrepancy.advice import what_next, which_c
 from pneumatic_unload.discrepancy.html import markdown_to_html
 from pneumatic_unload.discrepancy.multirun import GeometryLaw
 from pneumatic_unload.discrepancy.types import BIC_HELP, DiscrepancyResult
+
+if TYPE_CHECKING:  # annotations only
+    from pneumatic_unload.fit.profile import Interval
 
 FloatArray = NDArray[np.float64]
 
@@ -161,6 +164,12 @@ def _fmt(v: float | None, unit: str = "") -> str:
     return f"{v:.4g}{(' ' + unit) if unit and unit != '-' else ''}"
 
 
+def _identifiable(iv: Interval) -> str:
+    """The identifiable column of the parameter table: yes, NO, or 'not computed' (no
+    interval could be computed, which says nothing about the record)."""
+    return "yes" if iv.identifiable else "NO" if iv.computed else "not computed"
+
+
 def _sigma_sources(nz: dict[str, Any]) -> str:
     """How sigma [Pa] was made from the plateau and whole-trace (high-pass) estimates."""
     sp, sh, w = nz.get("sigma_plateau"), nz.get("sigma_highpass"), nz.get("highpass_weight")
@@ -200,10 +209,14 @@ def markdown(res: DiscrepancyResult, files: dict[str, str], title: str = "") -> 
               "| parameter | value | interval | method | identifiable | meaning |",
               "| --- | --- | --- | --- | --- | --- |"]
     for k, v in res.parameters.items():
-        lines.append(f"| {k} | {_fmt(v.value, v.unit)} | [{_fmt(v.low)}, {_fmt(v.high)}] "
-                     f"| {v.method} | {'yes' if v.identifiable else 'NO'} | {v.doc} |")
+        span = f"[{_fmt(v.low)}, {_fmt(v.high)}]" if v.identifiable else "none (see below)"
+        lines.append(f"| {k} | {_fmt(v.value, v.unit)} | {span} "
+                     f"| {v.method} | {_identifiable(v)} | {v.doc} |")
     lines += ["", "An interval that does not close inside the parameter's range means the "
               "trace cannot pin the parameter down (reported as not identifiable).", ""]
+    unknown = [(k, v) for k, v in res.parameters.items() if not v.identifiable]
+    if unknown:
+        lines += [f"- **{k}**: {v.describe()}" for k, v in unknown] + [""]
     if "models" in files:
         lines += ["## Measured vs models", "", f"![models]({files['models']})", ""]
     if "residuals" in files:

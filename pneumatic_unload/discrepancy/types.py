@@ -181,11 +181,15 @@ class Fit:
 
 
 def interval_dict(iv: Interval) -> dict[str, Any]:
-    """JSON-ready dict of an interval (infinite ends as None)."""
+    """JSON-ready dict of an interval: an end that is not known (or not finite) is None;
+    ``reason`` says in words why a parameter is not identifiable and what would identify
+    it ('' when it is); ``computed`` False: no interval could be computed (a failure of
+    the computation, not a property of the record)."""
     def f(v: float) -> float | None:
         return v if math.isfinite(v) else None
     return {"value": iv.value, "ci_low": f(iv.low), "ci_high": f(iv.high), "unit": iv.unit,
-            "method": iv.method, "identifiable": iv.identifiable, "doc": iv.doc}
+            "method": iv.method, "identifiable": iv.identifiable, "reason": iv.reason,
+            "computed": iv.computed, "doc": iv.doc}
 
 
 @dataclass

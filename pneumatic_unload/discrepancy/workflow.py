@@ -324,9 +324,12 @@ def _verdict(effect: str, amb: list[str], claimed: list[str], before: Diagnostic
         txt += f"; added greedily: {', '.join(claimed)}"
     txt += (f"; RMS {before.rms:.4g} Pa -> {after.rms:.4g} Pa "
             f"(normalised {before.nrms:.3f} -> {after.nrms:.3f})")
-    bad = [k for k, v in params.items() if not v.identifiable]
+    bad = [k for k, v in params.items() if not v.identifiable and v.computed]
     if bad:
         txt += f"; not identifiable: {', '.join(bad)}"
+    unknown = [k for k, v in params.items() if not v.computed]
+    if unknown:
+        txt += f"; uncertainty not computed: {', '.join(unknown)}"
     return txt
 
 

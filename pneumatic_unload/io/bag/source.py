@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path, PurePath
+from typing import Any, Final
 
 import yaml
 from rosbags.interfaces import Connection, MessageDefinitionFormat
@@ -30,9 +31,11 @@ from .errors import (
 from .schema import make_typestore
 
 __all__ = [
+    "METADATA_LAYOUT",
     "BagSource",
     "bag_typestore",
     "open_reader",
+    "read_metadata",
     "resolve_bag",
     "topic_connections",
 ]
@@ -67,15 +70,155 @@ def resolve_bag(path: str | os.PathLike[str]) -> BagSource:
                 f"closing it; {RECOVER_HINT}"
             )
         raise BagFormatError(f"{bag} is not a rosbag2 bag directory (no metadata.yaml)")
-    try:
-        info = yaml.safe_load(meta_path.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
-        files = [bag / PurePath(x).name for x in info["relative_file_paths"]]
-        compression = str(info.get("compression_mode") or "").lower()
-        custom = {str(k): str(v) for k, v in (info.get("custom_data") or {}).items()}
-    except Exception as err:
-        raise BagFormatError(f"bag {bag} has an unreadable metadata.yaml: {err}") from err
+    info = read_metadata(meta_path)
+    files = [bag / PurePath(x).name for x in info["relative_file_paths"]]
+    compression = str(info.get("compression_mode") or "").lower()
+    custom = {str(k): str(v) for k, v in (info.get("custom_data") or {}).items()}
     fast = () if compression not in ("", "none") else tuple(f for f in files if f.suffix == ".mcap")
     return BagSource(bag, bag, fast, custom)
+
+
+#: What a rosbag2 ``metadata.yaml`` must hold (the keys rosbags' Reader and this package use).
+METADATA_LAYOUT: Final = (
+    "a rosbag2 metadata.yaml must hold a mapping with the key 'rosbag2_bagfile_information' "
+    "whose mapping holds 'version' (an integer 1 to 9), 'storage_identifier' ('mcap' or "
+    "'sqlite3'), 'relative_file_paths' (a list of file names), 'topics_with_message_count' "
+    "(a list of mappings, each with 'message_count' and 'topic_metadata': a mapping with "
+    "'name', 'type' and 'serialization_format': 'cdr'), 'message_count' (an integer), "
+    "'duration' (a mapping with 'nanoseconds') and 'starting_time' (a mapping with "
+    "'nanoseconds_since_epoch'); optional: 'compression_mode' and 'compression_format' "
+    "(strings), 'custom_data' (a mapping), 'files' (a list)"
+)
+
+_STORAGES: Final = ("mcap", "sqlite3")
+
+
+def _kind(value: object) -> str:
+    """What a YAML value is, in words (for the messages of :func:`read_metadata`)."""
+    if value is None:
+        return "empty"
+    names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
+             list: "a list", dict: "a mapping"}
+    for typ, name in names.items():
+        if type(value) is typ:
+            text = repr(value)
+            return f"{name} ({text[:40]}...)" if len(text) > 43 else f"{name} ({text})"
+    return type(value).__name__
+
+
+def _metadata_problem(doc: object) -> str | None:
+    """The first way ``doc`` (a loaded ``metadata.yaml``) departs from
+    :data:`METADATA_LAYOUT`, in words; None if it has the layout."""
+    key = "rosbag2_bagfile_information"
+    if not isinstance(doc, dict):
+        return f"it is {_kind(doc)}, not a mapping"
+    if key not in doc:
+        return f"it has no key '{key}' (its keys: {', '.join(map(str, doc)) or 'none'})"
+    info = doc[key]
+    if not isinstance(info, dict):
+        return f"'{key}' is {_kind(info)}, not a mapping"
+
+    def count(value: object) -> bool:
+        return type(value) is int and value >= 0
+
+    def mapping_with(name: str, sub: str) -> str | None:
+        if name not in info:
+            return f"'{key}' has no '{name}'"
+        value = info[name]
+        if not isinstance(value, dict) or not count(value.get(sub)):
+            return (f"'{name}' is {_kind(value)}, not a mapping with '{sub}' (an integer "
+                    "number of nanoseconds >= 0)")
+        return None
+
+    checks: list[tuple[str, Callable[[Any], bool]]] = [
+        ("version", lambda v: type(v) is int and 1 <= v <= 9),
+        ("storage_identifier", lambda v: v in _STORAGES),
+        ("relative_file_paths",
+         lambda v: isinstance(v, list) and all(isinstance(x, str) and x for x in v)),
+        ("topics_with_message_count", lambda v: isinstance(v, list)),
+        ("message_count", count),
+    ]
+    wanted = {"version": "an integer 1 to 9", "storage_identifier": "'mcap' or 'sqlite3'",
+              "relative_file_paths": "a list of file names",
+              "topics_with_message_count": "a list", "message_count": "an integer >= 0"}
+    for name, ok in checks:
+        if name not in info:
+            return f"'{key}' has no '{name}'"
+        if not ok(info[name]):
+            return f"'{name}' is {_kind(info[name])}, not {wanted[name]}"
+    for i, topic in enumerate(info["topics_with_message_count"]):
+        where = f"'topics_with_message_count' entry {i + 1}"
+        if not isinstance(topic, dict):
+            return f"{where} is {_kind(topic)}, not a mapping"
+        if not count(topic.get("message_count")):
+            return f"{where} has no 'message_count' integer >= 0"
+        meta = topic.get("topic_metadata")
+        if not isinstance(meta, dict):
+            return f"{where} has no 'topic_metadata' mapping"
+        for field in ("name", "type", "serialization_format"):
+            if not isinstance(meta.get(field), str):
+                return f"'topic_metadata' of {where} has no '{field}' string"
+        if meta["serialization_format"] != "cdr":
+            return (f"'serialization_format' of {where} is {meta['serialization_format']!r}; "
+                    "rosbag2 bags this package reads are 'cdr'")
+        qos = meta.get("offered_qos_profiles") or []
+        if isinstance(qos, str):  # rosbag2 before version 9: the profiles as YAML text
+            with contextlib.suppress(yaml.YAMLError):
+                qos = yaml.safe_load(qos) or []
+        if not isinstance(qos, list) or not all(isinstance(x, dict) for x in qos):
+            return (f"'offered_qos_profiles' of {where} is {_kind(qos)}, not a list of "
+                    "mappings")
+    for name, sub in (("duration", "nanoseconds"), ("starting_time", "nanoseconds_since_epoch")):
+        if (problem := mapping_with(name, sub)) is not None:
+            return problem
+    if not isinstance(info.get("compression_mode", ""), str):
+        return f"'compression_mode' is {_kind(info['compression_mode'])}, not a string"
+    if not isinstance(info.get("compression_format") or "", str):
+        return f"'compression_format' is {_kind(info['compression_format'])}, not a string"
+    mode = info.get("compression_mode", "").lower()
+    if mode not in ("", "none", "file", "message"):
+        return (f"'compression_mode' is {info['compression_mode']!r}, not '', 'none', 'file' "
+                "or 'message'")
+    if mode in ("file", "message") and info.get("compression_format") != "zstd":
+        return (f"'compression_mode' is {mode!r} but 'compression_format' is "
+                f"{_kind(info.get('compression_format'))}, not 'zstd'")
+    if not isinstance(info.get("custom_data") or {}, dict):
+        return f"'custom_data' is {_kind(info['custom_data'])}, not a mapping"
+    if not isinstance(info.get("files", []), list):
+        return f"'files' is {_kind(info['files'])}, not a list"
+    return None
+
+
+def read_metadata(meta_path: Path) -> dict[str, Any]:
+    """The ``rosbag2_bagfile_information`` mapping of a bag's ``metadata.yaml``, checked
+    against :data:`METADATA_LAYOUT` (so that rosbags' Reader and this package find every
+    key they use with the expected type).
+
+    Raises:
+        BagFormatError: the file is unreadable, not YAML, or lacks that layout; the message
+            names the file, what is wrong, what the file must hold and how to rewrite it.
+    """
+    bag = meta_path.parent
+    fix = f"if its storage files are intact, `pneumatic-unload recover {bag}` rewrites it"
+    try:
+        doc = yaml.safe_load(meta_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as err:
+        raise BagFormatError(f"cannot read {meta_path}: {err}") from err
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
+        what = getattr(err, "problem", None) or "a YAML syntax error"
+        raise BagFormatError(
+            f"{meta_path} is not valid YAML{where}: {what}; {METADATA_LAYOUT}; {fix}"
+        ) from err
+    problem = _metadata_problem(doc)
+    if problem is not None:
+        raise BagFormatError(
+            f"{meta_path} is not rosbag2 metadata: {problem}; {METADATA_LAYOUT}; {fix}"
+        )
+    assert isinstance(doc, dict)  # checked by _metadata_problem
+    info: dict[str, Any] = doc["rosbag2_bagfile_information"]
+    return info
 
 
 @contextlib.contextmanager
@@ -88,7 +231,8 @@ def open_reader(src: BagSource) -> Iterator[Reader]:
         raise
     except Exception as err:
         raise BagFormatError(
-            f"cannot read bag {src.path}: {err}. If its writer did not finish, {RECOVER_HINT}"
+            f"cannot read bag {src.path}: {str(err).rstrip('.')}. If its writer did not "
+            f"finish, {RECOVER_HINT}"
         ) from err
     try:
         yield reader
