@@ -420,7 +420,10 @@ def conductance_sse(
     p10 : float
         Initial pressure [Pa absolute].
     p1_inf : float
-        Recovered pressure after re-equilibration to T10 [Pa absolute].
+        Recovered pressure after re-equilibration to T10 [Pa absolute]. NaN is returned
+        unless p10 > 0 and p1_inf > 0 (absolute pressures: otherwise the fractional power
+        is complex, or p1_inf = 0 divides by zero); C <= 0 when p1_inf >= p10 (no mass
+        left the tank), which the caller must refuse.
     volume : float
         V [m^3].
     t10 : float
@@ -428,6 +431,8 @@ def conductance_sse(
     gas : Gas
         Gas properties.
     """
+    if not (p10 > 0.0 and p1_inf > 0.0):  # not absolute pressures (or NaN): no real C
+        return math.nan
     theta_1 = choked_time_constant(volume, 1.0, t10, gas, paper_form=True)
     x = (p10 / p1_inf) ** ((gas.gamma - 1.0) / 2.0) - 1.0
     return theta_1 * x / t_star

@@ -31,6 +31,7 @@ from pneumatic_unload.inversion import invert_crossing
 from pneumatic_unload.model import simulate
 from pneumatic_unload.physics import (
     conductance_isentropic_inversion,
+    conductance_sse,
     isentropic_crossing_time,
     orifice_conductance,
     p_star,
@@ -121,6 +122,38 @@ def test_isentropic_closed_forms_are_nan_for_non_absolute_pressures():
     assert math.isnan(conductance_isentropic_inversion(1.0, -2e5, 7e5, 1e-3))
     assert math.isnan(isentropic_crossing_time(2e5, -7e5, 1e-3, 1e-8))
     assert conductance_isentropic_inversion(1.0, 2e5, 7e5, 1e-3) > 0
+
+
+def test_an_aborted_unload_below_zero_pa_has_no_sse_value_not_a_complex_c():
+    # bench_fuzz (analyze_wild): an aborted 1.5 bar unload recorded 1.44 bar low, p_atm not
+    # given: p10 = 6.0 kPa, the recovery's p1_inf = -9.0 kPa; eq 23's power of
+    # p10/p1_inf < 0 was complex (TypeError at the SSE sigma's hypot in sse.py). No SSE
+    # value then, with the reason.
+    cfg = RigConfig(volume=2e-3, conductance=orifice_conductance(1e-3), initial_pressure=1.5e5,
+                    effects=("heat_transfer",), valve_close_time=2.0, rate=50.0,
+                    duration=120.0, noise_std=300.0, seed=1, pre_time=0.3)
+    sim = simulate(cfg)
+    est = EstimatorSettings(**{**cfg.tank_fields(), "atmosphere": None})
+    res = analyze(sim.t, sim.measured - 1.44e5, est)
+    fz.check_results(res)
+    assert [(r.status, r.final) for r in res] == [("aborted", False), ("aborted", True)]
+    last = res[1]
+    assert "no SSE value: pressures not absolute Pa" in last.status_text
+    assert "p1_inf = -9" in last.status_text
+    assert last.p10 == pytest.approx(6029.0, abs=50.0)
+    assert math.isnan(last.conductance) and last.extra == {}
+
+
+@pytest.mark.parametrize(("p10", "p1_inf"), [(6.0e3, -9.0e3), (-6.0e3, -9.0e3), (6.0e3, 0.0),
+                                             (-6.0e3, 9.0e3), (math.nan, 9.0e3)])
+def test_sse_closed_form_is_nan_for_non_absolute_pressures(p10, p1_inf):
+    assert math.isnan(conductance_sse(2.0, p10, p1_inf, 2e-3))
+
+
+def test_sse_closed_form_is_real_and_signed_for_absolute_pressures():
+    assert conductance_sse(2.0, 1.5e5, 1.1e5, 2e-3) > 0
+    assert conductance_sse(2.0, 1.5e5, 1.5e5, 2e-3) == 0.0
+    assert conductance_sse(2.0, 1.5e5, 1.6e5, 2e-3) < 0  # gas gained: refused by the caller
 
 
 def test_model_inversion_outside_the_models_range_is_nan_not_an_overflow():

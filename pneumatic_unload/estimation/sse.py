@@ -246,6 +246,20 @@ def scan_recovery(st: EstimatorState, i: int, end: int) -> int:
     return int(ks[k]) if k < ks.size else end
 
 
+def sse_pressure_problem(p10: float, p1_inf: float) -> str:
+    """Why eq 23 gives no C for the initial pressure p10 and the recovered pressure p1_inf
+    [Pa absolute] whatever their uncertainty, or '' when it may: both must be absolute
+    pressures (> 0; a fractional power of a negative ratio is complex). Without a given
+    p_atm nothing checks the pressures before the recovery: gauge readings, or a signal
+    without ``signal_gain``/``signal_offset``, get this far. (p1_inf >= p10, C <= 0, is
+    the caller's: an extrapolated p1_inf may land there, an uncertain fit.)"""
+    if not (p10 > 0.0 and p1_inf > 0.0):
+        return (f"pressures not absolute Pa (p10 = {p10:.6g} Pa, p1_inf = {p1_inf:.6g} Pa; "
+                f"eq 23 needs p10 > p1_inf > 0): gauge readings or a signal without "
+                f"signal_gain/signal_offset?")
+    return ""
+
+
 def abort_result(st: EstimatorState, i: int, recovered: bool, text: str = "") -> UnloadResult:
     """Result of an aborted unload at index i; with ``recovered`` (or a recovery fit good
     enough to extrapolate at the end of the stream), the SSE value of eq 23."""
@@ -271,12 +285,23 @@ def abort_result(st: EstimatorState, i: int, recovered: bool, text: str = "") ->
     t_star = u.t_close - u.t0
     t_star_std = u.t0_std
     gas, t10, vol = s.gas, s.initial_temperature, s.volume
+    why = sse_pressure_problem(p10, p_inf)
+    if why:
+        res.status_text += f"; no SSE value: {why}"
+        return res
     c = physics.conductance_sse(t_star, p10, p_inf, vol, t10, gas)
-    dc_dp = (physics.conductance_sse(t_star, p10, p_inf + p_inf_std, vol, t10, gas) - c)
+    c_hi = physics.conductance_sse(t_star, p10, p_inf + p_inf_std, vol, t10, gas)
+    # p1_inf one sigma higher: at or above p10 (C <= 0 there) the SSE sigma is at least C
+    dc_dp = c_hi - c if p_inf + p_inf_std < p10 else math.inf
     c_std = math.hypot(dc_dp, c * t_star_std / t_star, c * SSE_MODEL_REL_STD)
     if not (math.isfinite(c) and c > 0 and c_std < 0.25 * c):
+        reach = ""
+        if p_inf >= p10:  # an extrapolation beyond p10: C <= 0
+            reach = f", not below p10 = {p10:.0f} Pa"
+        elif math.isinf(dc_dp):
+            reach = f", its 1-sigma band reaching p10 = {p10:.0f} Pa"
         res.status_text += (f"; recovery fit too uncertain for SSE (p_inf = {p_inf:.0f} "
-                            f"+- {p_inf_std:.0f} Pa)")
+                            f"+- {p_inf_std:.0f} Pa{reach})")
         return res
     done = 1.0 - fit.remaining / fit.rise
     how = ("recovery plateau" if recovered else
