@@ -42,7 +42,11 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
+from pneumatic_unload.config.estimator import (
+    MODEL_UNCERTAINTY,
+    EstimatorSettings,
+    wall_uncertainty,
+)
 from pneumatic_unload.config.tank import wall_pair
 from pneumatic_unload.inversion import invert_crossing
 from pneumatic_unload.physics import conductance_eq39, conductance_isentropic_inversion
@@ -67,7 +71,8 @@ EXACT_INPUTS: dict[str, float] = {"volume_uncertainty": 0.0, "temperature_uncert
                                   "model_uncertainty": 0.0}
 #: The stated inputs exact, the model's limits kept: a peer simulation (HydDown) analysed
 #: with its own tank and gas.
-EXACT_INPUTS_FOREIGN_MODEL: dict[str, float] = {**EXACT_INPUTS, "model_uncertainty": 0.003}
+EXACT_INPUTS_FOREIGN_MODEL: dict[str, float] = {**EXACT_INPUTS,
+                                                "model_uncertainty": MODEL_UNCERTAINTY}
 
 
 @dataclass(frozen=True)

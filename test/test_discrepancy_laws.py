@@ -117,9 +117,11 @@ def test_the_c_range_carries_the_budget_model_limits_term():
 
 def test_a_further_leak_that_another_heat_law_explains_as_well_is_refused():
     """HydDown v5l (5 L, natural convection, T10 303 K): with the hot start named
-    (natural+turbulent law), a laminar leak gains about 50 with C -3.3 %; the hot start
-    with the density law explains as much with C -0.0 %: the leak is refused as a look-alike
-    of the heat law (``laws.law_refusals``)."""
+    (natural+turbulent law), a laminar leak gains about 40 with C -1.8 % (-3.3 % before the
+    integrator's steps were put on a grid: the leak's valley is flat, its C moves with the
+    last bits of the model); the hot start with the density law explains as much with
+    C -0.0 %: the leak, which would move C, is refused as a look-alike of the heat law
+    (``laws.law_refusals``)."""
     import zlib
 
     from foreign.hyddown_data import DATA_DIR, load, record
@@ -148,7 +150,7 @@ def test_a_further_leak_that_another_heat_law_explains_as_well_is_refused():
                                    if k not in neutral[0]}}]
     leak = fit_candidate(pk, base, neutral_k, "leak")
     gain = base.bic - leak.bic
-    assert gain > 10.0 and abs(leak.theta["C"] / m["truth_conductance"] - 1.0) > 0.02
+    assert gain > 10.0 and abs(leak.theta["C"] / m["truth_conductance"] - 1.0) > 0.01
     why = law_refusals(pk, base, {"leak": gain}, 10.0)
     assert "leak" in why and "density" in why["leak"], why
     # a candidate far ahead of every law is not refused

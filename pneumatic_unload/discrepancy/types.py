@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config import EFFECTS, TankSpec
+from pneumatic_unload.config.estimator import MODEL_UNCERTAINTY
 from pneumatic_unload.config.fields import (
     ConfigError,
     flag,
@@ -75,8 +76,10 @@ class DiscrepancySettings(TankSpec):
         Relative bin width of the likelihood [-] (smaller: slower, a little more power).
     model_uncertainty : float
         Relative standard uncertainty of the model-based C from the discharge model's own
-        limits [-], as the estimator's (default 0.3 %, the RMS error of the model C against
-        the HydDown peer simulator; 0 only for data made by the package's own model): in
+        limits [-], as the estimator's (default
+        :data:`~pneumatic_unload.config.estimator.MODEL_UNCERTAINTY`, 0.34 %, the RMS error
+        of the model C against the HydDown peer simulator; 0 only for data made by the
+        package's own model): in
         :meth:`DiscrepancyResult.conductance_std` and the C range, through the budget's
         model-limits term (:func:`pneumatic_unload.budget.model_limits_term`).
     length_diameter_known : bool
@@ -101,8 +104,9 @@ class DiscrepancySettings(TankSpec):
     profile: bool = flag(True, "check the linear intervals with profile likelihoods")
     resolution: float = number(0.03, "-", 1e-3, 0.5, "relative bin width of the likelihood")
     model_uncertainty: float = number(
-        0.003, "-", 0.0, 0.5, "relative standard uncertainty of the model-based C from the "
-        "model's own limits (ideal gas, uniform state, heat-law family)")
+        MODEL_UNCERTAINTY, "-", 0.0, 0.5, "relative standard uncertainty of the "
+        "model-based C from the model's own limits (ideal gas, uniform state, heat-law "
+        "family)")
     length_diameter_known: bool = flag(True, "the tank's L/D is stated (False: the "
                                        "natural heat law is also fitted at L/D 1-7.6)")
     time_limit: float | None = optional(
