@@ -340,3 +340,29 @@ def test_a_crossing_without_an_instant_still_ends_its_tail(tmp_path):
     case = {"t_ns": d["t_ns"], "p": d["p"], "config": None, "settings": None, "damage": [],
             "volume": float(d["volume"]), "variance": float(d["variance"])}
     fio.prop_bag(tmp_path, case)
+
+
+def test_a_fitted_p_atm_beyond_any_atmosphere_is_a_curve_fit_error_not_a_config_error():
+    # helper search, session 11: an aborted-looking record with p_atm auto; the curve fit
+    # moved p_atm to 853 Pa (ConfigError out of `analyze` when the fitted model was built).
+    # The crossing estimate stands; the final result says why the fit is not used.
+    import json
+
+    d = _fuzz_data("fuzz_fitted_patm_out_of_range")
+    es = EstimatorSettings(**json.loads(str(d["settings_json"])))
+    res = fz.run_analyze(d["t"], d["p"], es)
+    fz.check_results(res)
+    (final,) = [r for r in res if r.final]
+    assert "not an atmosphere" in final.extra["curve_fit_error"]
+    assert final.status == "ok" and final.conductance_model > 0  # the crossing's
+
+
+def test_a_final_plateau_that_is_no_atmosphere_is_bad_data_with_the_fix():
+    """Gauge readings analysed as absolute with p_atm auto: the final plateau (about 0 Pa)
+    is not an atmosphere; the unload is bad_data naming the fix, not a C."""
+    cfg = RigConfig(volume=1e-3, conductance=5e-9, pre_time=0.5, duration=12.0, seed=4)
+    sim = simulate(cfg)
+    es = EstimatorSettings(volume=1e-3, atmosphere=None)
+    res = analyze(sim.t, sim.measured - 101325.0 + 500.0, es)
+    assert res and all(r.status == "bad_data" for r in res), [r.status for r in res]
+    assert "not an atmosphere" in res[0].status_text and "--atmosphere" in res[0].status_text

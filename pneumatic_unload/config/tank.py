@@ -96,6 +96,13 @@ WALL_RANGE: tuple[float, float] = next(
     for f in dataclasses.fields(TankSpec) if f.name == "wall_temperature")
 
 
+#: The atmospheric pressures a rig may vent to [Pa absolute] (the ``atmosphere`` field's
+#: range).
+ATMOSPHERE_RANGE: tuple[float, float] = next(
+    (float(f.metadata["min"]), float(f.metadata["max"]))
+    for f in dataclasses.fields(TankSpec) if f.name == "atmosphere")
+
+
 def wall_pair(wall: float, u: float) -> tuple[float, float]:
     """The wall temperature ``wall`` [K] moved up and down by its standard uncertainty u
     [K], each inside :data:`WALL_RANGE`: (upper, lower) [K]. A wall at the edge of the

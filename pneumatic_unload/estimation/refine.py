@@ -26,6 +26,7 @@ from pneumatic_unload.budget import (
 from pneumatic_unload.budget_b import ratio_budget
 from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
 from pneumatic_unload.config.rig import RigConfig
+from pneumatic_unload.config.tank import ATMOSPHERE_RANGE
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 from pneumatic_unload.fit.uncertainty import inadequacy
 from pneumatic_unload.fitting import CurveFit, fit_curve
@@ -322,6 +323,13 @@ def refine_with_curve_fit(
         return dataclasses.replace(res, final=True, extra={
             **res.extra, "curve_fit_error": f"the fit did not determine C ({fit.conductance:.3g}"
                                             f" +- {c_std:.3g} m^3/(s Pa))"})
+    lo, hi = ATMOSPHERE_RANGE
+    if not lo <= fit.p_atm <= hi:
+        # p_atm fitted (not given) beyond any atmosphere: the fit describes something else
+        return dataclasses.replace(res, final=True, extra={
+            **res.extra, "curve_fit_error": f"the fit moved p_atm to {fit.p_atm:.0f} Pa, not "
+                                            f"an atmosphere ({lo:.0f}-{hi:.0f} Pa): give it "
+                                            "(--atmosphere PA)"})
     tau_model = fitted_tau_exp(fit.config(settings), res.tau_exp)
     if not (math.isfinite(tau_model) and tau_model > 0):
         tau_model = math.nan

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from pneumatic_unload.config.tank import ATMOSPHERE_RANGE
 from pneumatic_unload.estimation import reduction
 from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.decisions import (
@@ -308,6 +309,20 @@ def auto_too_long(st: EstimatorState, i: int) -> list[UnloadResult]:
     return [res]
 
 
+def atmosphere_problem(st: EstimatorState, level: float) -> str | None:
+    """Why a final plateau at ``level`` [signal units] cannot be the atmosphere (p_atm
+    auto), or None: outside :data:`~pneumatic_unload.config.tank.ATMOSPHERE_RANGE` [Pa]
+    (gauge readings, a signal in another unit, a sensor that is not where it seems)."""
+    p_atm = st.to_pa(level)
+    lo, hi = ATMOSPHERE_RANGE
+    if lo <= p_atm <= hi:
+        return None
+    return (f"the final plateau, taken as p_atm (auto), is at {p_atm:.0f} Pa, not an "
+            f"atmosphere ({lo:.0f}-{hi:.0f} Pa absolute): gauge readings, another unit, or "
+            f"a signal without signal_gain/signal_offset? Give the atmosphere (--atmosphere "
+            f"PA) and check the pressure unit")
+
+
 def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
                              ) -> list[UnloadResult]:
     """p_atm auto: once the final plateau is reached, set p* and find the crossing
@@ -317,7 +332,10 @@ def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
     tau_guess = (float(tv[i]) - u.t0) / 4.0
     if at_end:
         w = max((i - u.i0) // 8, 8)
-        st.set_pstar(st.buf.mean(i - w + 1, i + 1))
+        level = st.buf.mean(i - w + 1, i + 1)
+        if (why := atmosphere_problem(st, level)) is not None:
+            return st.bad(i, why)
+        st.set_pstar(level)
         u.atm_var = st.sigma**2 / w
         j = first_below(pv, u.i0, i + 1, st.level)
         if j > i:
@@ -331,6 +349,8 @@ def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
     drop = u.p10 - level
     if drop < 0.5 * u.dp_guess:
         return on_abort(st, i)
+    if (why := atmosphere_problem(st, level)) is not None:
+        return st.bad(i, why)
     st.set_pstar(level)
     u.atm_var = st.sigma**2 / w
     j = first_below(pv, u.i0, i + 1, st.level)

@@ -110,6 +110,10 @@ def fast_chunk_pairs(
                    for index in sorted(summary.chunk_indexes,
                                        key=lambda c: c.chunk_start_offset)]
         indexes = [(index, wanted) for index, wanted in indexes if wanted]
+        size = mcap_file.stat().st_size
+        if any(index.chunk_start_offset + index.chunk_length + index.message_index_length
+               > size for index, _wanted in indexes):
+            raise NotFastDecodable  # a damaged index points past the file's end
         counted = 0
         for index, wanted in indexes:  # message index headers only: a few bytes per chunk
             for cid in wanted:
