@@ -1,10 +1,16 @@
-"""Shared plumbing of the ROS 2 nodes: QoS profiles, parameters from RigConfig, spinning.
+"""Shared plumbing of the ROS 2 nodes: QoS profiles, parameters from RigConfig, start,
+spinning and stop.
 
-Nodes stay thin: they convert messages, hold parameters and call the ROS-free core.
+Nodes stay thin: they convert messages, hold parameters and call the ROS-free core. Every node
+starts ROS with :func:`start_ros`, calls :func:`running` once it is built and runs while
+:func:`ok`: SIGINT and SIGTERM stop a node at any moment, its start included (see
+:mod:`pneumatic_unload.nodes`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -26,10 +32,12 @@ from rclpy.qos import (
     QoSProfile,
     ReliabilityPolicy,
 )
+from rclpy.signals import SignalHandlerOptions
 
 from pneumatic_unload.config import ConfigError, RigConfig, adapters
 from pneumatic_unload.config import nodes as config_nodes
 from pneumatic_unload.config.adapters import ParameterSpec
+from pneumatic_unload.nodes import HELD_SIGNALS, held_signal, hold_signals
 
 #: Pressure samples: reliable, deep history (the subscriber's callback is the bottleneck).
 PRESSURE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
@@ -161,28 +169,80 @@ def make_executor(kind: str = "events") -> Any:
     return rclpy.executors.SingleThreadedExecutor()
 
 
+def start_ros(args: Sequence[str] | None = None) -> bool:
+    """Start ROS for a node: ``rclpy.init`` without rclpy's signal handlers, SIGINT and SIGTERM
+    held (recorded, not acted upon; see :mod:`pneumatic_unload.nodes`), so that the node is
+    built whole. Returns False, without starting ROS, when a signal came already (during the
+    imports): the node stops before it starts.
+
+    rclpy's handlers are never installed: they shut the context down from a thread of their
+    own, at any instant, also while an EventsExecutor registers the node's callbacks (it
+    needs the context for that); the executor then keeps callbacks it no longer knows of and
+    aborts the process when it is destroyed (exit status -6). A node's loop ends on
+    :func:`ok` instead, and the context is shut down after the executor.
+    """
+    hold_signals()
+    if held_signal() is not None:
+        return False
+    rclpy.init(args=list(args) if args is not None else sys.argv,
+               signal_handler_options=SignalHandlerOptions.NO)
+    return True
+
+
+def stopping() -> bool:
+    """True once a SIGINT or SIGTERM came (during the start or since)."""
+    return held_signal() is not None
+
+
+def ok() -> bool:
+    """Go on running: ROS is up and no SIGINT or SIGTERM came."""
+    return rclpy.ok() and not stopping()
+
+
+def running(*, keyboard_interrupt: bool = False) -> None:
+    """The node is built and about to run: raises KeyboardInterrupt when a SIGINT or SIGTERM
+    came during the start, so that the node stops here through its usual path (``close()``,
+    executor shutdown, destroy, ``rclpy`` shutdown; exit status 0). Main thread.
+
+    From now on SIGINT and SIGTERM stay recorded and the node's loop ends on :func:`ok`
+    (:func:`run`, the recorder): no KeyboardInterrupt breaks into a callback or into the
+    executor's own work. ``keyboard_interrupt``: they raise KeyboardInterrupt in the main
+    thread instead (a node that sleeps or waits outside an executor: the replay).
+    """
+    if keyboard_interrupt:
+        for sig in HELD_SIGNALS:
+            signal.signal(sig, signal.default_int_handler)
+    if stopping():
+        raise KeyboardInterrupt
+
+
 def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
         executor: str = "events") -> int:
-    """Init rclpy, build the node, spin until Ctrl-C/SIGTERM, clean up; exit code 0.
+    """Init rclpy, build the node, spin until SIGINT/SIGTERM, clean up; exit code 0.
 
     A node's ``close()`` (if it has one) runs before the node is destroyed, so that files
-    are completed on SIGINT and SIGTERM.
+    are completed on SIGINT and SIGTERM, also when they come during the start
+    (:func:`start_ros`, :func:`running`); the executor is shut down before the node is
+    destroyed, and ROS after both.
     """
-    rclpy.init(args=list(args) if args is not None else sys.argv)
+    if not start_ros(args):
+        return 0
     node: Node | None = None
+    ex: Any = None
     code = 0
     try:
         node = node_factory()
         ex = make_executor(executor)
         ex.add_node(node)
-        # spin() of the EventsExecutor does not return on shutdown: poll the context
-        while rclpy.ok():
+        running()
+        # spin() of the EventsExecutor does not return on shutdown: poll
+        while ok():
             try:
                 ex.spin_once(timeout_sec=0.1)
             except RuntimeError:
-                # SIGINT shuts the context down from the signal handler; an event taken
-                # by the EventsExecutor in that instant cannot be handed to Python
-                # ("Unable to convert call argument"): that is the shutdown, not a fault
+                # an event taken by the EventsExecutor in the instant the context is shut
+                # down (from outside) cannot be handed to Python ("Unable to convert call
+                # argument"): that is the shutdown, not a fault
                 if rclpy.ok():
                     raise
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -198,6 +258,11 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None,
             close = getattr(node, "close", None)
             if close is not None:
                 close()
+            if ex is not None:
+                # before the node is destroyed and ROS shut down: the executor takes back
+                # the node's callbacks (it needs the context for that)
+                with contextlib.suppress(Exception):
+                    ex.shutdown(timeout_sec=1.0)
             node.destroy_node()
         rclpy.try_shutdown()
     return code

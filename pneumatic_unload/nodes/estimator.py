@@ -70,6 +70,7 @@ from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
     FinalFit,
+    LossCounter,
     OpeningFinal,
     OpeningStartEstimator,
     StreamingEstimator,
@@ -148,7 +149,8 @@ class EstimatorNode(Node):
             raise common.StartupError("estimator", str(exc)) from exc
         self._goal_part = ""  # the part id of the running ~/measure goal
         self._unload_parts: dict[int, str] = {}  # unload index -> a goal's part id
-        _warm_up(self._settings)
+        if not common.stopping():  # a node stopped during its start does not warm up
+            _warm_up(self._settings)
         # everything allocated so far (modules, the warm-up) is long-lived: out of the
         # collector's sight, so a full collection during an unload scans only what the run
         # allocates (a full scan of numpy/scipy/rclpy's objects took ~10 ms at a crossing)
@@ -187,6 +189,10 @@ class EstimatorNode(Node):
         self._last_pressure = math.nan
         self._n_diag = 0
         self._rejected = 0
+        #: Samples missing from the input stream, counted from the stamps (a transport or a
+        #: queue that did not keep up), and the count at the last report [-].
+        self._loss = LossCounter()
+        self._missing_reported = 0
         # [s] from the arrival of the completing sample to the publication: crossing
         # estimates, and final (curve-fit) estimates
         self.latencies: deque[float] = deque(maxlen=100_000)
@@ -360,6 +366,7 @@ class EstimatorNode(Node):
         except Exception as exc:  # never silent, never fatal: report and start afresh
             self._restart_core(exc)
             return
+        self._loss.update(ns)  # after the push: off the crossing estimate's latency
         self._last_pressure = p
         self._last_arrival = arrived if arrivals is None else arrivals[-1]
         if not isinstance(est, StreamingEstimator):
@@ -559,6 +566,18 @@ class EstimatorNode(Node):
         if self._settings.start_time is not None and \
                 time.monotonic() - self._last_arrival > self._p("end_timeout"):
             self._end_of_stream()
+        loss = self._loss
+        if loss.missing > self._missing_reported:
+            new = loss.missing - self._missing_reported
+            self._missing_reported = loss.missing
+            fix = (": single FluidPressure messages do not keep up at this rate; publish "
+                   "PressureBlock messages (simulator: block_size) and set input:=block"
+                   if self._p("input") == "sample" else ": blocks lost in transport (qos "
+                   "reliable keeps them)")
+            self._diagnose(_WARN, f"{new} samples missing from the stream since the last "
+                                  f"report ({loss.missing} of {loss.received + loss.missing}"
+                                  f", {100 * loss.fraction:.2f} %, counted from the stamps)"
+                                  f"{fix}")
         level = {"error": _ERROR}.get(self._state, _OK)
         self._send(level, f"{self._state}: {self._why}")
 
@@ -569,6 +588,7 @@ class EstimatorNode(Node):
             "samples": str(self.received), "queued": str(len(self._samples)),
             "fits_queued": str(len(self._fits)),
             "rejected": str(self._rejected),
+            "samples_missing": str(self._loss.missing),
             "unloads": str(self._n_unloads),
             "latency_p50_ms": f"{np.percentile(lat, 50):.3f}" if lat.size else "",
             "latency_p99_ms": f"{np.percentile(lat, 99):.3f}" if lat.size else "",
@@ -705,6 +725,7 @@ class EstimatorNode(Node):
         self._wake.set()
         self._worker.join(timeout=5.0)
         stats = {"received": self.received, "rejected": self._rejected,
+                 "missing": self._loss.missing,
                  "results": self.n_results,
                  "latencies_ms": [round(x * 1e3, 4) for x in self.latencies],
                  "final_latencies_ms": [round(x * 1e3, 4) for x in self.final_latencies],

@@ -41,7 +41,8 @@ bag (first ``/rig/config`` message and metadata ``custom_data``), so that
 not a JSON object is reported and not stored.
 
 Shutdown: SIGINT or SIGTERM ends the node with exit code 0 and a complete bag
-(``metadata.yaml`` written). A bad message or a bad topic never ends the node: it is logged
+(``metadata.yaml`` written), at any moment, its start included (stopped before it made its
+bag, it leaves none). A bad message or a bad topic never ends the node: it is logged
 and counted. Invalid parameters end it at start with exit code 2 and the reason.
 """
 
@@ -504,10 +505,13 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.experimental import EventsExecutor
 
+    from pneumatic_unload.nodes import common
+
     code = config_nodes.help_or_none("recorder", argv)
     if code is not None:
         return code
-    rclpy.init(args=sys.argv if argv is None else argv)
+    if not common.start_ros(sys.argv if argv is None else argv):
+        return 0  # SIGINT/SIGTERM during the imports: stopped before it started, no bag
     node = None
     try:
         try:
@@ -526,7 +530,9 @@ def main(argv: list[str] | None = None) -> int:
         next_flush = time.monotonic() + session.flush_interval
         next_poll = 0.0
         try:
-            while rclpy.ok():
+            # a SIGINT/SIGTERM of the start stops the node here: the bag is completed below
+            common.running()
+            while common.ok():
                 executor.spin_once(timeout_sec=min(0.05, session.flush_interval / 2))
                 now = time.monotonic()
                 if now >= next_flush:

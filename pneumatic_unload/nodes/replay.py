@@ -226,18 +226,22 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.impl.implementation_singleton import rclpy_implementation
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    from pneumatic_unload.nodes.common import node_parameters
+    from pneumatic_unload.nodes import common
 
     RCLError = rclpy_implementation.RCLError
 
     profile = use_fast_heartbeat()
-    rclpy.init(args=sys.argv if argv is None else argv)
+    if not common.start_ros(sys.argv if argv is None else argv):
+        # SIGINT/SIGTERM during the imports: stopped before it started
+        if profile is not None:
+            profile.unlink(missing_ok=True)
+        return 0
     node = rclpy.create_node("replay")
     log = node.get_logger()
     try:
         try:
             # the one list of parameters (also --help and config/replay.yaml)
-            for name, (default, desc) in node_parameters("replay").items():
+            for name, (default, desc) in common.node_parameters("replay").items():
                 node.declare_parameter(name, default, desc)
             try:
                 topics = list(node.get_parameter("topics").value or [])
@@ -282,6 +286,9 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr, flush=True)
             return 2
 
+        # built: a SIGINT/SIGTERM of the start stops the node here (before it publishes); a
+        # later one raises KeyboardInterrupt (also out of the pacing's sleeps)
+        common.running(keyboard_interrupt=True)
         if node.get_parameter("wait_for_subscribers").value and min_subs > 0:
             watched = [pubs[TOPIC_PRESSURE]] if TOPIC_PRESSURE in pubs else list(pubs.values())
             deadline = time.monotonic() + float(wait_timeout)

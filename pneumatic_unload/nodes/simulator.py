@@ -46,6 +46,10 @@ from pneumatic_unload.rig import RigStream
 MODES = ("service", "cycle")
 
 
+#: Above this sample rate [Hz] the node advises the block input.
+BLOCK_ADVICE_RATE = 2000.0
+
+
 class SimulatorNode(Node):
     """Simulated rig (see the module docstring)."""
 
@@ -161,6 +165,13 @@ class SimulatorNode(Node):
                 time.sleep(0.01)
             time.sleep(0.2)  # let the matched readers finish discovery of each other too
         self.get_logger().info(f"streaming at {rate:g} Hz")
+        if rate > BLOCK_ADVICE_RATE and self._p("per_sample"):
+            advice = (f"blocks of {self._p('block_size')} samples on /tank/pressure_block: "
+                      "run the estimator with input:=block" if self._p("block_size") else
+                      "set block_size (e.g. 100) and run the estimator with input:=block")
+            self.get_logger().info(
+                f"at {rate:g} Hz single FluidPressure messages outrun a small machine's "
+                f"receiver (7.9 % lost at 10 kHz on 2 cores): {advice}")
         wall0 = time.time_ns()
         mono0 = time.monotonic()
         t_step = max(1, round(rate / self._p("temperature_rate"))) \
