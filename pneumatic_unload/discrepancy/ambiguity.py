@@ -30,14 +30,17 @@ their combined 1-sigma:
 Whatever the verdict, C of the final model is the conductance of everything downstream of
 the valve: a leak in parallel with the component that follows the component's own flow
 law (an orifice leak with the same b) changes the trace exactly as a larger C does, at any
-size (the ISO 6358 flow is linear in C at a fixed b), so no fit can bound it. The range
-therefore always reaches down to the component's C with such a leak of up to
-:data:`PARALLEL_LEAK_MAX` times its own C (``parallel_low``); a run with the component
-plugged removes that caveat.
+size (the ISO 6358 flow is linear in C at a fixed b), so no fit can bound it. That is not
+what the data allow but what no pressure record can tell: it is stated apart, as its own
+field (``parallel_low``: the component's C with such a leak of up to
+:data:`PARALLEL_LEAK_MAX` times its own C hidden in it) and sentence (:data:`C_MEANING`,
+with the leak test that bounds it: a run with the component plugged), never as the lower
+end of the range.
 
-The range spans the members' C values and their 3-sigma intervals (C +- 3 sigma, clipped
-at zero; sigma the noise's and the model limits' combined, the budget's term
-:func:`~pneumatic_unload.budget.model_limits_term`) and the parallel-leak bound.
+The range states what the data allow: it spans the C values of the final model and of the
+members (the models that fit about equally) with their 3-sigma intervals (C +- 3 sigma,
+clipped at zero; sigma the noise's and the model limits' combined, the budget's term
+:func:`~pneumatic_unload.budget.model_limits_term`).
 """
 
 from __future__ import annotations
@@ -109,11 +112,12 @@ class ConductanceAmbiguity:
         [m^3/(s Pa)], 'delta_bic' (BIC above the best model of its round) [-], 'why'.
         Empty when no other model competes (C is then not ambiguous).
     low, high : float
-        C range across the members, their 3-sigma intervals and the parallel-leak bound
-        included [m^3/(s Pa)].
+        C range the data allow: the final model's and the members' 3-sigma intervals
+        [m^3/(s Pa)].
     parallel_low : float
         Component's C if a leak in parallel with it of :data:`PARALLEL_LEAK_MAX` times
-        its C were hidden in the final model's C (lower 3-sigma end) [m^3/(s Pa)].
+        its C were hidden in the final model's C (lower 3-sigma end) [m^3/(s Pa)]: what no
+        pressure record can exclude (a leak test bounds it), not part of the range.
     separating : list of str
         Measurements that would separate them.
     """
@@ -248,7 +252,7 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
 
     s0_ = total(c0, s0)
     out.parallel_low = max(c0 - K_RANGE * s0_, 0.0) / (1.0 + PARALLEL_LEAK_MAX)
-    out.low, out.high = out.parallel_low, c0 + K_RANGE * s0_
+    out.low, out.high = max(c0 - K_RANGE * s0_, 0.0), c0 + K_RANGE * s0_
     plugged = f"C vs a leak in parallel with the component: {PLUGGED_RUN}"
     if not members and not down:
         out.separating.append(plugged)
@@ -291,9 +295,10 @@ def describe(amb: ConductanceAmbiguity) -> str:
 #: opens with it; a sonic one changes the trace exactly as a larger C does).
 C_MEANING = ("C is the conductance of everything downstream of the shut-off valve: a leak "
              "in parallel with the component adds to it (an orifice-law one with the same "
-             "b is indistinguishable from a larger C, at any size); the C range reported "
-             "reaches down to the component's C with such a leak of up to "
-             f"{PARALLEL_LEAK_MAX:g} times its own C; to exclude one: " + PLUGGED_RUN)
+             "b is indistinguishable from a larger C, at any size), so no pressure record "
+             "bounds it; the bound of one of up to "
+             f"{PARALLEL_LEAK_MAX:g} times the component's own C is stated apart "
+             "(parallel_leak_low), not in the C range; to exclude one: " + PLUGGED_RUN)
 
 
 def _fmt(effects: list[str]) -> str:

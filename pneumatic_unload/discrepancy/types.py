@@ -317,18 +317,18 @@ class DiscrepancyResult:
     temperature: FloatArray | None = None
     settings: DiscrepancySettings | None = None
     notes: list[str] = field(default_factory=list)
-    #: The C range: models that fit about equally with different C, and the bound of a
-    #: leak in parallel with the component; a
+    #: The C range: models that fit about equally with different C (and, apart, the bound
+    #: of a leak in parallel with the component); a
     #: :class:`~pneumatic_unload.discrepancy.ambiguity.ConductanceAmbiguity` (its
     #: ``ambiguous`` says whether another model competes). None only when not computed.
     conductance_ambiguity: Any = None
 
     @property
     def conductance_range(self) -> tuple[float, float] | None:
-        """Range of the component's C [m^3/(s Pa)]: across the models that fit about
-        equally, down to the component's C with a parallel leak of up to
-        :data:`~pneumatic_unload.discrepancy.ambiguity.PARALLEL_LEAK_MAX` C hidden in it
-        (None only when not computed)."""
+        """Range of C the data allow [m^3/(s Pa)]: the 3-sigma intervals of the final
+        model and of the models that fit about equally (None only when not computed). A
+        leak in parallel with the component, which no record bounds, is stated apart
+        (``conductance_ambiguity.parallel_low``)."""
         a = self.conductance_ambiguity
         return None if a is None else (a.low, a.high)
 

@@ -34,9 +34,9 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
    (:func:`~pneumatic_unload.discrepancy.search.sensor_refusals`).
 4. **C range.** Models that fit about equally but give different C (BIC window, white
    fits, a winner at a bound, a placement or law variant, a leak in parallel with the
-   component) are reported as a C ambiguity; whatever the verdict, the range reaches down
-   to the component's C with a hidden parallel leak (:mod:`~pneumatic_unload.discrepancy.
-   ambiguity`).
+   component) are reported as a C ambiguity, the range spanning their 3-sigma intervals;
+   whatever the verdict, the component's C with a hidden parallel leak, which no record
+   bounds, is stated apart (:mod:`~pneumatic_unload.discrepancy.ambiguity`).
 5. **Gap.** RMS before and after, the effect's parameters with 95 % intervals (linear from
    the Jacobian, replaced by the profile likelihood when the linear one is unreliable); an
    interval that does not close within the parameter range means "not identifiable".

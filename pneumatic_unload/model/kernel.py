@@ -137,8 +137,11 @@ def build(folder: Path | None = None, source: Path | None = None) -> Path:
             errors.append(f"{d}: {exc}")
             continue
         try:
+            # in a session of its own: a Ctrl-C to the terminal's process group (a node
+            # stopped while it builds) does not kill the compiler under the node's handler
             proc = subprocess.run([cc, *CFLAGS, "-o", tmp, str(source), "-lm"],
-                                  capture_output=True, text=True, check=False)
+                                  capture_output=True, text=True, check=False,
+                                  start_new_session=True)
             if proc.returncode != 0:
                 raise KernelBuildError(f"compiling {source} with {cc} failed:\n"
                                        f"{proc.stderr.strip()}")
