@@ -399,16 +399,8 @@ def numerical_reproducibility(residual: Residual, result: FitResult, *, fade: bo
     (n residuals: chi^2 is known to about n eps residual variances, so a minimum that the
     search locates by comparing chi^2 values is known to about sqrt(n eps) of a standard
     deviation along an ill-determined direction; measured with 1e-14 perturbations of the
-    samples and under other OpenBLAS kernels: bench/bench_reproducibility.py).
-
-    Parameters
-    ----------
-    residual : callable
-        The residual function the result was fitted with.
-    result : FitResult
-        The minimum.
-    fade : bool
-        As given to :func:`minimize`.
+    samples and under other OpenBLAS kernels: bench/bench_reproducibility.py). The
+    parameters are those of :func:`restart_spread`.
     """
     spread = restart_spread(residual, result, fade=fade)
     s2 = result.chi2 / result.dof
