@@ -395,9 +395,9 @@ class StreamingEstimator:
         assert ts is not None
         self._suspect = None
         if t - st.last_t >= MIN_STAMP_STEP:
-            st.diag("warn", f"one sample stamped {st.last_t - ts:.6g} s before its "
-                    f"predecessor (t={ts:.9f} s after {st.last_t:.9f} s) dropped: out of "
-                    "order, the next stamp continues the time base", ts)
+            st.diag("warn", f"one sample out of order dropped: its stamp goes backwards "
+                    f"{st.last_t - ts:.6g} s (t={ts:.9f} s after {st.last_t:.9f} s), the "
+                    "next stamp continues the time base", ts)
             return []
         st.diag("warn", f"stamp going backwards ({ts:.9f} s after {st.last_t:.9f} s)"
                 " ignored", ts)
