@@ -45,8 +45,8 @@ from pneumatic_unload.testline.db import EXPORT_COLUMNS, file_rows
 from pneumatic_unload.testline.report import html_report
 from pneumatic_unload.testline.spec import DM3_PER_S_BAR, read_file_data
 
-CSV_OPTIONS = ("time_column", "pressure_column", "pressure_unit", "time_unit",
-               "temperature_unit")
+CSV_OPTIONS = ("time_column", "pressure_column", "temperature_column", "pressure_unit",
+               "time_unit", "temperature_unit")
 
 
 class BatchCliError(Exception):

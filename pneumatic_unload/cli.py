@@ -176,7 +176,8 @@ def open_input(args: argparse.Namespace) -> Record:
     try:
         rec = open_record(
             args.path, topic=args.topic, time_column=args.time_column,
-            pressure_column=args.pressure_column, pressure_unit=args.pressure_unit,
+            pressure_column=args.pressure_column,
+            temperature_column=args.temperature_column, pressure_unit=args.pressure_unit,
             time_unit=args.time_unit, temperature_unit=args.temperature_unit,
             gauge=args.gauge or None, atmosphere=args.atmosphere)
     except RecordError as exc:
@@ -287,12 +288,16 @@ def _load_temperature(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray]
 
             tr = read_csv_trace(
                 path, time_column=args.time_column, pressure_column=args.pressure_column,
+                temperature_column=args.temperature_column,
                 pressure_unit=args.pressure_unit, time_unit=args.time_unit,
                 temperature_unit=args.temperature_unit, gauge=args.gauge or None,
                 atmosphere=args.atmosphere)
-            if tr.temperature is None or tr.temperature.size < 3:
+            if tr.temperature is None:
                 return None
-            return np.asarray(tr.t, float), np.asarray(tr.temperature, float)
+            ok = np.isfinite(tr.temperature)  # a slower channel: empty cells between
+            if np.count_nonzero(ok) < 3:
+                return None
+            return np.asarray(tr.t[ok], float), np.asarray(tr.temperature[ok], float)
         from pneumatic_unload.io.bag import read_temperature
 
         t_ns, temp = read_temperature(path)
@@ -441,6 +446,10 @@ def add_input_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--topic", default="/tank/pressure", help="pressure topic of a bag")
     parser.add_argument("--time-column", help="CSV time column [s]")
     parser.add_argument("--pressure-column", help="CSV pressure column")
+    parser.add_argument("--temperature-column",
+                        help="CSV gas-temperature column (default: found by its name, e.g. "
+                             "'Temp [C]', 'gas_temperature_c'; its value at the unload start "
+                             "is T10)")
     parser.add_argument("--pressure-unit", choices=tuple(PRESSURE_UNITS), default=None,
                         help="CSV pressure unit (default: from the header, else Pa)")
     parser.add_argument("--time-unit", choices=tuple(TIME_UNITS), default=None,

@@ -77,7 +77,11 @@ class Record:
         assert self.stream is not None
         try:
             for c in self.stream:
-                yield c.t, c.p
+                ok = np.isfinite(c.p)  # rows of a slower channel alone (multi-rate logs)
+                if ok.all():
+                    yield c.t, c.p
+                elif ok.any():
+                    yield c.t[ok], c.p[ok]
         except (CsvError, OSError) as exc:
             raise RecordError(f"{self.path}: {exc}") from exc
 
@@ -91,13 +95,16 @@ class Record:
         try:
             for c in self.stream:
                 assert c.temperature is not None
-                if t <= c.t[-1]:
-                    return float(np.interp(t, np.concatenate((prev_t, c.t)),
-                                           np.concatenate((prev_v, c.temperature))))
-                prev_t, prev_v = c.t[-1:], c.temperature[-1:]
+                ok = np.isfinite(c.temperature)  # empty cells: a slower channel
+                ct, cv = c.t[ok], c.temperature[ok]
+                if ct.size and t <= ct[-1]:
+                    return float(np.interp(t, np.concatenate((prev_t, ct)),
+                                           np.concatenate((prev_v, cv))))
+                if ct.size:
+                    prev_t, prev_v = ct[-1:], cv[-1:]
         except (CsvError, OSError) as exc:
             raise RecordError(f"{self.path}: {exc}") from exc
-        return float(prev_v[-1])
+        return float(prev_v[-1]) if prev_v.size else float("nan")
 
 
 def open_record(path: str | Path, *, topic: str = "/tank/pressure",
@@ -132,9 +139,12 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
             stream = CsvStream(p, chunk_bytes=chunk_bytes, **opts)
             cfg: dict[str, Any] = {}
             if stream.layout.i_temp is not None:
-                first = next(iter(stream))
-                assert first.temperature is not None
-                cfg["measured_initial_temperature"] = float(first.temperature[0])
+                for chunk in stream:  # the first temperature logged (maybe rows later)
+                    assert chunk.temperature is not None
+                    ok = np.flatnonzero(np.isfinite(chunk.temperature))
+                    if ok.size:
+                        cfg["measured_initial_temperature"] = float(chunk.temperature[ok[0]])
+                        break
         except (CsvError, ValueError, OSError) as exc:
             raise RecordError(f"{p}: {exc}") from exc
         return Record(path=p, cfg=cfg, warnings=stream.layout.source.warnings, stream=stream)

@@ -153,7 +153,10 @@ def test_non_numeric_cell_names_line_and_column(tmp_path):
     with pytest.raises(CsvFormatError, match=r"log\.csv:4 \(data row 2\).*'oops'.*'pressure'"):
         read_csv_trace(path)
     path = _write(tmp_path, "time,pressure\n0,\n", "e.csv")
-    with pytest.raises(CsvFormatError, match="empty cell"):
+    with pytest.raises(CsvFormatError, match="every cell of the pressure column"):
+        read_csv_trace(path)
+    path = _write(tmp_path, "time,pressure\n0,100000\n,100000\n", "t.csv")
+    with pytest.raises(CsvFormatError, match=r"empty cell.*'time'"):
         read_csv_trace(path)
     path = _write(tmp_path, "time,pressure\n0,nan\n", "n.csv")
     with pytest.raises(CsvFormatError, match="non-finite"):
@@ -188,3 +191,76 @@ def test_header_with_a_lone_carriage_return_is_a_format_error(tmp_path):
     path.write_bytes(b"\x00\x93\xean;\rv\xc6\xc9")
     with pytest.raises(CsvFormatError, match=r"header \(line 1\) cannot be split"):
         read_csv_trace(path)
+
+
+# ------------------------------------------------------- multi-rate logs and column names
+def test_units_after_an_underscore_are_the_column_units(tmp_path):
+    """'pressure_kPa', 'time_ms', 'gas_temperature_c': the unit written as loggers do; a
+    short name such as 'p_atm' is not split."""
+    path = _write(tmp_path, "time_ms,pressure_kPa,gas_temperature_c,p_atm\n"
+                            "0,700,25,101\n10,690,24.9,101\n")
+    trace = read_csv_trace(path)
+    assert trace.t.tolist() == [0.0, 0.01] and trace.p[0] == pytest.approx(7e5)
+    assert trace.temperature[0] == pytest.approx(298.15)
+    src = trace.source
+    assert (src.time_column, src.pressure_column, src.temperature_column) == (
+        "time_ms", "pressure_kPa", "gas_temperature_c")
+    assert not src.warnings
+
+
+def test_a_wall_or_room_temperature_is_not_the_gas_temperature(tmp_path):
+    path = _write(tmp_path, "time [s],pressure [kPa],wall temperature [C],T_tank [C]\n"
+                            "0,700,20,25\n1,600,20,22\n")
+    assert read_csv_trace(path).temperature is None  # no gas-temperature name
+    trace = read_csv_trace(path, temperature_column="T_tank")
+    assert trace.temperature.tolist() == pytest.approx([298.15, 295.15])
+
+
+def _multirate_csv(tmp_path, every=50):
+    """A 500 Hz pressure log with the gas temperature every ``every``-th row (empty cells
+    between, as multi-rate loggers write) and some temperature-only rows; the rig: a hot
+    start (T10 303 K, wall 293 K)."""
+    from pneumatic_unload.config import RigConfig
+    from pneumatic_unload.model import simulate
+
+    cfg = RigConfig(volume=5e-3, conductance=8e-9, initial_pressure=6e5, pre_time=1.0,
+                    duration=12.0, effects=("heat_transfer",), rate=500.0,
+                    initial_temperature=303.15, wall_temperature=293.15, seed=3)
+    sim = simulate(cfg)
+    rows = ["time_s,pressure_kPa,gas temperature [C]"]
+    for k, (t, p, temp) in enumerate(zip(sim.t, sim.measured, sim.temperature,
+                                         strict=True)):
+        rows.append(f"{t:.4f},{p / 1e3:.4f},{temp - 273.15:.3f}" if k % every == 0
+                    else f"{t:.4f},{p / 1e3:.4f},")
+        if k % (4 * every) == 7:  # the temperature logger's own instant, no pressure
+            rows.append(f"{t + 1e-4:.4f},,{temp - 273.15:.3f}")
+    return cfg, _write(tmp_path, "\n".join(rows) + "\n", "multirate.csv")
+
+
+def test_a_multirate_log_is_read_with_its_empty_cells(tmp_path):
+    _cfg, path = _multirate_csv(tmp_path)
+    trace = read_csv_trace(path)
+    ok_p, ok_t = np.isfinite(trace.p), np.isfinite(trace.temperature)
+    assert 0 < np.count_nonzero(~ok_p) < 0.01 * trace.p.size
+    assert np.count_nonzero(ok_t) == pytest.approx(trace.t.size / 40, rel=0.2)
+    assert trace.temperature[ok_t][0] == pytest.approx(303.15, abs=1.0)  # T10, then cooling
+    assert np.all(trace.temperature[ok_t] > 200.0)
+
+
+def test_a_multirate_log_gives_c_with_t10_from_its_temperature_column(tmp_path, capsys):
+    """The CLI analyses the pressure channel and takes T10 from the slower temperature
+    channel at the unload start (was refused: 'an empty cell in column ...')."""
+    import json
+
+    from pneumatic_unload.cli import main
+
+    cfg, path = _multirate_csv(tmp_path)
+    assert main(["analyze", str(path), "--volume", "0.005", "--atmosphere", "101325",
+                 "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    t10 = d["inputs"]["initial_temperature"]
+    assert t10["source"] == "temperature column at the unload start"
+    assert t10["value"] == pytest.approx(cfg.initial_temperature, abs=0.5)
+    (u,) = [x for x in d["unloads"] if x["final"]]
+    assert abs(u["conductance_model"] - cfg.conductance) <= 3 * u["conductance_model_std"]
+    assert u["conductance_model"] == pytest.approx(cfg.conductance, rel=0.01)

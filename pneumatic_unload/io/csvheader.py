@@ -123,10 +123,18 @@ class CsvLayout:
 
 
 def _split_header(cell: str) -> tuple[str, str | None]:
-    """('Pressure', 'kPa') for 'Pressure [kPa]'; (cell, None) without a bracketed unit."""
+    """('Pressure', 'kPa') for 'Pressure [kPa]' or 'Pressure (kPa)'; ('pressure', 'kPa')
+    for 'pressure_kPa' (a known unit after the last underscore of a name of 3 or more
+    characters, as loggers write column names: 'gas_temperature_c', 'time_s'); (cell,
+    None) without a unit."""
     match = _HEADER_RE.match(cell.strip())
     if match and match.group("name"):
         return match.group("name").strip(), match.group("unit").strip()
+    name, sep, tail = cell.strip().rpartition("_")
+    if sep and len(name) >= 3 and (
+            _pressure_unit(tail) is not None or _lookup(tail, TIME_UNITS) is not None
+            or _lookup(tail, TEMPERATURE_UNITS) is not None):
+        return name, tail
     return cell.strip(), None
 
 
@@ -182,7 +190,11 @@ def _is_pressure(name: str) -> bool:
 
 
 def _is_temperature(name: str) -> bool:
-    return name.startswith("temp") or name in ("t_gas", "gas temperature")
+    """A gas-temperature column by its name: 'temp...', 't_gas', or any name with
+    'temperature' in it that is not the wall's, the room's or the ambient's."""
+    other = any(w in name for w in ("wall", "room", "ambient", "amb_", "outside"))
+    return (name.startswith("temp") or name in ("t_gas", "gas temperature")
+            or "temperature" in name) and not other
 
 
 def _unit(

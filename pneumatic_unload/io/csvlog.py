@@ -70,11 +70,13 @@ FloatArray = npt.NDArray[np.float64]
 
 @dataclass(frozen=True)
 class CsvTrace:
-    """A tank-discharge trace read from a CSV file."""
+    """A tank-discharge trace read from a CSV file (rows in file order; a multi-rate log's
+    empty cells are NaN: ``p[np.isfinite(p)]`` is the pressure channel, likewise the
+    temperature's)."""
 
     t: FloatArray  #: sample times [s], from the logger clock (not shifted to 0)
-    p: FloatArray  #: tank pressure [Pa absolute]
-    temperature: FloatArray | None  #: gas temperature [K], None if not logged
+    p: FloatArray  #: tank pressure [Pa absolute] (NaN: an empty cell)
+    temperature: FloatArray | None  #: gas temperature [K] (NaN: empty), None if not logged
     source: CsvSource
 
     @property
@@ -85,7 +87,9 @@ class CsvTrace:
 
 @dataclass(frozen=True)
 class CsvChunk:
-    """Consecutive rows of a CSV file, converted: t [s], p [Pa absolute], temperature [K]."""
+    """Consecutive rows of a CSV file, converted: t [s], p [Pa absolute], temperature [K];
+    NaN where a pressure or temperature cell is empty (a multi-rate logger writes a slower
+    channel's cells only at its own samples; rows with a time stamp alone are dropped)."""
 
     t: FloatArray
     p: FloatArray
@@ -163,7 +167,7 @@ class CsvStream:
     # ------------------------------------------------------------------ reading
     def __iter__(self) -> Iterator[CsvChunk]:
         """Chunks of converted rows, in file order (one pass)."""
-        n_rows = 0
+        n_rows = n_pressures = 0
         line = self._header_line  # lines consumed so far
         last_t = -math.inf
         with _open(self.path) as fh:
@@ -183,10 +187,16 @@ class CsvStream:
                     continue
                 chunk = self._convert(vals, n_rows, last_t)
                 n_rows += vals.shape[0]
+                if chunk.t.size == 0:
+                    continue  # time stamps alone
+                n_pressures += int(np.count_nonzero(np.isfinite(chunk.p)))
                 last_t = float(chunk.t[-1])
                 yield chunk
         if n_rows == 0:
             raise CsvFormatError(f"CSV file {self.path} has a header but no data rows")
+        if n_pressures == 0:
+            raise CsvFormatError(f"CSV file {self.path}: every cell of the pressure column "
+                                 f"{self.layout.source.pressure_column!r} is empty")
         self.rows = n_rows
 
     def _parse(self, lines: list[str], line0: int, row0: int) -> FloatArray:
@@ -230,6 +240,11 @@ class CsvStream:
             vals = []
             for i, kind in zip(cols, kinds, strict=False):
                 cell = row[i].strip()
+                if not cell and kind != "time":
+                    # a multi-rate logger leaves a slower channel's cells empty between
+                    # its samples: NaN, skipped by the readers of that channel
+                    vals.append(math.nan)
+                    continue
                 try:
                     value = float(cell.replace(",", ".") if d != "," else cell)
                 except ValueError:
@@ -260,6 +275,7 @@ class CsvStream:
         """SI values of parsed rows, checked (row0: data rows before them; last_t: time of
         the row before them [s])."""
         lay = self.layout
+        vals = vals[~np.all(np.isnan(vals[:, 1:]), axis=1)]  # rows of a time stamp alone
         t = vals[:, 0] * lay.time_scale
         steps = np.diff(t, prepend=last_t)
         if np.any(steps <= 0.0):
