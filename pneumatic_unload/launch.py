@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import random
 import re
+import shutil
 import signal
 import socket
 import subprocess
@@ -78,6 +79,11 @@ class NodeProcess:
                  env: dict[str, str] | None = None) -> None:
         args = [sys.executable, "-m", f"pneumatic_unload.nodes.{name}", "--ros-args",
                 *ros_args(params or {}), *(extra or [])]
+        if shutil.which("env") is not None:
+            # SIGINT and SIGTERM at their defaults in the node (a launcher run as a shell's
+            # background job has SIGINT ignored, which a child inherits: a stop in the
+            # node's first ~50 ms, before its own handler, would be lost)
+            args = ["env", "--default-signal=INT,TERM", *args]
         self.name = name
         log_dir = log_dir or Path("/tmp")
         log_dir.mkdir(parents=True, exist_ok=True)

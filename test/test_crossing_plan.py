@@ -93,8 +93,11 @@ def test_scaled_budgets_equal_the_budgets_computed_at_the_crossing(case: int) ->
         for a, b in zip(got["terms"], want["terms"], strict=True):
             if b["std"] is None:
                 assert a["std"] is None
-            elif a["name"] == MODEL_FORM_TERM:  # a table against the iteration: 1e-6
-                assert a["std"] == pytest.approx(b["std"], rel=1e-3, abs=1e-7 * c), a["name"]
+            elif a["name"] == MODEL_FORM_TERM:
+                # a table against the iteration, each at the inversion's rtol 1e-6 on the
+                # integrator's step grid: 1.7e-6 of C apart at most over these cases (the
+                # helium case; 1e-6 before the step grid)
+                assert a["std"] == pytest.approx(b["std"], rel=1e-3, abs=1e-5 * c), a["name"]
             else:
                 assert a["std"] == pytest.approx(b["std"], rel=1e-11, abs=1e-30), a["name"]
             assert a["note"] == b["note"] or a["name"] in (WALL_TERM, MODEL_FORM_TERM)

@@ -144,6 +144,11 @@ def _start(run: Run, domain: int, tmp_path: Path) -> None:
            *ros_args(run.params)]
     if run.ignored:
         cmd = ["/bin/sh", "-c", "trap '' INT; exec \"$0\" \"$@\"", *cmd]
+    else:
+        # the normal setup whatever this test runs under (a shell's background job, as a
+        # CI harness may be, hands its children SIGINT ignored, and a SIGINT before the
+        # node's own handler would then be lost): SIGINT and SIGTERM at their defaults
+        cmd = ["env", "--default-signal=INT,TERM", *cmd]
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
     if run.fresh:
         kernel_dir = tmp_path / f"kernel-{run.log.stem}"

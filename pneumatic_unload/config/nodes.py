@@ -111,9 +111,9 @@ def _simulator() -> list[ParameterSpec]:
               "unload"),
         _double("temperature_rate", 10.0, "rate of /tank/temperature (0: off)", "Hz", 0.0,
                 1000.0),
-        _int("block_size", 100, "samples per /tank/pressure_block message (0: no blocks); "
-             "above 2 kHz run the estimator on them (input:=block): single messages are "
-             "lost on a small machine", 0,
+        _int("block_size", -1, "samples per /tank/pressure_block message (0: no blocks; "
+             "-1: 100 above 2 kHz, where the estimator should run on them with "
+             "input:=block: single messages are lost on a small machine; none below)", -1,
              100_000),
         _bool("per_sample", True, "publish every sample as a FluidPressure on "
               "/tank/pressure"),
