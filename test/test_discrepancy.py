@@ -93,22 +93,43 @@ def _ar1(n, rho, sigma, seed):
     return e
 
 
-def test_sigma_tracks_the_realised_noise_on_a_short_trace():
-    # harness case with 2092 samples: the plateaus (908 samples) alone gave sigma 944 Pa
-    # while the noise realised on the trace is 981 Pa rms, so even a perfect model read a
-    # normalised RMS of 1.039 (> 1.02); the whole-trace high-pass estimate fixes that
-    case = draw_case("pipe_volume", 1010)
-    sim, clean = case.simulate(), case.noise_free()
-    s = DiscrepancySettings(volume=case.config.volume)
-    prob = Problem(sim.t, sim.measured, s)
-    n = prob.t.size
-    realised = float(np.sqrt(np.mean((sim.measured - clean.measured)[:n] ** 2)))
-    nm = prob.noise
-    assert nm.source == "plateaus"
-    assert abs(nm.sigma_plateau / realised - 1.0) > 0.03  # the failure mode stays visible
-    assert nm.highpass_weight > 0.8
-    assert nm.sigma == pytest.approx(realised, rel=0.01)
-    assert nm.sigma_highpass == pytest.approx(realised, rel=0.02)
+#: Harness draws with short traces (2000-6300 samples; the issue's 1010 among them).
+SHORT_DRAWS = (1002, 1007, 1010, 1014, 1017, 1018, 1021, 1022, 1023)
+
+
+def test_sigma_tracks_the_realised_noise_on_short_traces():
+    """Harness case 1010 (2092 samples): the plateaus (908 samples) alone gave sigma
+    944 Pa while the noise realised on the trace is 981 Pa rms, so even a perfect model
+    read a normalised RMS of 1.039 (> NRMS_LIMIT, 1.02); the whole-trace high-pass
+    estimate fixes that. Over the short draws: sigma within the statistical uncertainty of
+    an rms of the trace's n samples, 1/sqrt(2 n), of the realised noise (each within 3 of
+    it; their mean square at most 1: measured 0.11) and without bias (mean +0.09 %, its
+    standard error 0.13 %), so that a perfect model's normalised RMS stays within
+    NRMS_LIMIT; and nearer to it than the plateaus alone, about 40 % of the samples (rms
+    relative errors measured 0.4 % against 1.8 %)."""
+    from pneumatic_unload.discrepancy.types import NRMS_LIMIT
+
+    err, err_plateau, z = [], [], []
+    for seed in SHORT_DRAWS:
+        case = draw_case("pipe_volume", seed)
+        sim, clean = case.simulate(), case.noise_free()
+        prob = Problem(sim.t, sim.measured, DiscrepancySettings(volume=case.config.volume))
+        n = prob.t.size
+        realised = float(np.sqrt(np.mean((sim.measured - clean.measured)[:n] ** 2)))
+        nm = prob.noise
+        assert nm.source == "plateaus" and nm.highpass_weight > 0.8, (seed, nm)
+        u = 1.0 / math.sqrt(2.0 * n)  # relative 1-sigma of an rms of n samples
+        err.append(nm.sigma / realised - 1.0)
+        err_plateau.append(nm.sigma_plateau / realised - 1.0)
+        z.append(err[-1] / u)
+        assert abs(z[-1]) < 3.0, (seed, err[-1], u)
+        assert abs(nm.sigma_highpass / realised - 1.0) < 3.0 * u, seed
+        assert 1.0 / NRMS_LIMIT < realised / nm.sigma < NRMS_LIMIT, seed
+    assert float(np.mean(np.square(z))) <= 1.0, z
+    # no bias: the mean relative error within 3 standard errors of zero (a t test)
+    assert abs(float(np.mean(err))) < 3.0 * float(np.std(err, ddof=1)) / math.sqrt(len(err))
+    rms, rms_plateau = (float(np.sqrt(np.mean(np.square(e)))) for e in (err, err_plateau))
+    assert rms < 0.5 * rms_plateau, (rms, rms_plateau)
 
 
 @pytest.mark.parametrize("rho", [0.0, 0.5, 0.9])

@@ -84,24 +84,39 @@ def test_start_found_when_a_noise_dip_on_a_short_plateau_triggers_before_the_ope
     noise dip 0.2 s before the opening for the step, and the dip's mean confirms it. The
     start fit was searched only before that trigger: pinned there with no falling slope,
     the unload was 'bad_data' (tau_exp without uncertainty). The start is now also
-    searched up to the sample 10 % down, and the better fit kept."""
+    searched up to the sample 10 % down, and the better fit kept.
+
+    Over draws of the noise (seeds 440-447, the issue's 445 among them): one trigger each,
+    never later than the detector's latency allows (a sample trigger_sigma noise deviations
+    below the plateau: the noiseless pressure 4 deviations further down, for the trigger
+    level of a short plateau's noise estimate and the sample's own noise; measured 18-28 ms
+    after the opening, the bound 41 ms); the issue's draw triggers before the opening (on
+    the noise dip); every draw's start, tau_exp and C are found all the same."""
     vol, c = 4.629995693504536e-3, 1.1315598134141542e-08
-    cfg = RigConfig(volume=vol, conductance=c, pre_time=0.3, noise_std=800.0, seed=445,
-                    rate=1000.0, effects=("heat_transfer",))
-    cfg = cfg.replace(duration=4.0 * tau_exp_eq38(7e5, 101325.0, vol, c, 293.15, cfg.gas))
-    sim = simulate(cfg)
-    est = StreamingEstimator(settings_for(cfg))
-    res = est.push_block(sim.t, sim.measured) + est.finish()
-    detected = [d.t for d in est.diagnostics if d.message == "unload step detected"]
-    assert detected == [pytest.approx(0.095)]  # the trace still triggers 0.2 s early
-    assert [(r.status, r.final) for r in res] == [("ok", False), ("ok", True)]
-    final = res[1]
-    for r in res:
-        assert math.isfinite(r.tau_exp_std)
-        assert abs(r.t_start - sim.t_open) <= 3.0 * r.tau_exp_std
-        assert abs(r.tau_exp / _true_crossing(sim, cfg.atmosphere) - 1.0) < 2e-3
-    assert abs(final.conductance_model - c) <= 3.0 * final.conductance_model_std
-    assert final.conductance_model == pytest.approx(c, rel=2e-3, abs=0)
+    early = []
+    for seed in range(440, 448):
+        cfg = RigConfig(volume=vol, conductance=c, pre_time=0.3, noise_std=800.0, seed=seed,
+                        rate=1000.0, effects=("heat_transfer",))
+        cfg = cfg.replace(duration=4.0 * tau_exp_eq38(7e5, 101325.0, vol, c, 293.15, cfg.gas))
+        sim = simulate(cfg)
+        settings = settings_for(cfg)
+        est = StreamingEstimator(settings)
+        res = est.push_block(sim.t, sim.measured) + est.finish()
+        (trigger,) = [d.t for d in est.diagnostics if d.message == "unload step detected"]
+        down = cfg.initial_pressure - (settings.trigger_sigma + 4.0) * cfg.noise_std
+        latest = float(sim.t[np.flatnonzero(sim.pressure < down)[0]])
+        assert trigger <= latest, (seed, trigger, latest)
+        if trigger < sim.t_open:
+            early.append(seed)
+        assert [(r.status, r.final) for r in res] == [("ok", False), ("ok", True)], seed
+        final = res[1]
+        for r in res:
+            assert math.isfinite(r.tau_exp_std)
+            assert abs(r.t_start - sim.t_open) <= 3.0 * r.tau_exp_std
+            assert abs(r.tau_exp / _true_crossing(sim, cfg.atmosphere) - 1.0) < 2e-3
+        assert abs(final.conductance_model - c) <= 3.0 * final.conductance_model_std
+        assert final.conductance_model == pytest.approx(c, rel=2e-3, abs=0)
+    assert 445 in early  # the issue's draw still triggers on its noise dip
 
 
 def test_heat_transfer_model_based_c_within_2_percent_while_eq39_is_off():

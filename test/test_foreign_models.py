@@ -18,6 +18,7 @@ import pytest
 from foreign.newton_tank import discharge
 
 from pneumatic_unload.estimation import EstimatorSettings, analyze, merge_final
+from pneumatic_unload.fitting import LAW_BIC_THRESHOLD
 
 
 @pytest.mark.parametrize("tau_heat,volume,conductance,b,seed", [
@@ -46,8 +47,10 @@ def test_model_c_and_b_on_an_independent_newton_cooling_model(tau_heat, volume, 
 def test_density_exponent_law_recovered_from_an_independent_model(exponent, tau_heat, volume,
                                                                   conductance, seed):
     """An hA ~ rho^n made by the independent model (not the package's kernel): the curve
-    fit offers the density law, the data choose it (or a law within delta-BIC 10 that gives
-    the same C), n comes back within 3 sigma and C within 2 %."""
+    fit offers the density law and the data choose it, every other law more than
+    LAW_BIC_THRESHOLD behind (measured: 5703 and 1669 behind; not a case the data leave
+    open); n, tau_h and C come back within 3 sigma of the truth (measured z: n -1.0 and
+    -0.2, tau_h -1.5 and +0.6, C +0.05 and -0.01) and C within 2 %."""
     p10, p_atm, b = 8e5, 101325.0, 0.4
     tau0 = volume / (1.4 * 1e5 * conductance)  # eq 28 [s]
     t = np.arange(0.0, 0.2 + 8.0 * tau0, 1e-3)
@@ -57,12 +60,16 @@ def test_density_exponent_law_recovered_from_an_independent_model(exponent, tau_
     (r,) = merge_final(analyze(t, y, EstimatorSettings(volume=volume)))
     fit = r.extra["curve_fit"]
     assert "density" in fit["laws"], fit["not_offered"]
-    assert fit["heat_law"] == "density" or \
-        fit["laws"]["density"]["bic"] - fit["laws"][fit["heat_law"]]["bic"] < 10.0
+    assert fit["heat_law"] == "density", fit["laws"]
+    bic = {law: v["bic"] for law, v in fit["laws"].items()}
+    assert all(v - bic["density"] > LAW_BIC_THRESHOLD for law, v in bic.items()
+               if law != "density"), bic
+    n, n_std = fit["heat_exponent"], fit["heat_exponent_std"]
+    assert 0.0 < n_std < 0.05 and abs(n - exponent) < 3.0 * n_std, (n, n_std)
+    assert 0.0 < fit["tau_heat_std"] < 0.1 * tau_heat
+    assert abs(fit["tau_heat"] - tau_heat) < 3.0 * fit["tau_heat_std"]
     assert abs(r.conductance_model / conductance - 1.0) < 0.02
-    if fit["heat_law"] == "density":
-        assert abs(fit["heat_exponent"] - exponent) < 3.0 * fit["heat_exponent_std"] + 0.02
-        assert abs(fit["tau_heat"] / tau_heat - 1.0) < 0.1
+    assert abs(r.conductance_model - conductance) < 3.0 * r.conductance_model_std
 
 
 def test_laws_that_fit_about_as_well_enter_the_budget_as_its_model_form_line():

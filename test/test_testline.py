@@ -155,7 +155,11 @@ def test_rerun_skips_what_is_done_and_force_replaces(inputs: Path, tmp_path: Pat
 
 
 def test_a_killed_batch_resumes_without_duplicates(inputs: Path, tmp_path: Path):
+    """A batch killed (SIGKILL, no cleanup) after it wrote some inputs and before it wrote
+    them all: the rerun skips exactly the inputs written before the kill, analyses the
+    rest, and the database holds each input and each unload once."""
     db = tmp_path / "k.sqlite"
+    paths = discover([inputs])
     cmd = [sys.executable, "-m", "pneumatic_unload.cli", "batch", str(inputs), "--db",
            str(db), "--workers", "1", "--part-regex", r"(V14-\d+)"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -171,19 +175,29 @@ def test_a_killed_batch_resumes_without_duplicates(inputs: Path, tmp_path: Path)
                 n = 0
             if n >= 1:
                 break
-        time.sleep(0.05)
+        time.sleep(0.01)
     proc.send_signal(signal.SIGKILL)
-    proc.wait()
-    assert n >= 1
+    assert proc.wait() == -signal.SIGKILL  # killed, not finished before the signal
+    # what the killed batch left: some inputs, not all (the kill landed mid-batch)
+    con = open_db(db)
+    before = {f["path"]: (f["id"], f["analysed_at"]) for f in file_rows(con)}
+    con.close()
+    assert 1 <= len(before) < len(paths), sorted(before)
     out = subprocess.run([*cmd, "--json"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 1, out.stderr  # the broken CSV
     summary = json.loads(out.stdout)
-    assert summary["analysed"] + len(summary["skipped"]) == 5
+    # the inputs written before the kill are skipped, the others analysed now
+    assert sorted(summary["skipped"]) == sorted(before)
+    assert summary["analysed"] == len(paths) - len(before)
     con = open_db(db)
     files = file_rows(con)
     con.close()
-    assert len(files) == 5 and len({f["path"] for f in files}) == 5
-    assert len(_rows(db)) == 4
+    assert sorted(f["path"] for f in files) == sorted(paths)  # each input once
+    # the rows written before the kill are kept as they were, not rewritten
+    assert {f["path"]: (f["id"], f["analysed_at"]) for f in files
+            if f["path"] in before} == before
+    rows = _rows(db)
+    assert len(rows) == 4 and len({(r["path"], r["unload_index"]) for r in rows}) == 4
 
 
 def _writer(db: str, who: int, n: int) -> None:
