@@ -43,6 +43,9 @@ ON_BOUND = 1e-6
 #: one]: about 1e5 machine epsilons, standing in for the last-bit differences (another
 #: BLAS kernel, another summation order) that the search's path amplifies.
 RESTART_DISPLACEMENT = 1e-11
+#: Evaluation budget of that restart [-]: two iterations (a well-conditioned minimum is
+#: back within rounding after one; the live final fit's latency bounds the rest).
+RESTART_NFEV = 4
 #: Residual value returned for parameters where the model cannot be evaluated [-].
 BAD_RESIDUAL = 1e6
 
@@ -345,8 +348,8 @@ def minimize(residual: Residual, params: Parameters, *,
 
 
 def restart_spread(residual: Residual, result: FitResult, *, fade: bool = False,
-                   displacement: float = RESTART_DISPLACEMENT, max_nfev: int = 60
-                   ) -> dict[str, float]:
+                   displacement: float = RESTART_DISPLACEMENT,
+                   max_nfev: int = RESTART_NFEV) -> dict[str, float]:
     """Numerical reproducibility of a minimum, measured: the search restarted from it
     displaced by ``displacement`` (alternating signs over the scaled coordinates).
 
@@ -367,12 +370,15 @@ def restart_spread(residual: Residual, result: FitResult, *, fade: bool = False,
     displacement : float
         Start displacement [-, scaled coordinates].
     max_nfev : int
-        Evaluation budget of the restart (half as many iterations) [-].
+        Evaluation budget of the restart (half as many iterations) [-]: a restart that
+        has not converged within it has moved at least as far as it reports (the live
+        final fit's latency bounds it).
 
     Returns
     -------
     dict
-        Relative change of each free parameter's value [-] (NaN where the restart failed).
+        Relative change of each free parameter's value [-] (NaN where the restart's
+        residuals or Jacobian were not finite).
     """
     params = result.params
     if not params.free:
@@ -383,12 +389,13 @@ def restart_spread(residual: Residual, result: FitResult, *, fade: bool = False,
         fading = fade and any(p.fade and p.vary for p in params)
         signs = np.where(np.arange(result.x.size) % 2 == 0, 1.0, -1.0)
         x0 = np.clip(result.x + displacement * signs, lo, hi)
-        x, _f, _jac, ok, _n = levenberg_marquardt(
+        x, f, jac, _ok, _n = levenberg_marquardt(
             fun, x0, fun(x0), lo, hi, max_iter=max(2, max_nfev // 2),
             move=params.step if fading else None, hold_outward=fading)
+    failed = not (np.all(np.isfinite(f)) and np.all(np.isfinite(jac)))
     values = params.to_values(x)
-    return {name: (abs(values[name] - result.values[name])
-                   / max(abs(result.values[name]), 1e-300)) if ok else math.nan
+    return {name: math.nan if failed else (abs(values[name] - result.values[name])
+                                           / max(abs(result.values[name]), 1e-300))
             for name in params.free}
 
 
