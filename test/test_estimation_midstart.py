@@ -137,3 +137,40 @@ def test_a_recovery_no_fit_describes_ends_and_the_next_unloads_are_estimated(mon
     # the unload whose opening ends the recovery (the pressure falls again) is skipped
     assert [s for i, s, _ in status if i > 2] == ["ok"] * 4
     assert any("fell again" in d.message for d in est.diagnostics)
+
+
+@pytest.mark.parametrize("volume,join", [(5e-3, 11.0), (10e-3, 8.0), (10e-3, 17.0),
+                                         (25e-3, 8.0)])
+def test_live_joined_in_a_slow_tail_publishes_no_bogus_estimate(volume, join):
+    """A node restarted late in a slow unload (5-25 L): the tail looks flat over the few
+    dozen samples before it "drops" on; it was taken for an opening and published C
+    20-50 % off ('not_choked'). A plateau too short to tell a fall under way from a flat one
+    is no plateau: the unload is skipped with the reason."""
+    from pneumatic_unload.model import simulate
+    from pneumatic_unload.runs import settings_for
+
+    cfg = RigConfig(volume=volume, conductance=C_TRUE, critical_ratio=0.4,
+                    effects=("heat_transfer",), noise_std=1000.0, quantization=10.0,
+                    full_scale=1.1e6, seed=5, pre_time=1.0, duration=60.0)
+    sim = simulate(cfg)
+    k = int(np.searchsorted(sim.t, sim.t_open + join))
+    out, est = _live(settings_for(cfg), sim.t[k:], sim.measured[k:])
+    assert not [r for r in out if r.status in ("ok", "not_choked", "aborted_sse")], [
+        (r.status, r.conductance_model) for r in out]
+    msgs = " | ".join(d.message for d in est.diagnostics)
+    assert "no plateau before the drop" in msgs and "started during an unload" in msgs
+
+
+def test_live_start_shortly_before_an_opening_is_still_measured():
+    """A node up 0.2 s before the valve opens: its plateau resolves the fall rate, and the
+    unload is measured."""
+    from pneumatic_unload.model import simulate
+    from pneumatic_unload.runs import settings_for
+
+    cfg = RigConfig(volume=2e-3, conductance=C_TRUE, noise_std=1000.0, quantization=10.0,
+                    seed=6, pre_time=1.0, duration=8.0)
+    sim = simulate(cfg)
+    k = int(np.searchsorted(sim.t, sim.t_open - 0.2))
+    out, _est = _live(settings_for(cfg), sim.t[k:], sim.measured[k:])
+    assert out and out[0].status == "ok"
+    assert out[0].conductance_model == pytest.approx(C_TRUE, rel=0.05)

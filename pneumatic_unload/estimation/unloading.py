@@ -73,10 +73,11 @@ PLATEAU_FALL_FRACTION = 0.25
 def no_plateau(t: FloatArray, p: FloatArray, min_plateau: int, slope0: float) -> str:
     """Why the samples before a fitted start are no pre-step plateau, or '' when they are.
 
-    They are none when fewer than ``min_plateau`` [-] (p10 is not measured), or when their
+    They are none when fewer than ``min_plateau`` [-] (p10 is not measured), when their
     straight-line fall rate is both significant (more than 4 standard errors, the noise
     from first differences) and more than PLATEAU_FALL_FRACTION of the initial fall rate
-    ``slope0`` [signal units/s] (the "step" continues a fall already under way). ``t`` [s]
+    ``slope0`` [signal units/s] (the "step" continues a fall already under way), or when
+    they are too few to resolve such a fall (4 standard errors above that fraction). ``t`` [s]
     and ``p`` [signal units]: the samples from the plateau's first one up to the start.
     """
     n = p.size
@@ -92,6 +93,13 @@ def no_plateau(t: FloatArray, p: FloatArray, min_plateau: int, slope0: float) ->
     if fall > 4.0 * se and fall > PLATEAU_FALL_FRACTION * slope0:
         return (f"no plateau before the drop (the {n} samples before the start fall at "
                 f"{fall:.4g} /s, {100.0 * fall / slope0:.0f} % of the initial fall rate)")
+    if 4.0 * se > PLATEAU_FALL_FRACTION * slope0:
+        # too short to tell: a slow tail joined late looks flat over a few dozen samples
+        # and then "drops" (a bogus unload, C tens of % off)
+        return (f"no plateau before the drop that can be told from a fall under way (the "
+                f"{n} samples before the start resolve a fall rate of {4.0 * se:.4g} /s, "
+                f"more than {100 * PLATEAU_FALL_FRACTION:.0f} % of the initial "
+                f"{slope0:.4g} /s)")
     return ""
 
 
@@ -164,7 +172,10 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
                 i, f"sensor saturated on the pre-step plateau at {vmax!r}: p10 unknown")
     u.t0 = t0
     u.i0 = int(np.searchsorted(tv, t0))
-    if st.stream_start and first_unload_check(st, i, tv[lo:u.i0], pv[lo:u.i0], slope):
+    # the first unload of a stream: judged on its whole plateau since the stream began (a
+    # slow tail joined late looks flat over the hinge's window, not over seconds)
+    if st.stream_start and first_unload_check(st, i, tv[min(lo, st.arm_index):u.i0],
+                                              pv[min(lo, st.arm_index):u.i0], slope):
         return []
     # the start's and p10's (co)variance from the hinge model's information (its curvature
     # and continuity included; p* moves with p10, see crossing_result)
