@@ -15,6 +15,7 @@ and the buffer they allow fits the memory documented for them.
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import pytest
 
@@ -34,6 +35,18 @@ def _slow_recovery():
                     seed=11, duration=40.0, valve_close_time=2.0, effects=("heat_transfer",),
                     heat_transfer_mode="fixed", heat_transfer_coefficient=0.05)
     return cfg, simulate(cfg)
+
+
+def _feed_holding(est: StreamingEstimator, sim: Any, state: str) -> tuple[list, float]:
+    """Feed ``sim`` in blocks of 1000; the results and the bytes the estimator's buffer
+    grows by per sample held while in ``state`` [B]."""
+    out, held = [], []
+    for k in range(0, sim.t.size, 1000):
+        out += est.push_block(sim.t[k:k + 1000], sim.measured[k:k + 1000])
+        if est.state == state:
+            held.append(_held(est))
+    out += est.finish()
+    return out, _bytes_per_sample(held)
 
 
 def test_a_recovery_that_never_settles_is_closed_at_the_bound(monkeypatch):
@@ -100,14 +113,7 @@ def test_the_recovery_bound_outlasts_a_big_tanks_recovery_within_its_memory(
                     noise_std=300.0, seed=3, rate=200.0, duration=815.0,
                     valve_close_time=15.0, effects=("heat_transfer",))
     sim = simulate(cfg)
-    est = StreamingEstimator(settings_for(cfg))
-    out, held = [], []
-    for k in range(0, sim.t.size, 1000):
-        out += est.push_block(sim.t[k:k + 1000], sim.measured[k:k + 1000])
-        if est.state == "recovery":
-            held.append(_held(est))
-    out += est.finish()
-    per_sample = _bytes_per_sample(held)
+    out, per_sample = _feed_holding(StreamingEstimator(settings_for(cfg)), sim, "recovery")
     (final,) = [r for r in out if r.final]
     assert final.status == "aborted_sse" and "from the recovery plateau" in \
         final.status_text, final.status_text
@@ -154,14 +160,9 @@ def test_the_auto_bound_keeps_a_big_tanks_unload_within_its_memory():
                     rate=100.0, pre_time=1.0, effects=("heat_transfer",))
     cfg = dataclasses.replace(cfg, duration=1.5 * default_duration(cfg))
     sim = simulate(cfg)
-    est = StreamingEstimator(dataclasses.replace(settings_for(cfg), atmosphere=None))
-    out, held = [], []
-    for k in range(0, sim.t.size, 1000):
-        out += est.push_block(sim.t[k:k + 1000], sim.measured[k:k + 1000])
-        if est.state == "unloading":
-            held.append(_held(est))
-    out += est.finish()
-    per_sample = _bytes_per_sample(held)
+    out, per_sample = _feed_holding(
+        StreamingEstimator(dataclasses.replace(settings_for(cfg), atmosphere=None)), sim,
+        "unloading")
     assert [(r.index, r.status, r.final) for r in out] == [(0, "ok", False), (0, "ok", True)]
     crossing = out[0]
     assert abs(crossing.p_atm - cfg.atmosphere) < 500.0
