@@ -94,14 +94,13 @@ def test_simulator_estimator_recorder_end_to_end(tmp_path: Path, ros_node: Any,
     # discovery of a new process can take seconds, so the rig starts once it has
     spin_until(node, ex, lambda: "waiting" in estimator_states(), 30.0)
     # the simulator starts streaming once the estimator and the recorder are subscribed: it
-    # counts the matched readers of the pressure topics it publishes, and the recorder reads
-    # both /tank/pressure and /tank/pressure_block, so a block-fed estimator is the third
-    # (with 2, the recorder alone started the stream and, under load, a block-fed estimator
-    # matched ~1.3 s late: it lost the first blocks and its live C differed from the bag's)
+    # counts the nodes subscribed to the pressure topics it publishes, the recorder (which
+    # reads both /tank/pressure and /tank/pressure_block) once (counted by subscriptions,
+    # the recorder alone started the stream and, under load, a block-fed estimator matched
+    # ~1.3 s late: it lost the first blocks and its live C differed from the bag's)
     block = estimator_input == "block"
-    blocks = {"block_size": BLOCK, "per_sample": True} if block else {}
-    sim = NodeProcess("simulator", {**RIG, "start_delay": 1.5,
-                                    "wait_for_subscribers": 3 if block else 2,
+    blocks = {"block_size": BLOCK, "per_sample": True} if block else {"block_size": BLOCK}
+    sim = NodeProcess("simulator", {**RIG, "start_delay": 1.5, "wait_for_subscribers": 2,
                                     "duration": 5.0, "auto_charge": False, **blocks}, tmp_path)
     try:
         assert spin_until(node, ex, lambda: any("curve-fit" in m.method for m in got), 40.0), (

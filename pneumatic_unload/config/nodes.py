@@ -121,9 +121,9 @@ def _simulator() -> list[ParameterSpec]:
         _bool("output_volts", False, "publish the transducer's output in volts "
               "(transducer_zero + transducer_sensitivity * p) instead of Pa: an "
               "uncalibrated rig"),
-        _int("wait_for_subscribers", 0, "start streaming only when this many pressure "
-             "subscriptions match, counted over the pressure topics published "
-             "(/tank/pressure, /tank/pressure_block)", 0, 100),
+        _int("wait_for_subscribers", 0, "start streaming only when this many nodes "
+             "subscribe to the pressure topics published (/tank/pressure, "
+             "/tank/pressure_block; a node on both counts once)", 0, 100),
     ]
 
 

@@ -153,6 +153,13 @@ class SimulatorNode(Node):
         except Exception as exc:  # a dead loop must be visible, not silent
             self.get_logger().error(f"rig loop stopped: {type(exc).__name__}: {exc}")
 
+    def _subscriber_nodes(self, pubs: list[Any]) -> int:
+        """Distinct nodes subscribed to any of the publishers' topics [-] (a recorder that
+        takes both pressure topics counts once)."""
+        nodes = {(info.node_namespace, info.node_name) for pub in pubs
+                 for info in self.get_subscriptions_info_by_topic(pub.topic_name)}
+        return len(nodes)
+
     def _block_size(self, rate: float) -> int:
         """Samples per PressureBlock [-] at ``rate`` [Hz]: the parameter, or with -1 (the
         default) :data:`AUTO_BLOCK` above :data:`BLOCK_ADVICE_RATE`, else none."""
@@ -170,9 +177,8 @@ class SimulatorNode(Node):
                 + ([self._pub_block] if self._block_size(rate) or not self._p("per_sample")
                    else [])
             names = " + ".join(p.topic_name for p in pubs)
-            self.get_logger().info(f"waiting for {need} subscriber(s) of {names}")
-            while sum(p.get_subscription_count() for p in pubs) < need \
-                    and not self._stop.is_set():
+            self.get_logger().info(f"waiting for {need} subscriber node(s) of {names}")
+            while self._subscriber_nodes(pubs) < need and not self._stop.is_set():
                 time.sleep(0.01)
             time.sleep(0.2)  # let the matched readers finish discovery of each other too
         self.get_logger().info(f"streaming at {rate:g} Hz")
