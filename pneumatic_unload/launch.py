@@ -8,6 +8,7 @@ Each process writes its output to a log file (a pipe could fill up and block the
 
 from __future__ import annotations
 
+import functools
 import os
 import random
 import re
@@ -57,6 +58,18 @@ def ros_args(params: dict[str, Any]) -> list[str]:
     return out
 
 
+@functools.cache
+def _env_resets_signals() -> bool:
+    """The system's ``env`` has ``--default-signal`` (coreutils 8.31 and later)."""
+    if shutil.which("env") is None:
+        return False
+    try:
+        return subprocess.run(["env", "--default-signal=INT,TERM", "true"],
+                              capture_output=True, timeout=10).returncode == 0
+    except (OSError, subprocess.SubprocessError):
+        return False
+
+
 class NodeProcess:
     """A node of this package in its own process, its output in a log file.
 
@@ -79,7 +92,7 @@ class NodeProcess:
                  env: dict[str, str] | None = None) -> None:
         args = [sys.executable, "-m", f"pneumatic_unload.nodes.{name}", "--ros-args",
                 *ros_args(params or {}), *(extra or [])]
-        if shutil.which("env") is not None:
+        if _env_resets_signals():
             # SIGINT and SIGTERM at their defaults in the node (a launcher run as a shell's
             # background job has SIGINT ignored, which a child inherits: a stop in the
             # node's first ~50 ms, before its own handler, would be lost)
