@@ -240,6 +240,8 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
             x_new = np.clip(move(x, step), inner_lo, inner_hi)
             f_new = fun(x_new)
             nfev += 1
+            # kept unless chi^2 rises by more than its tolerance: a strict comparison of
+            # two chi^2 values this close decides on their last bits
             if float(f_new @ f_new) <= cost + POLISH_CHI2_TOL * s2:
                 return x_new, f_new, jac, True, nfev
         h = jf.T @ jf
