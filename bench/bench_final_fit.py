@@ -64,7 +64,7 @@ class Counter:
 
     def install(self) -> None:
         orig_res = BinnedLikelihood.residuals_at
-        orig_law = fitting._fit_law
+        orig_law = fitting.fit_law
         orig_valley = fitting.valley_std
         counter = self
 
@@ -95,7 +95,7 @@ class Counter:
                 counter.label = prev
 
         BinnedLikelihood.residuals_at = residuals_at  # type: ignore[method-assign]
-        fitting._fit_law = fit_law
+        fitting.fit_law = fit_law
         fitting.valley_std = valley
 
 

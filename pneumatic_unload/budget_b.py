@@ -22,7 +22,8 @@ from pneumatic_unload.config.estimator import EstimatorSettings
 
 def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
                  model_form_std: float, p10: float, p_atm: float, atmosphere_measured: bool,
-                 wall: tuple[float, float, str] | None, wall_fitted: bool = False) -> Budget:
+                 wall: tuple[float, float, str] | None, wall_fitted: bool = False,
+                 extra_terms: tuple[BudgetTerm, ...] = ()) -> Budget:
     """The budget of the curve fit's critical pressure ratio b [-], line by line as C's.
 
     b is where the fitted flow turns subsonic, p_atm / p1 there; its sensitivities:
@@ -57,6 +58,8 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
         where it comes from); None without a heat law.
     wall_fitted : bool
         The chosen law fitted the wall (a hot start).
+    extra_terms : tuple of BudgetTerm
+        Further lines (the subsonic index m's, [-]).
     """
     s = settings
     u = input_uncertainties(s, p10)
@@ -88,5 +91,6 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
         terms.append(BudgetTerm(WALL_TERM, "B", s.wall, uw, "K", std,
                                 f"{why}; |db/dTw| = {per_k:.3g} /K" if math.isfinite(per_k)
                                 else why))
+    terms.extend(extra_terms)
     terms.append(model_form_term(model_form_std if math.isfinite(model_form_std) else 0.0))
     return Budget(b, tuple(terms))

@@ -103,6 +103,21 @@ class CurveFit:
         last-bit differences (another CPU's BLAS kernel or summation order) may change;
         1e-12 or less for a well-conditioned record, more in a flat valley (a faded heat
         exchange). NaN when not measured; b's is 0 when b was held.
+    subsonic_index, subsonic_index_std : float
+        The ISO 6358-1:2013 subsonic index m and its 1-sigma [-]: fitted when the record's
+        subsonic tail determines it and the data choose it (the information criterion of
+        the heat laws), else held at 0.5 (std NaN).
+    subsonic_index_fitted : bool
+        m was fitted (True) or held (False).
+    subsonic_std, subsonic_std_b : float
+        With m held: C's [m^3/(s Pa)] and b's [-] standard uncertainty from holding it (the
+        budgets' 'subsonic index' line, :mod:`pneumatic_unload.subsonic_offer`); 0 when m
+        was fitted (its uncertainty is in the fit's covariance).
+    subsonic_source : str
+        Why m was fitted or held, in words.
+    model_form_std_m : float
+        m's model-form 1-sigma [-]: the spread of the m of the laws fitted with m that fit
+        about as well, weighted as C's (not in ``subsonic_index_std``); NaN when m is held.
     """
 
     conductance: float
@@ -138,6 +153,13 @@ class CurveFit:
     model_form_std_b: float = math.nan
     conductance_reproducibility: float = math.nan
     critical_ratio_reproducibility: float = math.nan
+    subsonic_index: float = 0.5
+    subsonic_index_std: float = math.nan
+    subsonic_index_fitted: bool = False
+    subsonic_std: float = 0.0
+    subsonic_std_b: float = 0.0
+    subsonic_source: str = ""
+    model_form_std_m: float = math.nan
 
     def config(self, settings: EstimatorSettings) -> RigConfig:
         """The fitted model's configuration (valve opening at t = 0) [SI]."""
@@ -145,6 +167,8 @@ class CurveFit:
         cfg = rig_from_settings(settings, conductance=self.conductance, p10=self.p10,
                                 p_atm=self.p_atm, critical_ratio=b,
                                 heat_scale=self.heat_scale)
+        if self.subsonic_index != cfg.subsonic_index:
+            cfg = cfg.replace(subsonic_index=float(np.clip(self.subsonic_index, 0.1, 1.0)))
         if self.heat_law.startswith("natural") and self.heat_turbulent != 1.0:
             cfg = cfg.replace(heat_transfer_turbulent_ratio=float(
                 np.clip(self.heat_turbulent, 0.0, 10.0)))

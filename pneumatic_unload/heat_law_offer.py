@@ -89,7 +89,7 @@ def density_law_problem(fixed: CurveFit | None) -> str | None:
 def next_law_start(first: CurveFit, settings: EstimatorSettings, t0: float
                    ) -> dict[str, float]:
     """Starting values [SI] of the next laws' fits from the first law's fit (times relative
-    to t0 [s]): its C, opening, p10, b (and p_atm when fitted), the heat exchange as the
+    to t0 [s]): its C, opening, p10, b (and p_atm and m when fitted), the heat exchange as the
     thermal time constant of the gas 20 K below the wall; where the natural law's scale
     sits on its lower bound (the record shows no exchange), the constant-hA law's longest
     time constant (no exchange either: it then starts converged in that coordinate)."""
@@ -102,4 +102,6 @@ def next_law_start(first: CurveFit, settings: EstimatorSettings, t0: float
         start["b"] = first.critical_ratio
     if settings.atmosphere is None:
         start["p_atm"] = first.p_atm
+    if first.subsonic_index_fitted:
+        start["m"] = first.subsonic_index
     return start

@@ -23,7 +23,7 @@ from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertaint
 from pneumatic_unload.config.tank import wall_pair
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import Start
-from pneumatic_unload.model.parametric import ParametricModel
+from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START, ParametricModel
 from pneumatic_unload.physics import P_STAR_FRACTION, isentropic_crossing_time
 
 FloatArray = NDArray[np.float64]
@@ -36,14 +36,16 @@ CRITICAL_RATIO_PRIOR_STD = 0.1
 
 def estimator_model(settings: EstimatorSettings, start: Start, *,
                     p_atm: float | None = None, heat_law: str = "natural",
-                    fit_wall: bool = False) -> ParametricModel:
+                    fit_wall: bool = False, fit_m: bool = False) -> ParametricModel:
     """The parametric model of the estimator: heat transfer (``heat_law``, and the wall
-    temperature as a parameter with ``fit_wall``) or none."""
+    temperature as a parameter with ``fit_wall``) or none; the subsonic index m a parameter
+    with ``fit_m`` (else held at 0.5)."""
     effects = ("heat_transfer",) if settings.heat_model == "natural" else ()
     tank = settings.tank if p_atm is None else dataclasses.replace(settings.tank,
                                                                   atmosphere=p_atm)
     return ParametricModel(effects, tank, start, heat_law=heat_law,
-                           fit_wall_temperature=fit_wall and bool(effects))
+                           fit_wall_temperature=fit_wall and bool(effects),
+                           subsonic_index=None if fit_m else SUBSONIC_INDEX_START)
 
 
 def rig_from_settings(settings: EstimatorSettings, *, conductance: float, p10: float,

@@ -110,8 +110,15 @@ def format_result(r: UnloadResult) -> str:
         lines.append("  b              = "
                      + with_uncertainty(f"{r.critical_ratio:.3f}", r.critical_ratio_std,
                                         fmt=".3f"))
+        if math.isfinite(r.subsonic_index):
+            cf = r.extra.get("curve_fit", {})
+            m_text = with_uncertainty(f"{r.subsonic_index:.3f}", r.subsonic_index_std,
+                                      fmt=".3f")
+            lines.append("  m              = " + (
+                f"{m_text} (fitted)" if cf.get("subsonic_index_fitted")
+                else f"{m_text} ({cf.get('subsonic_source') or 'held at 0.5'})"))
     elif r.final:
-        lines.append("  b              = not identifiable from this record (the flow stayed "
+        lines.append("  b, m           = not identifiable from this record (the flow stayed "
                      "choked, or the subsonic tail is too short or too noisy)")
     lines += budget_lines(r)
     if math.isfinite(r.conductance_std):

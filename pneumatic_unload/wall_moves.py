@@ -47,7 +47,8 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
         for sign in (1.0, -1.0):
             wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
             moved = estimator_model(dataclasses.replace(settings, wall_temperature=wall),
-                                    model.start, heat_law=law)
+                                    model.start, heat_law=law,
+                                    fit_m=model.subsonic_index is None)
             try:
                 dr = np.asarray(trace.residual(moved)(fit.values), dtype=float) - fit.fun
             except (ValueError, ArithmeticError):

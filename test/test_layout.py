@@ -326,6 +326,9 @@ LAYERS: dict[str, int] = {
     "fitting": 4,  # model-based C: the curve fit, its heat-law choice
     "curve_fit_result": 4,  # the curve fit's result (fitted values, laws compared)
     "heat_law_offer": 4,  # which heat laws a record can carry (offered to the fit's choice)
+    "law_fit": 4,  # one heat law's fit of the curve fit
+    "law_family": 4,  # the laws compared (hot starts, m held or fitted) and the criterion
+    "subsonic_offer": 4,  # whether a record carries m, and the budget line of holding it
     "recovery": 4,  # SSE: the re-heating after an aborted unload
     "budget": 4,  # the uncertainty budget of a C (GUM: type A, type B, model form)
     "budget_b": 4,  # the budget of b, with C's lines

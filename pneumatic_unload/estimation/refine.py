@@ -37,6 +37,7 @@ from pneumatic_unload.inversion import (
     may_turn_subsonic,
 )
 from pneumatic_unload.recovery import fit_recovery
+from pneumatic_unload.subsonic_offer import m_budget, subsonic_term
 
 #: Quality figure [0, 1] at most of a result whose model does not describe the record at
 #: its noise level ("model inadequate" in its status text).
@@ -133,7 +134,8 @@ def b_budget(fit: CurveFit, settings: EstimatorSettings,
     return ratio_budget(settings, fit.critical_ratio, type_a_std=fit.critical_ratio_std,
                         model_form_std=fit.model_form_std_b, p10=fit.p10, p_atm=fit.p_atm,
                         atmosphere_measured=settings.atmosphere is None, wall=wall,
-                        wall_fitted=law.endswith("+wall")).to_dict()
+                        wall_fitted=law.endswith("+wall"),
+                        extra_terms=(subsonic_term(fit, "b"),)).to_dict()
 
 
 def crossing_wall_std(settings: EstimatorSettings, table: Any, tau: float, *,
@@ -338,8 +340,8 @@ def refine_with_curve_fit(
     if "budget_eq39" in res.extra:
         extra["budget_eq39"] = res.extra["budget_eq39"]
     budget = final_budget(res, settings, c=fit.conductance, type_a_std=c_std,
-                          model_form_std=mf, heat_law=fit.heat_law, extra_terms=extra_terms,
-                          fit=fit)
+                          model_form_std=mf, heat_law=fit.heat_law,
+                          extra_terms=(*extra_terms, subsonic_term(fit, "C")), fit=fit)
     if budget is not None:
         extra["budget"] = budget
         c_std = budget["combined_std"]
@@ -349,6 +351,7 @@ def refine_with_curve_fit(
     if math.isfinite(fit.critical_ratio):
         extra["budget_b"] = b_budget(fit, settings, res)
         b_std = extra["budget_b"]["combined_std"]
+        extra["budget_m"] = m_budget(fit).to_dict()
     status, text = res.status, res.status_text
     quality = res.quality if fit.success else min(res.quality, 0.5)
     nrms = fit.rms / noise_std if math.isfinite(noise_std) and noise_std > 0 else math.nan
@@ -373,5 +376,7 @@ def refine_with_curve_fit(
         conductance_model_std=c_std,
         t_start_model=fit.t_start, tau_exp_model=tau_model,
         critical_ratio=fit.critical_ratio, critical_ratio_std=b_std,
-        method=res.method + "+curve-fit", extra=extra,
+        subsonic_index=fit.subsonic_index if math.isfinite(fit.critical_ratio) else math.nan,
+        subsonic_index_std=extra["budget_m"]["combined_std"] if "budget_m" in extra
+        else math.nan, method=res.method + "+curve-fit", extra=extra,
         quality=quality if why is None else min(quality, INADEQUATE_QUALITY))

@@ -72,6 +72,11 @@ class UnloadResult:
     #: tau_exp of the fitted model, its p* crossing from its start [s]: uses the whole curve,
     #: so it is less noisy than ``tau_exp`` (the paper's measurement, which it never replaces).
     tau_exp_model: float = math.nan
+    #: ISO 6358-1:2013 subsonic index m of the final fit and its standard uncertainty [-]
+    #: (fitted where the record determines it, else held at 0.5 with the uncertainty of the
+    #: components' range; NaN before the final fit).
+    subsonic_index: float = math.nan
+    subsonic_index_std: float = math.nan
 
     @property
     def bias(self) -> float:
@@ -155,6 +160,9 @@ def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
         "budget_largest": budget.get("largest", ""),
         "heat_law": r.extra.get("curve_fit", {}).get("heat_law", "") if r.final else "",
         "critical_ratio": r.critical_ratio, "critical_ratio_std": r.critical_ratio_std,
+        "subsonic_index": r.subsonic_index, "subsonic_index_std": r.subsonic_index_std,
+        "subsonic_index_fitted": bool(r.extra.get("curve_fit", {}).get(
+            "subsonic_index_fitted", False)) if r.final else False,
         "tau_exp": r.tau_exp, "p10": r.p10, "p_atm": r.p_atm, "p_star": r.p_star,
         "initial_temperature": r.initial_temperature, "volume": r.volume,
     }

@@ -33,6 +33,12 @@ from pneumatic_unload.model.effects import (
 from pneumatic_unload.model.ode import integrate, valve_events
 from pneumatic_unload.model.sensor import sensor_response
 
+#: The subsonic index m of the ISO 6358-1:2013 flow law held when it is not fitted, and
+#: the start of its fit [-] (0.5: the elliptic law of ISO 6358:1989).
+SUBSONIC_INDEX_START = 0.5
+#: Bounds of a fitted m [-] (the simulator's range).
+SUBSONIC_INDEX_RANGE = (0.1, 1.0)
+
 
 class ParametricModel:
     """The baseline discharge plus effects, as a function of named parameter values.
@@ -52,10 +58,15 @@ class ParametricModel:
         Fit the wall temperature with the heat-transfer effect (start: ``tank.wall``).
         ``hot_start`` in ``effects`` is the heat-transfer effect with the wall temperature
         always fitted (start: below T10, :data:`HOT_START_DROPS`).
+    subsonic_index : float or None
+        The component's ISO 6358-1 subsonic index m [-] held at this value; None: m is a
+        parameter ('m', start :data:`SUBSONIC_INDEX_START`, bounds
+        :data:`SUBSONIC_INDEX_RANGE`).
     """
 
     def __init__(self, effects: tuple[str, ...], tank: TankSpec, start: Start, *,
-                 heat_law: str = "natural", fit_wall_temperature: bool = False) -> None:
+                 heat_law: str = "natural", fit_wall_temperature: bool = False,
+                 subsonic_index: float | None = SUBSONIC_INDEX_START) -> None:
         bad = [e for e in effects if e not in CANDIDATES]
         if bad:
             raise ValueError(f"unknown effect(s) {bad}; known: {', '.join(CANDIDATES)}")
@@ -70,6 +81,7 @@ class ParametricModel:
         self.heat_law = heat_law
         self.hot_start = HOT_START in effects
         self.fit_wall_temperature = fit_wall_temperature or self.hot_start
+        self.subsonic_index = subsonic_index
         #: effects of the configuration (the hot start is heat transfer in the simulator)
         self.config_effects = tuple("heat_transfer" if e == HOT_START else e
                                     for e in self.effects)
@@ -92,6 +104,10 @@ class ParametricModel:
             Parameter("p10", p, 0.3 * p, 3.0 * p, "Pa", scale=1e-3 * p,
                       doc="initial pressure (absolute)"),
         ]
+        if self.subsonic_index is None:
+            lo, hi = SUBSONIC_INDEX_RANGE
+            ps.append(Parameter("m", SUBSONIC_INDEX_START, lo, hi, "-", scale=0.1,
+                                doc="ISO 6358-1 subsonic index"))
         if self.tank.atmosphere is None:
             ps.append(Parameter("p_atm", s.p_atm, 0.3 * s.p_atm, 3.0 * s.p_atm, "Pa",
                                 scale=1e-3 * s.p_atm, doc="atmospheric pressure (absolute)"))
@@ -160,6 +176,8 @@ class ParametricModel:
             "conductance": c, "critical_ratio": clamp(v["b"], 0.0, 0.99),
             "initial_pressure": clamp(v["p10"], 1e4, 5e7),
             "atmosphere": clamp(p_atm, 1e3, 2e5),
+            "subsonic_index": clamp(v.get("m", self.subsonic_index or SUBSONIC_INDEX_START),
+                                    *SUBSONIC_INDEX_RANGE),
             "wall_temperature": float(v.get("t_wall", tank.wall))}
         for rec in self.records:
             kw.update(rec.apply(vv, tank))

@@ -29,13 +29,13 @@ from pathlib import Path
 from typing import Any
 
 #: Schema version written by this package [-].
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 #: How long a writer waits for the write lock before giving up [s].
 BUSY_TIMEOUT = 60.0
 
-#: Columns of ``unloads`` taken from a result's JSON (:func:`~pneumatic_unload.output.
-#: unload_json`), with their SQL types; units SI.
-UNLOAD_COLUMNS: tuple[tuple[str, str], ...] = (
+#: Columns of ``unloads`` of schema version 1, taken from a result's JSON
+#: (:func:`~pneumatic_unload.output.unload_json`), with their SQL types; units SI.
+V1_COLUMNS: tuple[tuple[str, str], ...] = (
     ("status", "TEXT"), ("status_text", "TEXT"), ("final", "INTEGER"),
     ("t_start", "REAL"), ("tau_exp", "REAL"), ("tau_exp_std", "REAL"),
     ("p10", "REAL"), ("p_atm", "REAL"), ("p_star", "REAL"),
@@ -46,6 +46,12 @@ UNLOAD_COLUMNS: tuple[tuple[str, str], ...] = (
     ("recommended_conductance", "REAL"), ("recommended_std", "REAL"),
     ("heat_law", "TEXT"), ("method", "TEXT"), ("quality", "REAL"),
 )
+#: Columns added by version 2: the ISO 6358-1:2013 subsonic index m and its uncertainty [-].
+V2_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("subsonic_index", "REAL"), ("subsonic_index_std", "REAL"),
+)
+#: Every column of ``unloads`` taken from a result's JSON.
+UNLOAD_COLUMNS = V1_COLUMNS + V2_COLUMNS
 
 _V1 = f"""
 CREATE TABLE files (
@@ -69,7 +75,7 @@ CREATE TABLE unloads (
     file_id INTEGER NOT NULL REFERENCES files(id) ON DELETE CASCADE,
     unload_index INTEGER NOT NULL,
     part_id TEXT NOT NULL,
-    {", ".join(f"{n} {t}" for n, t in UNLOAD_COLUMNS)},
+    {", ".join(f"{n} {t}" for n, t in V1_COLUMNS)},
     verdict TEXT,
     verdict_reason TEXT,
     budget_json TEXT,
@@ -82,7 +88,8 @@ CREATE INDEX files_part ON files (part_id);
 """
 
 #: Schema steps: MIGRATIONS[k] takes a database from version k to k + 1.
-MIGRATIONS: tuple[str, ...] = (_V1,)
+_V2 = ";\n".join(f"ALTER TABLE unloads ADD COLUMN {n} {t}" for n, t in V2_COLUMNS)
+MIGRATIONS: tuple[str, ...] = (_V1, _V2)
 
 
 class ResultsDBError(Exception):

@@ -204,7 +204,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
         h.append("<li>none</li>")
     h.append("</ul><h2>Unloads</h2><table id='unloads'><tr><th class='l'>part</th>"
              "<th class='l'>input</th><th>#</th><th class='l'>status</th><th>C</th>"
-             "<th>u(C)</th><th>b</th><th>tau_exp [s]</th><th class='l'>heat law</th>"
+             "<th>u(C)</th><th>b</th><th>m</th><th>tau_exp [s]</th><th class='l'>heat law</th>"
              "<th class='l'>verdict</th></tr>")
     curves: dict[str, Any] = {}
     for k, u in enumerate(unloads):
@@ -213,7 +213,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
         curves[str(k)] = {**curve, "p_star": p_star,
                           "title": html.escape(f"{u['part_id']} {Path(u['path']).name} "
                                                f"#{u['unload_index']}")}
-        b, tau = u["critical_ratio"], u["tau_exp"]
+        b, tau, m = u["critical_ratio"], u["tau_exp"], u.get("subsonic_index")
         h.append(f"<tr class='unload {_e(u['verdict'] or '')}' data-k='{k}'>"
                  f"<td class='l'>{_e(u['part_id'])}</td><td class='l'>"
                  f"{_e(Path(u['path']).name)}</td><td>{u['unload_index']}</td>"
@@ -221,6 +221,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
                  f"<td>{_c(u['recommended_conductance'])}</td>"
                  f"<td>{_c(u['recommended_std'], 5)}</td>"
                  f"<td>{'-' if b is None else f'{b:.3f}'}</td>"
+                 f"<td>{'-' if m is None else f'{m:.2f}'}</td>"
                  f"<td>{'-' if tau is None else f'{tau:.4f}'}</td>"
                  f"<td class='l'>{_e(u['heat_law'])}</td>"
                  f"<td class='l'>{_e(u['verdict'] or '-')}</td></tr>")

@@ -1,0 +1,257 @@
+"""The family of models the final curve fit compares: the heat laws, their hot-start
+variants, each with the subsonic index m held at 0.5 or fitted; and the information
+criterion that chooses among them.
+
+:class:`Family` fits the laws in turn (:func:`~pneumatic_unload.law_fit.fit_law`), each
+starting from the first law's fit, offers a law with a second parameter only where the
+record determines it (:mod:`pneumatic_unload.heat_law_offer`), explores strong and weak
+exchange when every law leaves structure, and adds the hot-start variants where the wall
+assumed at T10 leaves structure or T10 is far from a room's temperature. :func:`offer_m`
+adds a law's variant with m fitted (or held) where the record determines m
+(:mod:`pneumatic_unload.subsonic_offer`). :func:`criterion` is the BIC of every fit.
+Keys of the table: the law ('natural', 'fixed', 'density', 'natural+turbulent'), '+wall'
+for a hot start, '|m' for m fitted.
+
+SI units: s, Pa absolute, K, m^3/(s Pa).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pneumatic_unload.config.estimator import (
+    AMBIENT_TEMPERATURE,
+    WALL_ASSUMED_STD,
+    EstimatorSettings,
+)
+from pneumatic_unload.curve_fit_result import CurveFit, CurveSpan
+from pneumatic_unload.heat_law_offer import (
+    DENSITY_LAW_MAX_EXPONENT_SD,
+    TURBULENT_MAX_LOG_SD,
+    density_law_problem,
+    next_law_start,
+    turbulent_law_problem,
+)
+from pneumatic_unload.law_fit import fit_law, heat_of, start_from
+from pneumatic_unload.subsonic_offer import M_SUFFIX, split_key, subsonic_index_problem
+
+#: Residual inflation above which, with the wall assumed at T10, the hot-start variants
+#: (wall temperature fitted) are tried too [-] (they are also tried when T10 is more than
+#: sqrt(3) WALL_ASSUMED_STD from a room's AMBIENT_TEMPERATURE).
+HOT_START_INFLATION = 1.5
+
+#: One fit of the table: (result, chi^2 [Pa^2], free parameters [-]).
+Fit = tuple[CurveFit, float, int]
+
+
+@dataclass
+class Family:
+    """The fits of one curve fit, made in turn.
+
+    Attributes
+    ----------
+    span : CurveSpan
+        Where the samples lie.
+    settings : EstimatorSettings
+        Tank, gas and heat model.
+    common : dict
+        Arguments of every :func:`~pneumatic_unload.law_fit.fit_law` call (trace, starting
+        values, hold, fit_heat).
+    profile_heat : bool
+        Profile the heat scale where its likelihood is not quadratic (the laws' first fits).
+    fits : dict
+        Key -> :data:`Fit` offered to the criterion.
+    raw : dict
+        Key -> the fit's FitResult ('result'), model, covariance scale and CurveFit ('fit').
+    not_offered : dict
+        Key -> why a fit made is not offered (the record does not carry its parameter).
+    """
+
+    span: CurveSpan
+    settings: EstimatorSettings
+    common: dict[str, Any]
+    profile_heat: bool = True
+    fits: dict[str, Fit] = field(default_factory=dict)
+    raw: dict[str, dict[str, Any]] = field(default_factory=dict)
+    not_offered: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def natural(self) -> bool:
+        """The natural heat model is on (else adiabatic)."""
+        return self.settings.heat_model == "natural"
+
+    def fit(self, key: str, *, start: dict[str, float] | None, max_nfev: int,
+            profile_heat: bool = False, explore: bool = False) -> Fit:
+        """The fit of a table key [see the module note] (kept in ``raw``, not offered)."""
+        law, wall, fit_m = split_key(key)
+        kept: dict[str, Any] = {}
+        self.raw[key] = kept
+        out = fit_law(self.span, self.settings, profile_heat=profile_heat, law=law,
+                      start=start, max_nfev=max_nfev, fit_wall=wall, fit_m=fit_m,
+                      explore=explore, keep=kept, **self.common)
+        kept["fit"] = out[0]
+        return out
+
+    def run(self, laws: tuple[str, ...], sfx: str) -> None:
+        """Fit ``laws`` with m held (``sfx`` '') or fitted ('|m'), the laws already in the
+        table skipped; then the exploration and the hot starts of this family."""
+        start: dict[str, float] | None = None
+        first = self.fits.get(laws[0] + sfx)
+        if first is not None and first[0].inflation < 2.0 \
+                and math.isfinite(first[0].conductance):
+            start = next_law_start(first[0], self.settings, self.span.t_ref)
+        for law in laws:
+            key = law + sfx
+            if key in self.fits or key in self.not_offered:
+                continue
+            law_start, nfev = start, (200 if not self.fits else 32)
+            if law == "density":
+                why = density_law_problem(self.fits.get("fixed" + sfx, (None,))[0])
+                if why is not None:
+                    self.not_offered[key] = why
+                    continue
+                # from the constant-hA fit (n = 0), the exponent moved towards convection's
+                fx = self.fits["fixed" + sfx][0]
+                law_start = start_from(fx, self.span.t_ref, tau_heat=fx.tau_heat,
+                                       heat_exponent=0.3)
+                nfev = 80
+            if law == "natural+turbulent":
+                why = turbulent_law_problem(self.fits.get("natural" + sfx, (None,))[0],
+                                            self.settings, self.span.t_last)
+                if why is not None:
+                    self.not_offered[key] = why
+                    continue
+                nt = self.fits["natural" + sfx][0]
+                law_start = start_from(nt, self.span.t_ref, heat_scale=nt.heat_scale,
+                                       heat_turbulent=1.0)
+                nfev = 80
+            got = self.fit(key, start=law_start, max_nfev=nfev,
+                           profile_heat=self.profile_heat)
+            why = _second_parameter_problem(law, got[0])
+            if why is not None:
+                self.not_offered[key] = why
+                continue
+            self.fits[key] = got
+            if start is None and got[0].inflation < 2.0 and math.isfinite(got[0].conductance):
+                # the next law starts from this fit when it is close (white residuals);
+                # otherwise from the neutral values, with a second start screened
+                start = next_law_start(got[0], self.settings, self.span.t_ref)
+        self._explore(sfx)
+        self._hot_starts(sfx)
+
+    def _explore(self, sfx: str) -> None:
+        """Structured residuals under every law of the family: a basin may have been missed
+        (e.g. a nearly isothermal discharge fitted from the weak-exchange side); explore
+        strong and weak heat exchange from the neutral values and keep what fits better."""
+        family = [k for k in self.fits if k.endswith(M_SUFFIX) == bool(sfx)]
+        if not family or min(self.fits[k][0].inflation for k in family) <= 2.0:
+            return
+        for key in family:
+            start = {"m": self.fits[key][0].subsonic_index} if sfx else None
+            kept_before = self.raw.get(key)
+            again = self.fit(key, start=start, max_nfev=200, profile_heat=self.profile_heat,
+                             explore=True)
+            if again[1] < self.fits[key][1]:
+                self.fits[key] = again
+            elif kept_before is not None:
+                self.raw[key] = kept_before
+
+    def _hot_starts(self, sfx: str) -> None:
+        """The hot-start variants (the wall fitted from each one-parameter law's fit) where
+        the wall assumed at T10 leaves structure under every law, or T10 is far from a
+        room's temperature (a gas warmed or cooled by the charge: the density law can take
+        up a wall away from T10 with white residuals and C several % off); offered where
+        the wall is clearly away from T10 or the variant turns the structure into white
+        residuals."""
+        s = self.settings
+        family = [k for k in self.fits if k.endswith(M_SUFFIX) == bool(sfx)]
+        if not (self.natural and self.common["fit_heat"] and s.wall_temperature is None
+                and family):
+            return
+        least = min(self.fits[k][0].inflation for k in family)
+        if not (least > HOT_START_INFLATION or abs(s.initial_temperature - AMBIENT_TEMPERATURE)
+                > math.sqrt(3.0) * WALL_ASSUMED_STD):
+            return
+        for law in [k for k in ("natural", "fixed") if k + sfx in self.fits]:
+            base = self.fits[law + sfx][0]
+            if not math.isfinite(base.conductance):
+                continue
+            key = f"{law}+wall{sfx}"
+            hot = self.fit(key, start=start_from(base, self.span.t_ref, **heat_of(base)),
+                           max_nfev=120)
+            # a hot start is a claim about the rig: a wall clearly away from T10 (3 of the
+            # temperature's uncertainties, at least 3 K) makes it, or one nearer that turns
+            # the structure every law with the wall at T10 leaves into white residuals; else
+            # it absorbs other model error (HydDown: a wall 2.4 K off moved C by +0.25 %)
+            gap = abs(hot[0].wall_temperature - s.initial_temperature)
+            if gap > 3.0 * max(s.temperature_uncertainty, 1.0) or \
+                    least > HOT_START_INFLATION >= hot[0].inflation:
+                self.fits[key] = hot
+
+
+def _second_parameter_problem(law: str, fit: CurveFit) -> str | None:
+    """Why a law with a second heat parameter is not offered: the record does not
+    determine it (None: offer it, and for the one-parameter laws)."""
+    if law == "density":
+        sd = fit.heat_exponent_std
+        if not (math.isfinite(sd) and sd <= DENSITY_LAW_MAX_EXPONENT_SD):
+            return (f"the record does not determine the exponent n "
+                    f"(1-sigma {sd:.2g} > {DENSITY_LAW_MAX_EXPONENT_SD:g})")
+    if law == "natural+turbulent":
+        sd = fit.heat_turbulent_std / fit.heat_turbulent if fit.heat_turbulent > 0 \
+            else math.nan
+        if not (math.isfinite(sd) and sd <= TURBULENT_MAX_LOG_SD):
+            return (f"the record does not determine the turbulent branch "
+                    f"(relative 1-sigma {sd:.2g} > {TURBULENT_MAX_LOG_SD:g})")
+    return None
+
+
+def other(key: str) -> str:
+    """The table key of the same law with m held instead of fitted, or fitted instead of
+    held."""
+    return key.removesuffix(M_SUFFIX) if key.endswith(M_SUFFIX) else key + M_SUFFIX
+
+
+def offer_m(fam: Family, key: str) -> str | None:
+    """Fit the law of ``key`` with m fitted if held there, held if fitted, from that fit;
+    offer it to the criterion unless m is fitted and the record does not determine it
+    (:func:`~pneumatic_unload.subsonic_offer.subsonic_index_problem`: the reason goes to
+    ``not_offered`` and is returned; None when offered)."""
+    twin = other(key)
+    base = fam.fits[key][0]
+    try:
+        got: Fit | None = fam.fit(twin, start=start_from(base, fam.span.t_ref,
+                                                         **heat_of(base)), max_nfev=120)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+        got = None
+    why = "the fit failed" if got is None else \
+        subsonic_index_problem(got[0]) if twin.endswith(M_SUFFIX) else None
+    if got is not None and why is None:
+        fam.fits[twin] = got
+    else:
+        fam.not_offered[twin] = why or ""
+    return why
+
+
+def criterion(fits: dict[str, Fit], n: int) -> dict[str, float]:
+    """BIC [-] of every fit: chi^2 normalised by the lowest-chi^2 fit's residual variance
+    (inflated when structured: correlated residuals carry less information), n samples."""
+    log_n = math.log(max(n, 2))
+    unit = criterion_unit(fits)
+    return {law: chi2 / unit + k * log_n for law, (_cf, chi2, k) in fits.items()}
+
+
+def criterion_unit(fits: dict[str, Fit]) -> float:
+    """The criterion's residual variance [Pa^2]: the lowest-chi^2 fit's, inflated."""
+    ref = fits[min(fits, key=lambda k: fits[k][1])][0]
+    return max(ref.rms**2 * ref.inflation, 1e-300)
+
+
+def best_key(fits: dict[str, Fit], n: int) -> str:
+    """The key of the lowest BIC (:func:`criterion`)."""
+    bic = criterion(fits, n)
+    return min(bic, key=lambda k: bic[k])

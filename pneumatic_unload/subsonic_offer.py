@@ -1,0 +1,125 @@
+"""Whether a record carries the subsonic index m of ISO 6358-1:2013, and what holding it
+costs.
+
+The curve fit (:func:`pneumatic_unload.fitting.fit_curve`) fits its chosen heat law once
+more with m free. That variant is offered to the information criterion (the rule the heat
+laws use: lowest BIC wins) only where the record determines m
+(:func:`subsonic_index_problem`: the subsonic tail recorded, m within
+:data:`SUBSONIC_INDEX_MAX_SD`). Where m stays held at 0.5, what that costs C and b is a line
+of their budgets (:func:`held_lines`): their sensitivity to m along the m-free fit's valley
+times m's standard uncertainty (the fit's own where the record determines m, else that of
+the components' range, :data:`SUBSONIC_INDEX_PRIOR_SD`).
+
+SI units: m^3/(s Pa); b and m are dimensionless.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from pneumatic_unload.budget import Budget, BudgetTerm, model_form_term, record_term
+from pneumatic_unload.curve_fit_result import CurveFit
+from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
+
+#: Name of m's line in the budgets of C and b.
+SUBSONIC_TERM = "subsonic index m"
+#: Reason when the m-free fit could not be made.
+FAILED = "m held at 0.5; the fit with m free failed"
+#: Key suffix of a law's variant with m fitted (in the curve fit's BIC table).
+M_SUFFIX = "|m"
+#: The m-free variant is offered only when the record determines m within this 1-sigma [-]
+#: (enough to tell a silencer's 0.3 from the elliptic 0.5).
+SUBSONIC_INDEX_MAX_SD = 0.1
+#: Standard uncertainty of a held m where the record does not determine it [-]: m of valves,
+#: nozzles, tubes and silencers lies within about 0.25-0.75 (a uniform law: 0.5/sqrt(12)).
+SUBSONIC_INDEX_PRIOR_SD = 0.5 / math.sqrt(12.0)
+
+
+def split_key(key: str) -> tuple[str, bool, bool]:
+    """A curve-fit table key ('fixed', 'natural+wall', 'density|m', ...) as (heat law,
+    wall fitted, m fitted)."""
+    fit_m = key.endswith(M_SUFFIX)
+    base = key.removesuffix(M_SUFFIX)
+    fit_wall = base.endswith("+wall")
+    return base.removesuffix("+wall"), fit_wall, fit_m
+
+
+def subsonic_index_problem(fit: CurveFit) -> str | None:
+    """Why the m-free fit is not offered to the criterion (None: offer it): m and b must be
+    finite and m determined within :data:`SUBSONIC_INDEX_MAX_SD`."""
+    sd = fit.subsonic_index_std
+    if not math.isfinite(fit.conductance):
+        return "the fit with m free did not converge"
+    if not math.isfinite(fit.critical_ratio):
+        return "with m free the record does not determine b (the subsonic tail is too short " \
+               "or too noisy)"
+    if not (math.isfinite(sd) and sd <= SUBSONIC_INDEX_MAX_SD):
+        return (f"the record does not determine m (1-sigma {sd:.2g} > "
+                f"{SUBSONIC_INDEX_MAX_SD:g})")
+    return None
+
+
+def held_lines(kept: dict[str, Any] | None, free: CurveFit | None, offered: bool
+               ) -> tuple[float, float, float, str]:
+    """C's [m^3/(s Pa)] and b's [-] standard uncertainty from m held at 0.5, m's standard
+    uncertainty [-] and the reason in words: the slopes dC/dm and db/dm along the m-free
+    fit's valley (``kept``: its FitResult 'result' and covariance scale 's2'; ``free``: its
+    CurveFit) times m's uncertainty: max(its 1-sigma, its distance from 0.5) where the
+    record determines m (``offered``), else :data:`SUBSONIC_INDEX_PRIOR_SD`. NaN when
+    there is no m-free fit to take the slopes from."""
+    if kept is None or free is None or "result" not in kept:
+        return math.nan, math.nan, SUBSONIC_INDEX_PRIOR_SD, FAILED
+    res = kept["result"]
+    names = list(res.params.free)
+    if "m" not in names or "C" not in names:
+        return math.nan, math.nan, SUBSONIC_INDEX_PRIOR_SD, FAILED
+    cov = np.asarray(res.covariance(kept["s2"]), dtype=float)
+    im, ic = names.index("m"), names.index("C")
+    if not (np.all(np.isfinite(cov)) and cov[im, im] > 0):
+        return (math.nan, math.nan, SUBSONIC_INDEX_PRIOR_SD,
+                "m held at 0.5; the slopes of C and b along m are not determined")
+    p_m, p_c = res.params["m"], res.params["C"]
+    dm_dx = p_m.scale  # m is fitted linearly
+    slope_c = cov[ic, im] / cov[im, im] * p_c.scale * free.conductance / dm_dx
+    slope_b = math.nan
+    if "b" in names:
+        ib = names.index("b")
+        slope_b = cov[ib, im] / cov[im, im] * res.params["b"].scale / dm_dx
+    if offered:
+        u = max(free.subsonic_index_std, abs(free.subsonic_index - SUBSONIC_INDEX_START))
+        why = (f"m held at 0.5: the record determines m = {free.subsonic_index:.3f} +- "
+               f"{free.subsonic_index_std:.3f}, the criterion keeps 0.5")
+    else:
+        u = SUBSONIC_INDEX_PRIOR_SD
+        why = (f"m held at 0.5 (+- {u:.3f}, the range of components): the record does not "
+               "determine it")
+    return abs(slope_c) * u, abs(slope_b) * u if math.isfinite(slope_b) else 0.0, u, why
+
+
+def subsonic_term(fit: CurveFit, quantity: str) -> BudgetTerm:
+    """The budget line of m for C (``quantity`` 'C', std [m^3/(s Pa)]) or b ('b', [-]):
+    with m held, the move of holding it (:func:`held_lines`); fitted, 0 (its uncertainty is
+    in the curve fit's line)."""
+    std = fit.subsonic_std if quantity == "C" else fit.subsonic_std_b
+    note = fit.subsonic_source + ("; in the curve fit's line" if fit.subsonic_index_fitted
+                                  else "")
+    return BudgetTerm(SUBSONIC_TERM, "B", fit.subsonic_index, fit.subsonic_index_std, "-",
+                      0.0 if fit.subsonic_index_fitted else std, note)
+
+
+def m_budget(fit: CurveFit) -> Budget:
+    """The budget of m [-]: fitted, the curve fit's line and the heat laws' spread of the
+    laws fitted with m (``fit.model_form_std_m``); held, the held value's uncertainty
+    (:func:`held_lines`). The wall temperature's move of m is not evaluated (as b's, it is
+    of second order where the wall is assumed at T10)."""
+    if fit.subsonic_index_fitted:
+        mf = fit.model_form_std_m if math.isfinite(fit.model_form_std_m) else 0.0
+        return Budget(fit.subsonic_index, (
+            record_term("curve fit (noise, AR(1), residual structure)",
+                        fit.subsonic_index_std), model_form_term(mf)))
+    return Budget(fit.subsonic_index, (
+        BudgetTerm("m held", "B", fit.subsonic_index, fit.subsonic_index_std, "-",
+                   fit.subsonic_index_std, fit.subsonic_source),))
