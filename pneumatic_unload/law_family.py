@@ -37,6 +37,7 @@ from pneumatic_unload.heat_law_offer import (
     turbulent_law_problem,
 )
 from pneumatic_unload.law_fit import fit_law, heat_of, start_from
+from pneumatic_unload.model.effects import WALL_TEMPERATURE
 from pneumatic_unload.subsonic_offer import M_SUFFIX, split_key, subsonic_index_problem
 
 #: Residual inflation above which, with the wall assumed at T10, the hot-start variants
@@ -188,7 +189,13 @@ class Family:
             # the structure every law with the wall at T10 leaves into white residuals; else
             # it absorbs other model error (HydDown: a wall 2.4 K off moved C by +0.25 %)
             gap = abs(hot[0].wall_temperature - s.initial_temperature)
-            if gap > 3.0 * max(s.temperature_uncertainty, 1.0) or \
+            if min(abs(hot[0].wall_temperature - WALL_TEMPERATURE.lo),
+                   abs(hot[0].wall_temperature - WALL_TEMPERATURE.hi)) < 1.0:
+                # a wall on the bound of any room's is no minimum: it absorbs other model
+                # error (two restrictions in series: a wall at 150 K, C -4.3 %)
+                self.not_offered[key] = (f"the wall went to the bound of its range "
+                                         f"({hot[0].wall_temperature:.0f} K): no hot start")
+            elif gap > 3.0 * max(s.temperature_uncertainty, 1.0) or \
                     least > HOT_START_INFLATION >= hot[0].inflation:
                 self.fits[key] = hot
 

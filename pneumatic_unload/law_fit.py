@@ -61,6 +61,8 @@ def curve_fit_trace(t: FloatArray, p: FloatArray, t_start: float) -> Trace:
                  t_start, edges=curve_fit_bins(t, t_start))
 
 
+#: The critical ratios b screened (with m 0.3 and 0.7) where m is freed [-].
+M_START_B = (0.1, 0.3, 0.55)
 #: Residual inflation above which a law's fit is repeated with plain (log) stepping and
 #: the lower chi^2 kept [-]: the fade stepping reaches the minimum in about half the
 #: evaluations, but from a start far off its path can end in a false minimum with
@@ -156,6 +158,10 @@ def fit_law(
     if explore and natural and fit_heat:
         starts = ([{"heat_scale": 30.0}, {"heat_scale": 0.1}] if law.startswith("natural") else
                   [{"tau_heat": 0.05 * tau}, {"tau_heat": 20.0 * tau}])
+    if fit_m and (start or {}).get("m", SUBSONIC_INDEX_START) == SUBSONIC_INDEX_START:
+        # m freed from a fit with m held: b and m trade along a curved valley (a flow never
+        # choked: b 0.23, m 0.30 for 0.10, 0.35), so the search starts screen its far ends
+        starts = (starts or []) + [{"b": b0, "m": m0} for b0 in M_START_B for m0 in (0.3, 0.7)]
     if start is not None:
         lo_t, hi_t = 0.0, math.inf
         if "tau_heat" in model.parameters:
@@ -214,8 +220,7 @@ def fit_law(
     b, b_std = v["b"], float(std["b"])
     m, m_std = v.get("m", SUBSONIC_INDEX_START), float(std.get("m", math.nan))
     if not math.isfinite(b_std) or b_std > 0.05 or b_std == 0.0:
-        b, b_std = math.nan, math.nan
-        m_std = math.nan
+        b, b_std = math.nan, math.nan  # (m may be determined without b: a flow never choked)
     h = v.get("heat_scale", 1.0)
     h_std = float(std["heat_scale"]) if "heat_scale" in free else math.nan
     cf = CurveFit(

@@ -48,14 +48,12 @@ def split_key(key: str) -> tuple[str, bool, bool]:
 
 
 def subsonic_index_problem(fit: CurveFit) -> str | None:
-    """Why the m-free fit is not offered to the criterion (None: offer it): m and b must be
-    finite and m determined within :data:`SUBSONIC_INDEX_MAX_SD`."""
+    """Why the m-free fit is not offered to the criterion (None: offer it): C finite and m
+    determined within :data:`SUBSONIC_INDEX_MAX_SD` (b need not be: a flow that is never
+    choked determines m and C, not where choking would begin)."""
     sd = fit.subsonic_index_std
     if not math.isfinite(fit.conductance):
         return "the fit with m free did not converge"
-    if not math.isfinite(fit.critical_ratio):
-        return "with m free the record does not determine b (the subsonic tail is too short " \
-               "or too noisy)"
     if not (math.isfinite(sd) and sd <= SUBSONIC_INDEX_MAX_SD):
         return (f"the record does not determine m (1-sigma {sd:.2g} > "
                 f"{SUBSONIC_INDEX_MAX_SD:g})")

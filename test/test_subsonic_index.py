@@ -1,0 +1,148 @@
+"""The subsonic index m of ISO 6358-1:2013 on data the package did not make: discharges of
+the independent model ``test/foreign/newton_tank.py`` through the ISO law with m != 0.5,
+an isentropic nozzle and two restrictions in series (1 kHz, 0.1 % FS noise, the subsonic
+tail recorded). The grid with five noise draws is ``bench/bench_foreign_laws.py``.
+
+Before m was fitted (main 4bd69e5, m held at 0.5): on the 20 ISO cases C within 1 % 8/20
+(-11.5 % at m 0.25, b 0.3; +11.2 % at m 0.62, b 0.45), b within 0.03 5/20. Measured with
+m in the family (bench, 140 traces): C within 1 % 140/140 (ISO, nozzle) and 23/25
+(series: 3.8 % at most); |z| <= 2 with the record's sigma alone: ISO C 95 %, b 95 %,
+m 97 %.
+"""
+
+from __future__ import annotations
+
+import math
+import sqlite3
+import zlib
+
+import numpy as np
+import pytest
+from foreign.newton_tank import IsoLaw, Nozzle, Series, discharge, truth
+
+from pneumatic_unload.budget import EXACT_INPUTS
+from pneumatic_unload.estimation import EstimatorSettings, UnloadResult, analyze, merge_final
+from pneumatic_unload.subsonic_offer import SUBSONIC_INDEX_PRIOR_SD, SUBSONIC_TERM
+
+P_ATM, T10, NOISE = 101325.0, 293.15, 1000.0
+
+
+def _run(law: IsoLaw | Nozzle | Series, volume: float, p10: float, tau_heat: float,
+         name: str, *, tail: float = 9.0, exact: bool = False) -> UnloadResult:
+    """Analyse the foreign discharge of ``law`` recorded for ``tail`` tau0 after the
+    opening (0.2 s plateau before it)."""
+    tau0 = volume / (1.4e5 * truth(law).conductance)
+    t = np.arange(0.0, 0.2 + tail * tau0, 1e-3)
+    p = discharge(t, volume=volume, p10=p10, t10=T10, p_atm=P_ATM, tau_heat=tau_heat,
+                  t_open=0.2, flow_law=law)
+    y = p + np.random.default_rng(zlib.crc32(name.encode())).normal(0.0, NOISE, t.size)
+    given = dict(EXACT_INPUTS) if exact else {}
+    (r,) = merge_final(analyze(t, y, EstimatorSettings(volume=volume, **given)))
+    assert r.final and math.isfinite(r.conductance_model), r.status_text
+    return r
+
+
+@pytest.mark.parametrize("m,b,volume,c,p10,tau_heat", [
+    (0.25, 0.3, 2.5e-3, 4e-9, 7e5, 10.0), (0.35, 0.1, 2e-3, 2e-9, 7e5, 5.0),
+    (0.62, 0.1, 5e-3, 1.2e-8, 8e5, 5.0), (0.75, 0.45, 10e-3, 2e-8, 8e5, 20.0)])
+def test_m_fitted_on_a_foreign_iso_law(m, b, volume, c, p10, tau_heat):
+    r = _run(IsoLaw(c, b, m), volume, p10, tau_heat, f"iso-{m}-{b}")
+    fit = r.extra["curve_fit"]
+    assert fit["subsonic_index_fitted"], fit["subsonic_source"]
+    assert abs(r.conductance_model / c - 1.0) < 0.01
+    assert abs(r.conductance_model - c) < 3.0 * r.conductance_model_std
+    assert abs(r.critical_ratio - b) < 0.03 and abs(r.critical_ratio - b) < 3.0 * \
+        r.critical_ratio_std
+    assert abs(r.subsonic_index - m) < 0.05 and abs(r.subsonic_index - m) < 3.0 * \
+        r.subsonic_index_std
+    # m fitted: its lines are in the fit's; the budget of m says so
+    assert r.extra["budget_m"]["combined_std"] == pytest.approx(r.subsonic_index_std)
+    line = [x for x in r.extra["budget"]["terms"] if x["name"] == SUBSONIC_TERM]
+    assert len(line) == 1 and line[0]["std"] == 0.0 and "fitted" in line[0]["note"]
+
+
+def test_m_held_where_the_law_is_elliptic_and_its_line_is_small():
+    """m = 0.5 made: the criterion holds it; the line of holding it is the record's own
+    uncertainty of m times C's slope, far below C's sigma."""
+    c = 5e-9
+    r = _run(IsoLaw(c, 0.4, 0.5), 3e-3, 7e5, 10.0, "iso-0.5")
+    fit = r.extra["curve_fit"]
+    assert not fit["subsonic_index_fitted"] and r.subsonic_index == 0.5
+    assert "the record determines m" in fit["subsonic_source"]
+    assert 0.0 < r.subsonic_index_std < 0.02
+    (line,) = [x for x in r.extra["budget"]["terms"] if x["name"] == SUBSONIC_TERM]
+    assert 0.0 < line["std"] < 0.3 * r.conductance_model_std
+    assert abs(r.conductance_model / c - 1.0) < 0.01
+
+
+def test_m_held_with_a_wide_uncertainty_where_the_tail_is_short():
+    """A record that ends soon after the flow turns subsonic hardly determines m (measured:
+    m = 0.37 +- 0.09 for a component with m = 0.3; the criterion keeps 0.5): held at 0.5
+    with an uncertainty of at least that (its distance from the record's m, or 0.144 for
+    the range 0.25-0.75 where the record does not determine it at all), and C's line
+    carries what that costs; C within 2 % and 3 sigma."""
+    c = 5e-9
+    r = _run(IsoLaw(c, 0.3, 0.3), 3e-3, 7e5, 10.0, "iso-short", tail=1.6)
+    fit = r.extra["curve_fit"]
+    assert not fit["subsonic_index_fitted"] and r.subsonic_index == 0.5
+    assert 0.09 <= r.subsonic_index_std <= SUBSONIC_INDEX_PRIOR_SD + 1e-12
+    (line,) = [x for x in r.extra["budget"]["terms"] if x["name"] == SUBSONIC_TERM]
+    assert line["std"] > 0.0 and line["input_std"] == pytest.approx(r.subsonic_index_std)
+    assert abs(r.conductance_model / c - 1.0) < 0.02
+    assert abs(r.conductance_model - c) < 3.0 * r.conductance_model_std
+
+
+def test_isentropic_nozzle_and_two_restrictions_in_series():
+    nozzle = Nozzle(math.pi * 2e-3**2 / 4.0, 0.8)
+    r = _run(nozzle, 3e-3, 7e5, 5.0, "nozzle")
+    tr = truth(nozzle)
+    assert abs(r.conductance_model / tr.conductance - 1.0) < 0.01
+    assert abs(r.critical_ratio - tr.critical_ratio) < 0.03
+    assert abs(r.subsonic_index - tr.subsonic_index) < 0.05
+    pair = Series(IsoLaw(1.5e-8, 0.2, 0.4), IsoLaw(6e-9, 0.5, 0.6))
+    r = _run(pair, 4e-3, 7e5, 20.0, "series")
+    tr = truth(pair)
+    assert abs(r.conductance_model / tr.conductance - 1.0) < 0.01
+    assert abs(r.critical_ratio - tr.fit_b) < 0.03  # the ISO law nearest the pair's
+    assert abs(r.subsonic_index - tr.fit_m) < 0.05
+
+
+def test_coverage_of_c_b_and_m_over_an_iso_grid():
+    """The record's own sigma (inputs exact, no model-limits line) covers C, b and m on
+    the ISO family: 12 cases, m 0.25-0.75, b 0.3-0.6 (bench: 95-97 % within 2 sigma on
+    100 traces); at least 10 of 12 within 2 sigma for each (binomial at 95 %:
+    P(<= 9 of 12) = 2 %), and every C within 1 %. (b = 0.1 from 6-8 bar is never choked:
+    there b, m and the heat exchange can trade, one record fitting b 0.23, m 0.30 with
+    white residuals for 0.10, 0.35 adiabatic: b's sigma does not cover it. Left out here,
+    said in the bench.)"""
+    grid = [(m, b) for m in (0.25, 0.35, 0.62, 0.75) for b in (0.3, 0.45, 0.6)]
+    zs: dict[str, list[float]] = {"C": [], "b": [], "m": []}
+    vc = ((1e-3, 3e-9), (2.5e-3, 4e-9), (5e-3, 1.2e-8), (10e-3, 2e-8))
+    for k, (m, b) in enumerate(grid):
+        v, c = vc[k % 4]
+        r = _run(IsoLaw(c, b, m), v, (8e5, 7e5, 6e5)[k % 3], (5.0, 10.0, 20.0, 1e4)[k % 4],
+                 f"grid-{m}-{b}", exact=True)
+        assert abs(r.conductance_model / c - 1.0) < 0.01, (m, b)
+        zs["C"].append((r.conductance_model - c) / r.conductance_model_std)
+        zs["b"].append((r.critical_ratio - b) / r.critical_ratio_std)
+        zs["m"].append((r.subsonic_index - m) / r.subsonic_index_std)
+    for name, z in zs.items():
+        assert sum(abs(x) <= 2.0 for x in z) >= 10, (name, np.round(z, 2))
+
+
+def test_results_database_of_schema_1_gains_the_m_columns(tmp_path):
+    from pneumatic_unload.testline.db import MIGRATIONS, SCHEMA_VERSION, open_db
+
+    path = tmp_path / "old.sqlite"
+    con = sqlite3.connect(path)
+    for stmt in MIGRATIONS[0].split(";"):
+        if stmt.strip():
+            con.execute(stmt)
+    con.execute("PRAGMA user_version = 1")
+    con.commit()
+    con.close()
+    open_db(path).close()
+    con = sqlite3.connect(path)
+    cols = {row[1] for row in con.execute("PRAGMA table_info(unloads)")}
+    assert {"subsonic_index", "subsonic_index_std"} <= cols
+    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 2
