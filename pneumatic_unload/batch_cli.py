@@ -70,14 +70,16 @@ def options_from(args: argparse.Namespace) -> InputOptions:
     """The batch's :class:`InputOptions` from its command line."""
     settings = _settings_file(args.settings) if args.settings else {}
     settings.update(adapters.given_options(args, EstimatorSettings))
-    if args.atmosphere_auto:
-        settings["atmosphere"] = None
+    barometer = settings.get("atmosphere")
+    try:
+        zero = adapters.gauge_inputs(bool(args.gauge), barometer, bool(args.atmosphere_auto),
+                                     settings)
+    except ConfigError as exc:
+        raise BatchCliError(str(exc)) from exc
     csv = {k: getattr(args, k) for k in CSV_OPTIONS if getattr(args, k) is not None}
-    if args.gauge:
-        if settings.get("atmosphere") is None:
-            raise BatchCliError("--gauge needs --atmosphere PA")
+    if zero is not None:
         csv["gauge"] = True
-        csv["atmosphere"] = settings["atmosphere"]
+        csv["atmosphere"] = zero
     try:
         spec = load_spec(args.spec) if args.spec else None
     except SpecError as exc:

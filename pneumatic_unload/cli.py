@@ -52,6 +52,7 @@ from pneumatic_unload.records import (
     Record,
     RecordError,
     analyze_input,
+    measured_temperature,
     open_record,
     settings_for,
 )
@@ -118,8 +119,7 @@ def settings_from(args: argparse.Namespace, cfg: dict[str, Any]) -> EstimatorSet
     rig configuration (tank and gas), then the defaults of
     :class:`~pneumatic_unload.estimation.EstimatorSettings`."""
     given = adapters.given_options(args, EstimatorSettings)
-    if getattr(args, "atmosphere_auto", False):
-        given["atmosphere"] = None
+    gauge_atmosphere(args, given)
     try:
         return settings_for(cfg, given)
     except (RecordError, EstimationError, ConfigError) as exc:
@@ -170,16 +170,35 @@ def input_sources(args: argparse.Namespace, cfg: dict[str, Any], settings: Estim
     }
 
 
+def csv_options(args: argparse.Namespace) -> dict[str, Any]:
+    """How to read a CSV input: its columns, units and gauge zero (see
+    :func:`~pneumatic_unload.io.csvlog.read_csv_trace`)."""
+    return {k: getattr(args, k) for k in (
+        "time_column", "pressure_column", "temperature_column", "pressure_unit",
+        "time_unit", "temperature_unit")} | {"gauge": args.gauge or None,
+                                             "atmosphere": gauge_atmosphere(args)}
+
+
+def gauge_atmosphere(args: argparse.Namespace, given: dict[str, Any] | None = None
+                     ) -> float | None:
+    """The atmosphere [Pa] added to gauge readings (``--gauge``): the barometer's reading
+    ``--atmosphere``, or with ``--atmosphere-auto`` the standard one (the final plateau is
+    the zero; :func:`~pneumatic_unload.config.adapters.gauge_inputs` completes ``given``
+    settings); None for absolute readings."""
+    try:
+        return adapters.gauge_inputs(bool(getattr(args, "gauge", False)),
+                                     getattr(args, "atmosphere", None),
+                                     bool(getattr(args, "atmosphere_auto", False)),
+                                     given if given is not None else {})
+    except ConfigError as exc:
+        raise CliError(str(exc)) from exc
+
+
 def open_input(args: argparse.Namespace) -> Record:
     """The input PATH of ``analyze`` as a :class:`~pneumatic_unload.records.Record` (a CSV is
     read in chunks later); what was assumed about it is printed as warnings on stderr."""
     try:
-        rec = open_record(
-            args.path, topic=args.topic, time_column=args.time_column,
-            pressure_column=args.pressure_column,
-            temperature_column=args.temperature_column, pressure_unit=args.pressure_unit,
-            time_unit=args.time_unit, temperature_unit=args.temperature_unit,
-            gauge=args.gauge or None, atmosphere=args.atmosphere)
+        rec = open_record(args.path, topic=args.topic, **csv_options(args))
     except RecordError as exc:
         raise CliError(str(exc)) from exc
     for w in rec.warnings:
@@ -199,8 +218,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             raise CliError(f"--plot {args.plot}: folder {folder} does not exist")
     rec = open_input(args)
     given = adapters.given_options(args, EstimatorSettings)
-    if getattr(args, "atmosphere_auto", False):
-        given["atmosphere"] = None
+    gauge_atmosphere(args, given)
     try:
         ana = analyze_input(rec, given)
     except (RecordError, EstimationError, ConfigError) as exc:
@@ -279,35 +297,6 @@ def cmd_recover(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------- discrepancy
-def _load_temperature(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray] | None:
-    """Measured gas temperature of the input (t [s], T [K]), or None when absent."""
-    path = Path(args.path)
-    try:
-        if path.suffix.lower() in (".csv", ".txt"):
-            from pneumatic_unload.io.csvlog import read_csv_trace
-
-            tr = read_csv_trace(
-                path, time_column=args.time_column, pressure_column=args.pressure_column,
-                temperature_column=args.temperature_column,
-                pressure_unit=args.pressure_unit, time_unit=args.time_unit,
-                temperature_unit=args.temperature_unit, gauge=args.gauge or None,
-                atmosphere=args.atmosphere)
-            if tr.temperature is None:
-                return None
-            ok = np.isfinite(tr.temperature)  # a slower channel: empty cells between
-            if np.count_nonzero(ok) < 3:
-                return None
-            return np.asarray(tr.t[ok], float), np.asarray(tr.temperature[ok], float)
-        from pneumatic_unload.io.bag import read_temperature
-
-        t_ns, temp = read_temperature(path)
-        if len(temp) < 3:
-            return None
-        return np.asarray(t_ns, dtype=np.int64) * 1e-9, np.asarray(temp, float)
-    except Exception:  # the temperature is optional evidence: never fail the run on it
-        return None
-
-
 def _progress_printer(args: argparse.Namespace, path: str, n_paths: int
                       ) -> Callable[[str], None] | None:
     """Progress lines to stderr (--progress, or stderr a terminal), else None."""
@@ -346,7 +335,8 @@ def cmd_discrepancy(args: argparse.Namespace) -> int:
                 "length_diameter_ratio" in TankSpec.fields_of(cfg)
             ds = DiscrepancySettings(**tank.tank_fields(), **own,
                                      length_diameter_known=known)
-            res = find_discrepancy(t, p, ds, temperature=_load_temperature(ns),
+            res = find_discrepancy(t, p, ds, temperature=measured_temperature(
+                ns.path, **csv_options(ns)),
                                    progress=_progress_printer(args, path, len(args.paths)))
         except DiscrepancyError as exc:
             raise CliError(f"{path}: {exc}") from exc
@@ -503,9 +493,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         sub = ap._subparsers._group_actions[0].choices if ap._subparsers else {}
         ap_cmd = sub.get(getattr(args, "command", None), ap)
         ap_cmd.error(unrecognized_message(ap_cmd, extra))
-    if getattr(args, "gauge", False) and args.atmosphere is None:
-        print("pneumatic-unload: error: --gauge needs --atmosphere PA", file=sys.stderr)
-        return 2
     try:
         return int(args.func(args))
     except (CliError, batch_cli.BatchCliError) as exc:

@@ -115,6 +115,12 @@ class CurveFit:
         was fitted (its uncertainty is in the fit's covariance).
     subsonic_source : str
         Why m was fitted or held, in words.
+    pressure_offset, pressure_offset_std : float
+        The transducer's zero offset fitted (a reading = pressure + offset) and its 1-sigma
+        [Pa]; 0 and NaN when it was not fitted (the record settles at the given p_atm).
+    offset_source : str
+        Why the offset was fitted or not, in words ('' when p_atm is fitted: the plateau's
+        level is then the atmosphere's).
     model_form_std_m : float
         m's model-form 1-sigma [-]: the spread of the m of the laws fitted with m that fit
         about as well, weighted as C's (not in ``subsonic_index_std``); NaN when m is held.
@@ -160,6 +166,9 @@ class CurveFit:
     subsonic_std_b: float = 0.0
     subsonic_source: str = ""
     model_form_std_m: float = math.nan
+    pressure_offset: float = 0.0
+    pressure_offset_std: float = math.nan
+    offset_source: str = ""
 
     def config(self, settings: EstimatorSettings) -> RigConfig:
         """The fitted model's configuration (valve opening at t = 0) [SI]."""
@@ -174,6 +183,9 @@ class CurveFit:
                 np.clip(self.heat_turbulent, 0.0, 10.0)))
         if math.isfinite(self.wall_temperature):
             cfg = cfg.replace(wall_temperature=float(self.wall_temperature))
+        if self.pressure_offset != 0.0:
+            cfg = cfg.replace(effects=(*cfg.effects, "sensor_offset"),
+                              sensor_offset=float(self.pressure_offset))
         if self.heat_law.startswith(("fixed", "density")) and math.isfinite(self.tau_heat):
             g = settings.gas
             h_a = self.p10 * settings.volume / ((g.gamma - 1.0) * settings.initial_temperature

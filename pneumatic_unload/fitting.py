@@ -44,6 +44,7 @@ from pneumatic_unload.law_fit import (
     curve_fit_bins,
     curve_fit_trace,
     fit_law,
+    heat_of,
     start_from,
 )
 from pneumatic_unload.subsonic_offer import M_SUFFIX, held_lines, split_key
@@ -119,33 +120,31 @@ def fit_curve(
         trace = Trace.from_stats(bins, UNIT_NOISE)  # the same for every law
         last = float(bins.t_last[-1])
         span = CurveSpan(reduced.t_ref, reduced.t_ref + last, last, bins.n, reduced.dt)
+        settled = float(bins.y_sum[-1] / bins.count[-1])
     else:
         t = np.asarray(t, dtype=float)
         tr = t - t[0]
         trace = curve_fit_trace(tr, np.asarray(p, dtype=float), t_start - float(t[0]))
         dt = float(np.median(np.diff(tr[:100_001]))) if t.size > 1 else 1.0
         span = CurveSpan(float(t[0]), float(t[-1]), float(tr[-1]), int(t.size), dt)
+        settled = float(np.mean(np.asarray(p, dtype=float)[tr >= 0.98 * tr[-1]]))
     common = dict(t_start=t_start, p10=p10, p_atm=p_atm, conductance=conductance,
                   fit_heat=bool(fit_heat and natural), trace=trace, hold=hold)
-    fam = Family(span, settings, common, profile_heat)
-    fam.run(tried, "")  # m held at 0.5
-    # the subsonic index: the first law once more with m free; where the record determines
-    # m and the criterion prefers it to the same law with m held, the laws are fitted again
-    # with m free (m and the heat law trade: both families are offered); clearly (by
-    # LAW_BIC_THRESHOLD: HydDown's 1 L vessel, 3.5 better with m free, then took the density
-    # law with m = 0.527 and C +1.5 % over the hot start's -0.1 %)
+    fam, best = _choose(Family(span, settings, common, profile_heat), tried)
+    offset_why = ""
+    if settings.atmosphere is not None:
+        # p_atm given: a record that settles away from it (a transducer's zero offset)
+        # has the offset fitted, the family fitted again with it, where the criterion
+        # clearly prefers it (by LAW_BIC_THRESHOLD; an offset it does not determine is not
+        # offered); else it is said not to be
+        offset_why = _offer_offset(fam, best, settled - settings.atmosphere)
+        if offset_why is None:
+            fam, best = _choose(Family(span, settings, common, profile_heat, offset=True),
+                                tried)
+            cf0 = fam.fits[best][0]
+            offset_why = (f"fitted: the record settles {cf0.pressure_offset:+.0f} +- "
+                          f"{cf0.pressure_offset_std:.0f} Pa from the given p_atm")
     fits, raw = fam.fits, fam.raw  # raw: each fit's FitResult and model (the wall term)
-    first = tried[0]
-    if first in fits and offer_m(fam, first) is None:
-        pair = criterion({k: fits[k] for k in (first, first + M_SUFFIX)}, span.n)
-        if pair[first] - pair[first + M_SUFFIX] > LAW_BIC_THRESHOLD:
-            fam.run(tried, M_SUFFIX)
-    best = best_key(fits, span.n)
-    if other(best) not in raw:
-        # the chosen law's other variant (m held for one fitted, m free for one held: the
-        # slopes of the held m's line): the criterion decides between the two
-        offer_m(fam, best)
-        best = best_key(fits, span.n)
     bic = criterion(fits, span.n)
     cf = fits[best][0]
     if best.endswith(M_SUFFIX):
@@ -180,7 +179,8 @@ def fit_curve(
         model_form_std_b=mf_b, laws=table,
         heat_law=best.removesuffix(M_SUFFIX) if natural else "none",
         not_offered=fam.not_offered, subsonic_std=m_c, subsonic_std_b=m_b,
-        subsonic_index_std=m_u, subsonic_source=m_why, model_form_std_m=mf_m)
+        subsonic_index_std=m_u, subsonic_source=m_why, model_form_std_m=mf_m,
+        offset_source=offset_why)
     if raw.get(best):  # the fit's own numerical reproducibility (another machine's bits)
         rep = numerical_reproducibility(trace.residual(raw[best]["model"]),
                                         raw[best]["result"], fade=bool(raw[best]["fade"]))
@@ -216,6 +216,77 @@ def fit_curve(
     return out
 
 
+#: Largest zero offset fitted, as a fraction of the drop p10 - p_atm [-] (a transducer's
+#: zero is off by a few kPa; a record that sits tens of kPa away has not settled).
+OFFSET_MAX_FRACTION = 0.05
+#: The record's last 2 % must lie within this fraction of the drop of the given p_atm plus
+#: the fitted offset [-]: the record settles on its final plateau.
+SETTLED_FRACTION = 0.01
+
+
+def _choose(fam: Family, tried: tuple[str, ...]) -> tuple[Family, str]:
+    """Fit the laws ``tried`` with m held, and with m free where the record asks for it;
+    returns the family and the key the criterion chooses.
+
+    The subsonic index: the first law once more with m free; where the record determines
+    m and the criterion prefers it to the same law with m held, the laws are fitted again
+    with m free (m and the heat law trade: both families are offered); clearly (by
+    LAW_BIC_THRESHOLD: HydDown's 1 L vessel, 3.5 better with m free, then took the density
+    law with m = 0.527 and C +1.5 % over the hot start's -0.1 %). The chosen law's other
+    variant (m held for one fitted, m free for one held: the slopes of the held m's line)
+    is fitted too, and the criterion decides between the two."""
+    fam.run(tried, "")  # m held at 0.5
+    fits, n = fam.fits, fam.span.n
+    first = tried[0]
+    if first in fits and offer_m(fam, first) is None:
+        pair = criterion({k: fits[k] for k in (first, first + M_SUFFIX)}, n)
+        if pair[first] - pair[first + M_SUFFIX] > LAW_BIC_THRESHOLD:
+            fam.run(tried, M_SUFFIX)
+    best = best_key(fits, n)
+    if other(best) not in fam.raw:
+        offer_m(fam, best)
+        best = best_key(fits, n)
+    return fam, best
+
+
+def _offer_offset(fam: Family, best: str, gap: float) -> str | None:
+    """Fit the chosen law ``best`` once more with the transducer's zero offset (starting
+    from ``gap`` [Pa], the record's last 2 % above the given p_atm); None when the criterion
+    clearly prefers it (by LAW_BIC_THRESHOLD, the offset determined), else why not, in
+    words."""
+    # on the chosen law with m free (fitted for the pair where needed): a flow law that is
+    # not the elliptic one leaves structure an offset cannot take up, and hides it
+    key = best if best.endswith(M_SUFFIX) else best + M_SUFFIX
+    held = fam.raw.get(key, {}).get("entry") or fam.fits[best]
+    if held is fam.fits[best]:
+        key = best
+    probe = Family(fam.span, fam.settings, fam.common, offset=True)
+    base = held[0]
+    start = start_from(base, fam.span.t_ref, **heat_of(base))
+    if math.isfinite(gap):
+        start["offset"] = gap
+    try:
+        got = probe.fit(key, start=start, max_nfev=120)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+        return "not fitted: the fit with an offset failed"
+    off, sd = got[0].pressure_offset, got[0].pressure_offset_std
+    drop = got[0].p10 - fam.settings.atmosphere
+    if not (abs(off) <= OFFSET_MAX_FRACTION * drop
+            and abs(gap - off) <= SETTLED_FRACTION * drop):
+        # a zero offset is a small shift of a record that settles: one that ends before
+        # its final plateau (or a large "offset") is something else
+        return (f"not fitted: the record does not settle on a plateau an offset explains "
+                f"(its end {gap:+.0f} Pa from the given p_atm, an offset would be "
+                f"{off:+.0f} Pa)")
+    pair = criterion({"held": held, "offset": got}, fam.span.n)
+    gain = pair["held"] - pair["offset"]
+    if math.isfinite(sd) and gain > LAW_BIC_THRESHOLD:
+        return None
+    return (f"not fitted: the record settles at the given p_atm (an offset of {off:+.0f} "
+            f"+- {sd:.0f} Pa would improve the criterion by {gain:.1f} <= "
+            f"{LAW_BIC_THRESHOLD:g})")
+
+
 def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: float, *,
                 law: str, fit_heat: bool, hold: tuple[str, ...],
                 span: CurveSpan, fit_m: bool = False) -> tuple[float, float]:
@@ -236,7 +307,8 @@ def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: flo
             again = fit_law(span, moved, t_start=fit.t_start, p10=fit.p10, p_atm=fit.p_atm,
                              conductance=fit.conductance, fit_heat=fit_heat,
                              profile_heat=False, law=law, start=start, max_nfev=60,
-                             trace=trace, hold=hold, fit_m=fit_m)[0]
+                             trace=trace, hold=hold, fit_m=fit_m,
+                             fit_offset=math.isfinite(fit.pressure_offset_std))[0]
         except (ValueError, FloatingPointError, np.linalg.LinAlgError):
             return math.nan, math.nan
         out.append((again.conductance, again.critical_ratio))

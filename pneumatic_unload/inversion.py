@@ -36,11 +36,15 @@ CRITICAL_RATIO_PRIOR_STD = 0.1
 
 def estimator_model(settings: EstimatorSettings, start: Start, *,
                     p_atm: float | None = None, heat_law: str = "natural",
-                    fit_wall: bool = False, fit_m: bool = False) -> ParametricModel:
+                    fit_wall: bool = False, fit_m: bool = False,
+                    fit_offset: bool = False) -> ParametricModel:
     """The parametric model of the estimator: heat transfer (``heat_law``, and the wall
     temperature as a parameter with ``fit_wall``) or none; the subsonic index m a parameter
-    with ``fit_m`` (else held at 0.5)."""
-    effects = ("heat_transfer",) if settings.heat_model == "natural" else ()
+    with ``fit_m`` (else held at 0.5); the transducer's zero offset a parameter ('offset'
+    [Pa]) with ``fit_offset``."""
+    effects: tuple[str, ...] = ("heat_transfer",) if settings.heat_model == "natural" else ()
+    if fit_offset:
+        effects = (*effects, "sensor_offset")
     tank = settings.tank if p_atm is None else dataclasses.replace(settings.tank,
                                                                   atmosphere=p_atm)
     return ParametricModel(effects, tank, start, heat_law=heat_law,

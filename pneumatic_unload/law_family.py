@@ -64,10 +64,13 @@ class Family:
         values, hold, fit_heat).
     profile_heat : bool
         Profile the heat scale where its likelihood is not quadratic (the laws' first fits).
+    offset : bool
+        Every fit with the transducer's zero offset fitted.
     fits : dict
         Key -> :data:`Fit` offered to the criterion.
     raw : dict
-        Key -> the fit's FitResult ('result'), model, covariance scale and CurveFit ('fit').
+        Key -> the fit's FitResult ('result'), model, covariance scale, CurveFit ('fit')
+        and :data:`Fit` ('entry', offered or not).
     not_offered : dict
         Key -> why a fit made is not offered (the record does not carry its parameter).
     """
@@ -76,6 +79,7 @@ class Family:
     settings: EstimatorSettings
     common: dict[str, Any]
     profile_heat: bool = True
+    offset: bool = False
     fits: dict[str, Fit] = field(default_factory=dict)
     raw: dict[str, dict[str, Any]] = field(default_factory=dict)
     not_offered: dict[str, str] = field(default_factory=dict)
@@ -93,8 +97,9 @@ class Family:
         self.raw[key] = kept
         out = fit_law(self.span, self.settings, profile_heat=profile_heat, law=law,
                       start=start, max_nfev=max_nfev, fit_wall=wall, fit_m=fit_m,
+                      fit_offset=self.offset,
                       explore=explore, keep=kept, **self.common)
-        kept["fit"] = out[0]
+        kept["fit"], kept["entry"] = out[0], out
         return out
 
     def run(self, laws: tuple[str, ...], sfx: str) -> None:

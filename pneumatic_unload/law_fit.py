@@ -92,6 +92,7 @@ def fit_law(
     profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
     max_nfev: int = 200, explore: bool = False, trace: Trace,
     hold: tuple[str, ...] = (), fit_wall: bool = False, fit_m: bool = False,
+    fit_offset: bool = False,
     keep: dict[str, Any] | None = None,
 ) -> tuple[CurveFit, float, int]:
     """One law's fit for :func:`~pneumatic_unload.fitting.fit_curve`; returns (fit,
@@ -129,6 +130,8 @@ def fit_law(
     fit_wall : bool
         Fit the wall temperature too (hot-start variant; starts screened 10 and 30 K below
         T10 and, with a constant hA, a strong exchange from 10 K below and 5 K above).
+    fit_offset : bool
+        Fit the transducer's zero offset too (a reading = pressure + offset; p_atm given).
     fit_m : bool
         Fit the subsonic index m too (else held at 0.5).
     keep : dict, optional
@@ -144,7 +147,8 @@ def fit_law(
     neutral = Start(conductance=conductance, critical_ratio=settings.critical_ratio,
                   t_open=float(np.clip(t_start, 0.0, span.duration)), p10=p10, p_atm=p_atm,
                   tau=tau, dt=dt, t_first=0.0, t_last=span.duration)
-    model = estimator_model(settings, neutral, heat_law=law, fit_wall=fit_wall, fit_m=fit_m)
+    model = estimator_model(settings, neutral, heat_law=law, fit_wall=fit_wall, fit_m=fit_m,
+                            fit_offset=fit_offset)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
     if "t_open" in hold:
         fixed["t_open"] = float(t_start)
@@ -239,5 +243,7 @@ def fit_law(
         else math.nan,
         whiteness_p=whiteness_p, heat_turbulent=v.get("heat_turbulent", 1.0),
         heat_turbulent_std=float(std["heat_turbulent"]) if "heat_turbulent" in free
-        else math.nan, subsonic_index=m, subsonic_index_std=m_std, subsonic_index_fitted=fit_m)
+        else math.nan, subsonic_index=m, subsonic_index_std=m_std, subsonic_index_fitted=fit_m,
+        pressure_offset=v.get("offset", 0.0),
+        pressure_offset_std=float(std["offset"]) if "offset" in free else math.nan)
     return cf, fit.chi2, fit.k

@@ -38,7 +38,7 @@ def unload_json(r: UnloadResult) -> dict[str, Any]:
     ('model_inadequate': the reason, or '') and the C to report."""
     d = r.to_dict()
     extra = d.pop("extra", None) or {}
-    for key in ("budget", "budget_eq39", "budget_b"):
+    for key in ("budget", "budget_eq39", "budget_b", "budget_m"):
         if key in extra:
             d[key] = extra[key]
     cf = extra.get("curve_fit", {}) if r.final else {}
@@ -53,6 +53,9 @@ def unload_json(r: UnloadResult) -> dict[str, Any]:
     d["reproducibility"] = {
         "conductance_model": cf.get("conductance_reproducibility"),
         "critical_ratio": cf.get("critical_ratio_reproducibility")} if cf else None
+    d["subsonic_index_fitted"] = bool(cf.get("subsonic_index_fitted", False))
+    d["subsonic_source"] = cf.get("subsonic_source", "")
+    d["offset_source"] = cf.get("offset_source", "")
     d["model_inadequate"] = extra.get("model_inadequate", "")
     d["recommended"] = recommended(r)
     return finite_or_none(d)

@@ -284,3 +284,31 @@ def analyze_input(record: Record, given: dict[str, Any]) -> InputAnalysis:
         unloads = [dataclasses.replace(r, status="bad_data", status_text=problem)
                    for r in unloads]
     return InputAnalysis(record, settings, run, unloads, t10_column, why, problem)
+
+
+def measured_temperature(path: str | Path, **csv_options: Any
+                         ) -> tuple[FloatArray, FloatArray] | None:
+    """The gas temperature an input carries (t [s], T [K]: a CSV's temperature column,
+    read with ``csv_options`` as :func:`open_record`, its empty cells skipped; a bag's
+    temperature topic), or None when it carries fewer than 3 values or cannot be read
+    (the temperature is optional evidence: a run never fails on it)."""
+    path = Path(path)
+    try:
+        if path.suffix.lower() in (".csv", ".txt"):
+            from pneumatic_unload.io.csvlog import read_csv_trace
+
+            tr = read_csv_trace(path, **csv_options)
+            if tr.temperature is None:
+                return None
+            ok = np.isfinite(tr.temperature)  # a slower channel: empty cells between
+            if np.count_nonzero(ok) < 3:
+                return None
+            return np.asarray(tr.t[ok], float), np.asarray(tr.temperature[ok], float)
+        from pneumatic_unload.io.bag import read_temperature
+
+        t_ns, temp = read_temperature(path)
+        if len(temp) < 3:
+            return None
+        return np.asarray(t_ns, dtype=np.int64) * 1e-9, np.asarray(temp, float)
+    except Exception:
+        return None

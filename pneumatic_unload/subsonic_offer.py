@@ -1,5 +1,5 @@
 """Whether a record carries the subsonic index m of ISO 6358-1:2013, and what holding it
-costs.
+costs (and the line of a fitted transducer zero offset).
 
 The curve fit (:func:`pneumatic_unload.fitting.fit_curve`) fits its chosen heat law once
 more with m free. That variant is offered to the information criterion (the rule the heat
@@ -121,3 +121,13 @@ def m_budget(fit: CurveFit) -> Budget:
     return Budget(fit.subsonic_index, (
         BudgetTerm("m held", "B", fit.subsonic_index, fit.subsonic_index_std, "-",
                    fit.subsonic_index_std, fit.subsonic_source),))
+
+
+def offset_terms(fit: CurveFit) -> tuple[BudgetTerm, ...]:
+    """The fitted zero offset's line of C's budget (none when it was not fitted): its value
+    and 1-sigma [Pa], 0 in the budget (its uncertainty is in the curve fit's line)."""
+    if not math.isfinite(fit.pressure_offset_std):
+        return ()
+    return (BudgetTerm("pressure transducer zero (fitted)", "A", fit.pressure_offset,
+                       fit.pressure_offset_std, "Pa", 0.0,
+                       f"{fit.offset_source}; in the curve fit's line"),)

@@ -48,7 +48,8 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
             wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
             moved = estimator_model(dataclasses.replace(settings, wall_temperature=wall),
                                     model.start, heat_law=law,
-                                    fit_m=model.subsonic_index is None)
+                                    fit_m=model.subsonic_index is None,
+                                    fit_offset="sensor_offset" in model.effects)
             try:
                 dr = np.asarray(trace.residual(moved)(fit.values), dtype=float) - fit.fun
             except (ValueError, ArithmeticError):

@@ -332,3 +332,35 @@ def from_mapping(cls: type, d: dict[str, Any], *, strict: bool = True) -> dict[s
     if unknown and strict:
         raise ConfigError(f"unknown {cls.__name__} key(s): {', '.join(unknown)}")
     return {k: v for k, v in d.items() if k in known}
+
+
+#: The atmosphere added to gauge readings when none is given (``--gauge --atmosphere-auto``:
+#: the record's final plateau is the zero, p_atm is fitted from it) [Pa absolute].
+STANDARD_ATMOSPHERE = 101_325.0
+#: The standard uncertainty of that assumed barometer [Pa]: the weather's spread at a bench
+#: up to about 200 m above sea level (give the barometer's reading, ``--atmosphere PA``,
+#: above that); it enters C's budget as the transducer's common offset does.
+ASSUMED_BAROMETER_STD = 2_000.0
+
+
+def gauge_inputs(gauge: bool, atmosphere: float | None, auto: bool,
+                 settings: dict[str, Any]) -> float | None:
+    """The atmosphere [Pa] to add to gauge readings, and ``settings`` completed, for gauge
+    readings (``gauge``) with a barometer reading ``atmosphere`` [Pa] or none; ``auto``:
+    p_atm fitted from the final plateau (set in ``settings`` as None). Without a barometer,
+    auto takes :data:`STANDARD_ATMOSPHERE` and, unless given, a pressure uncertainty of
+    :data:`ASSUMED_BAROMETER_STD`. Raises :class:`ConfigError` for gauge readings with
+    neither. None when the readings are absolute."""
+    if auto:
+        settings["atmosphere"] = None
+    if not gauge:
+        return None
+    if atmosphere is not None:
+        return float(atmosphere)
+    if not auto:
+        raise ConfigError("--gauge needs --atmosphere PA (the barometer's reading), or "
+                          "--atmosphere-auto (the final plateau is the zero; 101325 Pa "
+                          f"+- {ASSUMED_BAROMETER_STD:g} assumed)")
+    if settings.get("pressure_uncertainty") is None:
+        settings["pressure_uncertainty"] = ASSUMED_BAROMETER_STD
+    return STANDARD_ATMOSPHERE

@@ -37,7 +37,7 @@ from pneumatic_unload.inversion import (
     may_turn_subsonic,
 )
 from pneumatic_unload.recovery import fit_recovery
-from pneumatic_unload.subsonic_offer import m_budget, subsonic_term
+from pneumatic_unload.subsonic_offer import m_budget, offset_terms, subsonic_term
 
 #: Quality figure [0, 1] at most of a result whose model does not describe the record at
 #: its noise level ("model inadequate" in its status text).
@@ -341,7 +341,8 @@ def refine_with_curve_fit(
         extra["budget_eq39"] = res.extra["budget_eq39"]
     budget = final_budget(res, settings, c=fit.conductance, type_a_std=c_std,
                           model_form_std=mf, heat_law=fit.heat_law,
-                          extra_terms=(*extra_terms, subsonic_term(fit, "C")), fit=fit)
+                          extra_terms=(*extra_terms, subsonic_term(fit, "C"),
+                                       *offset_terms(fit)), fit=fit)
     if budget is not None:
         extra["budget"] = budget
         c_std = budget["combined_std"]
@@ -378,5 +379,8 @@ def refine_with_curve_fit(
         critical_ratio=fit.critical_ratio, critical_ratio_std=b_std,
         subsonic_index=fit.subsonic_index if math.isfinite(fit.critical_ratio) else math.nan,
         subsonic_index_std=extra["budget_m"]["combined_std"] if "budget_m" in extra
-        else math.nan, method=res.method + "+curve-fit", extra=extra,
+        else math.nan,
+        pressure_offset=fit.pressure_offset if math.isfinite(fit.pressure_offset_std)
+        else math.nan, pressure_offset_std=fit.pressure_offset_std,
+        method=res.method + "+curve-fit", extra=extra,
         quality=quality if why is None else min(quality, INADEQUATE_QUALITY))

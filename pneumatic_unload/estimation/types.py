@@ -77,6 +77,10 @@ class UnloadResult:
     #: components' range; NaN before the final fit).
     subsonic_index: float = math.nan
     subsonic_index_std: float = math.nan
+    #: The pressure transducer's zero offset fitted by the final fit and its 1-sigma [Pa]
+    #: (NaN when not fitted: the record settles at the given p_atm, or p_atm was fitted).
+    pressure_offset: float = math.nan
+    pressure_offset_std: float = math.nan
 
     @property
     def bias(self) -> float:
