@@ -43,7 +43,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from pneumatic_unload import fitting  # noqa: E402
+from pneumatic_unload import fitting, law_family, law_fit  # noqa: E402
 from pneumatic_unload.config import RigConfig  # noqa: E402
 from pneumatic_unload.estimation import EstimatorSettings, StreamingEstimator  # noqa: E402
 from pneumatic_unload.fit.likelihood import BinnedLikelihood  # noqa: E402
@@ -64,8 +64,8 @@ class Counter:
 
     def install(self) -> None:
         orig_res = BinnedLikelihood.residuals_at
-        orig_law = fitting.fit_law
-        orig_valley = fitting.valley_std
+        orig_law = law_family.fit_law
+        orig_valley = law_fit.valley_std
         counter = self
 
         def residuals_at(lik: Any, *a: Any, **k: Any) -> Any:
@@ -76,6 +76,7 @@ class Counter:
             prev = counter.label
             law = k.get("law", "natural")
             tag = law + ("+wall" if k.get("fit_wall") else "") \
+                + ("|m" if k.get("fit_m") else "") + ("+offset" if k.get("fit_offset") else "") \
                 + (" explore" if k.get("explore") else "")
             counter.label = tag if prev == "other" else prev
             try:
@@ -95,8 +96,9 @@ class Counter:
                 counter.label = prev
 
         BinnedLikelihood.residuals_at = residuals_at  # type: ignore[method-assign]
-        fitting.fit_law = fit_law
-        fitting.valley_std = valley
+        fitting.fit_law = fit_law  # the wall's refits
+        law_family.fit_law = fit_law  # the laws'
+        law_fit.valley_std = valley
 
 
 def jobs_of(cfg: RigConfig, settings: EstimatorSettings, unloads: int) -> list[Any]:

@@ -31,6 +31,7 @@ from pneumatic_unload.fit.reduced import Reducer
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.law_family import (
     HOT_START_INFLATION,
+    TWIN_BIC_MARGIN,
     Family,
     best_key,
     criterion,
@@ -47,7 +48,7 @@ from pneumatic_unload.law_fit import (
     heat_of,
     start_from,
 )
-from pneumatic_unload.subsonic_offer import M_SUFFIX, held_lines, split_key
+from pneumatic_unload.subsonic_offer import M_SUFFIX, held_lines, split_key, twin_lines
 from pneumatic_unload.wall_moves import law_spread, spread_b, wall_linear
 
 FloatArray = NDArray[np.float64]
@@ -152,8 +153,11 @@ def fit_curve(
             f"m fitted: {cf.subsonic_index:.3f} +- {cf.subsonic_index_std:.3f}")
     else:
         free_key = best + M_SUFFIX
-        m_c, m_b, m_u, m_why = held_lines(raw.get(free_key), raw.get(free_key, {}).get("fit"),
-                                          free_key in fits)
+        if raw.get(free_key, {}).get("fit") is not None:
+            m_c, m_b, m_u, m_why = held_lines(raw[free_key], raw[free_key]["fit"],
+                                              free_key in fits)
+        else:  # not worth a fit: the first-order twin's slopes and m
+            m_c, m_b, m_u, m_why = twin_lines(fam.twin(best, "m"))
     # the heat laws' model form among the laws with m as the chosen one's (m held: the
     # subsonic index line carries m's part)
     same = {k: f for k, f in fits.items() if k.endswith(M_SUFFIX) == best.endswith(M_SUFFIX)}
@@ -238,12 +242,13 @@ def _choose(fam: Family, tried: tuple[str, ...]) -> tuple[Family, str]:
     fam.run(tried, "")  # m held at 0.5
     fits, n = fam.fits, fam.span.n
     first = tried[0]
-    if first in fits and offer_m(fam, first) is None:
+    if first in fits and fam.worth(fam.twin(first, "m")) and offer_m(fam, first) is None:
         pair = criterion({k: fits[k] for k in (first, first + M_SUFFIX)}, n)
         if pair[first] - pair[first + M_SUFFIX] > LAW_BIC_THRESHOLD:
             fam.run(tried, M_SUFFIX)
     best = best_key(fits, n)
-    if other(best) not in fam.raw:
+    if other(best) not in fam.raw and (best.endswith(M_SUFFIX)
+                                       or fam.worth(fam.twin(best, "m"))):
         offer_m(fam, best)
         best = best_key(fits, n)
     return fam, best
@@ -253,13 +258,19 @@ def _offer_offset(fam: Family, best: str, gap: float) -> str | None:
     """Fit the chosen law ``best`` once more with the transducer's zero offset (starting
     from ``gap`` [Pa], the record's last 2 % above the given p_atm); None when the criterion
     clearly prefers it (by LAW_BIC_THRESHOLD, the offset determined), else why not, in
-    words."""
-    # on the chosen law with m free (fitted for the pair where needed): a flow law that is
-    # not the elliptic one leaves structure an offset cannot take up, and hides it
+    words (the probe also frees m: the criterion then asks for the offset's family only
+    where the offset is also 3 of its sigmas from 0)."""
+    # the first-order twin of the chosen fit (m as it is there) screens; the probe frees m
+    # too: a flow law that is not the elliptic one leaves structure an offset alone cannot
+    # take up, and an offset hides the subsonic tail's shape (m 0.3 read 3 kPa high: each
+    # alone gains little, both together thousands)
+    held = fam.fits[best]
+    tw = fam.twin(best, "offset")
+    if tw is not None and not fam.worth(tw):
+        return (f"not fitted: the record settles at the given p_atm (an offset of "
+                f"{tw.value:+.0f} +- {tw.std:.0f} Pa would not improve the criterion by "
+                f"{TWIN_BIC_MARGIN:g}, to first order)")
     key = best if best.endswith(M_SUFFIX) else best + M_SUFFIX
-    held = fam.raw.get(key, {}).get("entry") or fam.fits[best]
-    if held is fam.fits[best]:
-        key = best
     probe = Family(fam.span, fam.settings, fam.common, offset=True)
     base = held[0]
     start = start_from(base, fam.span.t_ref, **heat_of(base))
@@ -280,7 +291,7 @@ def _offer_offset(fam: Family, best: str, gap: float) -> str | None:
                 f"{off:+.0f} Pa)")
     pair = criterion({"held": held, "offset": got}, fam.span.n)
     gain = pair["held"] - pair["offset"]
-    if math.isfinite(sd) and gain > LAW_BIC_THRESHOLD:
+    if math.isfinite(sd) and gain > LAW_BIC_THRESHOLD and abs(off) > 3.0 * sd:
         return None
     return (f"not fitted: the record settles at the given p_atm (an offset of {off:+.0f} "
             f"+- {sd:.0f} Pa would improve the criterion by {gain:.1f} <= "

@@ -36,8 +36,11 @@ from pneumatic_unload.heat_law_offer import (
     next_law_start,
     turbulent_law_problem,
 )
+from pneumatic_unload.inversion import estimator_model
 from pneumatic_unload.law_fit import fit_law, heat_of, start_from
+from pneumatic_unload.linear_twin import Twin, linear_twin
 from pneumatic_unload.model.effects import WALL_TEMPERATURE
+from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
 from pneumatic_unload.subsonic_offer import M_SUFFIX, split_key, subsonic_index_problem
 
 #: Residual inflation above which, with the wall assumed at T10, the hot-start variants
@@ -45,6 +48,10 @@ from pneumatic_unload.subsonic_offer import M_SUFFIX, split_key, subsonic_index_
 #: sqrt(3) WALL_ASSUMED_STD from a room's AMBIENT_TEMPERATURE).
 HOT_START_INFLATION = 1.5
 
+#: A twin (m or an offset freed) is fitted in full only where its first-order BIC gain is
+#: above this [-] (half of the criterion's threshold of 10: the first order may under-state
+#: a large move).
+TWIN_BIC_MARGIN = 5.0
 #: One fit of the table: (result, chi^2 [Pa^2], free parameters [-]).
 Fit = tuple[CurveFit, float, int]
 
@@ -101,6 +108,28 @@ class Family:
                       explore=explore, keep=kept, **self.common)
         kept["fit"], kept["entry"] = out[0], out
         return out
+
+    def twin(self, key: str, name: str) -> Twin | None:
+        """The first-order twin of the fit ``key`` with ``name`` ('m' or 'offset') freed
+        (:func:`~pneumatic_unload.linear_twin.linear_twin`; None without it)."""
+        kept = self.raw.get(key)
+        if not kept or "model" not in kept:
+            return None
+        law, wall, fit_m = split_key(key)
+        model = estimator_model(self.settings, kept["model"].start, heat_law=law,
+                                fit_wall=wall, fit_m=fit_m or name == "m",
+                                fit_offset=self.offset or name == "offset")
+        start = SUBSONIC_INDEX_START if name == "m" else 0.0
+        return linear_twin(self.common["trace"], kept, model, name, start)
+
+    def worth(self, tw: Twin | None) -> bool:
+        """A twin worth fitting in full: not computable, or its predicted BIC gain above
+        :data:`TWIN_BIC_MARGIN`, in the residual variance the twin would leave (not
+        inflated: where the held fit leaves structure the twin may take it up)."""
+        if tw is None:
+            return True
+        unit = max((tw.chi2 - tw.gain) / max(tw.dof, 1), 1e-300)
+        return tw.gain / unit - math.log(max(self.span.n, 2)) > TWIN_BIC_MARGIN
 
     def run(self, laws: tuple[str, ...], sfx: str) -> None:
         """Fit ``laws`` with m held (``sfx`` '') or fitted ('|m'), the laws already in the

@@ -56,6 +56,8 @@ def unload_json(r: UnloadResult) -> dict[str, Any]:
     d["subsonic_index_fitted"] = bool(cf.get("subsonic_index_fitted", False))
     d["subsonic_source"] = cf.get("subsonic_source", "")
     d["offset_source"] = cf.get("offset_source", "")
+    if "gas_temperature" in extra:
+        d["gas_temperature"] = extra["gas_temperature"]
     d["model_inadequate"] = extra.get("model_inadequate", "")
     d["recommended"] = recommended(r)
     return finite_or_none(d)

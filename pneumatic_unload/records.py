@@ -21,10 +21,12 @@ import numpy as np
 
 from pneumatic_unload.config import ConfigError, TankSpec, adapters
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.curve_fit_result import CurveFit
 from pneumatic_unload.estimation.batch import merge_final
 from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
 from pneumatic_unload.estimation.types import FloatArray
 from pneumatic_unload.io.csvlog import CHUNK_BYTES, CsvError, CsvStream
+from pneumatic_unload.temperature_evidence import departure_text, temperature_evidence
 
 
 class RecordError(Exception):
@@ -84,6 +86,25 @@ class Record:
                     yield c.t[ok], c.p[ok]
         except (CsvError, OSError) as exc:
             raise RecordError(f"{self.path}: {exc}") from exc
+
+    def temperature_series(self) -> tuple[FloatArray, FloatArray] | None:
+        """The gas temperature the record carries: (t [s], T [K]) at its own rate (a CSV's
+        empty cells skipped, a bag's temperature topic), or None without one. One pass."""
+        if self.bag_topic is not None:
+            return measured_temperature(self.path)
+        if not self.has_temperature:
+            return None
+        assert self.stream is not None
+        ts, vs = [], []
+        try:
+            for c in self.stream:
+                assert c.temperature is not None
+                ok = np.isfinite(c.temperature)
+                ts.append(c.t[ok])
+                vs.append(c.temperature[ok])
+        except (CsvError, OSError) as exc:
+            raise RecordError(f"{self.path}: {exc}") from exc
+        return (np.concatenate(ts), np.concatenate(vs)) if ts else None
 
     def temperature_at(self, t: float) -> float:
         """Gas temperature at instant t [s] (linear between rows, the end rows beyond)
@@ -277,6 +298,7 @@ def analyze_input(record: Record, given: dict[str, Any]) -> InputAnalysis:
             settings = dataclasses.replace(settings, initial_temperature=t10)
             run = analyze_record(record, settings)
             unloads = merge_final(run.published)
+    unloads = with_temperature_evidence(record, settings, unloads)
     why = None if unloads else run.explain_no_unload()
     problem = run.gauge_suspicion()
     if problem is not None:
@@ -284,6 +306,32 @@ def analyze_input(record: Record, given: dict[str, Any]) -> InputAnalysis:
         unloads = [dataclasses.replace(r, status="bad_data", status_text=problem)
                    for r in unloads]
     return InputAnalysis(record, settings, run, unloads, t10_column, why, problem)
+
+
+def with_temperature_evidence(record: Record, settings: EstimatorSettings,
+                              unloads: list[Any]) -> list[Any]:
+    """The final results with the record's gas temperature as evidence
+    (:func:`~pneumatic_unload.temperature_evidence.temperature_evidence`: ``extra
+    ['gas_temperature']``, and the status text when the model's gas does not follow it);
+    ``gas_temperature`` says so where the record carries none."""
+    series = record.temperature_series()
+    out = []
+    for r in unloads:
+        cf = r.extra.get("curve_fit") if r.final else None
+        if cf is None:
+            out.append(r)
+            continue
+        if series is None:
+            ev: dict[str, Any] = {"used": False, "why": "the record carries no gas "
+                                  "temperature (CSV: --temperature-column NAME)"}
+        else:
+            fit = CurveFit(**cf)
+            ev = temperature_evidence(fit.config(settings), fit.t_start, *series)
+        text = departure_text(ev)
+        out.append(dataclasses.replace(
+            r, extra={**r.extra, "gas_temperature": ev},
+            status_text=f"{r.status_text}; {text}" if text else r.status_text))
+    return out
 
 
 def measured_temperature(path: str | Path, **csv_options: Any

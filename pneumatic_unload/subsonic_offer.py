@@ -22,6 +22,7 @@ import numpy as np
 
 from pneumatic_unload.budget import Budget, BudgetTerm, model_form_term, record_term
 from pneumatic_unload.curve_fit_result import CurveFit
+from pneumatic_unload.linear_twin import Twin
 from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
 
 #: Name of m's line in the budgets of C and b.
@@ -95,6 +96,25 @@ def held_lines(kept: dict[str, Any] | None, free: CurveFit | None, offered: bool
         why = (f"m held at 0.5 (+- {u:.3f}, the range of components): the record does not "
                "determine it")
     return abs(slope_c) * u, abs(slope_b) * u if math.isfinite(slope_b) else 0.0, u, why
+
+
+def twin_lines(tw: Twin | None) -> tuple[float, float, float, str]:
+    """As :func:`held_lines`, from the first-order twin of the held fit with m freed
+    (:func:`~pneumatic_unload.linear_twin.linear_twin`): where it determines m within
+    :data:`SUBSONIC_INDEX_MAX_SD`, m's uncertainty is max(its 1-sigma, its distance from
+    0.5), else :data:`SUBSONIC_INDEX_PRIOR_SD`."""
+    if tw is None:
+        return math.nan, math.nan, SUBSONIC_INDEX_PRIOR_SD, FAILED
+    if tw.std <= SUBSONIC_INDEX_MAX_SD:
+        u = max(tw.std, abs(tw.value - SUBSONIC_INDEX_START))
+        why = (f"m held at 0.5: the record determines m = {tw.value:.3f} +- {tw.std:.3f} "
+               f"(to first order), too close to 0.5 to be fitted")
+    else:
+        u = SUBSONIC_INDEX_PRIOR_SD
+        why = (f"m held at 0.5 (+- {u:.3f}, the range of components): the record does not "
+               "determine it")
+    b = abs(tw.slope_b) * u if math.isfinite(tw.slope_b) else 0.0
+    return abs(tw.slope_c) * u, b, u, why
 
 
 def subsonic_term(fit: CurveFit, quantity: str) -> BudgetTerm:

@@ -329,6 +329,8 @@ LAYERS: dict[str, int] = {
     "law_fit": 4,  # one heat law's fit of the curve fit
     "law_family": 4,  # the laws compared (hot starts, m held or fitted) and the criterion
     "subsonic_offer": 4,  # whether a record carries m, and the budget line of holding it
+    "linear_twin": 4,  # a fit's twin with one parameter more, to first order
+    "temperature_evidence": 4,  # the logged gas temperature against the fitted model
     "recovery": 4,  # SSE: the re-heating after an aborted unload
     "budget": 4,  # the uncertainty budget of a C (GUM: type A, type B, model form)
     "budget_b": 4,  # the budget of b, with C's lines

@@ -352,7 +352,8 @@ def refine_with_curve_fit(
     if math.isfinite(fit.critical_ratio):
         extra["budget_b"] = b_budget(fit, settings, res)
         b_std = extra["budget_b"]["combined_std"]
-        extra["budget_m"] = m_budget(fit).to_dict()
+    if math.isfinite(fit.critical_ratio) or fit.subsonic_index_fitted:
+        extra["budget_m"] = m_budget(fit).to_dict()  # (m without b: a flow never choked)
     status, text = res.status, res.status_text
     quality = res.quality if fit.success else min(res.quality, 0.5)
     nrms = fit.rms / noise_std if math.isfinite(noise_std) and noise_std > 0 else math.nan
@@ -377,7 +378,7 @@ def refine_with_curve_fit(
         conductance_model_std=c_std,
         t_start_model=fit.t_start, tau_exp_model=tau_model,
         critical_ratio=fit.critical_ratio, critical_ratio_std=b_std,
-        subsonic_index=fit.subsonic_index if math.isfinite(fit.critical_ratio) else math.nan,
+        subsonic_index=fit.subsonic_index if "budget_m" in extra else math.nan,
         subsonic_index_std=extra["budget_m"]["combined_std"] if "budget_m" in extra
         else math.nan,
         pressure_offset=fit.pressure_offset if math.isfinite(fit.pressure_offset_std)

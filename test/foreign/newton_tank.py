@@ -248,7 +248,8 @@ def discharge(t: np.ndarray, *, volume: float, conductance: float | None = None,
               b: float | None = None, p10: float, t10: float, p_atm: float, tau_heat: float,
               t_open: float, r_gas: float = 287.05, gamma: float = 1.4,
               density_exponent: float = 0.0, t_wall: float | None = None,
-              subsonic_index: float = 0.5, flow_law: FlowLaw | None = None) -> np.ndarray:
+              subsonic_index: float = 0.5, flow_law: FlowLaw | None = None,
+              temperature_out: np.ndarray | None = None) -> np.ndarray:
     """Tank pressure [Pa absolute] at instants t [s] (valve opens at t_open [s]; tau_heat
     [s] at the initial density; density_exponent n [-]: hA ~ rho^n; t_wall [K]: the wall
     temperature, held constant, default t10: a gas that starts at the wall's
@@ -256,7 +257,8 @@ def discharge(t: np.ndarray, *, volume: float, conductance: float | None = None,
     with it before the opening too (the closed tank's pressure follows its temperature).
     The flow: the ISO law of ``conductance``, ``b`` and ``subsonic_index`` m, or
     ``flow_law`` (:class:`IsoLaw`, :class:`Nozzle`, :class:`Series`; then neither
-    ``conductance`` nor ``b``)."""
+    ``conductance`` nor ``b``). ``temperature_out``: an array of t's size that receives the
+    gas temperature [K] at t."""
     if flow_law is None:
         if conductance is None or b is None:
             raise ValueError("give conductance and b, or a flow_law")
@@ -283,6 +285,7 @@ def discharge(t: np.ndarray, *, volume: float, conductance: float | None = None,
 
     y0 = [m0, m0 * cv * t10]
     out = np.full(t.size, p10)
+    temps = np.full(t.size, float(t10))
     atol = [m0 * 1e-12, m0 * cv * t10 * 1e-12]
     before = t < t_open
     if wall != t10 and t[0] < t_open:
@@ -292,6 +295,7 @@ def discharge(t: np.ndarray, *, volume: float, conductance: float | None = None,
                         method="Radau", t_eval=grid, rtol=1e-10, atol=atol)
         m, u = sol.y
         out[before] = (m * r_gas * (u / (m * cv)) / volume)[:-1]
+        temps[before] = (u / (m * cv))[:-1]
         y0 = [float(m[-1]), float(u[-1])]
     after = t >= t_open
     if np.any(after):
@@ -300,4 +304,7 @@ def discharge(t: np.ndarray, *, volume: float, conductance: float | None = None,
                         rtol=1e-10, atol=atol)
         m, u = sol.y
         out[after] = m * r_gas * (u / (m * cv)) / volume
+        temps[after] = u / (m * cv)
+    if temperature_out is not None:
+        temperature_out[:] = temps
     return out

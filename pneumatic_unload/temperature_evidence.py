@@ -1,0 +1,130 @@
+"""The logged gas temperature as evidence on the final curve fit: does the fitted model's
+gas temperature, seen through a thermometer, follow the one the record carries?
+
+:func:`temperature_evidence` takes the fitted model's mean gas temperature (the one
+integrator of :mod:`pneumatic_unload.model`, on the fitted configuration), passes it through
+the thermometer's model - a first-order lag with its time constant fitted within
+:data:`SENSOR_TAU_RANGE` (or given) and an offset - and compares it with the logged values:
+the RMS of fitted minus measured against the channel's own noise. It does not move C: the
+pressure alone is fitted (the joint fit is the next step); what it says goes to the result
+(JSON ``gas_temperature``) and, where no thermometer model makes the model's gas follow the
+log within its noise, to the status text.
+
+SI units: s, K.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import minimize_scalar
+
+from pneumatic_unload.config import RigConfig
+from pneumatic_unload.model import discharge, first_order_lag
+
+FloatArray = NDArray[np.float64]
+
+#: Bounds of the thermometer's fitted time constant [s] (a bare fine thermocouple to a
+#: sheathed probe in a thermowell).
+SENSOR_TAU_RANGE = (0.05, 120.0)
+#: The model's gas follows the log when the RMS of fitted minus measured is at most this
+#: many times the channel's noise [-] (with a floor of :data:`RESOLUTION_FLOOR`).
+FOLLOW_FACTOR = 2.0
+#: Smallest noise credited to a temperature channel [K] (a logger's 0.1 K resolution:
+#: quantisation alone is 0.03 K rms, a probe's accuracy is rarely better than 0.2 K).
+RESOLUTION_FLOOR = 0.2
+#: Points of the model's temperature between the log's samples (the lag is exact for the
+#: piecewise-linear interpolant of its input) [-].
+FINE_POINTS = 4000
+
+
+def channel_noise(temp: FloatArray) -> float:
+    """Noise of a temperature channel [K]: the RMS of its second differences / sqrt(6)
+    (white noise; a smooth trend's curvature hardly counts at a logger's rate), at least
+    :data:`RESOLUTION_FLOOR`."""
+    d2 = np.diff(np.asarray(temp, dtype=float), 2)
+    sig = float(np.sqrt(np.mean(d2 * d2) / 6.0)) if d2.size >= 3 else math.nan
+    return max(sig, RESOLUTION_FLOOR) if math.isfinite(sig) else RESOLUTION_FLOOR
+
+
+def temperature_evidence(cfg: RigConfig, t_open: float, t_log: FloatArray,
+                         temp_log: FloatArray, *, sensor_tau: float | None = None
+                         ) -> dict[str, Any]:
+    """Compare the fitted model's gas temperature with a logged one.
+
+    Parameters
+    ----------
+    cfg : RigConfig
+        The fitted model's configuration (``CurveFit.config``).
+    t_open : float
+        Its valve opening instant [s, the log's clock].
+    t_log, temp_log : ndarray
+        The logged gas temperature's instants [s] and values [K] (finite).
+    sensor_tau : float, optional
+        The thermometer's time constant [s] when known; else fitted.
+
+    Returns
+    -------
+    dict
+        ``used`` (False: compared, not fitted jointly) and ``why``; ``rms`` [K] of fitted
+        minus measured, ``noise`` [K] of the channel, ``follows`` (rms within
+        :data:`FOLLOW_FACTOR` noises), ``sensor_time_constant`` [s] and whether it sits on
+        a bound, ``sensor_offset`` [K], ``samples``; ``rms_without_sensor`` [K]: the model's
+        gas against the log with no lag and no offset.
+    """
+    t_log = np.asarray(t_log, dtype=float)
+    temp_log = np.asarray(temp_log, dtype=float)
+    ok = np.isfinite(t_log) & np.isfinite(temp_log)
+    t_log, temp_log = t_log[ok], temp_log[ok]
+    base = {"used": False, "why": "compared with the pressure fit's model (thermometer lag "
+            "and offset fitted); the joint fit of both channels is not made yet",
+            "samples": int(t_log.size)}
+    if t_log.size < 5 or not np.all(np.diff(t_log) > 0):
+        return {**base, "why": "fewer than 5 increasing temperature samples"}
+    t0 = min(float(t_log[0]), t_open)
+    fine = np.union1d(np.linspace(t0, float(t_log[-1]), FINE_POINTS), t_log)
+    try:
+        _p, gas = discharge(cfg.replace(noise_std=0.0), fine, t_open)
+    except (ValueError, ArithmeticError) as exc:
+        return {**base, "why": f"the model's temperature could not be computed: {exc}"}
+    at_log = np.searchsorted(fine, t_log)
+    noise = channel_noise(temp_log)
+
+    def seen(tau: float) -> FloatArray:
+        return first_order_lag(fine, gas, tau)[0][at_log]
+
+    def misfit(log_tau: float) -> float:
+        r = temp_log - seen(math.exp(log_tau))
+        return float(np.sum((r - r.mean()) ** 2))
+
+    lo, hi = (math.log(x) for x in SENSOR_TAU_RANGE)
+    if sensor_tau is None:
+        best = minimize_scalar(misfit, bounds=(lo, hi), method="bounded",
+                               options={"xatol": 1e-3})
+        tau = float(math.exp(best.x))
+    else:
+        tau = float(sensor_tau)
+    r = temp_log - seen(tau)
+    offset = float(r.mean())
+    rms = float(np.sqrt(np.mean((r - offset) ** 2)))
+    raw = temp_log - gas[at_log]
+    on_bound = sensor_tau is None and min(abs(math.log(tau) - lo), abs(math.log(tau) - hi)) \
+        < 0.01
+    return {**base, "rms": rms, "noise": noise, "follows": rms <= FOLLOW_FACTOR * noise,
+            "sensor_time_constant": tau, "sensor_time_constant_given": sensor_tau is not None,
+            "sensor_time_constant_at_bound": bool(on_bound), "sensor_offset": offset,
+            "rms_without_sensor": float(np.sqrt(np.mean(raw * raw)))}
+
+
+def departure_text(ev: dict[str, Any]) -> str:
+    """The status text's words when the model's gas does not follow the log ('' when it
+    does or was not compared)."""
+    if "rms" not in ev or ev.get("follows", True):
+        return ""
+    return (f"the logged gas temperature departs from the model's by {ev['rms']:.2g} K rms "
+            f"(channel noise {ev['noise']:.2g} K, thermometer lag "
+            f"{ev['sensor_time_constant']:.3g} s and offset {ev['sensor_offset']:+.2g} K "
+            f"fitted): no heat law of the fit follows it")

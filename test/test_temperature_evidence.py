@@ -1,0 +1,82 @@
+"""The logged gas temperature as evidence on the final fit (JSON ``gas_temperature``): a
+multi-rate CSV (pressure at 1 kHz, a thermocouple at 5 Hz in the same file, empty cells
+between) made by the independent model of ``test/foreign/newton_tank.py``. The fitted
+model's gas, seen through a fitted first-order lag and offset, follows a log that the same
+physics made, within the channel's noise; a log the pressure's physics did not make is
+said to depart, in the status text. (The joint fit of both channels is not made yet:
+``used`` is false and says so.)"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from foreign.newton_tank import discharge
+
+from pneumatic_unload.cli import main
+from pneumatic_unload.model import first_order_lag
+
+V, C, P_ATM, T10 = 5e-3, 8e-9, 101325.0, 293.15
+
+
+def _csv(path, *, tau_heat_log: float, lag: float, seed: int) -> None:
+    """A 1 kHz pressure and a 5 Hz thermocouple (time constant ``lag`` [s], 0.3 K noise)
+    of the gas of a discharge whose heat exchange has the thermal time constant
+    ``tau_heat_log`` [s] (the pressure's: 8 s)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 12.0, 1e-3)
+    p = discharge(t, volume=V, conductance=C, b=0.4, p10=7e5, t10=T10, p_atm=P_ATM,
+                  tau_heat=8.0, t_open=0.5)
+    gas = np.empty_like(t)
+    discharge(t, volume=V, conductance=C, b=0.4, p10=7e5, t10=T10, p_atm=P_ATM,
+              tau_heat=tau_heat_log, t_open=0.5, temperature_out=gas)
+    seen = first_order_lag(t, gas, lag)[0]
+    rows = ["time [s],pressure [kPa],gas temperature [C]"]
+    y = (p + rng.normal(0.0, 700.0, t.size)) / 1e3
+    for k in range(t.size):
+        temp = f"{seen[k] - 273.15 + rng.normal(0.0, 0.3):.3f}" if k % 200 == 0 else ""
+        rows.append(f"{t[k]:.4f},{y[k]:.4f},{temp}")
+    path.write_text("\n".join(rows) + "\n")
+
+
+def _analyze(path, capsys) -> dict:
+    assert main(["analyze", str(path), "--volume", str(V), "--json"]) == 0
+    (u,) = [x for x in json.loads(capsys.readouterr().out)["unloads"] if x["final"]]
+    return u
+
+
+def test_a_log_of_the_same_physics_is_followed_within_its_noise(tmp_path, capsys):
+    path = tmp_path / "run.csv"
+    _csv(path, tau_heat_log=8.0, lag=2.0, seed=1)
+    u = _analyze(path, capsys)
+    ev = u["gas_temperature"]
+    assert ev["used"] is False and "joint fit" in ev["why"]
+    assert ev["samples"] == 60
+    assert ev["follows"] and ev["rms"] <= 2.0 * ev["noise"], ev
+    assert 1.0 < ev["sensor_time_constant"] < 4.0, ev
+    assert abs(ev["sensor_offset"]) < 0.5
+    assert ev["rms_without_sensor"] > 2.0 * ev["rms"]  # the lag is what the log shows
+    assert "departs" not in u["status_text"]
+    assert abs(u["conductance_model"] / C - 1.0) < 0.01
+
+
+def test_a_log_the_pressure_did_not_make_departs_and_the_status_says_so(tmp_path, capsys):
+    """The thermocouple saw a gas that exchanged heat eight times faster (tau 1 s) than the
+    pressure shows (8 s): no lag and offset make the fitted model follow it."""
+    path = tmp_path / "run.csv"
+    _csv(path, tau_heat_log=1.0, lag=1.0, seed=2)
+    u = _analyze(path, capsys)
+    ev = u["gas_temperature"]
+    assert not ev["follows"] and ev["rms"] > 2.0 * ev["noise"], ev
+    assert "the logged gas temperature departs from the model's" in u["status_text"]
+
+
+def test_a_record_without_temperature_says_so(tmp_path, capsys):
+    t = np.arange(0.0, 12.0, 1e-3)
+    p = discharge(t, volume=V, conductance=C, b=0.4, p10=7e5, t10=T10, p_atm=P_ATM,
+                  tau_heat=8.0, t_open=0.5)
+    path = tmp_path / "p.csv"
+    np.savetxt(path, np.column_stack([t, p + np.random.default_rng(3).normal(0, 700, t.size)]),
+               delimiter=",", header="time [s],pressure [Pa]", comments="")
+    ev = _analyze(path, capsys)["gas_temperature"]
+    assert ev["used"] is False and "carries no gas temperature" in ev["why"]
