@@ -18,6 +18,7 @@ SI units: s, Pa absolute, K, m^3/(s Pa).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -52,6 +53,15 @@ HOT_START_INFLATION = 1.5
 #: above this [-] (half of the criterion's threshold of 10: the first order may under-state
 #: a large move).
 TWIN_BIC_MARGIN = 5.0
+#: The laws with a second heat parameter: the one-parameter law each extends and the
+#: starting values of the heat exchange taken from its fit (the density law from the
+#: constant hA, n = 0, moved towards convection's; the turbulent branch from the natural
+#: law with its multiplier 1).
+SECOND_PARAMETER: dict[str, tuple[str, Callable[[CurveFit], dict[str, float]]]] = {
+    "density": ("fixed", lambda f: {"tau_heat": f.tau_heat, "heat_exponent": 0.3}),
+    "natural+turbulent": ("natural", lambda f: {"heat_scale": f.heat_scale,
+                                                "heat_turbulent": 1.0}),
+}
 #: One fit of the table: (result, chi^2 [Pa^2], free parameters [-]).
 Fit = tuple[CurveFit, float, int]
 
@@ -144,25 +154,17 @@ class Family:
             if key in self.fits or key in self.not_offered:
                 continue
             law_start, nfev = start, (200 if not self.fits else 32)
-            if law == "density":
-                why = density_law_problem(self.fits.get("fixed" + sfx, (None,))[0])
-                if why is not None:
-                    self.not_offered[key] = why
+            if law in SECOND_PARAMETER:
+                # offered where the one-parameter law it extends shows what it needs,
+                # started from that law's fit
+                base_law, heat = SECOND_PARAMETER[law]
+                base = self.fits.get(base_law + sfx, (None,))[0]
+                why = density_law_problem(base) if law == "density" else \
+                    turbulent_law_problem(base, self.settings, self.span.t_last)
+                if why is not None or base is None:
+                    self.not_offered[key] = why or f"no {base_law} fit to start from"
                     continue
-                # from the constant-hA fit (n = 0), the exponent moved towards convection's
-                fx = self.fits["fixed" + sfx][0]
-                law_start = start_from(fx, self.span.t_ref, tau_heat=fx.tau_heat,
-                                       heat_exponent=0.3)
-                nfev = 80
-            if law == "natural+turbulent":
-                why = turbulent_law_problem(self.fits.get("natural" + sfx, (None,))[0],
-                                            self.settings, self.span.t_last)
-                if why is not None:
-                    self.not_offered[key] = why
-                    continue
-                nt = self.fits["natural" + sfx][0]
-                law_start = start_from(nt, self.span.t_ref, heat_scale=nt.heat_scale,
-                                       heat_turbulent=1.0)
+                law_start = start_from(base, self.span.t_ref, **heat(base))
                 nfev = 80
             got = self.fit(key, start=law_start, max_nfev=nfev,
                            profile_heat=self.profile_heat)

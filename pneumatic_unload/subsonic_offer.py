@@ -87,28 +87,26 @@ def held_lines(kept: dict[str, Any] | None, free: CurveFit | None, offered: bool
     if "b" in names:
         ib = names.index("b")
         slope_b = cov[ib, im] / cov[im, im] * res.params["b"].scale / dm_dx
-    if offered:
-        u = max(free.subsonic_index_std, abs(free.subsonic_index - SUBSONIC_INDEX_START))
-        why = (f"m held at 0.5: the record determines m = {free.subsonic_index:.3f} +- "
-               f"{free.subsonic_index_std:.3f}, the criterion keeps 0.5")
-    else:
-        u = SUBSONIC_INDEX_PRIOR_SD
-        why = (f"m held at 0.5 (+- {u:.3f}, the range of components): the record does not "
-               "determine it")
-    return abs(slope_c) * u, abs(slope_b) * u if math.isfinite(slope_b) else 0.0, u, why
+    return twin_lines(Twin("m", math.nan, free.subsonic_index, free.subsonic_index_std,
+                           float(slope_c), float(slope_b)), determined=offered,
+                      how="the criterion keeps 0.5")
 
 
-def twin_lines(tw: Twin | None) -> tuple[float, float, float, str]:
-    """As :func:`held_lines`, from the first-order twin of the held fit with m freed
-    (:func:`~pneumatic_unload.linear_twin.linear_twin`): where it determines m within
-    :data:`SUBSONIC_INDEX_MAX_SD`, m's uncertainty is max(its 1-sigma, its distance from
-    0.5), else :data:`SUBSONIC_INDEX_PRIOR_SD`."""
+def twin_lines(tw: Twin | None, *, determined: bool | None = None,
+               how: str = "to first order, too close to 0.5 to be fitted"
+               ) -> tuple[float, float, float, str]:
+    """As :func:`held_lines`, from m's twin of the held fit (the first-order one of
+    :func:`~pneumatic_unload.linear_twin.linear_twin`, or the m-free fit's): where the
+    record determines m (``determined``; default: within :data:`SUBSONIC_INDEX_MAX_SD`),
+    m's uncertainty is max(its 1-sigma, its distance from 0.5), else
+    :data:`SUBSONIC_INDEX_PRIOR_SD`; ``how``: why m is held all the same."""
     if tw is None:
         return math.nan, math.nan, SUBSONIC_INDEX_PRIOR_SD, FAILED
-    if tw.std <= SUBSONIC_INDEX_MAX_SD:
+    if determined is None:
+        determined = tw.std <= SUBSONIC_INDEX_MAX_SD
+    if determined:
         u = max(tw.std, abs(tw.value - SUBSONIC_INDEX_START))
-        why = (f"m held at 0.5: the record determines m = {tw.value:.3f} +- {tw.std:.3f} "
-               f"(to first order), too close to 0.5 to be fitted")
+        why = f"m held at 0.5: the record determines m = {tw.value:.3f} +- {tw.std:.3f}, {how}"
     else:
         u = SUBSONIC_INDEX_PRIOR_SD
         why = (f"m held at 0.5 (+- {u:.3f}, the range of components): the record does not "
