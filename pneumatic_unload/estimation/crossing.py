@@ -266,10 +266,14 @@ def _heat_not_seen(plan: CrossingPlan, tau: float, c_isen: float, c_model: float
     the two agree (a line of ~0); on a slow one the correlation's heat moves C by tens of
     per cent, which the correlation's +-30 % in the type A line does not span."""
     a = plan.adiabatic
-    if a == "":
-        return model_form_term(0.0, "no heat law")
-    if a == "isentropic":
-        c_adi = c_isen
+    if isinstance(a, str):
+        if a == "":
+            return model_form_term(0.0, "no heat law")
+        c_adi = c_isen  # 'isentropic'
+    elif a is not None and a.covers(tau):
+        # the adiabatic model's table (made where the flow may turn subsonic before p*:
+        # crossing_inversion's lookup, without its checks)
+        c_adi = a.lookup(tau, 0.0)[0]
     else:
         c_adi, _sd, _m, _w = crossing_inversion(
             plan.adiabatic_settings or _adiabatic(plan.settings), tau, 0.0, plan.p10,

@@ -344,7 +344,7 @@ def block_steps(t: FloatArray, p: FloatArray, last_t: float
         value is finite; the larger of the first and the last stamp's magnitude [s]).
     """
     out = array("d", _OUT_BYTES)
-    _LIB.pu_block_steps(t.ctypes.data, p.ctypes.data, t.size, last_t, out.buffer_info()[0])
+    _LIB.pu_block_steps(_address(t), _address(p), t.size, last_t, out.buffer_info()[0])
     return out[0], out[1], out[2] != 0.0, out[3]
 
 
@@ -354,7 +354,13 @@ def append_sums(t: FloatArray, p: FloatArray, prev: float, dest: tuple[int, int,
     addresses ``dest`` of the buffer's stamps, values, prefix sums and squared-difference
     sums (each sum's address at its last element held) and continue the sums
     (``pu_append``; ``prev``: the value before the block)."""
-    _LIB.pu_append(t.ctypes.data, p.ctypes.data, p.size, prev, *dest)
+    _LIB.pu_append(_address(t), _address(p), p.size, prev, *dest)
+
+
+def _address(a: FloatArray) -> int:
+    """The address of an array's first element (``a.ctypes.data`` without its Python-level
+    ctypes object, on the live block's path)."""
+    return a.__array_interface__["data"][0]
 
 
 def first_below_in(p: array, i: int, hi: int, level: float) -> int:
