@@ -213,26 +213,27 @@ class ScaledBudget:
     free: tuple[str, ...]
 
     def __post_init__(self) -> None:
-        # the reference's lines as dicts, copied and scaled by :meth:`dict_at`
-        object.__setattr__(self, "_lines", [_line(t) for t in self.ref.terms])
+        # the reference's lines: name, kind, std, whether free, and the dict copied and
+        # scaled by :meth:`dict_at`
+        object.__setattr__(self, "_rows", [(t.name, t.kind, t.std, t.name in self.free,
+                                            _line(t)) for t in self.ref.terms])
 
     def dict_at(self, c: float, given: dict[str, BudgetTerm | None]) -> dict[str, Any]:
         """The budget of ``c`` [m^3/(s Pa)] as :meth:`Budget.to_dict`: the proportional lines
         scaled from the reference, the free ones as ``given`` (None or absent: the line is
         left out); the lines' dicts copied from the reference's (the live crossing's path)."""
         k = abs(c) / abs(self.ref.value)
-        free = self.free
         rows = []
-        for t, template in zip(self.ref.terms, self._lines, strict=True):
-            if t.name in free:
-                g = given.get(t.name)
+        for name, kind, std, free, template in self._rows:  # type: ignore[attr-defined]
+            if free:
+                g = given.get(name)
                 if g is not None:
                     rows.append((g.name, g.kind, g.std, _line(g)))
             else:
-                std = t.std * k
+                std = std * k
                 line = template.copy()
                 line["std"] = std if math.isfinite(std) else None
-                rows.append((t.name, t.kind, std, line))
+                rows.append((name, kind, std, line))
         return _budget_dict(c, rows)
 
 

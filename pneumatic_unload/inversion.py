@@ -287,9 +287,22 @@ class InversionTable:
     def __post_init__(self) -> None:
         # the grid as Python floats: the lookup runs inside the live crossing's latency,
         # where numpy's per-call cost on 7 points exceeds the arithmetic
-        object.__setattr__(self, "_ys", [float(v) for v in self.log_t])
-        object.__setattr__(self, "_neg", [-float(v) for v in self.log_t])  # ascending
-        object.__setattr__(self, "_xs", [float(v) for v in self.log_c])
+        ys = [float(v) for v in self.log_t]
+        xs = [float(v) for v in self.log_c]
+        object.__setattr__(self, "_ys", ys)
+        object.__setattr__(self, "_neg", [-v for v in ys])  # ascending
+        # each window of four nodes' Lagrange terms: (x_a, the other three y, the
+        # denominator), the very products the interpolation would form at the crossing
+        windows = []
+        for j in range(max(len(ys) - 3, 0)):
+            w = ys[j:j + 4]
+            terms = []
+            for a in range(4):
+                o = [w[b] for b in range(4) if b != a]
+                terms.append((xs[j + a], o[0], o[1], o[2],
+                              (w[a] - o[0]) * (w[a] - o[1]) * (w[a] - o[2])))
+            windows.append(terms)
+        object.__setattr__(self, "_windows", windows)
         ends = self.log_c[[0, self.log_c.size // 2, -1]] if self.log_c.size else ()
         object.__setattr__(self, "_heat", ([float(v) for v in ends],
                                            [float(v) for v in self.rel_heat]))
@@ -302,18 +315,14 @@ class InversionTable:
     def _interpolate(self, tau: float) -> tuple[float, float]:
         """log C and d log C / d log t at the crossing time tau [s] (Lagrange cubic)."""
         y = math.log(tau)
-        ys_all: list[float] = self._ys  # type: ignore[attr-defined]
         k = bisect.bisect_left(self._neg, -y)  # type: ignore[attr-defined]
-        j = min(max(k - 2, 0), len(ys_all) - 4)
-        ys = ys_all[j:j + 4]
-        xs = self._xs[j:j + 4]  # type: ignore[attr-defined]
+        j = min(max(k - 2, 0), len(self._ys) - 4)  # type: ignore[attr-defined]
         x, dxdy = 0.0, 0.0
-        for a in range(4):  # Lagrange cubic x(y) and its derivative
-            others = [ys[b] for b in range(4) if b != a]
-            den = (ys[a] - others[0]) * (ys[a] - others[1]) * (ys[a] - others[2])
-            d0, d1, d2 = y - others[0], y - others[1], y - others[2]
-            x += xs[a] * (d0 * d1 * d2) / den
-            dxdy += xs[a] * (d1 * d2 + d0 * d2 + d0 * d1) / den
+        for xa, o0, o1, o2, den in self._windows[j]:  # type: ignore[attr-defined]
+            # the Lagrange cubic x(y) and its derivative
+            d0, d1, d2 = y - o0, y - o1, y - o2
+            x += xa * (d0 * d1 * d2) / den
+            dxdy += xa * (d1 * d2 + d0 * d2 + d0 * d1) / den
         return x, dxdy
 
     def lookup(self, tau: float, tau_std: float) -> tuple[float, float, float]:

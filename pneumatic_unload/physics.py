@@ -239,7 +239,17 @@ def conductance_eq39(
     gas : Gas
         Gas properties.
     """
-    return (p10 - p_atm) / p10 * math.sqrt(T_N / t10) * volume / (gas.gamma * P_N * tau_exp)
+    a, b = eq39_factors(p10, p_atm, volume, t10, gas)
+    return a / (b * tau_exp)
+
+
+def eq39_factors(p10: float, p_atm: float, volume: float, t10: float = T_N,
+                 gas: Gas = AIR) -> tuple[float, float]:
+    """eq 39 as C = a / (b tau_exp) (:func:`conductance_eq39`, the same doubles): a =
+    ((p10 - p_atm)/p10) sqrt(T_N/T10) V [m^3] and b = gamma p_N [Pa], which do not depend
+    on tau_exp (prepared before the live crossing). Pressures [Pa absolute], V [m^3],
+    T10 [K]."""
+    return (p10 - p_atm) / p10 * math.sqrt(T_N / t10) * volume, gas.gamma * P_N
 
 
 def choked_time_constant(
@@ -368,13 +378,24 @@ def conductance_isentropic_inversion(
     paper_form : bool
         See :func:`choked_time_constant`.
     """
+    if not p10 / p_cross > 0:  # not absolute pressures: a real power would be complex
+        return math.nan
+    return isentropic_factor(p_cross, p10, volume, t10, gas, paper_form) / t_cross
+
+
+def isentropic_factor(p_cross: float, p10: float, volume: float, t10: float = T_N,
+                      gas: Gas = AIR, paper_form: bool = False) -> float:
+    """The isentropic inversion as C = k / t_cross (:func:`conductance_isentropic_inversion`,
+    the same doubles): k = Theta(C = 1) X [m^3/Pa], which does not depend on the crossing
+    time (prepared before the live crossing); NaN unless p10 / p_cross > 0. Pressures
+    [Pa absolute], V [m^3], T10 [K]."""
     # t = Theta(C) * X with Theta proportional to 1/C
     ratio = p10 / p_cross
     if not ratio > 0:  # not absolute pressures: a real power would be complex
         return math.nan
     theta_1 = choked_time_constant(volume, 1.0, t10, gas, paper_form)
     x = ratio ** ((gas.gamma - 1.0) / (2.0 * gas.gamma)) - 1.0
-    return theta_1 * x / t_cross
+    return theta_1 * x
 
 
 def eq39_bias_isentropic(p10: float, p_atm: float, gas: Gas = AIR) -> float:

@@ -13,20 +13,35 @@ from array import array
 
 import numpy as np
 
+from pneumatic_unload.estimation.regression import append_sums
 from pneumatic_unload.estimation.types import FloatArray
 
 
-def _extended(a: array, x: FloatArray) -> array:
-    """``a`` with the float64 values x appended: in place, or on a copy of ``a`` when a
-    view of it is alive (an array that exports its buffer cannot grow: e.g. a sampling
-    profiler, as Dask workers run, holding a frame whose locals view it)."""
+def _extended(a: array, x: bytes) -> array:
+    """``a`` with the float64 values of the bytes x appended: in place, or on a copy of
+    ``a`` when a view of it is alive (an array that exports its buffer cannot grow: e.g. a
+    sampling profiler, as Dask workers run, holding a frame whose locals view it)."""
     try:
-        a.frombytes(x.tobytes())
+        a.frombytes(x)
         return a
     except BufferError:
         b = array("d", a.tobytes())
-        b.frombytes(x.tobytes())
+        b.frombytes(x)
         return b
+
+
+#: Zero bytes of the usual block sizes, by samples [-] (bounded: blocks of a few sizes).
+_ZEROS: dict[int, bytes] = {}
+
+
+def _zeros(n: int) -> bytes:
+    """8 n zero bytes: n float64 zeros to grow an array by [-]."""
+    z = _ZEROS.get(n)
+    if z is None:
+        if len(_ZEROS) > 16:
+            _ZEROS.clear()
+        z = _ZEROS[n] = bytes(8 * n)
+    return z
 
 
 class SampleBuffer:
@@ -82,26 +97,27 @@ class SampleBuffer:
 
     def extend(self, t: FloatArray, p: FloatArray) -> None:
         """Store a block of samples (t [s], p [signal units]) with the same sums as
-        :meth:`append` one by one (cumulative sums in the same order)."""
-        prev = self.p[-1] if self.p else float(p[0])
+        :meth:`append` one by one (each sum one addition at a time, in sample order).
+
+        The arrays grow by the block (zeros), then one compiled call copies it and
+        continues the sums (:func:`~.regression.append_sums`: the live block's path, where
+        each numpy call pays for cold caches after the idle wait between blocks)."""
+        t = np.ascontiguousarray(t, dtype=np.float64)
+        p = np.ascontiguousarray(p, dtype=np.float64)
         n = p.size
-        # [cq[-1], d0^2, d1^2, ...] with d the first differences from prev, summed in place
-        # (np.diff and np.concatenate cost more than the arithmetic on a live block)
-        q = np.empty(n + 1)
-        q[0] = self.cq[-1]
-        q[1] = p[0] - prev
-        np.subtract(p[1:], p[:-1], out=q[2:])
-        np.multiply(q[1:], q[1:], out=q[1:])
-        np.cumsum(q, out=q)
-        s = np.empty(n + 1)
-        s[0] = self.cs[-1]
-        s[1:] = p
-        np.cumsum(s, out=s)
-        # frombytes: a memcpy (array.extend would iterate element by element)
-        self.cq = _extended(self.cq, q[1:])
-        self.cs = _extended(self.cs, s[1:])
-        self.t = _extended(self.t, np.ascontiguousarray(t, dtype=np.float64))
-        self.p = _extended(self.p, np.ascontiguousarray(p, dtype=np.float64))
+        if n == 0:
+            return
+        prev = self.p[-1] if self.p else float(p[0])
+        old = len(self.p)
+        zeros = _zeros(n)
+        self.t = _extended(self.t, zeros)
+        self.p = _extended(self.p, zeros)
+        self.cs = _extended(self.cs, zeros)
+        self.cq = _extended(self.cq, zeros)
+        at = 8 * old  # the byte offset of the block (of the sums' last value held)
+        append_sums(t, p, prev, (self.t.buffer_info()[0] + at, self.p.buffer_info()[0] + at,
+                                 self.cs.buffer_info()[0] + at,
+                                 self.cq.buffer_info()[0] + at))
 
     def _unshare(self) -> None:
         """Replace the arrays by copies (views held elsewhere keep the old ones alive)."""

@@ -77,6 +77,12 @@ class CrossingPlan:
     adiabatic_settings : EstimatorSettings or None
         The settings without the heat law, for that inversion (made here: validating
         settings costs more than the rest of the crossing estimate).
+    eq39_factors : tuple of float
+        eq 39 as C = a / (b tau) (:func:`~pneumatic_unload.physics.eq39_factors`; NaN
+        when p10 is 0: the formula then runs at the crossing) [m^3], [Pa].
+    isentropic_factor : float
+        The isentropic inversion as C = k / tau (:func:`~pneumatic_unload.physics.
+        isentropic_factor`; NaN when the pressures have a problem) [m^3/Pa].
     """
 
     settings: EstimatorSettings
@@ -91,6 +97,8 @@ class CrossingPlan:
     wall: tuple[float, str]
     adiabatic: Any = ""
     adiabatic_settings: EstimatorSettings | None = None
+    eq39_factors: tuple[float, float] = (math.nan, math.nan)
+    isentropic_factor: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -186,7 +194,12 @@ def plan_crossing(settings: EstimatorSettings, *, p10: float, p_atm: float, p_st
                 free=(MODEL_TYPE_A, WALL_TERM, MODEL_FORM_TERM))
     return CrossingPlan(s, p10, p_atm, p_star, problem, subsonic, table, eq39, model, wall,
                         adiabatic, _adiabatic(s) if adiabatic not in ("", "isentropic")
-                        else None)
+                        else None,
+                        physics.eq39_factors(p10, p_atm, s.volume, s.initial_temperature,
+                                             s.gas) if p10 != 0 else (math.nan, math.nan),
+                        physics.isentropic_factor(p_star, p10, s.volume,
+                                                  s.initial_temperature, s.gas)
+                        if problem is None else math.nan)
 
 
 def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> CrossingEstimate:
@@ -194,8 +207,9 @@ def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> Crossin
     tau [s] and its 1-sigma tau_std [s] (see :func:`plan_crossing`)."""
     s = plan.settings
     p10, p_atm, p_star = plan.p10, plan.p_atm, plan.p_star
-    gas = s.gas
-    c39 = physics.conductance_eq39(tau, p10, p_atm, s.volume, s.initial_temperature, gas)
+    a39, b39 = plan.eq39_factors  # physics.conductance_eq39, prepared
+    c39 = a39 / (b39 * tau) if a39 == a39 else physics.conductance_eq39(
+        tau, p10, p_atm, s.volume, s.initial_temperature, s.gas)
     problem = plan.problem
     if problem is None and not math.isfinite(tau):
         problem = "no p* crossing time: the samples around p* are flat or degenerate"
@@ -213,8 +227,8 @@ def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> Crossin
             c39_std = _eq39(plan, c39, tau, tau_std, extra)
         return CrossingEstimate(problem, c39, c39_std, math.nan, math.nan, math.nan, "eq39",
                                 extra)
-    c_isen = physics.conductance_isentropic_inversion(tau, p_star, p10, s.volume,
-                                                      s.initial_temperature, gas)
+    # physics.conductance_isentropic_inversion, prepared (p10 > p* > 0: no problem)
+    c_isen = plan.isentropic_factor / tau
     c_model, c_model_std, method, wall_std = crossing_inversion(
         s, tau, tau_std, p10, p_atm, p_star, c_isen, table=plan.table)
     if math.isfinite(c39) and c39 > 0 and math.isfinite(tau_std):
@@ -266,10 +280,14 @@ def _heat_not_seen(plan: CrossingPlan, tau: float, c_isen: float, c_model: float
     the two agree (a line of ~0); on a slow one the correlation's heat moves C by tens of
     per cent, which the correlation's +-30 % in the type A line does not span."""
     a = plan.adiabatic
-    if a == "":
-        return model_form_term(0.0, "no heat law")
-    if a == "isentropic":
-        c_adi = c_isen
+    if isinstance(a, str):
+        if a == "":
+            return model_form_term(0.0, "no heat law")
+        c_adi = c_isen  # 'isentropic'
+    elif a is not None and a.covers(tau):
+        # the adiabatic model's table (made where the flow may turn subsonic before p*:
+        # crossing_inversion's lookup, without its checks)
+        c_adi = a.lookup(tau, 0.0)[0]
     else:
         c_adi, _sd, _m, _w = crossing_inversion(
             plan.adiabatic_settings or _adiabatic(plan.settings), tau, 0.0, plan.p10,

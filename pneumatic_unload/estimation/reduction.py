@@ -64,7 +64,9 @@ def reduce_due(st: EstimatorState, k: Any) -> Any:
     u = st.unload
     due = (k + 1 - window_start(st)) > REDUCE_FROM
     if st.mode == UNLOADING:
-        due = due & (block_mean(st.buf.sums()[0], k) > u.pstar + APPROACH * u.half)
+        # one index: the buffer itself (the same doubles, no view made)
+        cs = st.buf.sums()[0] if isinstance(k, np.ndarray) else st.buf.cs
+        due = due & (block_mean(cs, k) > u.pstar + APPROACH * u.half)
     return due
 
 

@@ -1,10 +1,14 @@
-/* The p* crossing fit of the streaming estimator, compiled (issue #10: the crossing
- * estimate published within a millisecond of the sample that completes it).
+/* The p* crossing fit of the streaming estimator and its block intake, compiled (issue #10:
+ * the crossing estimate published within a millisecond of the sample that completes it).
  *
  * The one implementation of the crossing regression: regression.py's crossing_fit and the
  * estimator's crossing window (unloading.complete_crossing) call these functions through
  * ctypes; every path (per sample, block, batch, live) runs the same arithmetic, so their
- * results stay bit-identical.
+ * results stay bit-identical. The block intake (pu_block_steps, pu_append, pu_first_below:
+ * a live block's checks, prefix sums and level trigger in three calls instead of some thirty
+ * numpy calls, each of which pays for cold caches after the idle wait between blocks) does
+ * the additions of the per-sample path in its order, one at a time (no FMA contraction: the
+ * kernel is built with -std=c99, whose default is -ffp-contract=off).
  *
  * Units: times in s, pressures in Pa (or the input's signal units: the fit is linear in p).
  */
@@ -174,4 +178,66 @@ void pu_crossing_window(const double *tv, const double *pv, long i0, long n, dou
         }
     out[3] = gap;
     out[4] = (double)lo;
+}
+
+/* The checks of a block of n samples (stamps t [s], values p) taken after the stamp
+ * last_t [s]: out[0] the shortest stamp step t[k] - t[k-1] (t[-1] = last_t) and out[1] the
+ * longest (both NaN when a step is NaN, as numpy's min and max), out[2] 1 when every value
+ * is finite (else 0), out[3] the larger of |t[0]| and |t[n-1]| [s]. n >= 1. */
+void pu_block_steps(const double *t, const double *p, long n, double last_t, double *out)
+{
+    double lo = INFINITY, hi = -INFINITY, prev = last_t;
+    int nan = 0, finite = 1;
+    for (long k = 0; k < n; k++) {
+        double d = t[k] - prev;
+        prev = t[k];
+        if (isnan(d)) {
+            nan = 1;
+        } else {
+            if (d < lo)
+                lo = d;
+            if (d > hi)
+                hi = d;
+        }
+        if (!isfinite(p[k]))
+            finite = 0;
+    }
+    double a = fabs(t[0]), b = fabs(t[n - 1]);
+    out[0] = nan ? NAN : lo;
+    out[1] = nan ? NAN : hi;
+    out[2] = finite ? 1.0 : 0.0;
+    out[3] = a > b || isnan(a) ? a : b;
+}
+
+/* A block of n samples appended to the estimator's buffer (buffer.SampleBuffer.extend):
+ * the stamps t [s] and values p copied to t_out and p_out; the prefix sums of the values
+ * and of their squared first differences continued from cs_out[0] and cq_out[0] (the last
+ * sums held) into cs_out[1..n] and cq_out[1..n], the first difference taken from prev (the
+ * last value held, or p[0]); each sum one addition at a time in sample order, as the
+ * per-sample append and numpy's cumsum make them. */
+void pu_append(const double *t, const double *p, long n, double prev, double *t_out,
+               double *p_out, double *cs_out, double *cq_out)
+{
+    double s = cs_out[0], q = cq_out[0];
+    for (long k = 0; k < n; k++) {
+        double v = p[k], d = v - prev;
+        double dd = d * d;
+        prev = v;
+        q = q + dd;
+        s = s + v;
+        t_out[k] = t[k];
+        p_out[k] = v;
+        cs_out[k + 1] = s;
+        cq_out[k + 1] = q;
+    }
+}
+
+/* First index in [i, hi) whose value p[k] is below level, or hi (decisions.first_below:
+ * a NaN is never below). */
+long pu_first_below(const double *p, long i, long hi, double level)
+{
+    for (long k = i; k < hi; k++)
+        if (p[k] < level)
+            return k;
+    return hi;
 }

@@ -311,12 +311,67 @@ def _load() -> ctypes.CDLL:
     lib.pu_crossing_fit.argtypes = [i64, ptr, ptr, dbl, ptr]
     lib.pu_crossing_window.restype = None
     lib.pu_crossing_window.argtypes = [ptr, ptr, i64, i64, dbl, i64, dbl, dbl, ptr]
+    lib.pu_block_steps.restype = None
+    lib.pu_block_steps.argtypes = [ptr, ptr, i64, dbl, ptr]
+    lib.pu_append.restype = None
+    lib.pu_append.argtypes = [ptr, ptr, i64, dbl, ptr, ptr, ptr, ptr]
+    lib.pu_first_below.restype = i64
+    lib.pu_first_below.argtypes = [ptr, i64, i64, dbl]
     return lib
 
 
 _LIB = _load()
 #: Initial bytes of :func:`crossing_window`'s output (five doubles).
 _OUT_BYTES = bytes(40)
+
+
+def block_steps(t: FloatArray, p: FloatArray, last_t: float
+                ) -> tuple[float, float, bool, float]:
+    """The checks of a block before the streaming estimator takes it (``pu_block_steps``:
+    one compiled call on the live path).
+
+    Parameters
+    ----------
+    t, p : ndarray
+        The block's stamps [s] and values, C-contiguous float64 of one length >= 1.
+    last_t : float
+        The last stamp taken before the block [s].
+
+    Returns
+    -------
+    tuple
+        (shortest stamp step [s], longest [s], both NaN when a step is NaN; whether every
+        value is finite; the larger of the first and the last stamp's magnitude [s]).
+    """
+    out = array("d", _OUT_BYTES)
+    _LIB.pu_block_steps(_address(t), _address(p), t.size, last_t, out.buffer_info()[0])
+    return out[0], out[1], out[2] != 0.0, out[3]
+
+
+def append_sums(t: FloatArray, p: FloatArray, prev: float, dest: tuple[int, int, int, int]
+                ) -> None:
+    """Copy a block (stamps t [s], values p: C-contiguous float64 of one length) to the
+    addresses ``dest`` of the buffer's stamps, values, prefix sums and squared-difference
+    sums (each sum's address at its last element held) and continue the sums
+    (``pu_append``; ``prev``: the value before the block)."""
+    _LIB.pu_append(_address(t), _address(p), p.size, prev, *dest)
+
+
+def _address(a: FloatArray) -> int:
+    """The address of an array's first element (``a.ctypes.data`` without its Python-level
+    ctypes object, on the live block's path)."""
+    return a.__array_interface__["data"][0]
+
+
+def first_below_in(p: array, i: int, hi: int, level: float) -> int:
+    """:func:`~.decisions.first_below` on the buffer's values ``p`` (array.array of float64)
+    in one compiled call: the first index in [i, hi) whose value is below ``level``, or
+    hi [-]."""
+    top = min(hi, len(p))
+    if top <= i or level == -math.inf:
+        return hi
+    k = _LIB.pu_first_below(p.buffer_info()[0], i, top, level)
+    return k if k < top else hi
 
 
 def corner_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float

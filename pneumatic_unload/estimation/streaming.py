@@ -20,8 +20,9 @@ from numpy.typing import ArrayLike
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation import decisions, detector, sse, tail, unloading
 from pneumatic_unload.estimation.buffer import SampleBuffer
-from pneumatic_unload.estimation.decisions import SCAN_HORIZON, first_below
+from pneumatic_unload.estimation.decisions import SCAN_HORIZON
 from pneumatic_unload.estimation.history import recent_results
+from pneumatic_unload.estimation.regression import block_steps, first_below_in
 from pneumatic_unload.estimation.state import (
     CONFIRM,
     RECOVERY,
@@ -221,19 +222,18 @@ class StreamingEstimator:
         if self._suspect is not None and t[0] == t[0] and abs(t[0]) <= MAX_ABS_STAMP:
             return self._resolve_suspect(float(t[0])) + self.push_block(t, p)
         st = self._st
-        # vectorised validity: finite, each stamp at least MIN_STAMP_STEP after the one
-        # before (the last accepted stamp for the first): then the steps are the gaps too
-        # (np.diff(t, prepend=st.last_t) without its per-call cost: on the live crossing's
-        # path, where the first numpy call after an idle wait pays for cold caches)
-        d = np.empty(t.size)
-        d[0] = t[0] - st.last_t
-        np.subtract(t[1:], t[:-1], out=d[1:])
-        if not (d.min() >= MIN_STAMP_STEP and np.isfinite(p).all()  # a NaN step: not >=
-                and max(abs(float(t[0])), abs(float(t[-1]))) <= MAX_ABS_STAMP):
+        # validity: finite, each stamp at least MIN_STAMP_STEP after the one before (the
+        # last accepted stamp for the first): then the steps are the gaps too; one compiled
+        # call (on the live crossing's path, where each numpy call after an idle wait pays
+        # for cold caches)
+        last_t = st.last_t
+        shortest, longest, finite, extent = block_steps(t, p, last_t)
+        if not (shortest >= MIN_STAMP_STEP and finite  # a NaN step: not >=
+                and extent <= MAX_ABS_STAMP):
             return self._push_slow(t, p)
         out: list[UnloadResult] = []
         k, size = 0, t.size
-        longest = d.max()
+        d: FloatArray | None = None  # the steps, made only for a block with a gap
         while k < size:
             if math.isnan(st.dt_nominal):
                 # sample by sample until the nominal period (and so the gap limit) is known
@@ -243,6 +243,8 @@ class StreamingEstimator:
             if not longest > st.gap_limit:  # no gap in the block
                 out += self._push_fast(t[k:], p[k:])
                 break
+            if d is None:
+                d = np.diff(t, prepend=last_t)
             gaps = np.flatnonzero(d[k:] > st.gap_limit)
             if gaps.size and gaps[0] == 0:
                 out += self.push(float(t[k]), float(p[k]))  # diagnoses the gap
@@ -350,7 +352,7 @@ class StreamingEstimator:
             return tail.scan_skip(st, i, end)
         # any other phase: the next periodic check or level trigger
         nc = st.next_check
-        j = first_below(np.frombuffer(st.buf.p, dtype=float), i, min(end, nc), st.level)
+        j = first_below_in(st.buf.p, i, min(end, nc), st.level)
         if j < min(end, nc):
             return j
         return nc if nc < end else end

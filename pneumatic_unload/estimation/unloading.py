@@ -30,6 +30,7 @@ from pneumatic_unload.estimation.reduction import reduce_due, reduce_unload, win
 from pneumatic_unload.estimation.refine import needs_model
 from pneumatic_unload.estimation.regression import (
     crossing_window,
+    first_below_in,
     hinge_cov,
     hinge_fit,
     rms_sigma,
@@ -272,8 +273,7 @@ FEW_CHECKS = 4
 def scan_unloading(st: EstimatorState, i: int, end: int) -> int:
     """Next index in [i, end) where :func:`step_unloading` decides something (end: none);
     only while p* is known or the start not yet refined."""
-    pv = np.frombuffer(st.buf.p, dtype=float)
-    j = first_below(pv, i, end, st.level)
+    j = first_below_in(st.buf.p, i, end, st.level)
     checks = range(st.next_check, min(j, end), PERIOD)
     if len(checks) == 0:
         return j

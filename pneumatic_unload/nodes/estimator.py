@@ -301,6 +301,17 @@ class EstimatorNode(Node):
         self._wake.set()
 
     def _on_block(self, msg: Any) -> None:
+        collect = gc.isenabled()  # no collection on the way to the push (see _feed)
+        if collect:
+            gc.disable()
+        try:
+            self._take_block(msg)
+        finally:
+            if collect:
+                gc.enable()
+
+    def _take_block(self, msg: Any) -> None:
+        """A PressureBlock's samples into the core (:meth:`_feed`)."""
         if not self._frame_ok(msg.header.frame_id):
             return
         now = time.monotonic()
@@ -345,6 +356,21 @@ class EstimatorNode(Node):
         [s] when the arrays are single samples queued by the callback (a result's latency
         is then counted from the arrival of the sample that completed it)."""
         est = self._est
+        # no garbage collection inside the push: a crossing estimate published there pays
+        # for none (a collection of the young objects, now and then an older generation);
+        # the first allocation after it takes the collection due, off the latency
+        collect = gc.isenabled()
+        if collect:
+            gc.disable()
+        try:
+            return self._push(est, ns, p, arrived, arrivals)
+        finally:
+            if collect:
+                gc.enable()
+
+    def _push(self, est: StreamingEstimator | OpeningStartEstimator, ns: Any, p: Any,
+              arrived: float, arrivals: list[float] | None) -> None:
+        """:meth:`_feed` with the collector off."""
         try:
             with self._lock:
                 prev = est.state
