@@ -171,6 +171,39 @@ def hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float, *,
     return t0, float(coef[0]), slope, curv, rms
 
 
+def sloped_hinge_fit(t: FloatArray, p: FloatArray, t_lo: float, t_hi: float
+                     ) -> tuple[float, float, float, float, float, float]:
+    """Fit p = p10 + d (t - t0) (t < t0), p10 - s u + c u^2 (u = t - t0 >= 0) with t0 in
+    [t_lo, t_hi]: the hinge of :func:`hinge_fit` on a plateau that drifts (a gas warmer or
+    cooler than the wall relaxing toward it before the opening). Linear least squares in
+    (p10, d, s, c) for each t0, minimised over t0 as :func:`hinge_fit` does.
+
+    Returns
+    -------
+    tuple
+        (t0 [s], p10 [Pa], s [Pa/s], c [Pa/s^2], residual rms [Pa], d [Pa/s]).
+    """
+    tc = t - t[0]
+    scale_t = max(float(tc[-1]), 1e-12)
+    p_ref = float(np.mean(p))
+    q = p - p_ref
+
+    def solve(t0: float) -> tuple[float, FloatArray]:
+        x = (tc - (t0 - t[0])) / scale_t
+        pre = x < 0.0
+        a = np.column_stack([np.ones_like(x), np.where(pre, x, 0.0),
+                             np.where(pre, 0.0, -x), np.where(pre, 0.0, x * x)])
+        coef, *_ = np.linalg.lstsq(a, q, rcond=None)
+        r = q - a @ coef
+        return float(r @ r), coef
+
+    t0 = grid_then_golden(lambda x: solve(x)[0], t, t_lo, t_hi, n_grid=64, rel_tol=1e-3)
+    sse, coef = solve(t0)
+    rms = math.sqrt(sse / max(p.size - 5, 1))
+    return (t0, float(coef[0]) + p_ref, float(coef[2]) / scale_t,
+            float(coef[3]) / scale_t**2, rms, float(coef[1]) / scale_t)
+
+
 def hinge_cov(t: FloatArray, t0: float, slope: float, curv: float, rms: float, *,
               exponent: float = math.inf) -> tuple[float, float, float]:
     """Covariance of the hinge fit's start and plateau (:func:`hinge_fit`) from its Fisher

@@ -34,6 +34,7 @@ from pneumatic_unload.estimation.regression import (
     hinge_cov,
     hinge_fit,
     rms_sigma,
+    sloped_hinge_fit,
 )
 from pneumatic_unload.estimation.sse import abort_result, on_abort
 from pneumatic_unload.estimation.state import TAIL, EstimatorState, UnloadState
@@ -151,16 +152,26 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     t_lo = float(tv[max(st.arm_index, trig - back)])
     t_hi = float(tv[trig])
     k = fall_exponent(st.settings.gamma)
-    t0, p10, slope, curv, rms = hinge_fit(tv[lo:n], pv[lo:n], t_lo, t_hi, exponent=k)
+    tw, pw = tv[lo:n], pv[lo:n]
+    t0, p10, slope, curv, rms = hinge_fit(tw, pw, t_lo, t_hi, exponent=k)
     if trig < i and (t_hi - t0 < 0.01 * (t_hi - float(tv[trig - 1])) or not slope > 0.0):
         # the start pinned at the trigger (within 1 % of a sample) or no fall found before
         # it: the trigger came before the opening (a noise dip confirmed against a plateau
         # of a few samples, whose level and noise are then off). The start is searched up
         # to the sample 10 % down, and taken from there only when it lies after the
         # trigger and fits better.
-        alt = hinge_fit(tv[lo:n], pv[lo:n], t_lo, float(tv[i]), exponent=k)
+        alt = hinge_fit(tw, pw, t_lo, float(tv[i]), exponent=k)
         if alt[0] > t_hi and alt[4] < rms:
             t0, p10, slope, curv, rms = alt
+    if trig < i and not slope > 0.0:
+        # still no fall: a plateau that drifts (a gas hot from the charge cooling toward
+        # the wall: the trigger fired on the drift) has its slope fitted with the start
+        hot = sloped_hinge_fit(tw, pw, t_lo, float(tv[i]))
+        if hot[2] > 0.0 and hot[4] < rms:
+            t0, p10, slope, curv, rms = hot[:5]
+            st.diag("ok", f"the plateau before the opening drifts by {hot[5]:.4g} /s (a gas "
+                    f"warmer or cooler than the wall): fitted with the start",
+                    float(tv[i]))
     pre = pv[lo:int(np.searchsorted(tv, t0))]
     sig_pre = rms_sigma(pre) if pre.size > 3 else rms
     if pre.size >= 8:
