@@ -88,6 +88,8 @@ def _estimate(i: int) -> dict:
         "subsonic_index": 0.5 if i == 0 else 0.31,
         "subsonic_index_std": 0.144 if i == 0 else 0.02,
         "subsonic_index_fitted": i == 1,
+        "pressure_offset": float("nan") if i == 0 else -2400.0,
+        "pressure_offset_std": float("nan") if i == 0 else 35.0,
         "tau_exp": 1.234,
         "p10": 6.0e5,
         "p_atm": 101_325.0,

@@ -144,5 +144,6 @@ def test_results_database_of_schema_1_gains_the_m_columns(tmp_path):
     open_db(path).close()
     con = sqlite3.connect(path)
     cols = {row[1] for row in con.execute("PRAGMA table_info(unloads)")}
-    assert {"subsonic_index", "subsonic_index_std"} <= cols
+    assert {"subsonic_index", "subsonic_index_std", "pressure_offset",
+            "pressure_offset_std"} <= cols
     assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 2

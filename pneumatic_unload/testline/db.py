@@ -46,9 +46,11 @@ V1_COLUMNS: tuple[tuple[str, str], ...] = (
     ("recommended_conductance", "REAL"), ("recommended_std", "REAL"),
     ("heat_law", "TEXT"), ("method", "TEXT"), ("quality", "REAL"),
 )
-#: Columns added by version 2: the ISO 6358-1:2013 subsonic index m and its uncertainty [-].
+#: Columns added by version 2: the ISO 6358-1:2013 subsonic index m and its uncertainty [-],
+#: the transducer's fitted zero offset and its uncertainty [Pa].
 V2_COLUMNS: tuple[tuple[str, str], ...] = (
     ("subsonic_index", "REAL"), ("subsonic_index_std", "REAL"),
+    ("pressure_offset", "REAL"), ("pressure_offset_std", "REAL"),
 )
 #: Every column of ``unloads`` taken from a result's JSON.
 UNLOAD_COLUMNS = V1_COLUMNS + V2_COLUMNS
