@@ -45,7 +45,6 @@ from pneumatic_unload.law_fit import (
     curve_fit_bins,
     curve_fit_trace,
     fit_law,
-    heat_of,
     start_from,
 )
 from pneumatic_unload.subsonic_offer import M_SUFFIX, held_lines, split_key, twin_lines
@@ -232,13 +231,14 @@ def _choose(fam: Family, tried: tuple[str, ...]) -> tuple[Family, str]:
     """Fit the laws ``tried`` with m held, and with m free where the record asks for it;
     returns the family and the key the criterion chooses.
 
-    The subsonic index: the first law once more with m free; where the record determines
-    m and the criterion prefers it to the same law with m held, the laws are fitted again
-    with m free (m and the heat law trade: both families are offered); clearly (by
+    The subsonic index: the first law once more with m free where its first-order twin
+    (:meth:`Family.twin`) says it is worth a fit; where the record determines m and the
+    criterion prefers it to the same law with m held, the laws are fitted again with m
+    free (m and the heat law trade: both families are offered); clearly (by
     LAW_BIC_THRESHOLD: HydDown's 1 L vessel, 3.5 better with m free, then took the density
     law with m = 0.527 and C +1.5 % over the hot start's -0.1 %). The chosen law's other
-    variant (m held for one fitted, m free for one held: the slopes of the held m's line)
-    is fitted too, and the criterion decides between the two."""
+    variant (m held for one fitted, m free for one held where its twin says it is worth a
+    fit) is fitted too, and the criterion decides between the two."""
     fam.run(tried, "")  # m held at 0.5
     fits, n = fam.fits, fam.span.n
     first = tried[0]
@@ -273,7 +273,7 @@ def _offer_offset(fam: Family, best: str, gap: float) -> str | None:
     key = best if best.endswith(M_SUFFIX) else best + M_SUFFIX
     probe = Family(fam.span, fam.settings, fam.common, offset=True)
     base = held[0]
-    start = start_from(base, fam.span.t_ref, **heat_of(base))
+    start = fam.start_of(base)
     if math.isfinite(gap):
         start["offset"] = gap
     try:

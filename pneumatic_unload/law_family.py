@@ -119,6 +119,11 @@ class Family:
         kept["fit"], kept["entry"] = out[0], out
         return out
 
+    def start_of(self, fit: CurveFit) -> dict[str, float]:
+        """Starting values [SI] of another fit from ``fit``: its C, opening, p10, b, p_atm,
+        m and heat exchange."""
+        return start_from(fit, self.span.t_ref, **heat_of(fit))
+
     def twin(self, key: str, name: str) -> Twin | None:
         """The first-order twin of the fit ``key`` with ``name`` ('m' or 'offset') freed
         (:func:`~pneumatic_unload.linear_twin.linear_twin`; None without it)."""
@@ -218,8 +223,7 @@ class Family:
             if not math.isfinite(base.conductance):
                 continue
             key = f"{law}+wall{sfx}"
-            hot = self.fit(key, start=start_from(base, self.span.t_ref, **heat_of(base)),
-                           max_nfev=120)
+            hot = self.fit(key, start=self.start_of(base), max_nfev=120)
             # a hot start is a claim about the rig: a wall clearly away from T10 (3 of the
             # temperature's uncertainties, at least 3 K) makes it, or one nearer that turns
             # the structure every law with the wall at T10 leaves into white residuals; else
@@ -267,8 +271,7 @@ def offer_m(fam: Family, key: str) -> str | None:
     twin = other(key)
     base = fam.fits[key][0]
     try:
-        got: Fit | None = fam.fit(twin, start=start_from(base, fam.span.t_ref,
-                                                         **heat_of(base)), max_nfev=120)
+        got: Fit | None = fam.fit(twin, start=fam.start_of(base), max_nfev=120)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError):
         got = None
     why = "the fit failed" if got is None else \

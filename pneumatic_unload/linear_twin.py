@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from pneumatic_unload.fit.params import Parameters
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.model.parametric import ParametricModel
 
@@ -86,14 +87,27 @@ def linear_twin(trace: Trace, kept: dict[str, Any], twin: ParametricModel, name:
         cov = np.linalg.inv(aug.T @ aug) * float(kept["s2"])
     except np.linalg.LinAlgError:
         return None
-    var = float(cov[-1, -1])
+    names = list(fit.params.free)
+    slopes = valley_slopes(cov, names, fit.params, fit.values["C"], len(names), p.scale)
+    if slopes is None:
+        return None
+    return Twin(name, gain, start + float(dx[-1]) * p.scale,
+                math.sqrt(float(cov[-1, -1])) * p.scale, *slopes, float(r0 @ r0),
+                r0.size - fit.k - 1)
+
+
+def valley_slopes(cov: np.ndarray, names: list[str], params: Parameters, conductance: float,
+                  j: int, scale: float) -> tuple[float, float] | None:
+    """dC/dq [m^3/(s Pa) per unit] and db/dq [- per unit] along the valley of a parameter
+    q fitted linearly with ``scale`` [its unit]: its column ``j`` of a covariance ``cov``
+    in scaled coordinates whose other columns are ``names`` (C fitted as its log, b
+    linearly, scales from ``params``; C's value ``conductance``); b's NaN when b is not
+    fitted. None when q's variance is not positive."""
+    var = float(cov[j, j])
     if not var > 0:
         return None
-    free = list(fit.params.free)
-    ic = free.index("C")
-    c = fit.values["C"]
-    slope_c = cov[ic, -1] / var * fit.params["C"].scale * c / p.scale
-    slope_b = cov[free.index("b"), -1] / var * fit.params["b"].scale / p.scale \
-        if "b" in free else math.nan
-    return Twin(name, gain, start + float(dx[-1]) * p.scale, math.sqrt(var) * p.scale,
-                float(slope_c), float(slope_b), float(r0 @ r0), r0.size - fit.k - 1)
+    ic = names.index("C")
+    slope_c = cov[ic, j] / var * params["C"].scale * conductance / scale
+    slope_b = cov[names.index("b"), j] / var * params["b"].scale / scale \
+        if "b" in names else math.nan
+    return float(slope_c), float(slope_b)

@@ -91,7 +91,15 @@ class Record:
         """The gas temperature the record carries: (t [s], T [K]) at its own rate (a CSV's
         empty cells skipped, a bag's temperature topic), or None without one. One pass."""
         if self.bag_topic is not None:
-            return measured_temperature(self.path)
+            from pneumatic_unload.io.bag import BagError, read_temperature
+
+            try:
+                t_ns, temp = read_temperature(self.path)
+            except BagError as exc:
+                raise RecordError(str(exc)) from exc
+            if len(temp) == 0:
+                return None
+            return np.asarray(t_ns, dtype=np.int64) * 1e-9, np.asarray(temp, float)
         if not self.has_temperature:
             return None
         assert self.stream is not None
@@ -314,7 +322,12 @@ def with_temperature_evidence(record: Record, settings: EstimatorSettings,
     (:func:`~pneumatic_unload.temperature_evidence.temperature_evidence`: ``extra
     ['gas_temperature']``, and the status text when the model's gas does not follow it);
     ``gas_temperature`` says so where the record carries none."""
-    series = record.temperature_series()
+    if not any(r.final and "curve_fit" in r.extra for r in unloads):
+        return unloads
+    try:
+        series = record.temperature_series()
+    except RecordError:  # optional evidence: the pressure's analysis stands without it
+        series = None
     out = []
     for r in unloads:
         cf = r.extra.get("curve_fit") if r.final else None
@@ -336,27 +349,12 @@ def with_temperature_evidence(record: Record, settings: EstimatorSettings,
 
 def measured_temperature(path: str | Path, **csv_options: Any
                          ) -> tuple[FloatArray, FloatArray] | None:
-    """The gas temperature an input carries (t [s], T [K]: a CSV's temperature column,
-    read with ``csv_options`` as :func:`open_record`, its empty cells skipped; a bag's
-    temperature topic), or None when it carries fewer than 3 values or cannot be read
-    (the temperature is optional evidence: a run never fails on it)."""
-    path = Path(path)
+    """The gas temperature an input carries (:meth:`Record.temperature_series` of the input
+    opened with ``csv_options`` as :func:`open_record`), or None when it carries fewer than
+    3 values or cannot be read (the temperature is optional evidence: a run never fails on
+    it)."""
     try:
-        if path.suffix.lower() in (".csv", ".txt"):
-            from pneumatic_unload.io.csvlog import read_csv_trace
-
-            tr = read_csv_trace(path, **csv_options)
-            if tr.temperature is None:
-                return None
-            ok = np.isfinite(tr.temperature)  # a slower channel: empty cells between
-            if np.count_nonzero(ok) < 3:
-                return None
-            return np.asarray(tr.t[ok], float), np.asarray(tr.temperature[ok], float)
-        from pneumatic_unload.io.bag import read_temperature
-
-        t_ns, temp = read_temperature(path)
-        if len(temp) < 3:
-            return None
-        return np.asarray(t_ns, dtype=np.int64) * 1e-9, np.asarray(temp, float)
+        got = open_record(path, **csv_options).temperature_series()
+        return got if got is not None and got[1].size >= 3 else None
     except Exception:
         return None

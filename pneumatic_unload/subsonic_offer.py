@@ -22,7 +22,7 @@ import numpy as np
 
 from pneumatic_unload.budget import Budget, BudgetTerm, model_form_term, record_term
 from pneumatic_unload.curve_fit_result import CurveFit
-from pneumatic_unload.linear_twin import Twin
+from pneumatic_unload.linear_twin import Twin, valley_slopes
 from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
 
 #: Name of m's line in the budgets of C and b.
@@ -76,20 +76,13 @@ def held_lines(kept: dict[str, Any] | None, free: CurveFit | None, offered: bool
     if "m" not in names or "C" not in names:
         return math.nan, math.nan, SUBSONIC_INDEX_PRIOR_SD, FAILED
     cov = np.asarray(res.covariance(kept["s2"]), dtype=float)
-    im, ic = names.index("m"), names.index("C")
-    if not (np.all(np.isfinite(cov)) and cov[im, im] > 0):
+    slopes = valley_slopes(cov, names, res.params, free.conductance, names.index("m"),
+                           res.params["m"].scale) if np.all(np.isfinite(cov)) else None
+    if slopes is None:
         return (math.nan, math.nan, SUBSONIC_INDEX_PRIOR_SD,
                 "m held at 0.5; the slopes of C and b along m are not determined")
-    p_m, p_c = res.params["m"], res.params["C"]
-    dm_dx = p_m.scale  # m is fitted linearly
-    slope_c = cov[ic, im] / cov[im, im] * p_c.scale * free.conductance / dm_dx
-    slope_b = math.nan
-    if "b" in names:
-        ib = names.index("b")
-        slope_b = cov[ib, im] / cov[im, im] * res.params["b"].scale / dm_dx
     return twin_lines(Twin("m", math.nan, free.subsonic_index, free.subsonic_index_std,
-                           float(slope_c), float(slope_b)), determined=offered,
-                      how="the criterion keeps 0.5")
+                           *slopes), determined=offered, how="the criterion keeps 0.5")
 
 
 def twin_lines(tw: Twin | None, *, determined: bool | None = None,
