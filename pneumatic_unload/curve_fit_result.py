@@ -124,6 +124,12 @@ class CurveFit:
     model_form_std_m : float
         m's model-form 1-sigma [-]: the spread of the m of the laws fitted with m that fit
         about as well, weighted as C's (not in ``subsonic_index_std``); NaN when m is held.
+    gas_temperature : dict
+        The logged gas temperature fitted beside the pressure (empty when it was not):
+        ``t10`` and ``t10_std`` [K] (the gas at the opening), ``sensor_time_constant`` and
+        its ``_std`` [s], ``rms`` [K] of fitted minus measured readings, ``noise`` [K] of
+        the channel, ``samples`` [-], ``weight`` [Pa/K] (see
+        :class:`~pneumatic_unload.fit.trace.TemperatureChannel`).
     """
 
     conductance: float
@@ -169,9 +175,13 @@ class CurveFit:
     pressure_offset: float = 0.0
     pressure_offset_std: float = math.nan
     offset_source: str = ""
+    gas_temperature: dict[str, float] = dataclasses.field(default_factory=dict)
 
     def config(self, settings: EstimatorSettings) -> RigConfig:
         """The fitted model's configuration (valve opening at t = 0) [SI]."""
+        t10 = self.gas_temperature.get("t10", math.nan)
+        if math.isfinite(t10):  # fitted with the logged temperature
+            settings = dataclasses.replace(settings, initial_temperature=float(t10))
         b = self.critical_ratio if math.isfinite(self.critical_ratio) else None
         cfg = rig_from_settings(settings, conductance=self.conductance, p10=self.p10,
                                 p_atm=self.p_atm, critical_ratio=b,

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,6 +49,13 @@ from pneumatic_unload.law_fit import (
     start_from,
 )
 from pneumatic_unload.subsonic_offer import M_SUFFIX, held_lines, split_key, twin_lines
+from pneumatic_unload.temperature_evidence import (
+    FOLLOW_FACTOR,
+    channel,
+    channel_noise,
+    channel_samples,
+    temperature_evidence,
+)
 from pneumatic_unload.wall_moves import law_spread, spread_b, wall_linear
 
 FloatArray = NDArray[np.float64]
@@ -71,6 +79,7 @@ def fit_curve(
     p10: float, p_atm: float, conductance: float, fit_heat: bool | None = None,
     profile_heat: bool = True, laws: tuple[str, ...] | None = None,
     hold: tuple[str, ...] = (), reduced: Reducer | None = None,
+    temperature: tuple[FloatArray, FloatArray] | None = None,
 ) -> CurveFit:
     """Least-squares fit of the discharge model to a recorded unload, with the heat law
     chosen by the data.
@@ -105,6 +114,10 @@ def fit_curve(
     reduced : Reducer, optional
         The samples already reduced to bins (an unload too long to hold, see
         :mod:`pneumatic_unload.fit.reduced`), used instead of t and p (None).
+    temperature : tuple of ndarray, optional
+        A logged gas temperature, instants [s, the clock of t] and values [K]: fitted
+        jointly with the pressure (:func:`_with_temperature`) where the span holds enough
+        readings; the result's ``gas_temperature`` says how (empty when not used).
 
     Returns
     -------
@@ -144,6 +157,12 @@ def fit_curve(
             cf0 = fam.fits[best][0]
             offset_why = (f"fitted: the record settles {cf0.pressure_offset:+.0f} +- "
                           f"{cf0.pressure_offset_std:.0f} Pa from the given p_atm")
+    temp_why: dict[str, Any] = {}
+    if temperature is not None:
+        fam, best, trace, temp_why = _with_temperature(fam, best, temperature, tried)
+        t10 = fam.fits[best][0].gas_temperature.get("t10", math.nan)
+        if math.isfinite(t10):  # the wall's lines about the fitted T10
+            settings = dataclasses.replace(settings, initial_temperature=t10)
     fits, raw = fam.fits, fam.raw  # raw: each fit's FitResult and model (the wall term)
     bic = criterion(fits, span.n)
     cf = fits[best][0]
@@ -183,7 +202,8 @@ def fit_curve(
         heat_law=best.removesuffix(M_SUFFIX) if natural else "none",
         not_offered=fam.not_offered, subsonic_std=m_c, subsonic_std_b=m_b,
         subsonic_index_std=m_u, subsonic_source=m_why, model_form_std_m=mf_m,
-        offset_source=offset_why)
+        offset_source=offset_why,
+        gas_temperature=cf.gas_temperature or temp_why)
     if raw.get(best):  # the fit's own numerical reproducibility (another machine's bits)
         rep = numerical_reproducibility(trace.residual(raw[best]["model"]),
                                         raw[best]["result"], fade=bool(raw[best]["fade"]))
@@ -217,6 +237,61 @@ def fit_curve(
             out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why,
                                       wall_std=wall_std)
     return out
+
+
+#: The joint fit is made again with the temperature's weight from its own residuals
+#: until their RMS is within this factor of the one assumed, at most
+#: :data:`TEMPERATURE_PASSES` times [-].
+TEMPERATURE_WEIGHT_TOLERANCE = 1.3
+TEMPERATURE_PASSES = 3
+
+
+def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArray],
+                      tried: tuple[str, ...]) -> tuple[Family, str, Trace, dict[str, Any]]:
+    """The family fitted again with the logged gas temperature beside the pressure: T10
+    and the thermometer's lag fitted, the readings' residuals weighted to the pressure's
+    (each channel's variance from its own residuals: first the larger of the channel's
+    noise and the misfit of the pressure fit's gas, then the joint fit's misfit, until
+    they agree within :data:`TEMPERATURE_WEIGHT_TOLERANCE`).
+
+    Returns the joint family, its chosen key, its trace and {} - or, where the joint fit's
+    readings do not follow the log within :data:`FOLLOW_FACTOR` of its noise (no heat law
+    of the model makes the gas the thermometer saw: it is no evidence of the heat law),
+    the pressure's family, key and trace and why not, with the joint fit's misfit [K] and
+    C [m^3/(s Pa)] for the budget (:func:`temperature_terms`)."""
+    trace: Trace = fam.common["trace"]
+    got = channel_samples(series, fam.span)
+    if isinstance(got, str):
+        return fam, best, trace, {"why": f"not used: {got}"}
+    t_rel, temp = got
+    cf = fam.fits[best][0]
+    noise = channel_noise(temp)
+    ev = temperature_evidence(cf.config(fam.settings), cf.t_start - fam.span.t_ref,
+                              t_rel, temp)
+    sigma = max(noise, ev.get("rms", noise))
+    if not (math.isfinite(cf.rms) and cf.rms > 0 and math.isfinite(sigma)):
+        return fam, best, trace, {"why": "not used: the pressure fit's residual is not "
+                                         "finite"}
+    for k in range(TEMPERATURE_PASSES):
+        joint = trace.with_channel(channel(t_rel, temp, cf.rms, sigma))
+        j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
+                                       fam.profile_heat, offset=fam.offset), tried)
+        summary = j_fam.fits[j_best][0].gas_temperature
+        summary.update(noise=noise, passes=k + 1)
+        now = max(noise, summary["rms"])
+        if abs(math.log(now / sigma)) <= math.log(TEMPERATURE_WEIGHT_TOLERANCE):
+            break
+        sigma = now
+    if summary["rms"] <= FOLLOW_FACTOR * noise:
+        return j_fam, j_best, joint, {}
+    jc = j_fam.fits[j_best][0]
+    return fam, best, trace, {
+        "why": f"not used: fitted jointly, the model's gas departs from it by "
+               f"{summary['rms']:.2g} K rms (noise {noise:.2g} K; C {jc.conductance:.4g} "
+               f"m^3/(s Pa) against the pressure's {cf.conductance:.4g}): no heat law "
+               f"follows it, the pressure alone is fitted and the difference is a line of "
+               f"the budget", "joint_rms": summary["rms"], "noise": noise,
+        "joint_conductance": jc.conductance}
 
 
 #: Largest zero offset fitted, as a fraction of the drop p10 - p_atm [-] (a transducer's

@@ -37,11 +37,12 @@ CRITICAL_RATIO_PRIOR_STD = 0.1
 def estimator_model(settings: EstimatorSettings, start: Start, *,
                     p_atm: float | None = None, heat_law: str = "natural",
                     fit_wall: bool = False, fit_m: bool = False,
-                    fit_offset: bool = False) -> ParametricModel:
+                    fit_offset: bool = False, thermometer: bool = False) -> ParametricModel:
     """The parametric model of the estimator: heat transfer (``heat_law``, and the wall
     temperature as a parameter with ``fit_wall``) or none; the subsonic index m a parameter
     with ``fit_m`` (else held at 0.5); the transducer's zero offset a parameter ('offset'
-    [Pa]) with ``fit_offset``."""
+    [Pa]) with ``fit_offset``; T10 and a thermometer's lag parameters with ``thermometer``
+    (a logged gas temperature fitted beside)."""
     effects: tuple[str, ...] = ("heat_transfer",) if settings.heat_model == "natural" else ()
     if fit_offset:
         effects = (*effects, "sensor_offset")
@@ -49,7 +50,8 @@ def estimator_model(settings: EstimatorSettings, start: Start, *,
                                                                   atmosphere=p_atm)
     return ParametricModel(effects, tank, start, heat_law=heat_law,
                            fit_wall_temperature=fit_wall and bool(effects),
-                           subsonic_index=None if fit_m else SUBSONIC_INDEX_START)
+                           subsonic_index=None if fit_m else SUBSONIC_INDEX_START,
+                           thermometer=thermometer)
 
 
 def rig_from_settings(settings: EstimatorSettings, *, conductance: float, p10: float,

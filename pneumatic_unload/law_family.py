@@ -133,7 +133,8 @@ class Family:
         law, wall, fit_m = split_key(key)
         model = estimator_model(self.settings, kept["model"].start, heat_law=law,
                                 fit_wall=wall, fit_m=fit_m or name == "m",
-                                fit_offset=self.offset or name == "offset")
+                                fit_offset=self.offset or name == "offset",
+                                thermometer=kept["model"].thermometer)
         start = SUBSONIC_INDEX_START if name == "m" else 0.0
         return linear_twin(self.common["trace"], kept, model, name, start)
 

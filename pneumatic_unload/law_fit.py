@@ -13,6 +13,7 @@ SI units: s, Pa absolute, K, m^3, m^3/(s Pa).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -24,7 +25,7 @@ from pneumatic_unload.curve_fit_result import CurveFit, CurveSpan
 from pneumatic_unload.fit.likelihood import make_bins
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
 from pneumatic_unload.fit.profile import valley_std
-from pneumatic_unload.fit.trace import Trace
+from pneumatic_unload.fit.trace import TemperatureChannel, Trace
 from pneumatic_unload.fit.uncertainty import (
     WHITENESS_P,
     residual_inflation,
@@ -82,7 +83,9 @@ def start_from(fit: CurveFit, t0: float, **heat: float) -> dict[str, float]:
     its C, opening, p10, b and p_atm, and the heat parameters given; non-finite ones left
     out."""
     v = {"C": fit.conductance, "t_open": fit.t_start - t0, "p10": fit.p10,
-         "b": fit.critical_ratio, "p_atm": fit.p_atm, "m": fit.subsonic_index, **heat}
+         "b": fit.critical_ratio, "p_atm": fit.p_atm, "m": fit.subsonic_index,
+         "t10": fit.gas_temperature.get("t10", math.nan),
+         "tau_thermo": fit.gas_temperature.get("sensor_time_constant", math.nan), **heat}
     return {k: x for k, x in v.items() if math.isfinite(x)}
 
 
@@ -147,8 +150,9 @@ def fit_law(
     neutral = Start(conductance=conductance, critical_ratio=settings.critical_ratio,
                   t_open=float(np.clip(t_start, 0.0, span.duration)), p10=p10, p_atm=p_atm,
                   tau=tau, dt=dt, t_first=0.0, t_last=span.duration)
+    ch = trace.channel
     model = estimator_model(settings, neutral, heat_law=law, fit_wall=fit_wall, fit_m=fit_m,
-                            fit_offset=fit_offset)
+                            fit_offset=fit_offset, thermometer=ch is not None)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
     if "t_open" in hold:
         fixed["t_open"] = float(t_start)
@@ -188,12 +192,14 @@ def fit_law(
     if keep is not None:
         keep.update(result=fit, model=model, fade=fit is not plain)
     v = fit.values
-    # residuals are bin sums / sqrt(count): their variance is the per-sample variance
+    # residuals are bin sums / sqrt(count): their variance is the per-sample variance (a
+    # temperature channel's weighted residuals have the same by its weight)
     s2 = fit.chi2 / fit.dof
-    inflation = residual_inflation(fit.fun)
-    whiteness_p = ljung_box(fit.fun)[1]
+    r_p = fit.fun if ch is None else fit.fun[:fit.fun.size - ch.n]  # the pressure's
+    inflation = residual_inflation(r_p)
+    whiteness_p = ljung_box(r_p)[1]
     if whiteness_p < WHITENESS_P:  # structure beyond lag 1 too
-        inflation = max(inflation, structure_inflation(fit.fun))
+        inflation = max(inflation, structure_inflation(r_p))
     cov = fit.covariance(s2 * inflation)
     if keep is not None:
         keep["s2"] = s2 * inflation
@@ -245,5 +251,22 @@ def fit_law(
         heat_turbulent_std=float(std["heat_turbulent"]) if "heat_turbulent" in free
         else math.nan, subsonic_index=m, subsonic_index_std=m_std, subsonic_index_fitted=fit_m,
         pressure_offset=v.get("offset", 0.0),
-        pressure_offset_std=float(std["offset"]) if "offset" in free else math.nan)
+        pressure_offset_std=float(std["offset"]) if "offset" in free else math.nan,
+        gas_temperature={} if ch is None else channel_summary(ch, fit.fun, v, std))
+    if ch is not None:  # the pressure's residual RMS (the temperature's is in K)
+        cf = dataclasses.replace(cf, rms=math.sqrt(float(np.sum(r_p * r_p)) / max(
+            r_p.size - fit.k, 1)))
     return cf, fit.chi2, fit.k
+
+
+def channel_summary(ch: TemperatureChannel, fun: FloatArray, v: dict[str, float],
+                    std: dict[str, float]) -> dict[str, float]:
+    """A fit's temperature channel in SI units (the :class:`CurveFit` field
+    ``gas_temperature``): T10 and the thermometer's time constant with their 1-sigma [K],
+    [s], the RMS of fitted minus measured readings [K], readings and weight [-], [Pa/K]."""
+    r_t = fun[fun.size - ch.n:] / ch.weight
+    return {"t10": v["t10"], "t10_std": float(std.get("t10", math.nan)),
+            "sensor_time_constant": v["tau_thermo"],
+            "sensor_time_constant_std": float(std.get("tau_thermo", math.nan)),
+            "rms": float(np.sqrt(np.mean(r_t * r_t))), "samples": float(ch.temp.size),
+            "weight": ch.weight}

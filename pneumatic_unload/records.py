@@ -26,7 +26,11 @@ from pneumatic_unload.estimation.batch import merge_final
 from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
 from pneumatic_unload.estimation.types import FloatArray
 from pneumatic_unload.io.csvlog import CHUNK_BYTES, CsvError, CsvStream
-from pneumatic_unload.temperature_evidence import departure_text, temperature_evidence
+from pneumatic_unload.temperature_evidence import (
+    channel_evidence,
+    departure_text,
+    temperature_evidence,
+)
 
 
 class RecordError(Exception):
@@ -240,8 +244,14 @@ def analyze_record(record: Record, settings: EstimatorSettings) -> ChunkedAnalys
     RecordError
         A bad row of a CSV (named by its line), too few samples.
     """
+    temperature = None
+    if record.bag_topic is None:  # a bag's: once the live node fits it too (parity)
+        try:
+            temperature = record.temperature_series()
+        except RecordError:  # optional evidence: the pressure's analysis stands without it
+            temperature = None
     try:
-        return analyze_chunks(record.chunks(), settings)
+        return analyze_chunks(record.chunks(), settings, temperature=temperature)
     except EstimationError as exc:
         raise RecordError(f"{record.path}: {exc}") from exc
 
@@ -334,12 +344,17 @@ def with_temperature_evidence(record: Record, settings: EstimatorSettings,
         if cf is None:
             out.append(r)
             continue
+        joint = cf.get("gas_temperature") or {}
         if series is None:
             ev: dict[str, Any] = {"used": False, "why": "the record carries no gas "
                                   "temperature (CSV: --temperature-column NAME)"}
+        elif "t10" in joint:
+            ev = channel_evidence(joint)
         else:
             fit = CurveFit(**cf)
             ev = temperature_evidence(fit.config(settings), fit.t_start, *series)
+            if joint.get("why"):
+                ev["why"] = f"compared, {joint['why']}"
         text = departure_text(ev)
         out.append(dataclasses.replace(
             r, extra={**r.extra, "gas_temperature": ev},

@@ -22,7 +22,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
+from pneumatic_unload.budget import BudgetTerm
 from pneumatic_unload.config import RigConfig
+from pneumatic_unload.curve_fit_result import CurveSpan
+from pneumatic_unload.fit.trace import TemperatureChannel
 from pneumatic_unload.model import discharge, first_order_lag
 
 FloatArray = NDArray[np.float64]
@@ -124,7 +127,78 @@ def departure_text(ev: dict[str, Any]) -> str:
     does or was not compared)."""
     if "rms" not in ev or ev.get("follows", True):
         return ""
+    how = (f"T10 and a thermometer lag of {ev['sensor_time_constant']:.3g} s fitted"
+           if ev.get("used") else
+           f"a thermometer lag of {ev['sensor_time_constant']:.3g} s and an offset of "
+           f"{ev['sensor_offset']:+.2g} K fitted")
     return (f"the logged gas temperature departs from the model's by {ev['rms']:.2g} K rms "
-            f"(channel noise {ev['noise']:.2g} K, thermometer lag "
-            f"{ev['sensor_time_constant']:.3g} s and offset {ev['sensor_offset']:+.2g} K "
-            f"fitted): no heat law of the fit follows it")
+            f"(channel noise {ev['noise']:.2g} K; {how}): no heat law of the fit follows "
+            "it")
+
+
+#: Fewest readings of a logged temperature inside the fitted span for the joint fit [-].
+CHANNEL_MIN_SAMPLES = 5
+
+
+def channel_samples(series: tuple[FloatArray, FloatArray], span: CurveSpan
+                    ) -> tuple[FloatArray, FloatArray] | str:
+    """The readings of a logged gas temperature (instants [s, absolute], values [K]) that
+    lie in the curve fit's span, at the span's relative times [s], or why there are too
+    few (finite, increasing instants only)."""
+    t, temp = (np.asarray(x, dtype=float) for x in series)
+    ok = np.isfinite(t) & np.isfinite(temp) & (t >= span.t_ref) & (t <= span.t_last)
+    t, temp = t[ok] - span.t_ref, temp[ok]
+    if t.size and not np.all(np.diff(t) > 0):
+        keep = np.concatenate(([True], np.diff(t) > 0))  # repeated stamps: the first
+        t, temp = t[keep], temp[keep]
+        if not np.all(np.diff(t) > 0):
+            return "its instants go backwards inside the unload"
+    if t.size < CHANNEL_MIN_SAMPLES:
+        return (f"{t.size} reading(s) inside the unload's span; the joint fit needs "
+                f"{CHANNEL_MIN_SAMPLES}")
+    return t, temp
+
+
+def channel(t: FloatArray, temp: FloatArray, pressure_rms: float, sigma: float
+            ) -> TemperatureChannel:
+    """The channel of readings ``temp`` [K] at relative instants t [s] whose residuals
+    have the standard deviation ``sigma`` [K], weighted to the pressure residuals'
+    ``pressure_rms`` [Pa]."""
+    return TemperatureChannel(t, temp, float(pressure_rms / sigma))
+
+
+def channel_evidence(summary: dict[str, float]) -> dict[str, Any]:
+    """JSON ``gas_temperature`` of a joint fit (the curve fit's ``gas_temperature``
+    summary): ``used`` true, the fitted readings' ``rms`` [K] against the channel's
+    ``noise`` [K] and whether the model ``follows`` the log (within :data:`FOLLOW_FACTOR`
+    noises), the thermometer's ``sensor_time_constant`` [s] and the fitted ``t10`` [K],
+    each with its 1-sigma."""
+    rms, noise = summary["rms"], summary["noise"]
+    follows = rms <= FOLLOW_FACTOR * noise
+    return {"used": True, "why": "fitted jointly with the pressure (the thermometer's lag "
+            "fitted, T10 from the log)" + ("" if follows else
+            "; weighted by its own misfit: no heat law follows it within its noise"),
+            "samples": int(summary["samples"]), "rms": rms, "noise": noise,
+            "follows": follows, "sensor_time_constant": summary["sensor_time_constant"],
+            "sensor_time_constant_std": summary["sensor_time_constant_std"],
+            "t10": summary["t10"], "t10_std": summary["t10_std"],
+            "sensor_offset": 0.0, "passes": int(summary.get("passes", 1))}
+
+
+def temperature_terms(fit: Any) -> tuple[BudgetTerm, ...]:
+    """The line of C's budget where a logged gas temperature departs from every heat law
+    (a :class:`~pneumatic_unload.curve_fit_result.CurveFit` whose ``gas_temperature`` has
+    the joint fit's ``joint_conductance``): the joint fit's C [m^3/(s Pa)] taken as the
+    half-width of a rectangular distribution about the pressure's, |dC|/sqrt(3); none
+    otherwise."""
+    g = fit.gas_temperature
+    jc = g.get("joint_conductance", math.nan)
+    if not math.isfinite(jc):
+        return ()
+    return (BudgetTerm("gas temperature log (no heat law follows it)", "model",
+                       g["joint_rms"], g["noise"], "K",
+                       abs(jc - fit.conductance) / math.sqrt(3.0),
+                       f"the joint fit's C {jc:.4g} m^3/(s Pa), the model's gas "
+                       f"{g['joint_rms']:.2g} K rms from the log (noise "
+                       f"{g['noise']:.2g} K): its distance from the pressure's C as the "
+                       "half-width of a rectangular distribution"),)

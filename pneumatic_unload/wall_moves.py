@@ -49,7 +49,8 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
             moved = estimator_model(dataclasses.replace(settings, wall_temperature=wall),
                                     model.start, heat_law=law,
                                     fit_m=model.subsonic_index is None,
-                                    fit_offset="sensor_offset" in model.effects)
+                                    fit_offset="sensor_offset" in model.effects,
+                                    thermometer=model.thermometer)
             try:
                 dr = np.asarray(trace.residual(moved)(fit.values), dtype=float) - fit.fun
             except (ValueError, ArithmeticError):

@@ -3,8 +3,9 @@ multi-rate CSV (pressure at 1 kHz, a thermocouple at 5 Hz in the same file, empt
 between) made by the independent model of ``test/foreign/newton_tank.py``. The fitted
 model's gas, seen through a fitted first-order lag and offset, follows a log that the same
 physics made, within the channel's noise; a log the pressure's physics did not make is
-said to depart, in the status text. (The joint fit of both channels is not made yet:
-``used`` is false and says so.)"""
+said to depart, in the status text. A log the model follows is fitted jointly with the
+pressure (``used``: T10 and the thermometer's lag fitted); one it does not follow is not
+used, and the joint fit's C is a line of the budget."""
 
 from __future__ import annotations
 
@@ -50,14 +51,15 @@ def test_a_log_of_the_same_physics_is_followed_within_its_noise(tmp_path, capsys
     _csv(path, tau_heat_log=8.0, lag=2.0, seed=1)
     u = _analyze(path, capsys)
     ev = u["gas_temperature"]
-    assert ev["used"] is False and "joint fit" in ev["why"]
+    assert ev["used"] is True and "jointly" in ev["why"], ev
     assert ev["samples"] == 60
     assert ev["follows"] and ev["rms"] <= 2.0 * ev["noise"], ev
-    assert 1.0 < ev["sensor_time_constant"] < 4.0, ev
-    assert abs(ev["sensor_offset"]) < 0.5
-    assert ev["rms_without_sensor"] > 2.0 * ev["rms"]  # the lag is what the log shows
+    # the thermocouple's 2 s lag and the gas's 293.15 K, each within 3 of its sigmas
+    assert abs(ev["sensor_time_constant"] - 2.0) < 3.0 * ev["sensor_time_constant_std"] + 0.05
+    assert abs(ev["t10"] - T10) < 3.0 * ev["t10_std"] + 0.05, ev
     assert "departs" not in u["status_text"]
     assert abs(u["conductance_model"] / C - 1.0) < 0.01
+    assert not any("gas temperature log" in b["name"] for b in u["budget"]["terms"])
 
 
 def test_a_log_the_pressure_did_not_make_departs_and_the_status_says_so(tmp_path, capsys):
@@ -67,8 +69,14 @@ def test_a_log_the_pressure_did_not_make_departs_and_the_status_says_so(tmp_path
     _csv(path, tau_heat_log=1.0, lag=1.0, seed=2)
     u = _analyze(path, capsys)
     ev = u["gas_temperature"]
+    assert ev["used"] is False and "no heat law follows it" in ev["why"], ev
     assert not ev["follows"] and ev["rms"] > 2.0 * ev["noise"], ev
     assert "the logged gas temperature departs from the model's" in u["status_text"]
+    (line,) = [b for b in u["budget"]["terms"] if "gas temperature log" in b["name"]]
+    assert line["std"] > 0.0
+    # the pressure alone is fitted: C as without the log, its sigma wider by the line
+    assert abs(u["conductance_model"] / C - 1.0) < 0.01
+    assert u["conductance_model_std"] >= line["std"]
 
 
 def test_a_record_without_temperature_says_so(tmp_path, capsys):

@@ -147,3 +147,39 @@ class SampleBuffer:
         self.cs = array("d", self.cs[keep:])
         self.cq = array("d", self.cq[keep:])
         self.shift += keep
+
+
+#: Readings a :class:`ReadingLog` keeps (the newest) [-]: a logged temperature at 10 Hz
+#: for 2.7 h.
+READING_LOG_CAPACITY = 100_000
+
+
+class ReadingLog:
+    """A slower channel's readings beside the pressure (a logged gas temperature): stamps
+    [s] and values [unit of the channel], bounded (the oldest dropped beyond
+    :data:`READING_LOG_CAPACITY`); non-finite values and stamps that do not increase are
+    not kept."""
+
+    def __init__(self, capacity: int = READING_LOG_CAPACITY) -> None:
+        self.capacity = capacity
+        self.t = np.empty(0)
+        self.v = np.empty(0)
+
+    def add(self, t: FloatArray, v: FloatArray) -> None:
+        """Append readings v at stamps t (arrays of one length) [s], [unit]."""
+        t = np.asarray(t, dtype=float).ravel()
+        v = np.asarray(v, dtype=float).ravel()
+        ok = np.isfinite(t) & np.isfinite(v)
+        t, v = t[ok], v[ok]
+        if t.size == 0:
+            return
+        last = self.t[-1] if self.t.size else -np.inf
+        keep = t > np.maximum.accumulate(np.concatenate(([last], t)))[:-1]
+        self.t = np.concatenate((self.t, t[keep]))[-self.capacity:]
+        self.v = np.concatenate((self.v, v[keep]))[-self.capacity:]
+
+    def between(self, t0: float, t1: float) -> tuple[FloatArray, FloatArray]:
+        """Copies of the readings with t0 <= t <= t1 [s]: (stamps [s], values [unit])."""
+        lo = int(np.searchsorted(self.t, t0, side="left"))
+        hi = int(np.searchsorted(self.t, t1, side="right"))
+        return self.t[lo:hi].copy(), self.v[lo:hi].copy()

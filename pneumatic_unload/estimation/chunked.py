@@ -127,7 +127,8 @@ class ChunkedAnalysis:
 
 def analyze_chunks(chunks: Iterable[tuple[ArrayLike, ArrayLike]],
                    settings: EstimatorSettings | None = None, *,
-                   overview_samples: int = OVERVIEW_SAMPLES) -> ChunkedAnalysis:
+                   overview_samples: int = OVERVIEW_SAMPLES,
+                   temperature: tuple[ArrayLike, ArrayLike] | None = None) -> ChunkedAnalysis:
     """:func:`~pneumatic_unload.estimation.analyze` over a record given in chunks.
 
     Parameters
@@ -139,6 +140,9 @@ def analyze_chunks(chunks: Iterable[tuple[ArrayLike, ArrayLike]],
         Tank and detection settings.
     overview_samples : int
         Samples kept in full for the explanation and plots [-].
+    temperature : tuple of array_like, optional
+        The record's logged gas temperature, stamps [s] and values [K], fitted beside the
+        pressure by the final fits (:meth:`StreamingEstimator.push_temperature`).
 
     Returns
     -------
@@ -154,6 +158,8 @@ def analyze_chunks(chunks: Iterable[tuple[ArrayLike, ArrayLike]],
     s = settings or EstimatorSettings()
     sparse = s.start_time is not None  # begins at the opening: small, analysed whole
     est = None if sparse else StreamingEstimator(s)
+    if est is not None and temperature is not None:
+        est.push_temperature(*temperature)
     run = ChunkedAnalysis(published=[], samples=0, settings=s,
                           overview=Overview(overview_samples))
     tail = np.empty(0)
@@ -180,7 +186,10 @@ def analyze_chunks(chunks: Iterable[tuple[ArrayLike, ArrayLike]],
         tail = np.concatenate((tail, pp[-keep:]))[-keep:]
     if sparse:
         run.published = analyze_from_start(np.concatenate([h[0] for h in held] or [[]]),
-                                           np.concatenate([h[1] for h in held] or [[]]), s)
+                                           np.concatenate([h[1] for h in held] or [[]]), s,
+                                           temperature=None if temperature is None else (
+                                               np.asarray(temperature[0], dtype=float),
+                                               np.asarray(temperature[1], dtype=float)))
         if tail.size:
             run.final_level = float(np.median(tail))
         return run

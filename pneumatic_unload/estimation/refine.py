@@ -38,6 +38,7 @@ from pneumatic_unload.inversion import (
 )
 from pneumatic_unload.recovery import fit_recovery
 from pneumatic_unload.subsonic_offer import m_budget, offset_terms, subsonic_term
+from pneumatic_unload.temperature_evidence import temperature_terms
 
 #: Quality figure [0, 1] at most of a result whose model does not describe the record at
 #: its noise level ("model inadequate" in its status text).
@@ -251,7 +252,7 @@ def crossing_inversion(settings: EstimatorSettings, tau: float, tau_std: float, 
 
 def final_curve_fit(res: UnloadResult, t: FloatArray | None, p: FloatArray | None,
                     settings: EstimatorSettings, *, noise_std: float,
-                    reduced: Any = None) -> UnloadResult | None:
+                    reduced: Any = None, temperature: Any = None) -> UnloadResult | None:
     """Final result of an unload from the full-curve fit (None when it fails).
 
     Parameters
@@ -267,8 +268,11 @@ def final_curve_fit(res: UnloadResult, t: FloatArray | None, p: FloatArray | Non
     reduced : Reducer, optional
         The samples reduced to bins, used instead of t and p (None): a long unload, see
         :mod:`pneumatic_unload.estimation.reduction`.
+    temperature : tuple of ndarray, optional
+        A logged gas temperature ([s], [K]) fitted beside the pressure.
     """
-    return refine_with_curve_fit(res, t, p, settings, noise_std=noise_std, reduced=reduced)
+    return refine_with_curve_fit(res, t, p, settings, noise_std=noise_std, reduced=reduced,
+                                 temperature=temperature)
 
 
 def recovery_fit(t: FloatArray, p: FloatArray, t_close: float) -> Any:
@@ -284,7 +288,7 @@ def recovery_fit(t: FloatArray, p: FloatArray, t_close: float) -> Any:
 def refine_with_curve_fit(
     res: UnloadResult, t: FloatArray, p: FloatArray, settings: EstimatorSettings,
     *, noise_std: float, hold: tuple[str, ...] = (), extra_terms: tuple[Any, ...] = (),
-    fit_heat: bool | None = None, reduced: Any = None,
+    fit_heat: bool | None = None, reduced: Any = None, temperature: Any = None,
 ) -> UnloadResult | None:
     """Final result of an unload: the crossing result refined by :func:`fit_curve`
     (``hold``: values held, and ``fit_heat``, see there; ``extra_terms``: further lines of
@@ -312,7 +316,7 @@ def refine_with_curve_fit(
     try:
         fit = fit_curve(t, p, settings, t_start=res.t_start, p10=res.p10, p_atm=res.p_atm,
                         conductance=res.conductance_model, hold=hold, fit_heat=fit_heat,
-                        reduced=reduced)
+                        reduced=reduced, temperature=temperature)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return dataclasses.replace(res, final=True, extra={"curve_fit_error": str(exc)})
     mf = fit.model_form_std if math.isfinite(fit.model_form_std) else 0.0
@@ -342,7 +346,7 @@ def refine_with_curve_fit(
     budget = final_budget(res, settings, c=fit.conductance, type_a_std=c_std,
                           model_form_std=mf, heat_law=fit.heat_law,
                           extra_terms=(*extra_terms, subsonic_term(fit, "C"),
-                                       *offset_terms(fit)), fit=fit)
+                                       *offset_terms(fit), *temperature_terms(fit)), fit=fit)
     if budget is not None:
         extra["budget"] = budget
         c_std = budget["combined_std"]

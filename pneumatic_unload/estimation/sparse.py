@@ -37,7 +37,7 @@ from pneumatic_unload.budget import MODEL_FORM_TERM, BudgetTerm, with_terms
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.crossing import HEAT_NOT_SEEN, crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.refine import refine_with_curve_fit
-from pneumatic_unload.estimation.types import UnloadResult
+from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 
 #: Fewest samples from the opening on [-].
 MIN_POINTS = 10
@@ -140,7 +140,8 @@ def interpolated_crossing(t: np.ndarray, p: np.ndarray, p_star: float, p_atm: fl
     return log, abs(log - lin), k
 
 
-def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings
+def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, *,
+                       temperature: tuple[FloatArray, FloatArray] | None = None
                        ) -> list[UnloadResult]:
     """The unload of a record that begins at the given opening ``settings.start_time``.
 
@@ -212,7 +213,8 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings
         # (stated, or the sample's noise: the fit's residual RMS) is a line of the budget
         final = refine_with_curve_fit(res, ts, ps, s, noise_std=math.nan,
                                       hold=("t_open", "p10"), extra_terms=terms,
-                                      fit_heat=None if ts.size >= FEW_POINTS else False)
+                                      fit_heat=None if ts.size >= FEW_POINTS else False,
+                                      temperature=temperature)
         if final is not None:
             extra = {**final.extra, "p10_source": p10_note}
             rms = float(extra.get("curve_fit", {}).get("rms", math.nan))

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from pneumatic_unload.config.estimator import EstimatorSettings
-from pneumatic_unload.estimation.buffer import SampleBuffer
+from pneumatic_unload.estimation.buffer import ReadingLog, SampleBuffer
 from pneumatic_unload.estimation.decisions import (
     DT_DEFAULT,
     PERIOD,
@@ -180,6 +180,8 @@ class EstimatorState:
         #: Final-fit jobs not yet taken (``defer_final_fit``; :class:`~.tail.FinalFit`).
         self.final_fits: list[Any] = []
         self.buf = SampleBuffer()
+        #: The logged gas temperature [s], [K] fitted beside the pressure by the final fits.
+        self.temperature = ReadingLog()
         #: The first and the last diagnostics (bounded, see :mod:`.history`).
         self.diagnostics = DiagnosticLog()
         self.n_unloads = 0

@@ -163,6 +163,14 @@ class StreamingEstimator:
         self._st.final_fits = []
         return jobs
 
+    def push_temperature(self, t: ArrayLike, temp: ArrayLike) -> None:
+        """Feed readings of the logged gas temperature: stamps [s, the pressure's clock] and
+        values [K] (a slower channel, at its own rate; readings that arrive before the
+        unload's final fit is due are fitted beside its pressure; non-finite or repeated
+        stamps ignored)."""
+        self._st.temperature.add(np.atleast_1d(np.asarray(t, dtype=float)),
+                                 np.atleast_1d(np.asarray(temp, dtype=float)))
+
     def push(self, t: float, p: float) -> list[UnloadResult]:
         """Feed one sample.
 

@@ -57,6 +57,9 @@ class FinalFit:
         Its stamp [s].
     reduced : Reducer or None
         A long unload's samples reduced to bins (see :mod:`.reduction`), or None.
+    temperature : tuple of ndarray or None
+        The logged gas temperature's readings over the unload ([s], [K], copies), fitted
+        beside the pressure; None without any.
     """
 
     crossing: UnloadResult
@@ -67,12 +70,14 @@ class FinalFit:
     i_complete: int
     t_complete: float
     reduced: Reducer | None = None
+    temperature: tuple[FloatArray, FloatArray] | None = None
 
     def run(self) -> UnloadResult | None:
         """The final result (None when the fit fails; see
         :func:`~.refine.final_curve_fit`)."""
         fin = final_curve_fit(self.crossing, self.t, self.p, self.settings,
-                              noise_std=self.noise_std, reduced=self.reduced)
+                              noise_std=self.noise_std, reduced=self.reduced,
+                              temperature=self.temperature)
         if fin is not None:
             fin.i_complete, fin.t_complete = self.i_complete, self.t_complete
         return fin
@@ -193,9 +198,13 @@ def finish_tail(st: EstimatorState, i: int, ended: bool, decided: int | None = N
         s = st.settings
         if s.curve_fit:
             t, p, reduced = fit_window(st, i)
+            t0 = float(t[0]) if t is not None else reduced.t_ref if reduced is not None \
+                else -math.inf
+            temp = st.temperature.between(t0, float(st.buf.t[i]))
             job = FinalFit(res, None if t is None else np.array(t), p, s,
                            abs(st.sigma * s.signal_gain), dec + st.buf.shift,
-                           float(st.buf.t[dec]), reduced)
+                           float(st.buf.t[dec]), reduced,
+                           temp if temp[0].size else None)
             if st.defer_final_fit:
                 st.final_fits.append(job)
             else:

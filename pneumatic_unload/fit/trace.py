@@ -9,8 +9,10 @@ evaluating the model only at the likelihood's quadrature nodes. SI units: s, Pa.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -43,6 +45,38 @@ class FittableModel(Protocol):
         ...
 
 
+@dataclass(frozen=True)
+class TemperatureChannel:
+    """A logged gas temperature fitted beside the pressure (a model with ``reading``, see
+    :meth:`pneumatic_unload.model.parametric.ParametricModel.reading`).
+
+    Attributes
+    ----------
+    t : ndarray
+        The thermometer's sample instants [s, the trace's relative times], increasing, at
+        least three; its first reading is the lag's initial state, not a residual.
+    temp : ndarray
+        Its readings [K].
+    weight : float
+        Pa per K of a temperature residual: the pressure residual's standard deviation over
+        the temperature's [Pa/K], so that both channels' residuals have one variance.
+    """
+
+    t: FloatArray
+    temp: FloatArray
+    weight: float
+
+    @property
+    def n(self) -> int:
+        """Residuals the channel adds [-]."""
+        return int(self.temp.size) - 1
+
+    def residual(self, model: FittableModel, v: Values) -> FloatArray:
+        """Weighted readings minus the model's [Pa-equivalent]."""
+        seen = model.reading(v, self.t, float(self.temp[0]))  # type: ignore[attr-defined]
+        return self.weight * (self.temp[1:] - seen[1:])
+
+
 class Trace:
     """A trace ready for fitting.
 
@@ -71,6 +105,14 @@ class Trace:
         #: :func:`time.monotonic` instant [s] after which an evaluation raises
         #: :class:`FitTimeout` (None: no deadline); one evaluation is the granularity.
         self.deadline: float | None = None
+        #: A logged gas temperature fitted beside (None: the pressure alone).
+        self.channel: TemperatureChannel | None = None
+
+    def with_channel(self, channel: TemperatureChannel | None) -> Trace:
+        """This trace with ``channel`` fitted beside the pressure (the likelihood shared)."""
+        out = copy.copy(self)
+        out.channel = channel
+        return out
 
     @classmethod
     def from_stats(cls, stats: BinStats, noise: NoiseModel) -> Trace:
@@ -81,6 +123,7 @@ class Trace:
         self.noise = noise
         self.lik = BinnedLikelihood.from_stats(stats, noise)
         self.deadline = None
+        self.channel = None
         return self
 
     @property
@@ -89,16 +132,18 @@ class Trace:
         return self.lik.n
 
     def residual(self, model: FittableModel) -> Callable[[Values], FloatArray]:
-        """The normalised binned residual of ``model`` as a function of its values [-].
+        """The normalised binned residual of ``model`` as a function of its values [-],
+        the temperature channel's weighted residuals after it when there is one.
 
         Raises :class:`FitTimeout` once :attr:`deadline` has passed.
         """
-        lik = self.lik
+        lik, ch = self.lik, self.channel
 
         def fun(v: Values) -> FloatArray:
             if self.deadline is not None and time.monotonic() > self.deadline:
                 raise FitTimeout("the time limit passed during a fit")
-            return lik.residuals_at(lambda tt: model.signal(v, tt), model.events(v))
+            r = lik.residuals_at(lambda tt: model.signal(v, tt), model.events(v))
+            return r if ch is None else np.concatenate((r, ch.residual(model, v)))
 
         return fun
 

@@ -31,13 +31,21 @@ from pneumatic_unload.model.effects import (
     clamp,
 )
 from pneumatic_unload.model.ode import integrate, valve_events
-from pneumatic_unload.model.sensor import sensor_response
+from pneumatic_unload.model.sensor import first_order_lag, sensor_response
 
 #: The subsonic index m of the ISO 6358-1:2013 flow law held when it is not fitted, and
 #: the start of its fit [-] (0.5: the elliptic law of ISO 6358:1989).
 SUBSONIC_INDEX_START = 0.5
 #: Bounds of a fitted m [-] (the simulator's range).
 SUBSONIC_INDEX_RANGE = (0.1, 1.0)
+#: Bounds of a thermometer's fitted time constant [s] (a bare fine thermocouple to a
+#: sheathed probe in a thermowell) and its start.
+THERMOMETER_TAU_RANGE = (0.05, 120.0)
+THERMOMETER_TAU_START = 1.0
+#: Points of the model's gas temperature between a thermometer's first and last reading
+#: (geometric from the opening; the lag is exact for the piecewise-linear interpolant of
+#: its input) [-].
+THERMOMETER_GRID = 400
 
 
 class ParametricModel:
@@ -62,11 +70,18 @@ class ParametricModel:
         The component's ISO 6358-1 subsonic index m [-] held at this value; None: m is a
         parameter ('m', start :data:`SUBSONIC_INDEX_START`, bounds
         :data:`SUBSONIC_INDEX_RANGE`).
+    thermometer : bool
+        A logged gas temperature is fitted beside the pressure: T10 (the gas temperature at
+        the opening, 't10' [K], start ``tank.initial_temperature``) and the thermometer's
+        first-order time constant ('tau_thermo' [s], :data:`THERMOMETER_TAU_RANGE`) are
+        parameters, and :meth:`reading` is what the thermometer shows. A wall not given
+        follows the fitted T10.
     """
 
     def __init__(self, effects: tuple[str, ...], tank: TankSpec, start: Start, *,
                  heat_law: str = "natural", fit_wall_temperature: bool = False,
-                 subsonic_index: float | None = SUBSONIC_INDEX_START) -> None:
+                 subsonic_index: float | None = SUBSONIC_INDEX_START,
+                 thermometer: bool = False) -> None:
         bad = [e for e in effects if e not in CANDIDATES]
         if bad:
             raise ValueError(f"unknown effect(s) {bad}; known: {', '.join(CANDIDATES)}")
@@ -82,6 +97,7 @@ class ParametricModel:
         self.hot_start = HOT_START in effects
         self.fit_wall_temperature = fit_wall_temperature or self.hot_start
         self.subsonic_index = subsonic_index
+        self.thermometer = thermometer
         #: effects of the configuration (the hot start is heat transfer in the simulator)
         self.config_effects = tuple("heat_transfer" if e == HOT_START else e
                                     for e in self.effects)
@@ -108,6 +124,12 @@ class ParametricModel:
             lo, hi = SUBSONIC_INDEX_RANGE
             ps.append(Parameter("m", SUBSONIC_INDEX_START, lo, hi, "-", scale=0.1,
                                 doc="ISO 6358-1 subsonic index"))
+        if self.thermometer:
+            ps.append(Parameter("t10", self.tank.initial_temperature, 150.0, 600.0, "K",
+                                scale=2.0, doc="gas temperature at the valve opening"))
+            lo, hi = THERMOMETER_TAU_RANGE
+            ps.append(Parameter("tau_thermo", THERMOMETER_TAU_START, lo, hi, "s", log=True,
+                                scale=1.0, doc="thermometer's first-order time constant"))
         if self.tank.atmosphere is None:
             ps.append(Parameter("p_atm", s.p_atm, 0.3 * s.p_atm, 3.0 * s.p_atm, "Pa",
                                 scale=1e-3 * s.p_atm, doc="atmospheric pressure (absolute)"))
@@ -178,16 +200,20 @@ class ParametricModel:
             "atmosphere": clamp(p_atm, 1e3, 2e5),
             "subsonic_index": clamp(v.get("m", self.subsonic_index or SUBSONIC_INDEX_START),
                                     *SUBSONIC_INDEX_RANGE),
-            "wall_temperature": float(v.get("t_wall", tank.wall))}
+            "wall_temperature": float(v.get("t_wall", tank.wall if "t10" not in v or
+                                            tank.wall_temperature is not None
+                                            else clamp(v["t10"], 150.0, 600.0)))}
+        if "t10" in v:
+            kw["initial_temperature"] = clamp(v["t10"], 150.0, 600.0)
         for rec in self.records:
             kw.update(rec.apply(vv, tank))
         if self.hot_start:
             kw.update(HOT_START_RECORD.apply(vv, tank))
         if self._base_config is None:
             gas = tank.gas
+            kw.setdefault("initial_temperature", tank.initial_temperature)
             self._base_config = RigConfig(
                 volume=tank.volume, length_diameter_ratio=tank.length_diameter_ratio,
-                initial_temperature=tank.initial_temperature,
                 gas_constant=gas.gas_constant, gamma=gas.gamma, effects=self.config_effects,
                 pre_time=0.0, noise_std=0.0, **kw)  # type: ignore[arg-type]
             return self._base_config
@@ -214,3 +240,24 @@ class ParametricModel:
     def temperature(self, v: Values, t: FloatArray) -> FloatArray:
         """Mean gas temperature of the model at instants t [K]."""
         return self.states(v, t)[:, 1]
+
+    def reading(self, v: Values, t: FloatArray, first: float) -> FloatArray:
+        """What a thermometer of time constant ``v['tau_thermo']`` [s] shows at instants t
+        [s] (increasing, at least two) when it showed ``first`` [K] at t[0]: the first-order
+        lag of the model's mean gas temperature [K] (exact for its piecewise-linear
+        interpolant on the log's instants and :data:`THERMOMETER_GRID` more, dense after
+        the opening)."""
+        t = np.asarray(t, dtype=float)
+        t0, t1, t_open = float(t[0]), float(t[-1]), float(v["t_open"])
+        after = max(t_open, t0)
+        if t1 > after:
+            span = t1 - after
+            dense = after + span * np.geomspace(1e-4, 1.0, THERMOMETER_GRID)
+            grid = np.union1d(t, np.concatenate(([after], dense)))
+        else:
+            grid = t
+        gas = self.temperature(v, grid)
+        lag = first_order_lag(grid[1:], gas[1:], float(v["tau_thermo"]),
+                              (float(grid[0]), float(gas[0]), float(first)))[0]
+        seen = np.concatenate(([float(first)], lag))
+        return seen[np.searchsorted(grid, t)]
