@@ -257,8 +257,8 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
     Returns the joint family, its chosen key, its trace and {} - or, where the joint fit's
     readings do not follow the log within :data:`FOLLOW_FACTOR` of its noise (no heat law
     of the model makes the gas the thermometer saw: it is no evidence of the heat law),
-    the pressure's family, key and trace and why not, with the joint fit's misfit [K] and
-    C [m^3/(s Pa)] for the budget (:func:`temperature_terms`)."""
+    the pressure's family, key and trace and why not, with the pressure fit's departure
+    from the log [K] for the budget (:func:`~.temperature_evidence.temperature_terms`)."""
     trace: Trace = fam.common["trace"]
     got = channel_samples(series, fam.span)
     if isinstance(got, str):
@@ -272,16 +272,25 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
     if not (math.isfinite(cf.rms) and cf.rms > 0 and math.isfinite(sigma)):
         return fam, best, trace, {"why": "not used: the pressure fit's residual is not "
                                          "finite"}
+    # each law starts from its fit to the pressure alone, the thermometer from the
+    # comparison's lag and the gas's T10 (the later passes from the previous pass)
+    thermo = {"t10": fam.settings.initial_temperature,
+              "tau_thermo": ev.get("sensor_time_constant", math.nan)}
+    seeds = {k: {**fam.start_of(f[0]), **{n: x for n, x in thermo.items()
+                                          if math.isfinite(x)}}
+             for k, f in fam.fits.items()}
     for k in range(TEMPERATURE_PASSES):
         joint = trace.with_channel(channel(t_rel, temp, cf.rms, sigma))
         j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
-                                       fam.profile_heat, offset=fam.offset), tried)
+                                       fam.profile_heat, offset=fam.offset,
+                                       seeds=seeds), tried)
         summary = j_fam.fits[j_best][0].gas_temperature
         summary.update(noise=noise, passes=k + 1)
         now = max(noise, summary["rms"])
         if abs(math.log(now / sigma)) <= math.log(TEMPERATURE_WEIGHT_TOLERANCE):
             break
         sigma = now
+        seeds = {key: j_fam.start_of(f[0]) for key, f in j_fam.fits.items()}
     if summary["rms"] <= FOLLOW_FACTOR * noise:
         return j_fam, j_best, joint, {}
     jc = j_fam.fits[j_best][0]
@@ -289,9 +298,9 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
         "why": f"not used: fitted jointly, the model's gas departs from it by "
                f"{summary['rms']:.2g} K rms (noise {noise:.2g} K; C {jc.conductance:.4g} "
                f"m^3/(s Pa) against the pressure's {cf.conductance:.4g}): no heat law "
-               f"follows it, the pressure alone is fitted and the difference is a line of "
-               f"the budget", "joint_rms": summary["rms"], "noise": noise,
-        "joint_conductance": jc.conductance}
+               f"follows it, the pressure alone is fitted and the departure is a line of "
+               f"the budget", "departure_rms": float(ev.get("rms", summary["rms"])),
+        "noise": noise, "t10_assumed": fam.settings.initial_temperature}
 
 
 #: Largest zero offset fitted, as a fraction of the drop p10 - p_atm [-] (a transducer's

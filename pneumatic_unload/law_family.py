@@ -62,6 +62,8 @@ SECOND_PARAMETER: dict[str, tuple[str, Callable[[CurveFit], dict[str, float]]]] 
     "natural+turbulent": ("natural", lambda f: {"heat_scale": f.heat_scale,
                                                 "heat_turbulent": 1.0}),
 }
+#: Evaluation budget of a fit started from its seed (:attr:`Family.seeds`) [-].
+SEEDED_NFEV = 80
 #: One fit of the table: (result, chi^2 [Pa^2], free parameters [-]).
 Fit = tuple[CurveFit, float, int]
 
@@ -90,6 +92,10 @@ class Family:
         and :data:`Fit` ('entry', offered or not).
     not_offered : dict
         Key -> why a fit made is not offered (the record does not carry its parameter).
+    seeds : dict
+        Key -> starting values [SI] of that key's fit, replacing the one the family would
+        take (e.g. the same law's fit to the pressure alone, for the joint fit with the
+        logged temperature).
     """
 
     span: CurveSpan
@@ -100,6 +106,7 @@ class Family:
     fits: dict[str, Fit] = field(default_factory=dict)
     raw: dict[str, dict[str, Any]] = field(default_factory=dict)
     not_offered: dict[str, str] = field(default_factory=dict)
+    seeds: dict[str, dict[str, float]] = field(default_factory=dict)
 
     @property
     def natural(self) -> bool:
@@ -110,6 +117,8 @@ class Family:
             profile_heat: bool = False, explore: bool = False) -> Fit:
         """The fit of a table key [see the module note] (kept in ``raw``, not offered)."""
         law, wall, fit_m = split_key(key)
+        if key in self.seeds:  # a start near this key's minimum: a few iterations
+            start, max_nfev = self.seeds[key], max(max_nfev, SEEDED_NFEV)
         kept: dict[str, Any] = {}
         self.raw[key] = kept
         out = fit_law(self.span, self.settings, profile_heat=profile_heat, law=law,

@@ -303,19 +303,20 @@ def analyze_input(record: Record, given: dict[str, Any]) -> InputAnalysis:
         A value out of range.
     """
     settings = settings_for(record.cfg, given)
+    t10_column = False
+    if record.has_temperature and "initial_temperature" not in given:
+        # T10 from the temperature column: the gas temperature at the start of the unload
+        # (the first row may be logged long before, during the charge), found by the
+        # detector alone (the final fits are made once, with it)
+        first = merge_final(analyze_record(record, dataclasses.replace(
+            settings, curve_fit=False)).published)
+        if first and math.isfinite(first[0].t_start):
+            t10 = record.temperature_at(first[0].t_start)
+            t10_column = True
+            if abs(t10 - settings.initial_temperature) > 1e-3:
+                settings = dataclasses.replace(settings, initial_temperature=t10)
     run = analyze_record(record, settings)
     unloads = merge_final(run.published)
-    t10_column = False
-    if (record.has_temperature and "initial_temperature" not in given and unloads
-            and math.isfinite(unloads[0].t_start)):
-        # T10 from the temperature column: the gas temperature at the start of the unload
-        # (the first row may be logged long before, during the charge)
-        t10 = record.temperature_at(unloads[0].t_start)
-        t10_column = True
-        if abs(t10 - settings.initial_temperature) > 1e-3:
-            settings = dataclasses.replace(settings, initial_temperature=t10)
-            run = analyze_record(record, settings)
-            unloads = merge_final(run.published)
     unloads = with_temperature_evidence(record, settings, unloads)
     why = None if unloads else run.explain_no_unload()
     problem = run.gauge_suspicion()

@@ -188,17 +188,18 @@ def channel_evidence(summary: dict[str, float]) -> dict[str, Any]:
 def temperature_terms(fit: Any) -> tuple[BudgetTerm, ...]:
     """The line of C's budget where a logged gas temperature departs from every heat law
     (a :class:`~pneumatic_unload.curve_fit_result.CurveFit` whose ``gas_temperature`` has
-    the joint fit's ``joint_conductance``): the joint fit's C [m^3/(s Pa)] taken as the
-    half-width of a rectangular distribution about the pressure's, |dC|/sqrt(3); none
+    the pressure fit's ``departure_rms`` [K] from the log, its thermometer's lag and
+    offset fitted): the gas temperature the model assumes is uncertain by that much, and
+    C from a pressure curve goes as 1/sqrt(T) (the flow C rho_N p sqrt(T_N/T) empties the
+    tank at a rate that goes as C sqrt(T)), so C's line is C rms / (2 T10); none
     otherwise."""
     g = fit.gas_temperature
-    jc = g.get("joint_conductance", math.nan)
-    if not math.isfinite(jc):
+    rms = g.get("departure_rms", math.nan)
+    if not math.isfinite(rms):
         return ()
-    return (BudgetTerm("gas temperature log (no heat law follows it)", "model",
-                       g["joint_rms"], g["noise"], "K",
-                       abs(jc - fit.conductance) / math.sqrt(3.0),
-                       f"the joint fit's C {jc:.4g} m^3/(s Pa), the model's gas "
-                       f"{g['joint_rms']:.2g} K rms from the log (noise "
-                       f"{g['noise']:.2g} K): its distance from the pressure's C as the "
-                       "half-width of a rectangular distribution"),)
+    t10 = g["t10_assumed"]
+    return (BudgetTerm("gas temperature (the log departs from every heat law)", "model",
+                       math.nan, rms, "K", fit.conductance * rms / (2.0 * t10),
+                       f"the model's gas {rms:.2g} K rms from the log (noise "
+                       f"{g['noise']:.2g} K; lag and offset fitted); C goes as "
+                       f"1/sqrt(T): C rms/(2 T10)"),)

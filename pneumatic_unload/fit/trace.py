@@ -13,7 +13,7 @@ import copy
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,9 +71,9 @@ class TemperatureChannel:
         """Residuals the channel adds [-]."""
         return int(self.temp.size) - 1
 
-    def residual(self, model: FittableModel, v: Values) -> FloatArray:
-        """Weighted readings minus the model's [Pa-equivalent]."""
-        seen = model.reading(v, self.t, float(self.temp[0]))  # type: ignore[attr-defined]
+    def residual(self, seen: FloatArray) -> FloatArray:
+        """Weighted readings minus the model's readings ``seen`` [K] (at :attr:`t`)
+        [Pa-equivalent]."""
         return self.weight * (self.temp[1:] - seen[1:])
 
 
@@ -142,8 +142,22 @@ class Trace:
         def fun(v: Values) -> FloatArray:
             if self.deadline is not None and time.monotonic() > self.deadline:
                 raise FitTimeout("the time limit passed during a fit")
-            r = lik.residuals_at(lambda tt: model.signal(v, tt), model.events(v))
-            return r if ch is None else np.concatenate((r, ch.residual(model, v)))
+            if ch is None:
+                return lik.residuals_at(lambda tt: model.signal(v, tt), model.events(v))
+            # one integration gives the pressure at the likelihood's nodes and the gas
+            # temperature the thermometer follows
+            m: Any = model
+            grid = m.thermometer_grid(v, ch.t)
+            gas: list[FloatArray] = []
+
+            def at(tt: FloatArray) -> FloatArray:
+                p, g = m.signal_and_temperature(v, tt, grid)
+                gas.append(g)
+                return p
+
+            r = lik.residuals_at(at, model.events(v))
+            seen = m.seen(v, grid, gas[-1], ch.t, float(ch.temp[0]))
+            return np.concatenate((r, ch.residual(seen)))
 
         return fun
 

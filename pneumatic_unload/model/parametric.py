@@ -245,19 +245,37 @@ class ParametricModel:
         """What a thermometer of time constant ``v['tau_thermo']`` [s] shows at instants t
         [s] (increasing, at least two) when it showed ``first`` [K] at t[0]: the first-order
         lag of the model's mean gas temperature [K] (exact for its piecewise-linear
-        interpolant on the log's instants and :data:`THERMOMETER_GRID` more, dense after
-        the opening)."""
+        interpolant on :meth:`thermometer_grid`)."""
+        grid = self.thermometer_grid(v, t)
+        return self.seen(v, grid, self.temperature(v, grid), t, first)
+
+    def thermometer_grid(self, v: Values, t: FloatArray) -> FloatArray:
+        """The instants [s] at which the gas temperature is taken for a thermometer read at
+        t [s]: t and :data:`THERMOMETER_GRID` more, geometric from the opening."""
         t = np.asarray(t, dtype=float)
-        t0, t1, t_open = float(t[0]), float(t[-1]), float(v["t_open"])
-        after = max(t_open, t0)
-        if t1 > after:
-            span = t1 - after
-            dense = after + span * np.geomspace(1e-4, 1.0, THERMOMETER_GRID)
-            grid = np.union1d(t, np.concatenate(([after], dense)))
-        else:
-            grid = t
-        gas = self.temperature(v, grid)
+        after, t1 = max(float(v["t_open"]), float(t[0])), float(t[-1])
+        if t1 <= after:
+            return t
+        dense = after + (t1 - after) * np.geomspace(1e-4, 1.0, THERMOMETER_GRID)
+        return np.union1d(t, np.concatenate(([after], dense)))
+
+    def signal_and_temperature(self, v: Values, t: FloatArray, grid: FloatArray
+                               ) -> tuple[FloatArray, FloatArray]:
+        """The sensor output at instants t [Pa] and the mean gas temperature at ``grid``
+        [K] from one integration (over both sets of instants [s])."""
+        cfg = self.config(v)
+        t = np.asarray(t, dtype=float)
+        both = np.union1d(t, grid)
+        st = integrate(cfg, both, v["t_open"], rtol=FIT_RTOL, quiet=True,
+                       max_steps=FIT_MAX_STEPS)
+        p = st[np.searchsorted(both, t), 0]
+        return sensor_response(t, p, cfg), st[np.searchsorted(both, grid), 1]
+
+    @staticmethod
+    def seen(v: Values, grid: FloatArray, gas: FloatArray, t: FloatArray, first: float
+             ) -> FloatArray:
+        """The thermometer's readings [K] at t [s] (a subset of ``grid`` [s], where the gas
+        temperature is ``gas`` [K]) from ``first`` [K] at t[0]."""
         lag = first_order_lag(grid[1:], gas[1:], float(v["tau_thermo"]),
                               (float(grid[0]), float(gas[0]), float(first)))[0]
-        seen = np.concatenate(([float(first)], lag))
-        return seen[np.searchsorted(grid, t)]
+        return np.concatenate(([float(first)], lag))[np.searchsorted(grid, t)]
