@@ -244,12 +244,10 @@ def analyze_record(record: Record, settings: EstimatorSettings) -> ChunkedAnalys
     RecordError
         A bad row of a CSV (named by its line), too few samples.
     """
-    temperature = None
-    if record.bag_topic is None:  # a bag's: once the live node fits it too (parity)
-        try:
-            temperature = record.temperature_series()
-        except RecordError:  # optional evidence: the pressure's analysis stands without it
-            temperature = None
+    try:
+        temperature = record.temperature_series()
+    except RecordError:  # optional evidence: the pressure's analysis stands without it
+        temperature = None
     try:
         return analyze_chunks(record.chunks(), settings, temperature=temperature)
     except EstimationError as exc:

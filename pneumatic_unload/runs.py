@@ -59,7 +59,7 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
     dict
         Summary: path, samples, duration [s], results (list of dicts).
     """
-    from pneumatic_unload.io.bag import BagRecorder
+    from pneumatic_unload.io.bag import ZERO_CELSIUS, BagRecorder
 
     if out.exists():
         raise FileExistsError(f"{out} exists already; choose a new --out")
@@ -75,15 +75,18 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
     t_ns = np.round(t_abs * 1e9).astype(np.int64)
     results: list[UnloadResult] = []
     settings = settings_for(cfg)
+    step = max(1, int(round(cfg.rate / TEMPERATURE_RATE)))
     if analyze_live:
         est = StreamingEstimator(settings)
-        # the stamps as a subscriber or the bag reader sees them: integer ns -> s
+        # the stamps and temperatures as a subscriber or the bag reader sees them: integer
+        # ns -> s, K -> degrees C -> K
         t_seen = t_ns * 1e-9
+        est.push_temperature(t_seen[::step], (temperature[::step] - ZERO_CELSIUS)
+                             + ZERO_CELSIUS)
         results = est.push_block(t_seen, measured) + est.finish()
     out.parent.mkdir(parents=True, exist_ok=True)
     with BagRecorder(out, config=cfg.to_dict()) as rec:
         rec.write_pressures(t_ns, measured)
-        step = max(1, int(round(cfg.rate / TEMPERATURE_RATE)))
         rec.write_temperatures(t_ns[::step], temperature[::step])
         rec.write_valve(int(t_ns[0]), False, 0.0)
         is_open = opening > 0

@@ -27,12 +27,12 @@ from pneumatic_unload.config import RigConfig
 from pneumatic_unload.curve_fit_result import CurveSpan
 from pneumatic_unload.fit.trace import TemperatureChannel
 from pneumatic_unload.model import discharge, first_order_lag
+from pneumatic_unload.model.parametric import THERMOMETER_TAU_RANGE
 
 FloatArray = NDArray[np.float64]
 
-#: Bounds of the thermometer's fitted time constant [s] (a bare fine thermocouple to a
-#: sheathed probe in a thermowell).
-SENSOR_TAU_RANGE = (0.05, 120.0)
+#: Bounds of the thermometer's fitted time constant [s] (the joint fit's).
+SENSOR_TAU_RANGE = THERMOMETER_TAU_RANGE
 #: The model's gas follows the log when the RMS of fitted minus measured is at most this
 #: many times the channel's noise [-] (with a floor of :data:`RESOLUTION_FLOOR`).
 FOLLOW_FACTOR = 2.0

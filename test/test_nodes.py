@@ -354,7 +354,8 @@ def test_estimator_survives_bad_messages(tmp_path: Path, ros_node: Any) -> None:
 
 def test_replay_of_reference_bag_into_live_estimator(tmp_path: Path, ros_node: Any,
                                                      repo_root: Path) -> None:
-    """Replaying bags/two_unloads into a live estimator reproduces analyze's estimates.
+    """Replaying bags/two_unloads (pressure and gas temperature) into a live estimator
+    reproduces analyze's estimates, the final fits with the logged temperature beside.
 
     The estimator starts with a wrong tank volume, which is then corrected at run time
     (as ``ros2 param set /estimator volume ...``): the estimates must be the recorded ones,
@@ -374,8 +375,9 @@ def test_replay_of_reference_bag_into_live_estimator(tmp_path: Path, ros_node: A
     est.wait_output("estimating on", 20.0)
     (r,) = _set_params(node, ex, "estimator", volume=float(cfg["volume"]))
     assert r.successful, r.reason
-    rep = NodeProcess("replay", {"bag": str(bag), "rate": 0.0, "topics": ["/tank/pressure"]},
-                      tmp_path)
+    # the gas temperature too: the final fits take it beside the pressure, live as offline
+    rep = NodeProcess("replay", {"bag": str(bag), "rate": 0.0,
+                                 "topics": ["/tank/pressure", "/tank/temperature"]}, tmp_path)
     try:
         assert spin_until(node, ex, lambda: len(got) >= len(recorded), 60.0), (
             f"{len(got)} of {len(recorded)} estimates; estimator:\n{est.output()[-2000:]}"

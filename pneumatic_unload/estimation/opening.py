@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 
 from pneumatic_unload import physics
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.estimation.buffer import ReadingLog
 from pneumatic_unload.estimation.history import DiagnosticLog
 from pneumatic_unload.estimation.sparse import (
     SETTLE_FRACTION,
@@ -47,10 +48,27 @@ class OpeningFinal:
     t: np.ndarray
     p: np.ndarray
     settings: EstimatorSettings
+    #: The logged gas temperature's readings over the samples ([s], [K]), or None.
+    temperature: tuple[np.ndarray, np.ndarray] | None = None
+
+    def window(self) -> tuple[float, float]:
+        """The samples' span [s]."""
+        return float(self.t[0]), float(self.t[-1])
+
+    @property
+    def t_end(self) -> float:
+        """The last sample's instant [s]."""
+        return float(self.t[-1])
+
+    def with_temperature(self, log: ReadingLog) -> OpeningFinal:
+        """This job with the readings of ``log`` over its :meth:`window` (None without
+        any)."""
+        got = log.between(*self.window())
+        return dataclasses.replace(self, temperature=got if got[0].size else None)
 
     def run(self) -> UnloadResult | None:
         """The final (curve-fit) result, or None when the fit did not give one."""
-        out = analyze_from_start(self.t, self.p, self.settings)
+        out = analyze_from_start(self.t, self.p, self.settings, temperature=self.temperature)
         return out[-1] if out[-1].final else None
 
 
@@ -80,6 +98,8 @@ class OpeningStartEstimator:
         self._crossing: UnloadResult | None = None
         self._run = 0  # consecutive settled samples after the crossing
         self._jobs: list[OpeningFinal] = []
+        #: The logged gas temperature's readings ([s], [K]; :meth:`push_temperature`).
+        self.temperature = ReadingLog()
         #: Diagnostics (a bounded :class:`~.history.DiagnosticLog`).
         self.diagnostics = DiagnosticLog()
 
@@ -106,6 +126,12 @@ class OpeningStartEstimator:
         """The final-estimate jobs made since the last call (at most one)."""
         jobs, self._jobs = self._jobs, []
         return jobs
+
+    def push_temperature(self, t: ArrayLike, temp: ArrayLike) -> None:
+        """Feed readings of the logged gas temperature (stamps [s, record clock], values
+        [K]): fitted beside the pressure by the final fit."""
+        self.temperature.add(np.atleast_1d(np.asarray(t, dtype=float)),
+                             np.atleast_1d(np.asarray(temp, dtype=float)))
 
     def push(self, t: float, p: float) -> list[UnloadResult]:
         """Feed one sample (t [s, record clock], p [signal units]); the crossing result
@@ -200,8 +226,9 @@ class OpeningStartEstimator:
         """The final job on the first n samples."""
         assert self._crossing is not None
         if self._settings.curve_fit:
-            self._jobs.append(OpeningFinal(self._crossing, self._t[:n].copy(),
-                                           self._p[:n].copy(), self._settings))
+            job = OpeningFinal(self._crossing, self._t[:n].copy(), self._p[:n].copy(),
+                               self._settings)
+            self._jobs.append(job.with_temperature(self.temperature))
         self._mode = "done"
 
     def _fail(self, message: str) -> list[UnloadResult]:

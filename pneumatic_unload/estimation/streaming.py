@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation import decisions, detector, sse, tail, unloading
-from pneumatic_unload.estimation.buffer import SampleBuffer
+from pneumatic_unload.estimation.buffer import ReadingLog, SampleBuffer
 from pneumatic_unload.estimation.decisions import SCAN_HORIZON
 from pneumatic_unload.estimation.history import recent_results
 from pneumatic_unload.estimation.regression import block_steps, first_below_in
@@ -170,6 +170,13 @@ class StreamingEstimator:
         stamps ignored)."""
         self._st.temperature.add(np.atleast_1d(np.asarray(t, dtype=float)),
                                  np.atleast_1d(np.asarray(temp, dtype=float)))
+
+    @property
+    def temperature(self) -> ReadingLog:
+        """The logged gas temperature's readings kept ([s], [K]; see
+        :meth:`push_temperature`): a deferred final fit takes those of its span when it
+        runs (:meth:`~.tail.FinalFit.window`)."""
+        return self._st.temperature
 
     def push(self, t: float, p: float) -> list[UnloadResult]:
         """Feed one sample.

@@ -6,12 +6,14 @@ indices in buffer samples."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.estimation.buffer import ReadingLog
 from pneumatic_unload.estimation.decisions import (
     PERIOD,
     PLATEAU,
@@ -71,6 +73,25 @@ class FinalFit:
     t_complete: float
     reduced: Reducer | None = None
     temperature: tuple[FloatArray, FloatArray] | None = None
+
+    def window(self) -> tuple[float, float]:
+        """The unload's span [s]: its first sample (held or reduced) and the end of its
+        tail (the logged temperature fitted beside is the readings within)."""
+        t0 = float(self.t[0]) if self.t is not None else \
+            self.reduced.t_ref if self.reduced is not None else -math.inf
+        return t0, self.t_end
+
+    def with_temperature(self, log: ReadingLog) -> FinalFit:
+        """This job with the readings of ``log`` over its :meth:`window` (None without
+        any): taken when it is made, and again when a live node runs it (the slower
+        topic's readings up to the tail's end may arrive after the pressure's)."""
+        got = log.between(*self.window())
+        return dataclasses.replace(self, temperature=got if got[0].size else None)
+
+    @property
+    def t_end(self) -> float:
+        """The last instant of the unload's tail [s]."""
+        return float(self.crossing.t_end)
 
     def run(self) -> UnloadResult | None:
         """The final result (None when the fit fails; see
@@ -198,13 +219,10 @@ def finish_tail(st: EstimatorState, i: int, ended: bool, decided: int | None = N
         s = st.settings
         if s.curve_fit:
             t, p, reduced = fit_window(st, i)
-            t0 = float(t[0]) if t is not None else reduced.t_ref if reduced is not None \
-                else -math.inf
-            temp = st.temperature.between(t0, float(st.buf.t[i]))
             job = FinalFit(res, None if t is None else np.array(t), p, s,
                            abs(st.sigma * s.signal_gain), dec + st.buf.shift,
-                           float(st.buf.t[dec]), reduced,
-                           temp if temp[0].size else None)
+                           float(st.buf.t[dec]), reduced)
+            job = job.with_temperature(st.temperature)
             if st.defer_final_fit:
                 st.final_fits.append(job)
             else:

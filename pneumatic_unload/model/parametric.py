@@ -38,9 +38,10 @@ from pneumatic_unload.model.sensor import first_order_lag, sensor_response
 SUBSONIC_INDEX_START = 0.5
 #: Bounds of a fitted m [-] (the simulator's range).
 SUBSONIC_INDEX_RANGE = (0.1, 1.0)
-#: Bounds of a thermometer's fitted time constant [s] (a bare fine thermocouple to a
-#: sheathed probe in a thermowell) and its start.
-THERMOMETER_TAU_RANGE = (0.05, 120.0)
+#: Bounds of a thermometer's fitted time constant [s] (a reading as good as instantaneous
+#: - a simulator's, or a probe far faster than the logger - to a sheathed probe in a
+#: thermowell) and its start.
+THERMOMETER_TAU_RANGE = (1e-4, 120.0)
 THERMOMETER_TAU_START = 1.0
 #: Points of the model's gas temperature between a thermometer's first and last reading
 #: (geometric from the opening; the lag is exact for the piecewise-linear interpolant of

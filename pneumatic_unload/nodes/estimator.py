@@ -87,6 +87,10 @@ STATES = ("waiting", "unloading", "done", "error")
 #: Most queued single samples fed to the core as one block [-] (the queue is drained in
 #: such blocks; a block is the same decisions as its samples one by one).
 MAX_BATCH = 4096
+#: Longest wait [s] of a final fit, from its last sample's arrival, for the gas
+#: temperature readings of its span (a slower topic; a topic that stopped is not waited
+#: for longer) [s].
+TEMPERATURE_WAIT = 2.0
 
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
@@ -183,6 +187,9 @@ class EstimatorNode(Node):
         self._stop = threading.Event()
         self._frame = self._p("frame_id")
         self._temperature = math.nan
+        #: A gas temperature reading was received: final fits wait for the readings of
+        #: their span (up to TEMPERATURE_WAIT s) before they run.
+        self._temperature_seen = False
         self._state = "waiting"
         self._why = "no unload yet"
         self._last: UnloadResult | None = None
@@ -220,7 +227,9 @@ class EstimatorNode(Node):
         else:
             self.create_subscription(FluidPressure, self._p("pressure_topic"),
                                      self._on_pressure, qos)
-        self.create_subscription(Temperature, "/tank/temperature", self._on_temperature, 10)
+        # the gas temperature with the pressure's QoS: every reading of an unload's span
+        # is fitted, a reader history of 10 would drop readings of a fast replay
+        self.create_subscription(Temperature, "/tank/temperature", self._on_temperature, qos)
         self._pub_est = self.create_publisher(UnloadEstimate, "~/estimate", common.LATCHED_QOS)
         self._pub_settings = self.create_publisher(String, "~/settings", common.LATCHED_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -339,6 +348,10 @@ class EstimatorNode(Node):
             self._diagnose(_WARN, f"temperature {msg.temperature!r} degC ignored")
             return
         self._temperature = t
+        stamp = common.ns_to_seconds(common.stamp_to_ns(msg.header.stamp))
+        with self._lock:  # every reading is evidence for the final fits (the pressure's clock)
+            self._est.push_temperature(stamp, t)
+            self._temperature_seen = True
         if self._p("temperature_from_topic"):
             with self._lock:
                 if self._est.state == "waiting" and abs(
@@ -501,7 +514,12 @@ class EstimatorNode(Node):
                 self._wake.wait(0.1)
                 self._wake.clear()
                 continue
-            job, arrived = self._fits.popleft()
+            job, arrived = self._fits[0]
+            if not self._temperature_ready(job, arrived):
+                self._wake.wait(0.01)  # the slower topic's readings of its span: not yet
+                self._wake.clear()
+                continue
+            job, arrived = self._fits.popleft()  # with the readings of its span
             try:
                 cpu = time.thread_time()
                 r = job.run()
@@ -512,6 +530,27 @@ class EstimatorNode(Node):
                 continue
             if r is not None:
                 self._publish_result(r, arrived)
+
+    def _temperature_ready(self, job: Any, arrived: float) -> bool:
+        """A final fit may run: no gas temperature is received, or a reading at or after
+        the end of its span has come in (or TEMPERATURE_WAIT s passed since its last
+        sample's arrival: a topic that stopped); the job then takes the readings of its
+        span (as an analysis of the record takes them: live = offline)."""
+        if not self._temperature_seen:
+            return True
+        with self._lock:
+            log = self._est.temperature
+            complete = bool(log.t.size and log.t[-1] >= job.t_end)
+            if not complete and time.monotonic() - arrived <= TEMPERATURE_WAIT:
+                return False
+            self._fits[0] = (job.with_temperature(log), arrived)
+        if not complete:
+            last = f"{log.t[-1]:.3f} s" if log.t.size else "none"
+            self._diagnose(_WARN, f"unload {job.crossing.index}: the gas temperature's last "
+                                  f"reading ({last}) is before the end of its span "
+                                  f"({job.t_end:.3f} s) after {TEMPERATURE_WAIT:g} s: its "
+                                  "final fit takes the readings there are")
+        return True
 
     def _on_state(self, core_state: str) -> None:
         if core_state == "waiting":
