@@ -383,6 +383,15 @@ def fitted_wall_term(wall: float, wall_std: float, law: str) -> BudgetTerm:
                       f"fitted ({law}, a hot start): in the curve fit's line")
 
 
+def held_wall_term(wall: float, u: float) -> BudgetTerm:
+    """The wall temperature's line of a hot start whose T10 was not measured (the wall
+    held at a room's ``wall`` [K], T10 fitted beside it): the room's uncertainty u [K]
+    moves wall and T10 together, which is the T10 line's (0 here: not counted twice)."""
+    return BudgetTerm(WALL_TERM, "B", wall, u, "K", 0.0,
+                      "a room's, held (a hot start: T10 fitted beside it); its move is "
+                      "T10's, in the T10 line")
+
+
 def term_std(budget: dict[str, Any] | None, name: str) -> float:
     """The standard uncertainty [m^3/(s Pa)] of the line ``name`` of a budget given as
     :meth:`Budget.to_dict`; NaN when there is no budget or no such line."""

@@ -39,6 +39,7 @@ from pneumatic_unload.law_family import (
     criterion_unit,
     offer_m,
     other,
+    plateau_drift,
 )
 from pneumatic_unload.law_fit import (
     CURVE_FIT_RESOLUTION,
@@ -143,7 +144,10 @@ def fit_curve(
         settled = float(np.mean(np.asarray(p, dtype=float)[tr >= 0.98 * tr[-1]]))
     common = dict(t_start=t_start, p10=p10, p_atm=p_atm, conductance=conductance,
                   fit_heat=bool(fit_heat and natural), trace=trace, hold=hold)
-    fam, best = _choose(Family(span, settings, common, profile_heat), tried)
+    drifts = reduced is None and plateau_drift(tr, np.asarray(p, dtype=float),
+                                               t_start - float(t[0]))
+    fam, best = _choose(Family(span, settings, common, profile_heat,
+                               plateau_drifts=drifts), tried)
     offset_why = ""
     if settings.atmosphere is not None:
         # p_atm given: a record that settles away from it (a transducer's zero offset)
@@ -152,8 +156,8 @@ def fit_curve(
         # offered); else it is said not to be
         offset_why = _offer_offset(fam, best, settled - settings.atmosphere)
         if offset_why is None:
-            fam, best = _choose(Family(span, settings, common, profile_heat, offset=True),
-                                tried)
+            fam, best = _choose(Family(span, settings, common, profile_heat, offset=True,
+                                       plateau_drifts=drifts), tried)
             cf0 = fam.fits[best][0]
             offset_why = (f"fitted: the record settles {cf0.pressure_offset:+.0f} +- "
                           f"{cf0.pressure_offset_std:.0f} Pa from the given p_atm")
@@ -215,8 +219,11 @@ def fit_curve(
         # starts that fit about as well as the chosen law are evidence of a gap), C's and
         # b's from the chosen law refitted with the wall moved; a given wall: b's only (C's
         # wall line is the crossing's)
+        # (a hot start that fitted T10 beside a wall at the room's: its gap from T10)
         u, why = wall_uncertainty(settings, hot_walls=[
-            f[0].wall_temperature for k, f in fits.items()
+            f[0].wall_temperature + settings.initial_temperature
+            - f[0].gas_temperature.get("t10", settings.initial_temperature)
+            for k, f in fits.items()
             if "+wall" in k and bic[k] - bic[best] < LAW_BIC_THRESHOLD])
         if u == 0.0:
             wall_std = wall_std_b = 0.0
@@ -283,7 +290,8 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
         joint = trace.with_channel(channel(t_rel, temp, cf.rms, sigma))
         j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
                                        fam.profile_heat, offset=fam.offset,
-                                       seeds=seeds), tried)
+                                       seeds=seeds, plateau_drifts=fam.plateau_drifts),
+                                tried)
         summary = j_fam.fits[j_best][0].gas_temperature
         summary.update(noise=noise, passes=k + 1)
         now = max(noise, summary["rms"])

@@ -17,12 +17,14 @@ SI units: s, Pa absolute, K, m^3/(s Pa).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pneumatic_unload.config.estimator import (
     AMBIENT_TEMPERATURE,
@@ -64,6 +66,7 @@ SECOND_PARAMETER: dict[str, tuple[str, Callable[[CurveFit], dict[str, float]]]] 
 }
 #: Evaluation budget of a fit started from its seed (:attr:`Family.seeds`) [-].
 SEEDED_NFEV = 80
+FloatArray = NDArray[np.float64]
 #: One fit of the table: (result, chi^2 [Pa^2], free parameters [-]).
 Fit = tuple[CurveFit, float, int]
 
@@ -96,6 +99,9 @@ class Family:
         Key -> starting values [SI] of that key's fit, replacing the one the family would
         take (e.g. the same law's fit to the pressure alone, for the joint fit with the
         logged temperature).
+    plateau_drifts : bool
+        The plateau before the opening drifts (:func:`plateau_drift`): the hot starts are
+        fitted too.
     """
 
     span: CurveSpan
@@ -107,6 +113,20 @@ class Family:
     raw: dict[str, dict[str, Any]] = field(default_factory=dict)
     not_offered: dict[str, str] = field(default_factory=dict)
     seeds: dict[str, dict[str, float]] = field(default_factory=dict)
+    plateau_drifts: bool = False
+
+    @property
+    def t10_assumed(self) -> bool:
+        """T10 was not measured (at its default, a room's :data:`AMBIENT_TEMPERATURE`, the
+        wall not given, no logged temperature): a hot start is then fitted as a gas warmer
+        or cooler than a wall at the room's temperature, T10 fitted (a tank stands in the
+        room, a charge warms the gas; the pressure hardly tells which of the two is at the
+        room's temperature: C goes as 1/sqrt(T) along that valley), not as a wall away from
+        a room's T10 (C +4.6 % to +5.7 % on 20-30 K hot starts:
+        bench/bench_temperature_records.py)."""
+        s = self.settings
+        return (s.initial_temperature == AMBIENT_TEMPERATURE and s.wall_temperature is None
+                and self.common["trace"].channel is None)
 
     @property
     def natural(self) -> bool:
@@ -121,9 +141,12 @@ class Family:
             start, max_nfev = self.seeds[key], max(max_nfev, SEEDED_NFEV)
         kept: dict[str, Any] = {}
         self.raw[key] = kept
-        out = fit_law(self.span, self.settings, profile_heat=profile_heat, law=law,
-                      start=start, max_nfev=max_nfev, fit_wall=wall, fit_m=fit_m,
-                      fit_offset=self.offset,
+        settings, warm = self.settings, wall and self.t10_assumed
+        if warm:  # a hot start read as a gas warm from its charge in a tank at the room's
+            settings = dataclasses.replace(settings, wall_temperature=AMBIENT_TEMPERATURE)
+        out = fit_law(self.span, settings, profile_heat=profile_heat, law=law,
+                      start=start, max_nfev=max_nfev, fit_wall=wall and not warm,
+                      fit_m=fit_m, fit_offset=self.offset, fit_t10=warm,
                       explore=explore, keep=kept, **self.common)
         kept["fit"], kept["entry"] = out[0], out
         return out
@@ -143,7 +166,8 @@ class Family:
         model = estimator_model(self.settings, kept["model"].start, heat_law=law,
                                 fit_wall=wall, fit_m=fit_m or name == "m",
                                 fit_offset=self.offset or name == "offset",
-                                thermometer=kept["model"].thermometer)
+                                thermometer=kept["model"].thermometer,
+                                fit_t10=kept["model"].fit_initial_temperature)
         start = SUBSONIC_INDEX_START if name == "m" else 0.0
         return linear_twin(self.common["trace"], kept, model, name, start)
 
@@ -226,7 +250,7 @@ class Family:
             return
         least = min(self.fits[k][0].inflation for k in family)
         if not (least > HOT_START_INFLATION or abs(s.initial_temperature - AMBIENT_TEMPERATURE)
-                > math.sqrt(3.0) * WALL_ASSUMED_STD):
+                > math.sqrt(3.0) * WALL_ASSUMED_STD or self.plateau_drifts):
             return
         for law in [k for k in ("natural", "fixed") if k + sfx in self.fits]:
             base = self.fits[law + sfx][0]
@@ -238,13 +262,14 @@ class Family:
             # temperature's uncertainties, at least 3 K) makes it, or one nearer that turns
             # the structure every law with the wall at T10 leaves into white residuals; else
             # it absorbs other model error (HydDown: a wall 2.4 K off moved C by +0.25 %)
-            gap = abs(hot[0].wall_temperature - s.initial_temperature)
-            if min(abs(hot[0].wall_temperature - WALL_TEMPERATURE.lo),
-                   abs(hot[0].wall_temperature - WALL_TEMPERATURE.hi)) < 1.0:
+            t10 = hot[0].gas_temperature.get("t10", s.initial_temperature)
+            gap = abs(hot[0].wall_temperature - t10)
+            edge = t10 if self.t10_assumed else hot[0].wall_temperature
+            if min(abs(edge - WALL_TEMPERATURE.lo), abs(edge - WALL_TEMPERATURE.hi)) < 1.0:
                 # a wall on the bound of any room's is no minimum: it absorbs other model
                 # error (two restrictions in series: a wall at 150 K, C -4.3 %)
-                self.not_offered[key] = (f"the wall went to the bound of its range "
-                                         f"({hot[0].wall_temperature:.0f} K): no hot start")
+                self.not_offered[key] = (f"the wall or T10 went to the bound of its range "
+                                         f"({edge:.0f} K): no hot start")
             elif gap > 3.0 * max(s.temperature_uncertainty, 1.0) or \
                     least > HOT_START_INFLATION >= hot[0].inflation:
                 self.fits[key] = hot
@@ -311,3 +336,30 @@ def best_key(fits: dict[str, Fit], n: int) -> str:
     """The key of the lowest BIC (:func:`criterion`)."""
     bic = criterion(fits, n)
     return min(bic, key=lambda k: bic[k])
+
+
+#: A plateau drifts when its straight line's slope is at least this many of its
+#: standard errors (the residuals' lag-1 correlation counted) [-].
+PLATEAU_DRIFT_Z = 5.0
+
+
+def plateau_drift(t: FloatArray, p: FloatArray, t_open: float) -> bool:
+    """The samples before the opening (t [s] < t_open [s], p [Pa]; at least 32) fall or
+    rise along a straight line by :data:`PLATEAU_DRIFT_Z` of its standard errors: the gas
+    exchanges heat with the wall before the opening (a hot start), even where the plateau
+    is short and the rest of the record hides it."""
+    pre = t < t_open - 2.0 * float(np.median(np.diff(t[:1001]))) if t.size > 2 else t < t_open
+    tt, pp = t[pre], p[pre]
+    if tt.size < 32:
+        return False
+    x = tt - tt.mean()
+    sxx = float(x @ x)
+    if sxx <= 0.0:
+        return False
+    slope = float(x @ (pp - pp.mean())) / sxx
+    r = pp - pp.mean() - slope * x
+    s2 = float(r @ r) / (tt.size - 2)
+    rho = float(r[1:] @ r[:-1]) / float(r @ r) if float(r @ r) > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.95)
+    se = math.sqrt(s2 / sxx * (1.0 + rho) / (1.0 - rho))
+    return se > 0.0 and abs(slope) > PLATEAU_DRIFT_Z * se

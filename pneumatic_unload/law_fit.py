@@ -95,7 +95,7 @@ def fit_law(
     profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
     max_nfev: int = 200, explore: bool = False, trace: Trace,
     hold: tuple[str, ...] = (), fit_wall: bool = False, fit_m: bool = False,
-    fit_offset: bool = False,
+    fit_offset: bool = False, fit_t10: bool = False,
     keep: dict[str, Any] | None = None,
 ) -> tuple[CurveFit, float, int]:
     """One law's fit for :func:`~pneumatic_unload.fitting.fit_curve`; returns (fit,
@@ -137,6 +137,8 @@ def fit_law(
         Fit the transducer's zero offset too (a reading = pressure + offset; p_atm given).
     fit_m : bool
         Fit the subsonic index m too (else held at 0.5).
+    fit_t10 : bool
+        Fit T10 too (a hot start whose T10 was not measured: the wall as in ``settings``).
     keep : dict, optional
         Receives the fit's :class:`~pneumatic_unload.fit.lsq.FitResult` ('result') and
         model ('model'), for :func:`~pneumatic_unload.wall_moves.wall_linear`.
@@ -152,7 +154,8 @@ def fit_law(
                   tau=tau, dt=dt, t_first=0.0, t_last=span.duration)
     ch = trace.channel
     model = estimator_model(settings, neutral, heat_law=law, fit_wall=fit_wall, fit_m=fit_m,
-                            fit_offset=fit_offset, thermometer=ch is not None)
+                            fit_offset=fit_offset, thermometer=ch is not None,
+                            fit_t10=fit_t10)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
     if "t_open" in hold:
         fixed["t_open"] = float(t_start)
@@ -240,7 +243,7 @@ def fit_law(
         heat_scale=h, heat_scale_std=h_std, rms=math.sqrt(s2), n=span.n,
         success=bool(fit.success), inflation=inflation,
         heat_law=f"{law}+wall" if fit_wall else law,
-        wall_temperature=v.get("t_wall", math.nan),
+        wall_temperature=v.get("t_wall", settings.wall if fit_t10 else math.nan),
         wall_temperature_std=float(std["t_wall"]) if "t_wall" in free else math.nan,
         tau_heat=v.get("tau_heat", math.nan),
         tau_heat_std=float(std["tau_heat"]) if "tau_heat" in free else math.nan,
@@ -252,7 +255,8 @@ def fit_law(
         else math.nan, subsonic_index=m, subsonic_index_std=m_std, subsonic_index_fitted=fit_m,
         pressure_offset=v.get("offset", 0.0),
         pressure_offset_std=float(std["offset"]) if "offset" in free else math.nan,
-        gas_temperature={} if ch is None else channel_summary(ch, fit.fun, v, std))
+        gas_temperature=channel_summary(ch, fit.fun, v, std) if ch is not None else
+        {"t10": v["t10"], "t10_std": float(std["t10"])} if "t10" in free else {})
     if ch is not None:  # the pressure's residual RMS (the temperature's is in K)
         cf = dataclasses.replace(cf, rms=math.sqrt(float(np.sum(r_p * r_p)) / max(
             r_p.size - fit.k, 1)))

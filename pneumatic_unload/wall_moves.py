@@ -50,7 +50,8 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
                                     model.start, heat_law=law,
                                     fit_m=model.subsonic_index is None,
                                     fit_offset="sensor_offset" in model.effects,
-                                    thermometer=model.thermometer)
+                                    thermometer=model.thermometer,
+                                    fit_t10=model.fit_initial_temperature)
             try:
                 dr = np.asarray(trace.residual(moved)(fit.values), dtype=float) - fit.fun
             except (ValueError, ArithmeticError):

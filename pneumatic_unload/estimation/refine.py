@@ -19,12 +19,17 @@ from pneumatic_unload import physics
 from pneumatic_unload.budget import (
     WALL_TERM,
     fitted_wall_term,
+    held_wall_term,
     model_budget,
     term_std,
     wall_sensitivity,
 )
 from pneumatic_unload.budget_b import ratio_budget
-from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
+from pneumatic_unload.config.estimator import (
+    WALL_ASSUMED_STD,
+    EstimatorSettings,
+    wall_uncertainty,
+)
 from pneumatic_unload.config.rig import RigConfig
 from pneumatic_unload.config.tank import ATMOSPHERE_RANGE
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
@@ -100,9 +105,12 @@ def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
     if not (math.isfinite(c) and c > 0):
         return None
     wall_std, wall_input = math.nan, None
-    if heat_law.endswith("+wall") and fit is not None:
+    if heat_law.endswith("+wall") and fit is not None and math.isfinite(
+            fit.wall_temperature_std):
         extra_terms = (*extra_terms, fitted_wall_term(fit.wall_temperature,
                                                       fit.wall_temperature_std, heat_law))
+    elif heat_law.endswith("+wall") and fit is not None:  # T10 fitted, the wall a room's
+        extra_terms = (*extra_terms, held_wall_term(fit.wall_temperature, WALL_ASSUMED_STD))
     elif heat_law != "none" and fit is not None and math.isfinite(fit.wall_uncertainty):
         wall_std, wall_input = fit.wall_std, (fit.wall_uncertainty, fit.wall_source)
     elif heat_law != "none":
@@ -336,6 +344,14 @@ def refine_with_curve_fit(
             **res.extra, "curve_fit_error": f"the fit moved p_atm to {fit.p_atm:.0f} Pa, not "
                                             f"an atmosphere ({lo:.0f}-{hi:.0f} Pa): give it "
                                             "(--atmosphere PA)"})
+    t10 = fit.gas_temperature.get("t10", math.nan)
+    if math.isfinite(t10):
+        # T10 fitted with the logged temperature (its statistical part in the fit's line,
+        # the probe's accuracy the T10 line), or by a hot start beside a wall at a room's
+        # temperature (that room's uncertainty the T10 line: law_family.Family.t10_assumed)
+        settings = dataclasses.replace(settings, initial_temperature=t10, **(
+            {} if "rms" in fit.gas_temperature else
+            {"temperature_uncertainty": WALL_ASSUMED_STD}))
     tau_model = fitted_tau_exp(fit.config(settings), res.tau_exp)
     if not (math.isfinite(tau_model) and tau_model > 0):
         tau_model = math.nan
@@ -379,6 +395,7 @@ def refine_with_curve_fit(
 
     return dataclasses.replace(
         res, final=True, status=status, status_text=text, conductance_model=fit.conductance,
+        initial_temperature=settings.initial_temperature,
         conductance_model_std=c_std,
         t_start_model=fit.t_start, tau_exp_model=tau_model,
         critical_ratio=fit.critical_ratio, critical_ratio_std=b_std,

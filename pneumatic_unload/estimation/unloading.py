@@ -140,6 +140,42 @@ def fall_exponent(gamma: float) -> float:
     return 2.0 * gamma / (gamma - 1.0)
 
 
+#: A drifting plateau's fall: its initial rate at least this many times the drift's [-].
+DRIFT_FALL_RATIO = 3.0
+
+
+def drifting_start(tv: FloatArray, pv: FloatArray, lo: int, i: int, min_plateau: int
+                   ) -> tuple[tuple[float, ...] | None, int]:
+    """The start of a fall after a plateau that drifts (:func:`sloped_hinge_fit`), found
+    on the shortest window ending at sample i (10 % down) that holds a plateau of
+    ``min_plateau`` samples before the start and a fall (the fitted fall's mean rate from the
+    start to sample i) clearly steeper than the drift (:data:`DRIFT_FALL_RATIO`, against the fitted
+    drift and the mean fall from sample ``lo`` to the start): a long drifting plateau is
+    curved (the gas cools exponentially) and a straight drift over all of it misplaces the
+    start. Windows of
+    2, 4, 8 ... plateaus, the last from sample ``lo``. Returns the fit (t0 [s], p10, s, c,
+    rms, drift [signal units, /s, /s^2]) and its first sample [-], or (None, lo)."""
+    n_w = 2 * min_plateau
+    while True:
+        a = max(lo, i + 1 - n_w)
+        tw, pw = tv[a:i + 1], pv[a:i + 1]
+        if tw.size >= 8:
+            hot = sloped_hinge_fit(tw, pw, float(tw[0]), float(tv[i]))
+            before = int(np.searchsorted(tw, hot[0]))
+            # the fall clearly steeper than the drift, here and over all of the record
+            # before it (a stream joined part way into an unload falls as fast before)
+            head = pv[lo:lo + min_plateau]
+            t_head = float(np.mean(tv[lo:lo + min_plateau]))
+            mean_rate = abs(float(np.mean(head)) - hot[1]) / max(hot[0] - t_head, 1e-12)
+            fall = hot[2] - hot[3] * (float(tv[i]) - hot[0])  # the fitted fall's mean rate
+            if before >= min_plateau and hot[2] > 0.0 and fall > DRIFT_FALL_RATIO * max(
+                    abs(hot[5]), mean_rate):
+                return hot, a
+        if a <= lo:
+            return None, lo
+        n_w *= 2
+
+
 def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     """Hinge fit of the valve-opening instant, p10 and the initial slope (index i: first
     sample 10 % down); sets p* when p_atm is given."""
@@ -163,12 +199,16 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
         alt = hinge_fit(tw, pw, t_lo, float(tv[i]), exponent=k)
         if alt[0] > t_hi and alt[4] < rms:
             t0, p10, slope, curv, rms = alt
-    if trig < i and not slope > 0.0:
-        # still no fall: a plateau that drifts (a gas hot from the charge cooling toward
-        # the wall: the trigger fired on the drift) has its slope fitted with the start
-        hot = sloped_hinge_fit(tw, pw, t_lo, float(tv[i]))
-        if hot[2] > 0.0 and hot[4] < rms:
+    # fewer samples before the start than a plateau needs: no plateau was found before it
+    at_first = int(np.searchsorted(tw, t0)) < 2 * st.settings.min_plateau
+    if trig < i and (not slope > 0.0 or at_first):
+        # still no fall, or a fall from the window's first samples (no plateau before it):
+        # a plateau that drifts (a gas hot from the charge cooling toward the wall: the
+        # trigger fired on the drift) has its slope fitted with the start
+        hot, a = drifting_start(tv, pv, lo, i, st.settings.min_plateau)
+        if hot is not None and (a > lo or hot[4] < rms):
             t0, p10, slope, curv, rms = hot[:5]
+            lo = a
             st.diag("ok", f"the plateau before the opening drifts by {hot[5]:.4g} /s (a gas "
                     f"warmer or cooler than the wall): fitted with the start",
                     float(tv[i]))

@@ -77,12 +77,15 @@ class ParametricModel:
         first-order time constant ('tau_thermo' [s], :data:`THERMOMETER_TAU_RANGE`) are
         parameters, and :meth:`reading` is what the thermometer shows. A wall not given
         follows the fitted T10.
+    fit_initial_temperature : bool
+        T10 ('t10') is a parameter without a thermometer (a hot start whose T10 was not
+        measured, the wall held at a room's temperature).
     """
 
     def __init__(self, effects: tuple[str, ...], tank: TankSpec, start: Start, *,
                  heat_law: str = "natural", fit_wall_temperature: bool = False,
                  subsonic_index: float | None = SUBSONIC_INDEX_START,
-                 thermometer: bool = False) -> None:
+                 thermometer: bool = False, fit_initial_temperature: bool = False) -> None:
         bad = [e for e in effects if e not in CANDIDATES]
         if bad:
             raise ValueError(f"unknown effect(s) {bad}; known: {', '.join(CANDIDATES)}")
@@ -99,6 +102,7 @@ class ParametricModel:
         self.fit_wall_temperature = fit_wall_temperature or self.hot_start
         self.subsonic_index = subsonic_index
         self.thermometer = thermometer
+        self.fit_initial_temperature = fit_initial_temperature or thermometer
         #: effects of the configuration (the hot start is heat transfer in the simulator)
         self.config_effects = tuple("heat_transfer" if e == HOT_START else e
                                     for e in self.effects)
@@ -125,9 +129,10 @@ class ParametricModel:
             lo, hi = SUBSONIC_INDEX_RANGE
             ps.append(Parameter("m", SUBSONIC_INDEX_START, lo, hi, "-", scale=0.1,
                                 doc="ISO 6358-1 subsonic index"))
-        if self.thermometer:
+        if self.fit_initial_temperature:
             ps.append(Parameter("t10", self.tank.initial_temperature, 150.0, 600.0, "K",
                                 scale=2.0, doc="gas temperature at the valve opening"))
+        if self.thermometer:
             lo, hi = THERMOMETER_TAU_RANGE
             ps.append(Parameter("tau_thermo", THERMOMETER_TAU_START, lo, hi, "s", log=True,
                                 scale=1.0, doc="thermometer's first-order time constant"))
