@@ -146,8 +146,9 @@ def fit_curve(
                   fit_heat=bool(fit_heat and natural), trace=trace, hold=hold)
     drifts = reduced is None and plateau_drift(tr, np.asarray(p, dtype=float),
                                                t_start - float(t[0]))
+    logged = temperature is not None
     fam, best = _choose(Family(span, settings, common, profile_heat,
-                               plateau_drifts=drifts), tried)
+                               plateau_drifts=drifts, t10_logged=logged), tried)
     offset_why = ""
     if settings.atmosphere is not None:
         # p_atm given: a record that settles away from it (a transducer's zero offset)
@@ -157,7 +158,7 @@ def fit_curve(
         offset_why = _offer_offset(fam, best, settled - settings.atmosphere)
         if offset_why is None:
             fam, best = _choose(Family(span, settings, common, profile_heat, offset=True,
-                                       plateau_drifts=drifts), tried)
+                                       plateau_drifts=drifts, t10_logged=logged), tried)
             cf0 = fam.fits[best][0]
             offset_why = (f"fitted: the record settles {cf0.pressure_offset:+.0f} +- "
                           f"{cf0.pressure_offset_std:.0f} Pa from the given p_atm")
@@ -290,7 +291,8 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
         joint = trace.with_channel(channel(t_rel, temp, cf.rms, sigma))
         j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
                                        fam.profile_heat, offset=fam.offset,
-                                       seeds=seeds, plateau_drifts=fam.plateau_drifts),
+                                       seeds=seeds, plateau_drifts=fam.plateau_drifts,
+                                       t10_logged=True),
                                 tried)
         summary = j_fam.fits[j_best][0].gas_temperature
         summary.update(noise=noise, passes=k + 1)
@@ -304,10 +306,14 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
     jc = j_fam.fits[j_best][0]
     return fam, best, trace, {
         "why": f"not used: fitted jointly, the model's gas departs from it by "
-               f"{summary['rms']:.2g} K rms (noise {noise:.2g} K; C {jc.conductance:.4g} "
-               f"m^3/(s Pa) against the pressure's {cf.conductance:.4g}): no heat law "
-               f"follows it, the pressure alone is fitted and the departure is a line of "
-               f"the budget", "departure_rms": float(ev.get("rms", summary["rms"])),
+               f"{summary['rms']:.2g} K rms (noise {noise:.2g} K; the pressure's residual "
+               f"{jc.rms:.4g} Pa rms against {cf.rms:.4g} alone, Ljung-Box p "
+               f"{jc.whiteness_p:.2g} against {cf.whiteness_p:.2g}; C {jc.conductance:.4g} "
+               f"m^3/(s Pa) against {cf.conductance:.4g}): no heat law follows it, the "
+               f"pressure alone is fitted and the departure is a line of the budget",
+        "joint_rms": summary["rms"], "joint_pressure_rms": jc.rms,
+        "joint_conductance": jc.conductance,
+        "departure_rms": float(ev.get("rms", summary["rms"])),
         "noise": noise, "t10_assumed": fam.settings.initial_temperature}
 
 
@@ -363,7 +369,8 @@ def _offer_offset(fam: Family, best: str, gap: float) -> str | None:
                 f"{tw.value:+.0f} +- {tw.std:.0f} Pa would not improve the criterion by "
                 f"{TWIN_BIC_MARGIN:g}, to first order)")
     key = best if best.endswith(M_SUFFIX) else best + M_SUFFIX
-    probe = Family(fam.span, fam.settings, fam.common, offset=True)
+    probe = Family(fam.span, fam.settings, fam.common, offset=True,
+                   plateau_drifts=fam.plateau_drifts, t10_logged=fam.t10_logged)
     base = held[0]
     start = fam.start_of(base)
     if math.isfinite(gap):

@@ -102,6 +102,8 @@ class Family:
     plateau_drifts : bool
         The plateau before the opening drifts (:func:`plateau_drift`): the hot starts are
         fitted too.
+    t10_logged : bool
+        The record carries the gas temperature (T10 measured, whatever its value).
     """
 
     span: CurveSpan
@@ -114,6 +116,7 @@ class Family:
     not_offered: dict[str, str] = field(default_factory=dict)
     seeds: dict[str, dict[str, float]] = field(default_factory=dict)
     plateau_drifts: bool = False
+    t10_logged: bool = False
 
     @property
     def t10_assumed(self) -> bool:
@@ -126,7 +129,7 @@ class Family:
         bench/bench_temperature_records.py)."""
         s = self.settings
         return (s.initial_temperature == AMBIENT_TEMPERATURE and s.wall_temperature is None
-                and self.common["trace"].channel is None)
+                and not self.t10_logged)
 
     @property
     def natural(self) -> bool:
@@ -270,6 +273,17 @@ class Family:
                 # error (two restrictions in series: a wall at 150 K, C -4.3 %)
                 self.not_offered[key] = (f"the wall or T10 went to the bound of its range "
                                          f"({edge:.0f} K): no hot start")
+            elif self.t10_assumed:
+                # T10 not measured: a gas warm from its charge is claimed where it lies
+                # beyond a room's spread (3 x WALL_ASSUMED_STD); white residuals alone are
+                # no evidence of it: a plateau that decays through a leak turned white
+                # with a gas 3 K warm and C +6.6 % (z 15; test_adequacy)
+                if gap > 3.0 * WALL_ASSUMED_STD:
+                    self.fits[key] = hot
+                else:
+                    self.not_offered[key] = (f"T10 not measured: a gas {gap:.1f} K from the "
+                                             f"room's is within its spread (3 x "
+                                             f"{WALL_ASSUMED_STD:g} K)")
             elif gap > 3.0 * max(s.temperature_uncertainty, 1.0) or \
                     least > HOT_START_INFLATION >= hot[0].inflation:
                 self.fits[key] = hot

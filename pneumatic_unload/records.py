@@ -347,7 +347,7 @@ def with_temperature_evidence(record: Record, settings: EstimatorSettings,
         if series is None:
             ev: dict[str, Any] = {"used": False, "why": "the record carries no gas "
                                   "temperature (CSV: --temperature-column NAME)"}
-        elif "t10" in joint:
+        elif "rms" in joint:  # fitted jointly
             ev = channel_evidence(joint)
         else:
             fit = CurveFit(**cf)
