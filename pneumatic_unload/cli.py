@@ -383,7 +383,7 @@ def add_discrepancy_parser(sub: Any) -> None:
         "discrepancy", help="name the effect the discharge model misses, with evidence",
         description="Name the effect the discharge model misses, with evidence. Time "
                     "bound: every run ends; its work is bounded in model evaluations (at "
-                    "most 3 greedy rounds of at most 10 candidates, at most 10 starts "
+                    "most 3 greedy rounds of at most 12 candidates, at most 10 starts "
                     "each, capped Levenberg-Marquardt iterations, an integrator step "
                     "budget per evaluation), and in seconds by --time-limit (default 600 "
                     "s): past it the fit under way stops; in the baseline or the first "

@@ -224,6 +224,19 @@ def test_clear_effect_is_named_alone_with_its_size(effect, extra, param, truth):
     assert res.delta_bic[effect] > 10.0
 
 
+@pytest.mark.parametrize("m", [0.3, 0.7])
+def test_a_subsonic_index_away_from_one_half_is_named_with_its_value(m):
+    """The component's ISO 6358-1:2013 m is a candidate: a record whose flow law has m 0.3
+    or 0.7 (the baseline holds 0.5) names it, with m within 0.02 and inside its interval
+    (measured: 0.304 [0.291, 0.318], 0.700 [0.689, 0.712]); the residual ends white."""
+    res = _run(_rig(subsonic_index=m, seed=7))
+    assert res.effect == "subsonic_index", res.delta_bic
+    iv = res.parameters["m"]
+    assert abs(iv.value - m) < 0.02 and iv.low <= m <= iv.high, iv
+    assert res.delta_bic["subsonic_index"] > 10.0
+    assert res.after.nrms <= 1.05 and res.after.white
+
+
 def test_valve_opening_is_inside_the_reported_set():
     res = _run(_rig(effects=("valve_opening",), valve_opening_time=0.06, seed=8))
     assert "valve_opening" in [res.effect, *res.ambiguous_with]
@@ -343,7 +356,7 @@ def test_cli_json_fields_and_report_files(tmp_path, capsys):
     assert set(d["delta_bic"]) == {"heat_transfer", "valve_opening", "sensor_lag", "leak",
                                    "leak_downstream", "orifice_leak",
                                    "orifice_leak_downstream", "pipe_volume", "sensor_offset",
-                                   "sensor_gain", "hot_start"}
+                                   "sensor_gain", "hot_start", "subsonic_index"}
     assert d["noise"]["sigma"] == pytest.approx(1000.0, rel=0.1) and "rho" in d["noise"]
     off = d["parameters"]["offset"]
     assert off["ci_low"] <= 5000.0 <= off["ci_high"] or abs(off["value"] - 5000) < 150

@@ -13,7 +13,8 @@ pre-step samples, record length the simulator's automatic 6 tau_exp. Effect size
 * orifice_leak: C_leak 2-20 % of C, b_leak 0.2-0.5; orifice_leak_downstream: C_leak
   5-50 % of C, b_leak 0.2-0.5;
 * pipe_volume: 5-30 % of V, pipe conductance 2-10 times C;
-* sensor_offset: 1-10 kPa, sensor_gain: 0.2-2 % (random sign).
+* sensor_offset: 1-10 kPa, sensor_gain: 0.2-2 % (random sign);
+* subsonic_index: m 0.25-0.4 or 0.62-0.8 (the ISO 6358-1:2013 law's; 0.5 in the baseline).
 
 The parameter names and mappings are those of
 :mod:`pneumatic_unload.model.effects`, so a fitted value compares directly with
@@ -135,6 +136,10 @@ def draw_case(effect: str, seed: int, *, rho: float = 0.0, noise_std: float = NO
     elif effect == "sensor_gain":
         truth["gain"] = rng.uniform(0.002, 0.02) * rng.choice([-1.0, 1.0])
         kw["sensor_gain"] = truth["gain"]
+    elif effect == "subsonic_index":
+        truth["m"] = rng.choice([rng.uniform(0.25, 0.4), rng.uniform(0.62, 0.8)])
+        kw["subsonic_index"] = truth["m"]
+        sim_effects = ()  # a field of the configuration, no effect of the simulator
     elif effect != "none":
         raise ValueError(f"unknown effect {effect!r}")
     noise: dict[str, float] = {"noise_std": noise_std}

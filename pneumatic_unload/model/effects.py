@@ -39,9 +39,19 @@ from pneumatic_unload.physics import RHO_N, T_N
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["CANDIDATES", "DOWNSTREAM_LEAKS", "HOT_START", "PLUGGED_RUN", "REGISTRY",
-           "SEPARATING_DATA", "Effect", "EffectParam", "Start",
-           "separating_data"]
+__all__ = [
+    "CANDIDATES",
+    "DOWNSTREAM_LEAKS",
+    "HOT_START",
+    "PLUGGED_RUN",
+    "REGISTRY",
+    "SEPARATING_DATA",
+    "SUBSONIC",
+    "Effect",
+    "EffectParam",
+    "Start",
+    "separating_data",
+]
 
 #: Integrator tolerance of every fit of the parametric model [-]: the model error (~1e-8
 #: p10, well under a Pa) stays far below the noise and below the finite-difference steps of
@@ -385,13 +395,30 @@ HOT_START_RECORD = Effect(
 )
 
 
+#: Name of the subsonic-index candidate: the component's ISO 6358-1:2013 m freed.
+SUBSONIC = "subsonic_index"
+#: The subsonic index's record: m, held at 0.5 (the elliptic law) in the baseline, is a
+#: parameter; the configuration's ``subsonic_index`` field, no effect of the simulator.
+SUBSONIC_RECORD = Effect(
+    SUBSONIC,
+    "the component: its flow law's subsonic index m (ISO 6358-1:2013) away from the 0.5 "
+    "of the elliptic law (silencers, tubes and many orifices): the shape of the subsonic "
+    "tail",
+    (EffectParam("m", "-", False, 0.1, 1.0, lambda s: 0.5, 0.1,
+                 "ISO 6358-1:2013 subsonic index m of the component"),),
+    lambda s: {"m": 0.5},
+    lambda s: [{"m": 0.3}, {"m": 0.7}],
+    lambda v, tank: {"subsonic_index": clamp(v["m"], 0.1, 1.0)},
+)
+
+
 def effect_record(name: str) -> Effect:
     """The record of a candidate effect (where it sits, its parameters) by name."""
-    return HOT_START_RECORD if name == HOT_START else REGISTRY[name]
+    return {HOT_START: HOT_START_RECORD, SUBSONIC: SUBSONIC_RECORD}.get(name) or REGISTRY[name]
 
 
-#: Every candidate effect of a discrepancy search: the configuration's effects and the
-#: hot start.
-CANDIDATES: tuple[str, ...] = (*EFFECTS, HOT_START)
+#: Every candidate effect of a discrepancy search: the configuration's effects, the hot
+#: start and the subsonic index.
+CANDIDATES: tuple[str, ...] = (*EFFECTS, HOT_START, SUBSONIC)
 #: Wall temperature starts of a hot start, below T10 [K].
 HOT_START_DROPS: tuple[float, ...] = (12.0, 35.0)

@@ -23,6 +23,8 @@ from pneumatic_unload.model.effects import (
     HOT_START_DROPS,
     HOT_START_RECORD,
     REGISTRY,
+    SUBSONIC,
+    SUBSONIC_RECORD,
     WALL_TEMPERATURE,
     Effect,
     FloatArray,
@@ -105,7 +107,7 @@ class ParametricModel:
         self.fit_initial_temperature = fit_initial_temperature or thermometer
         #: effects of the configuration (the hot start is heat transfer in the simulator)
         self.config_effects = tuple("heat_transfer" if e == HOT_START else e
-                                    for e in self.effects)
+                                    for e in self.effects if e != SUBSONIC)
         self.records = tuple(self._record(e) for e in self.effects)
         self.parameters = self._parameters()
         self._last_config: tuple[tuple[tuple[str, float], ...], RigConfig] | None = None
@@ -125,7 +127,7 @@ class ParametricModel:
             Parameter("p10", p, 0.3 * p, 3.0 * p, "Pa", scale=1e-3 * p,
                       doc="initial pressure (absolute)"),
         ]
-        if self.subsonic_index is None:
+        if self.subsonic_index is None and SUBSONIC not in self.effects:
             lo, hi = SUBSONIC_INDEX_RANGE
             ps.append(Parameter("m", SUBSONIC_INDEX_START, lo, hi, "-", scale=0.1,
                                 doc="ISO 6358-1 subsonic index"))
@@ -180,6 +182,8 @@ class ParametricModel:
         its wall temperature is added with the heat-transfer record's parameters)."""
         if effect in ("heat_transfer", HOT_START):
             return HEAT_VARIANTS[self.heat_law]
+        if effect == SUBSONIC:
+            return SUBSONIC_RECORD
         return REGISTRY[effect]
 
     def config(self, v: Values) -> RigConfig:
