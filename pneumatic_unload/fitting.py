@@ -260,7 +260,8 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
     and the thermometer's lag fitted, the readings' residuals weighted to the pressure's
     (each channel's variance from its own residuals: first the larger of the channel's
     noise and the misfit of the pressure fit's gas, then the joint fit's misfit, until
-    they agree within :data:`TEMPERATURE_WEIGHT_TOLERANCE`).
+    they agree within :data:`TEMPERATURE_WEIGHT_TOLERANCE`); the laws the pressure
+    rejects by more than the log's readings' count in the criterion are not refitted.
 
     Returns the joint family, its chosen key, its trace and {} - or, where the joint fit's
     readings do not follow the log within :data:`FOLLOW_FACTOR` of its noise (no heat law
@@ -287,8 +288,16 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
     seeds = {k: {**fam.start_of(f[0]), **{n: x for n, x in thermo.items()
                                           if math.isfinite(x)}}
              for k, f in fam.fits.items()}
+    # a law the pressure rejects by more than the log can give back is not refitted: the
+    # log's chi^2 under the chosen law is about its readings' count (its misfit is the
+    # weight's sigma), and no law can gain more than that from it
+    bic = criterion(fam.fits, fam.span.n)
+    window = temp.size + 2.0 * LAW_BIC_THRESHOLD
+    near = {split_key(k)[0] for k in bic if bic[k] - bic[best] <= window}
+    tried = tuple(law for law in tried if law in near) or (split_key(best)[0],)
     for k in range(TEMPERATURE_PASSES):
-        joint = trace.with_channel(channel(t_rel, temp, cf.rms, sigma))
+        joint = trace.with_channel(channel(t_rel, temp, cf.rms, sigma,
+                                           ev.get("sensor_time_constant", math.nan)))
         j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
                                        fam.profile_heat, offset=fam.offset,
                                        seeds=seeds, plateau_drifts=fam.plateau_drifts,

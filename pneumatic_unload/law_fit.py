@@ -157,6 +157,8 @@ def fit_law(
                             fit_offset=fit_offset, thermometer=ch is not None,
                             fit_t10=fit_t10)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
+    if ch is not None and ch.lag is not None:
+        fixed["tau_thermo"] = ch.lag
     if "t_open" in hold:
         fixed["t_open"] = float(t_start)
     if "p10" in hold:

@@ -45,11 +45,14 @@ FINE_POINTS = 4000
 
 
 def channel_noise(temp: FloatArray) -> float:
-    """Noise of a temperature channel [K]: the RMS of its second differences / sqrt(6)
-    (white noise; a smooth trend's curvature hardly counts at a logger's rate), at least
+    """Noise of a temperature channel [K]: the median absolute second difference, as a
+    standard deviation (x 1.4826) over sqrt(6) (white noise; the median, not the RMS: the
+    curvature of the fast cooling after the opening is large at a logger's rate for a few
+    readings - a 1 L tank's exact temperature at 10 Hz read 0.72 K by the RMS), at least
     :data:`RESOLUTION_FLOOR`."""
     d2 = np.diff(np.asarray(temp, dtype=float), 2)
-    sig = float(np.sqrt(np.mean(d2 * d2) / 6.0)) if d2.size >= 3 else math.nan
+    sig = 1.4826 * float(np.median(np.abs(d2))) / math.sqrt(6.0) if d2.size >= 3 \
+        else math.nan
     return max(sig, RESOLUTION_FLOOR) if math.isfinite(sig) else RESOLUTION_FLOOR
 
 
@@ -159,12 +162,22 @@ def channel_samples(series: tuple[FloatArray, FloatArray], span: CurveSpan
     return t, temp
 
 
-def channel(t: FloatArray, temp: FloatArray, pressure_rms: float, sigma: float
-            ) -> TemperatureChannel:
+#: A thermometer lag below this fraction of the readings' median spacing is not resolved
+#: by them: the joint fit holds it at the floor of its range (a flat direction would make
+#: the fit's last bits, and C's, depend on the machine: 5e-6 relative on a simulator's
+#: exact temperature) [-].
+UNRESOLVED_LAG = 0.05
+
+
+def channel(t: FloatArray, temp: FloatArray, pressure_rms: float, sigma: float,
+            lag_seen: float = math.nan) -> TemperatureChannel:
     """The channel of readings ``temp`` [K] at relative instants t [s] whose residuals
     have the standard deviation ``sigma`` [K], weighted to the pressure residuals'
-    ``pressure_rms`` [Pa]."""
-    return TemperatureChannel(t, temp, float(pressure_rms / sigma))
+    ``pressure_rms`` [Pa]; its lag held at the floor of :data:`SENSOR_TAU_RANGE` where
+    ``lag_seen`` [s] (the comparison's) is below :data:`UNRESOLVED_LAG` of the spacing."""
+    spacing = float(np.median(np.diff(t))) if t.size > 1 else math.inf
+    held = SENSOR_TAU_RANGE[0] if lag_seen < UNRESOLVED_LAG * spacing else None
+    return TemperatureChannel(t, temp, float(pressure_rms / sigma), held)
 
 
 def channel_evidence(summary: dict[str, float]) -> dict[str, Any]:

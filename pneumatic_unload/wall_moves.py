@@ -43,7 +43,9 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
             or not np.all(np.isfinite(jac)):
         return math.nan, math.nan
     moves, b_moves = [], []
+    lo, hi = fit.params.bounds()
     with np.errstate(all="ignore"):
+        live = ~((fit.x - lo < 1e-3 * (hi - lo)) | (hi - fit.x < 1e-3 * (hi - lo)))
         for sign in (1.0, -1.0):
             wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
             moved = estimator_model(dataclasses.replace(settings, wall_temperature=wall),
@@ -58,7 +60,10 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
                 return math.nan, math.nan
             if not np.all(np.isfinite(dr)):
                 return math.nan, math.nan
-            dx, *_ = np.linalg.lstsq(jac, -dr, rcond=1e-12)
+            # parameters on a bound of their range (a thermometer's lag at its floor) are
+            # held: their flat column would take the step out of the float range
+            dx = np.zeros(len(free))
+            dx[live], *_ = np.linalg.lstsq(jac[:, live], -dr, rcond=1e-12)
             try:  # a step beyond float range (log coordinates): not to first order
                 v = fit.params.to_values(fit.x + dx)
             except OverflowError:

@@ -52,7 +52,7 @@ def test_a_log_of_the_same_physics_is_followed_within_its_noise(tmp_path, capsys
     u = _analyze(path, capsys)
     ev = u["gas_temperature"]
     assert ev["used"] is True and "jointly" in ev["why"], ev
-    assert ev["samples"] == 60
+    assert 55 <= ev["samples"] <= 60  # 5 Hz for 12 s, those of the last 0.5 s left out
     assert ev["follows"] and ev["rms"] <= 2.0 * ev["noise"], ev
     # the thermocouple's 2 s lag and the gas's 293.15 K, each within 3 of its sigmas
     assert abs(ev["sensor_time_constant"] - 2.0) < 3.0 * ev["sensor_time_constant_std"] + 0.05

@@ -152,6 +152,11 @@ class SampleBuffer:
 #: Readings a :class:`ReadingLog` keeps (the newest) [-]: a logged temperature at 10 Hz
 #: for 2.7 h.
 READING_LOG_CAPACITY = 100_000
+#: A final fit takes the slower channel's readings up to this long before the end of its
+#: tail [s]: a live node has them all when the tail's last sample arrives (a topic's
+#: readings travel apart from the pressure's), so that it runs at once and takes what the
+#: record's analysis takes (the settled end of a tail adds little).
+READING_MARGIN = 0.5
 
 
 class ReadingLog:
@@ -177,6 +182,17 @@ class ReadingLog:
         keep = t > np.maximum.accumulate(np.concatenate(([last], t)))[:-1]
         self.t = np.concatenate((self.t, t[keep]))[-self.capacity:]
         self.v = np.concatenate((self.v, v[keep]))[-self.capacity:]
+
+    def span(self, t0: float, t_end: float) -> tuple[FloatArray, FloatArray] | None:
+        """The readings a final fit of an unload from t0 to t_end [s] takes: those with t0
+        <= t <= t_end - :data:`READING_MARGIN` (copies; None without any)."""
+        got = self.between(t0, t_end - READING_MARGIN)
+        return got if got[0].size else None
+
+    def complete(self, t_end: float) -> bool:
+        """Every reading :meth:`span` takes for a tail ending at t_end [s] is in: one at or
+        after t_end - :data:`READING_MARGIN` has arrived."""
+        return bool(self.t.size and self.t[-1] >= t_end - READING_MARGIN)
 
     def between(self, t0: float, t1: float) -> tuple[FloatArray, FloatArray]:
         """Copies of the readings with t0 <= t <= t1 [s]: (stamps [s], values [unit])."""

@@ -61,10 +61,9 @@ class OpeningFinal:
         return float(self.t[-1])
 
     def with_temperature(self, log: ReadingLog) -> OpeningFinal:
-        """This job with the readings of ``log`` over its :meth:`window` (None without
-        any)."""
-        got = log.between(*self.window())
-        return dataclasses.replace(self, temperature=got if got[0].size else None)
+        """This job with the readings of ``log`` over its :meth:`window` (see
+        :meth:`~.buffer.ReadingLog.span`; None without any)."""
+        return dataclasses.replace(self, temperature=log.span(*self.window()))
 
     def run(self) -> UnloadResult | None:
         """The final (curve-fit) result, or None when the fit did not give one."""

@@ -82,11 +82,10 @@ class FinalFit:
         return t0, self.t_end
 
     def with_temperature(self, log: ReadingLog) -> FinalFit:
-        """This job with the readings of ``log`` over its :meth:`window` (None without
-        any): taken when it is made, and again when a live node runs it (the slower
-        topic's readings up to the tail's end may arrive after the pressure's)."""
-        got = log.between(*self.window())
-        return dataclasses.replace(self, temperature=got if got[0].size else None)
+        """This job with the readings of ``log`` over its :meth:`window` (up to
+        :data:`~.buffer.READING_MARGIN` before its end: :meth:`~.buffer.ReadingLog.span`;
+        None without any): taken when it is made, and again when a live node runs it."""
+        return dataclasses.replace(self, temperature=log.span(*self.window()))
 
     @property
     def t_end(self) -> float:

@@ -60,11 +60,15 @@ class TemperatureChannel:
     weight : float
         Pa per K of a temperature residual: the pressure residual's standard deviation over
         the temperature's [Pa/K], so that both channels' residuals have one variance.
+    lag : float or None
+        The thermometer's time constant held [s] (given, or one the readings' spacing
+        cannot resolve); None: fitted.
     """
 
     t: FloatArray
     temp: FloatArray
     weight: float
+    lag: float | None = None
 
     @property
     def n(self) -> int:

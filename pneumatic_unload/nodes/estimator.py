@@ -532,22 +532,24 @@ class EstimatorNode(Node):
                 self._publish_result(r, arrived)
 
     def _temperature_ready(self, job: Any, arrived: float) -> bool:
-        """A final fit may run: no gas temperature is received, or a reading at or after
-        the end of its span has come in (or TEMPERATURE_WAIT s passed since its last
-        sample's arrival: a topic that stopped); the job then takes the readings of its
-        span (as an analysis of the record takes them: live = offline)."""
+        """A final fit may run: no gas temperature is received, or every reading of its
+        span has come in (:meth:`~.buffer.ReadingLog.complete`: they end half a second
+        before its tail's, so they are in when the tail's last sample arrives; or
+        TEMPERATURE_WAIT s passed since that arrival: a topic that stopped); the job then
+        takes the readings of its span (as an analysis of the record takes them: live =
+        offline)."""
         if not self._temperature_seen:
             return True
         with self._lock:
             log = self._est.temperature
-            complete = bool(log.t.size and log.t[-1] >= job.t_end)
+            complete = log.complete(job.t_end)
             if not complete and time.monotonic() - arrived <= TEMPERATURE_WAIT:
                 return False
             self._fits[0] = (job.with_temperature(log), arrived)
         if not complete:
             last = f"{log.t[-1]:.3f} s" if log.t.size else "none"
             self._diagnose(_WARN, f"unload {job.crossing.index}: the gas temperature's last "
-                                  f"reading ({last}) is before the end of its span "
+                                  f"reading ({last}) is short of the end of its span "
                                   f"({job.t_end:.3f} s) after {TEMPERATURE_WAIT:g} s: its "
                                   "final fit takes the readings there are")
         return True
