@@ -195,11 +195,18 @@ def write_csv(path: Path, t: np.ndarray, y: np.ndarray, temp: np.ndarray | None)
     path.write_text(head + "\n" + "\n".join(body.tolist()) + "\n")
 
 
-def _analyze(path: Path, volume: float, atmosphere: bool) -> dict:
+#: ``--record-only``: the stated inputs exact and no model-limits line, so that sigma(C) is
+#: the record's own (T10's line kept: without the column T10 is not measured).
+RECORD_ONLY = ["--volume-uncertainty", "0", "--pressure-uncertainty", "0",
+               "--atmosphere-uncertainty", "0", "--model-uncertainty", "0"]
+
+
+def _analyze(path: Path, volume: float, atmosphere: bool, record_only: bool = False) -> dict:
     """``analyze --json`` on the file; the final unload (or ``error``) and the CPU s."""
     from pneumatic_unload.cli import main
 
-    argv = ["analyze", str(path), "--volume", repr(volume), "--json"]
+    argv = ["analyze", str(path), "--volume", repr(volume), "--json",
+            *(RECORD_ONLY if record_only else [])]
     if atmosphere:
         argv += ["--atmosphere", repr(P_ATM)]
     out, err = io.StringIO(), io.StringIO()
@@ -221,9 +228,9 @@ def _analyze(path: Path, volume: float, atmosphere: bool) -> dict:
     return {"unload": final[0], "cpu": cpu}
 
 
-def run(job: tuple[Case, bool]) -> list[dict]:
+def run(job: tuple[Case, bool, bool]) -> list[dict]:
     """The case's record analysed with and without its temperature column."""
-    case, atmosphere = job
+    case, atmosphere, record_only = job
     t, y, temp = record(case)
     out = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -231,7 +238,7 @@ def run(job: tuple[Case, bool]) -> list[dict]:
             path = Path(tmp) / f"{case.name}-{'T' if with_t else 'p'}.csv"
             write_csv(path, t, y, temp if with_t else None)
             out.append({"case": case, "with_t": with_t,
-                        **_analyze(path, case.volume, atmosphere)})
+                        **_analyze(path, case.volume, atmosphere, record_only)})
     return out
 
 
@@ -368,16 +375,20 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--atmosphere", action="store_true",
                     help=f"pass --atmosphere {P_ATM:g} to analyze (the offset is fitted only "
                          "when p_atm is given)")
+    ap.add_argument("--record-only", action="store_true",
+                    help="V, p and p_atm exact and no model-limits line: sigma(C) the "
+                         "record's own (the coverage the acceptance asks)")
     args = ap.parse_args(argv)
     grid = cases(args.quick, args.seeds)
     print(f"Temperature records: {len(grid)} traces x (with, without the temperature column), "
-          f"{NOISE:g} Pa noise, p_atm {'given' if args.atmosphere else 'not given'}\n")
+          f"{NOISE:g} Pa noise, p_atm {'given' if args.atmosphere else 'not given'}"
+          f"{', record only' if args.record_only else ''}\n")
     print("| case | T | dT hot [K] | tau_h [s] | lag [s] | T/p rate [Hz] | plateau [s] | "
           "offset [Pa] | V [L] | C [dm^3/(s bar)] | b | p10 [bar] | tau0 [s] | C err [%] | "
           "z_C | b fit | b err | z_b | offset fit [Pa] | offset err [Pa] | "
           "T rms/noise, lag | status | CPU [s] |")
     print("|---" * 23 + "|")
-    jobs = [(c, args.atmosphere) for c in grid]
+    jobs = [(c, args.atmosphere, args.record_only) for c in grid]
     start = time.perf_counter()
     stats = []
     with contextlib.ExitStack() as stack:

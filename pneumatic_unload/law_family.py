@@ -278,7 +278,15 @@ class Family:
                 # beyond a room's spread (3 x WALL_ASSUMED_STD); white residuals alone are
                 # no evidence of it: a plateau that decays through a leak turned white
                 # with a gas 3 K warm and C +6.6 % (z 15; test_adequacy)
-                if gap > 3.0 * WALL_ASSUMED_STD:
+                hottest = (s.gas.gamma - 1.0) * AMBIENT_TEMPERATURE
+                if gap > hottest:
+                    # filling even an evacuated tank heats its gas to gamma T_supply at
+                    # most: a larger gap absorbs other model error (two restrictions in
+                    # series: T10 545 K, C -29 %)
+                    self.not_offered[key] = (f"T10 not measured: a gas {gap:.0f} K from the "
+                                             f"room's is beyond what a charge can make "
+                                             f"({hottest:.0f} K, gamma T_room)")
+                elif gap > 3.0 * WALL_ASSUMED_STD:
                     self.fits[key] = hot
                 else:
                     self.not_offered[key] = (f"T10 not measured: a gas {gap:.1f} K from the "
