@@ -296,8 +296,11 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
     near = {split_key(k)[0] for k in bic if bic[k] - bic[best] <= window}
     tried = tuple(law for law in tried if law in near) or (split_key(best)[0],)
     for k in range(TEMPERATURE_PASSES):
-        joint = trace.with_channel(channel(t_rel, temp, cf.rms, sigma,
-                                           ev.get("sensor_time_constant", math.nan)))
+        # (a lag the comparison finds unresolved is held only where its model follows the
+        # log: one that departs misplaces the lag too - 1e-4 s for 1 s on a hot start)
+        joint = trace.with_channel(channel(
+            t_rel, temp, cf.rms, sigma,
+            ev.get("sensor_time_constant", math.nan) if ev.get("follows") else math.nan))
         j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
                                        fam.profile_heat, offset=fam.offset,
                                        seeds=seeds, plateau_drifts=fam.plateau_drifts,
