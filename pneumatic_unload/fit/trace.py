@@ -47,8 +47,9 @@ class FittableModel(Protocol):
 
 @dataclass(frozen=True)
 class TemperatureChannel:
-    """A logged gas temperature fitted beside the pressure (a model with ``reading``, see
-    :meth:`pneumatic_unload.model.parametric.ParametricModel.reading`).
+    """A logged gas temperature fitted beside the pressure (a model with
+    ``thermometer_grid``, ``signal_and_temperature`` and ``seen``, see
+    :class:`pneumatic_unload.model.parametric.ParametricModel`).
 
     Attributes
     ----------

@@ -77,7 +77,7 @@ class ParametricModel:
         A logged gas temperature is fitted beside the pressure: T10 (the gas temperature at
         the opening, 't10' [K], start ``tank.initial_temperature``) and the thermometer's
         first-order time constant ('tau_thermo' [s], :data:`THERMOMETER_TAU_RANGE`) are
-        parameters, and :meth:`reading` is what the thermometer shows. A wall not given
+        parameters, and :meth:`seen` is what the thermometer shows. A wall not given
         follows the fitted T10.
     fit_initial_temperature : bool
         T10 ('t10') is a parameter without a thermometer (a hot start whose T10 was not
@@ -250,14 +250,6 @@ class ParametricModel:
     def temperature(self, v: Values, t: FloatArray) -> FloatArray:
         """Mean gas temperature of the model at instants t [K]."""
         return self.states(v, t)[:, 1]
-
-    def reading(self, v: Values, t: FloatArray, first: float) -> FloatArray:
-        """What a thermometer of time constant ``v['tau_thermo']`` [s] shows at instants t
-        [s] (increasing, at least two) when it showed ``first`` [K] at t[0]: the first-order
-        lag of the model's mean gas temperature [K] (exact for its piecewise-linear
-        interpolant on :meth:`thermometer_grid`)."""
-        grid = self.thermometer_grid(v, t)
-        return self.seen(v, grid, self.temperature(v, grid), t, first)
 
     def thermometer_grid(self, v: Values, t: FloatArray) -> FloatArray:
         """The instants [s] at which the gas temperature is taken for a thermometer read at
