@@ -20,11 +20,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize_scalar
 
 from pneumatic_unload.budget import BudgetTerm
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.curve_fit_result import CurveSpan
+from pneumatic_unload.fit.scalar import interval_minimum
 from pneumatic_unload.fit.trace import TemperatureChannel
 from pneumatic_unload.model import discharge, first_order_lag
 from pneumatic_unload.model.parametric import THERMOMETER_TAU_RANGE
@@ -42,6 +42,9 @@ RESOLUTION_FLOOR = 0.2
 #: Points of the model's temperature between the log's samples (the lag is exact for the
 #: piecewise-linear interpolant of its input) [-].
 FINE_POINTS = 4000
+#: Points of the log-spaced grid over :data:`SENSOR_TAU_RANGE` from which the lag search
+#: brackets its minimum (a cell spans a factor of about 2.7) [-].
+LAG_GRID = 15
 
 
 def channel_noise(temp: FloatArray) -> float:
@@ -108,9 +111,7 @@ def temperature_evidence(cfg: RigConfig, t_open: float, t_log: FloatArray,
 
     lo, hi = (math.log(x) for x in SENSOR_TAU_RANGE)
     if sensor_tau is None:
-        best = minimize_scalar(misfit, bounds=(lo, hi), method="bounded",
-                               options={"xatol": 1e-3})
-        tau = float(math.exp(best.x))
+        tau = math.exp(interval_minimum(misfit, lo, hi, points=LAG_GRID, tol=1e-3))
     else:
         tau = float(sensor_tau)
     r = temp_log - seen(tau)

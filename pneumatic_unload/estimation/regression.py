@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from pneumatic_unload.estimation.types import FloatArray
+from pneumatic_unload.fit.scalar import golden_section
 from pneumatic_unload.model.kernel import build
 
 
@@ -50,22 +51,8 @@ def grid_then_golden(f: Callable[[float], float], t: FloatArray, t_lo: float, t_
     vals = [f(float(c)) for c in cand]
     k = int(np.argmin(vals))
     step = float(cand[1] - cand[0]) if cand.size > 1 else t_hi - t_lo
-    a_, b_ = max(t_lo, float(cand[k]) - step), min(t_hi, float(cand[k]) + step)
-    gr = (math.sqrt(5.0) - 1.0) / 2.0
-    x1, x2 = b_ - gr * (b_ - a_), a_ + gr * (b_ - a_)
-    f1, f2 = f(x1), f(x2)
-    for _ in range(48):
-        if b_ - a_ < rel_tol * max(step, 1e-12):
-            break
-        if f1 <= f2:
-            b_, x2, f2 = x2, x1, f1
-            x1 = b_ - gr * (b_ - a_)
-            f1 = f(x1)
-        else:
-            a_, x1, f1 = x1, x2, f2
-            x2 = a_ + gr * (b_ - a_)
-            f2 = f(x2)
-    return 0.5 * (a_ + b_)
+    return golden_section(f, max(t_lo, float(cand[k]) - step),
+                          min(t_hi, float(cand[k]) + step), tol=rel_tol * max(step, 1e-12))
 
 
 def power_shape(s: float, c: float, exponent: float, u_max: float
