@@ -99,7 +99,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
-from foreign.newton_tank import IsoLaw, discharge
+from foreign.newton_tank import IsoLaw, discharge, thermocouple
 
 P_ATM, WALL = 101325.0, 293.15  # [Pa abs], [K]: the room, the tank's wall
 NOISE = 1000.0  # pressure noise, 0.1 % of a 1 MPa full scale [Pa]
@@ -166,19 +166,6 @@ def cases(quick: bool = False, seeds: int = 1) -> list[Case]:
     if quick:
         out = [out[k] for k in (0, 1, 4, 11)]
     return [Case(**{**c.__dict__, "seed": s}) for c in out for s in range(seeds)]
-
-
-def thermocouple(t: np.ndarray, gas: np.ndarray, lag: float, y0: float) -> np.ndarray:
-    """A first-order lag y' = (u - y) / lag of the piecewise-linear u = ``gas`` from y0:
-    y1 = u1 - s lag + (y0 - u0 + s lag) exp(-h / lag), s = (u1 - u0) / h, on each step."""
-    y = np.empty_like(gas)
-    y[0] = y0
-    h = np.diff(t)
-    a = np.exp(-h / lag)
-    s_lag = np.diff(gas) / h * lag
-    for k in range(t.size - 1):
-        y[k + 1] = gas[k + 1] - s_lag[k] + (y[k] - gas[k] + s_lag[k]) * a[k]
-    return y
 
 
 def record(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

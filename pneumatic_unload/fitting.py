@@ -52,6 +52,8 @@ from pneumatic_unload.law_fit import (
 from pneumatic_unload.subsonic_offer import M_SUFFIX, held_lines, split_key, twin_lines
 from pneumatic_unload.temperature_evidence import (
     FOLLOW_FACTOR,
+    TEMPERATURE_PASSES,
+    TEMPERATURE_WEIGHT_TOLERANCE,
     channel,
     channel_noise,
     channel_samples,
@@ -245,13 +247,6 @@ def fit_curve(
             out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why,
                                       wall_std=wall_std)
     return out
-
-
-#: The joint fit is made again with the temperature's weight from its own residuals
-#: until their RMS is within this factor of the one assumed, at most
-#: :data:`TEMPERATURE_PASSES` times [-].
-TEMPERATURE_WEIGHT_TOLERANCE = 1.3
-TEMPERATURE_PASSES = 3
 
 
 def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArray],

@@ -362,7 +362,7 @@ def best_key(fits: dict[str, Fit], n: int) -> str:
 
 #: A plateau drifts when its straight line's slope is at least this many of its
 #: standard errors (the residuals' lag-1 correlation counted) [-].
-PLATEAU_DRIFT_Z = 5.0
+PLATEAU_DRIFT_Z = 2.0
 
 
 def plateau_drift(t: FloatArray, p: FloatArray, t_open: float) -> bool:

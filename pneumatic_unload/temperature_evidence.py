@@ -36,6 +36,11 @@ SENSOR_TAU_RANGE = THERMOMETER_TAU_RANGE
 #: The model's gas follows the log when the RMS of fitted minus measured is at most this
 #: many times the channel's noise [-] (with a floor of :data:`RESOLUTION_FLOOR`).
 FOLLOW_FACTOR = 2.0
+#: A joint fit (the estimator's, the discrepancy workflow's) is made again with the
+#: temperature's weight from its own residuals until their RMS is within this factor of
+#: the one assumed, at most :data:`TEMPERATURE_PASSES` times [-].
+TEMPERATURE_WEIGHT_TOLERANCE = 1.3
+TEMPERATURE_PASSES = 3
 #: Smallest noise credited to a temperature channel [K] (a logger's 0.1 K resolution:
 #: quantisation alone is 0.03 K rms, a probe's accuracy is rarely better than 0.2 K).
 RESOLUTION_FLOOR = 0.2

@@ -120,6 +120,11 @@ class ConductanceAmbiguity:
         pressure record can exclude (a leak test bounds it), not part of the range.
     separating : list of str
         Measurements that would separate them.
+    fits : list of Fit
+        The fits of :attr:`members`, in their order (not in the JSON).
+    ruled_out : list of dict
+        Members a logged gas temperature rules out (:meth:`rule_out`): as in
+        :attr:`members`, with 'why'; no longer in the range.
     """
 
     members: list[dict[str, Any]] = field(default_factory=list)
@@ -127,6 +132,32 @@ class ConductanceAmbiguity:
     high: float = math.nan
     parallel_low: float = math.nan
     separating: list[str] = field(default_factory=list)
+    fits: list[Fit] = field(default_factory=list)
+    ruled_out: list[dict[str, Any]] = field(default_factory=list)
+    #: The final model's C and its total 1-sigma [m^3/(s Pa)] (the range's own ends).
+    final_conductance: tuple[float, float] = (math.nan, math.nan)
+
+    def rule_out(self, which: dict[int, str]) -> None:
+        """Take the members at the indices of ``which`` (into :attr:`members`; the
+        reported model, index 0, stays) out of the range, each with its reason, and span
+        the range anew over the final model and the members left (none left but the
+        final model: C is no longer ambiguous, unless a downstream leak is in it)."""
+        gone = {i for i in which if 0 < i < len(self.members)}
+        if not gone:
+            return
+        self.ruled_out += [{**self.members[i], "why": which[i]} for i in sorted(gone)]
+        keep = [i for i in range(len(self.members)) if i not in gone]
+        self.members = [self.members[i] for i in keep]
+        self.fits = [self.fits[i] for i in keep if i < len(self.fits)]
+        c0, s0 = self.final_conductance
+        self.low, self.high = max(c0 - K_RANGE * s0, 0.0), c0 + K_RANGE * s0
+        for m in self.members:
+            c, s = m["conductance"], m["conductance_std"]
+            self.low = min(self.low, max(c - K_RANGE * s, 0.0))
+            self.high = max(self.high, c + K_RANGE * s)
+        if len(self.members) == 1 and not any(e in DOWNSTREAM_LEAKS
+                                              for e in self.members[0]["effects"]):
+            self.members, self.fits = [], []
 
     @property
     def ambiguous(self) -> bool:
@@ -137,6 +168,7 @@ class ConductanceAmbiguity:
         """JSON-ready dict (the ``conductance_range`` of the JSON output)."""
         return {"low": self.low, "high": self.high, "unit": "m^3/(s Pa)",
                 "ambiguous": self.ambiguous, "members": self.members,
+                "ruled_out_by_temperature": self.ruled_out,
                 "parallel_leak_low": self.parallel_low,
                 "parallel_leak_max": PARALLEL_LEAK_MAX, "separating": self.separating}
 
@@ -251,6 +283,7 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
                           model_limits_term(c, model_uncertainty).std)
 
     s0_ = total(c0, s0)
+    out.final_conductance = (c0, s0_)
     out.parallel_low = max(c0 - K_RANGE * s0_, 0.0) / (1.0 + PARALLEL_LEAK_MAX)
     out.low, out.high = max(c0 - K_RANGE * s0_, 0.0), c0 + K_RANGE * s0_
     plugged = f"C vs a leak in parallel with the component: {PLUGGED_RUN}"
@@ -268,6 +301,7 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
         out.high = max(out.high, c + K_RANGE * s)
         out.members.append({"effects": list(f.effects), "conductance": c,
                             "conductance_std": s, "delta_bic": dbic, "why": why})
+        out.fits.append(f)
     names = sorted({e for f, _, _ in rows for e in f.effects})
     effs = [e for e in names if e not in final.effects] + list(final.effects)
     specific = separating_data(effs[:4]) if len(effs) > 1 else []

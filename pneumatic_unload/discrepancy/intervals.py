@@ -84,13 +84,17 @@ TEMPERATURE_TOLERANCE = 5.0
 
 
 def temperature_check(prob: Problem, base: Fit, final: Fit, t_meas: FloatArray,
-                      temp_meas: FloatArray) -> dict[str, Any]:
+                      temp_meas: FloatArray, joint: dict[str, Any] | None = None
+                      ) -> dict[str, Any]:
     """Compare a measured gas temperature with the baseline and final models [K].
 
-    The measured temperature is not used in any fit, so agreement is independent evidence
-    for (or against) the heat-transfer effect fitted on the pressure alone. A final model
+    The models' gas is compared as it is, with no thermometer: agreement is evidence for
+    (or against) the heat-transfer effect fitted on the pressure alone. A final model
     whose temperature differs from the log by more than :data:`TEMPERATURE_TOLERANCE` (rms)
-    is flagged ('contradicts') with the likely reason and what to measure next.
+    is flagged ('contradicts') with the likely reason and what to measure next - unless
+    the final model was fitted with the log and follows it through its thermometer
+    (``joint``: :func:`~pneumatic_unload.discrepancy.thermo.joint_fit`'s result, whose
+    ``rms`` [K] is then the final model's departure).
     """
     sel = (t_meas >= prob.t[0]) & (t_meas <= prob.t[-1])
     if np.count_nonzero(sel) < 3:
@@ -109,6 +113,11 @@ def temperature_check(prob: Problem, base: Fit, final: Fit, t_meas: FloatArray,
                       "min_model": float(np.min(Tmod)), "end_model": float(Tmod[-1])}
     heat = any(e in ("heat_transfer", "hot_start") for e in final.effects)
     better = out["final"]["rms"] < out["baseline"]["rms"]
+    follows = bool(joint and joint.get("follows"))
+    if follows:
+        assert joint is not None
+        out["final"]["rms_gas"] = out["final"]["rms"]
+        out["final"]["rms"] = float(joint["rms"])
     contradicts = out["final"]["rms"] > TEMPERATURE_TOLERANCE
     out["heat_transfer_fitted"] = heat
     out["contradicts"] = contradicts
@@ -125,6 +134,11 @@ def temperature_check(prob: Problem, base: Fit, final: Fit, t_meas: FloatArray,
                 f"{out['final']['mean']:+.1f} K); likely: {reason}; next: {next_}; "
                 + ("it is still closer than the adiabatic baseline" if better else
                    "it is not even closer than the adiabatic baseline"))
+    if follows:
+        assert joint is not None
+        head = (f"the final model, fitted with the logged gas temperature, follows it "
+                f"through its thermometer ({joint['rms']:.2g} K rms, noise "
+                f"{joint['noise']:.2g} K; lag {joint['sensor_time_constant']:.2g} s)")
     out["summary"] = (
         head + f" (rms {out['baseline']['rms']:.2f} K adiabatic vs {out['final']['rms']:.2f} K "
         f"final model; measured minimum {out['measured_min']:.1f} K, end "

@@ -25,7 +25,7 @@ from pneumatic_unload.estimation import (
     UnloadResult,
 )
 from pneumatic_unload.fit.noise import estimate_noise
-from pneumatic_unload.fit.trace import Trace
+from pneumatic_unload.fit.trace import TemperatureChannel, Trace
 from pneumatic_unload.model.effects import Start
 from pneumatic_unload.model.parametric import ParametricModel
 
@@ -103,6 +103,13 @@ class Problem:
         """The parametric model with these effects."""
         return ParametricModel(effects, self.tank, self.start, heat_law=heat_law,
                                fit_wall_temperature=self.settings.fit_wall_temperature)
+
+    def with_channel(self, channel: TemperatureChannel | None) -> Problem:
+        """The same trace and noise with a logged gas temperature fitted beside the
+        pressure (:meth:`~pneumatic_unload.fit.trace.Trace.with_channel`)."""
+        out = copy.copy(self)
+        out.trace = self.trace.with_channel(channel)
+        return out
 
     def with_length_diameter(self, ratio: float) -> Problem:
         """The same trace and noise with the tank's L/D set to ``ratio`` [-] (the natural

@@ -142,7 +142,7 @@ def write_plots(res: DiscrepancyResult, out: Path) -> dict[str, str]:
         if np.count_nonzero(sel) > 2:
             fig, ax = plt.subplots(figsize=(9, 4.5), dpi=100)
             ax.plot(tt[sel], res.temperature[sel] - 273.15, ".", ms=3, color="0.3",
-                    label="measured gas temperature (not used in the fit)")
+                    label="measured gas temperature")
             for f, label, col in ((res.baseline, "baseline (adiabatic)", "tab:red"),
                                   (res.final, after_label, "tab:blue")):
                 ax.plot(tt[sel], f.model.temperature(f.theta, tt[sel]) - 273.15, "-",
@@ -177,6 +177,32 @@ def _sigma_sources(nz: dict[str, Any]) -> str:
         return ""
     return (f"; sigma weights the plateau estimate {sp:.4g} Pa and the whole-trace "
             f"high-pass estimate {sh:.4g} Pa (weight {w:.2f})")
+
+
+def _joint_lines(res: DiscrepancyResult) -> list[str]:
+    """The table of the models fitted with the logged gas temperature (T10 and the
+    thermometer's lag fitted): which follow it and which it rules out of C's range."""
+    j = res.temperature_joint
+    if not j:
+        return []
+    if not j.get("available"):
+        return [f"Not fitted with the models: {j.get('why', '')}.", ""]
+    gone = set(j["rules_out"])
+    out = ["Each model of C's range fitted again with the log beside the pressure (T10 "
+           "and the thermometer's lag fitted; a model follows the log when its readings' "
+           "rms is within 2 of the channel's noise):", "",
+           "| model | follows | rms [K] | noise [K] | T10 [K] | lag [s] | C [dm^3/(s bar)] "
+           "| |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for i, m in enumerate(j["models"]):
+        name = ", ".join(m["effects"]) or "baseline"
+        if "rms" not in m:
+            out.append(f"| {name} | - | | | | | | {m.get('why', '')} |")
+            continue
+        note = "reported" if i == 0 else "ruled out" if i in gone else ""
+        out.append(f"| {name} | {'yes' if m['follows'] else 'no'} | {m['rms']:.2g} | "
+                   f"{m['noise']:.2g} | {m['t10']:.1f} | {m['sensor_time_constant']:.2g} | "
+                   f"{m['conductance'] / 1e-8:.4g} | {note} |")
+    return [*out, ""]
 
 
 def markdown(res: DiscrepancyResult, files: dict[str, str], title: str = "") -> str:
@@ -262,6 +288,7 @@ def markdown(res: DiscrepancyResult, files: dict[str, str], title: str = "") -> 
                 lines += [f"![temperature]({files['temperature']})", ""]
         else:
             lines += [tc.get("reason", "not available"), ""]
+        lines += _joint_lines(res)
     if res.notes:
         lines += ["## Notes", ""] + [f"- {n}" for n in res.notes] + [""]
     lines += ["## Method", "",

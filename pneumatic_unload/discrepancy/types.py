@@ -317,6 +317,10 @@ class DiscrepancyResult:
     temperature_check: dict[str, Any] | None = None
     t_temperature: FloatArray | None = None
     temperature: FloatArray | None = None
+    #: The logged gas temperature's verdict on the final model and C's ambiguity
+    #: members, each fitted jointly with it
+    #: (:func:`~pneumatic_unload.discrepancy.thermo.judge`); None without a log.
+    temperature_joint: dict[str, Any] | None = None
     settings: DiscrepancySettings | None = None
     notes: list[str] = field(default_factory=list)
     #: The C range: models that fit about equally with different C (and, apart, the bound
@@ -404,6 +408,7 @@ class DiscrepancyResult:
             "diagnostics_after": self.after.to_dict(),
             "extra_data": self.extra_data, "geometry_factor": self.geometry_factor,
             "temperature_check": self.temperature_check,
+            "temperature_joint": self.temperature_joint,
             "samples": self.n_samples, "bins": self.n_bins, "elapsed_s": self.elapsed,
             "notes": self.notes,
         })

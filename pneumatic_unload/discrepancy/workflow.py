@@ -82,6 +82,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -106,6 +107,7 @@ from pneumatic_unload.discrepancy.search import (
     sensor_refusals,
     structure_refusals,
 )
+from pneumatic_unload.discrepancy.thermo import joint_fit, judge, readings, temperature_words
 from pneumatic_unload.discrepancy.types import (
     Diagnostics,
     DiscrepancyError,
@@ -246,6 +248,16 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
                                    "while the natural heat law was refitted at other L/D "
                                    "values: the default L/D is kept, unchecked")
         timed_out = timed_out or f"time limit of {settings.time_limit:g} s reached"
+    # the logged gas temperature: the final model fitted with it (T10 and the
+    # thermometer's lag), reported when its gas follows the log, as the estimator does
+    joint_final: dict[str, Any] = {}
+    got = readings(prob_final, temperature) if temperature is not None else "no log"
+    if not isinstance(got, str):
+        say("discrepancy: the final model fitted with the logged gas temperature")
+        joint_final = joint_fit(prob_final, current, *got)
+        if joint_final.get("follows"):
+            current = joint_final["fit"]
+            prob_final = prob_final.with_channel(joint_final["channel"])
     after, m_after = diagnose(prob, current)
     names = [q for q in current.result.params.free if q not in base.result.params.names]
     t_iv = time.perf_counter()
@@ -261,7 +273,7 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
     params.update(intervals(prob_final, current, ["C"], profile=False))
     say(f"discrepancy: intervals {time.perf_counter() - t_iv:.1f} s")
     extra = separating_data([first_effect, *first_amb]) if first_amb else []
-    geo = geometry_factor_check(prob_final, current)
+    geo = geometry_factor_check(prob_final.with_channel(None), current)
     notes = [C_MEANING] + ([timed_out] if timed_out else []) + ([ld_note] if ld_note else [])
     if prob.noise.source == "differences":
         notes.append("no plateau long enough for the noise model: sigma from second "
@@ -279,6 +291,12 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
 
     c_amb = conductance_ambiguity(base, rounds, current, thr, fit_quality_of,
                                   settings.model_uncertainty, ld_members)
+    joint = None
+    if temperature is not None:
+        say("discrepancy: the logged gas temperature fitted with each model of C's range")
+        joint = judge(prob, [current, *c_amb.fits[1:]], temperature,
+                      final=joint_final or None)
+        verdict += temperature_words(joint, c_amb)
     if c_amb.ambiguous:
         verdict += "; " + describe(c_amb)
         extra += [x for x in c_amb.separating if x not in extra]
@@ -288,11 +306,12 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
         before=before, after=after, extra_data=extra, geometry_factor=geo, t=prob.t,
         y=prob.y, model_before=m_before, model_after=m_after, t_ref=prob.t_ref,
         n_samples=prob.lik.n, n_bins=prob.lik.n_bins, elapsed=0.0, settings=settings,
-        notes=notes, conductance_ambiguity=c_amb)
+        notes=notes, conductance_ambiguity=c_amb, temperature_joint=joint)
     if temperature is not None:
         res.t_temperature = np.asarray(temperature[0], dtype=float) - prob.t_ref
         res.temperature = np.asarray(temperature[1], dtype=float)
-        tc = temperature_check(prob, base, current, res.t_temperature, res.temperature)
+        tc = temperature_check(prob, base, current, res.t_temperature, res.temperature,
+                               joint_final)
         res.temperature_check = tc
         if tc.get("contradicts"):
             res.verdict += (f"; the logged gas temperature contradicts the fitted model "

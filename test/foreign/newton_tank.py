@@ -308,3 +308,17 @@ def discharge(t: np.ndarray, *, volume: float, conductance: float | None = None,
     if temperature_out is not None:
         temperature_out[:] = temps
     return out
+
+
+def thermocouple(t: np.ndarray, gas: np.ndarray, lag: float, y0: float) -> np.ndarray:
+    """A thermocouple's reading: the first-order lag y' = (u - y) / lag [s] of the
+    piecewise-linear gas temperature u = ``gas`` [K] at instants t [s], from y0 [K]:
+    y1 = u1 - s lag + (y0 - u0 + s lag) exp(-h / lag), s = (u1 - u0) / h, on each step."""
+    y = np.empty_like(gas)
+    y[0] = y0
+    h = np.diff(t)
+    a = np.exp(-h / lag)
+    s_lag = np.diff(gas) / h * lag
+    for k in range(t.size - 1):
+        y[k + 1] = gas[k + 1] - s_lag[k] + (y[k] - gas[k] + s_lag[k]) * a[k]
+    return y
