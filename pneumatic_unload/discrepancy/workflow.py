@@ -57,8 +57,13 @@ Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):
    start first (:func:`~pneumatic_unload.discrepancy.search.refit_contenders`). When the
    tank's L/D is not stated, the final model's natural heat law is also fitted at other
    L/D values (:func:`~pneumatic_unload.discrepancy.laws.length_diameter_choice`).
-7. **Temperature.** A logged gas temperature is compared with the models; a final model
-   that contradicts it is flagged with the likely reason (e.g. the wall temperature).
+7. **Temperature.** A logged gas temperature is fitted with the final model (T10 and the
+   thermometer's lag: :func:`~pneumatic_unload.discrepancy.thermo.joint_fit`, the
+   estimator's joint fit and rule), which is reported with it where its gas follows the
+   log; each member of C's range is fitted with it too, and those the log rules out leave
+   the range (:func:`~pneumatic_unload.discrepancy.thermo.temperature_words`). A final
+   model whose gas contradicts the log is flagged with the likely reason (e.g. the wall
+   temperature).
 
 **Time bound.** A run is bounded in evaluations: at most ``max_effects`` (3) rounds of at
 most 11 candidates, each fitted from at most 10 starts (two one-parameter heat laws x 5,
@@ -138,8 +143,9 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
     settings : DiscrepancySettings
         Rig data and options.
     temperature : tuple of ndarray, optional
-        Measured gas temperature (instants [s] on the same clock as t, values [K]): used
-        as independent evidence for the heat-transfer effect, never in the fit.
+        Measured gas temperature (instants [s] on the same clock as t, values [K]): not
+        in the search of effects; fitted with the final model and the models of C's range
+        (step 7).
     progress : callable, optional
         Called with one line per step (baseline, each candidate of each round, intervals,
         end), e.g. ``"discrepancy: round 1, candidate 3/10 sensor_lag 0.4 s"``.
