@@ -202,17 +202,22 @@ def write_csv(path: Path, t: np.ndarray, y: np.ndarray, temp: np.ndarray | None)
 
 
 #: ``--record-only``: the stated inputs exact and no model-limits line, so that sigma(C) is
-#: the record's own (T10's line kept: without the column T10 is not measured).
+#: the record's own; T10's line is kept without the column (T10 is not measured) and
+#: dropped with it (T10 is fitted from the log, and this grid's thermocouple has no offset:
+#: the probe is exact, as V is).
 RECORD_ONLY = ["--volume-uncertainty", "0", "--pressure-uncertainty", "0",
                "--atmosphere-uncertainty", "0", "--model-uncertainty", "0"]
+PROBE_EXACT = ["--temperature-uncertainty", "0"]
 
 
-def _analyze(path: Path, volume: float, atmosphere: bool, record_only: bool = False) -> dict:
+def _analyze(path: Path, volume: float, atmosphere: bool, record_only: bool = False,
+             with_t: bool = False) -> dict:
     """``analyze --json`` on the file; the final unload (or ``error``) and the CPU s."""
     from pneumatic_unload.cli import main
 
     argv = ["analyze", str(path), "--volume", repr(volume), "--json",
-            *(RECORD_ONLY if record_only else [])]
+            *(RECORD_ONLY if record_only else []),
+            *(PROBE_EXACT if record_only and with_t else [])]
     if atmosphere:
         argv += ["--atmosphere", repr(P_ATM)]
     out, err = io.StringIO(), io.StringIO()
@@ -244,7 +249,7 @@ def run(job: tuple[Case, bool, bool]) -> list[dict]:
             path = Path(tmp) / f"{case.name}-{'T' if with_t else 'p'}.csv"
             write_csv(path, t, y, temp if with_t else None)
             out.append({"case": case, "with_t": with_t,
-                        **_analyze(path, case.volume, atmosphere, record_only)})
+                        **_analyze(path, case.volume, atmosphere, record_only, with_t)})
     return out
 
 

@@ -14,7 +14,8 @@ enum {
     GAMMA, R_GAS, CP, VOLUME, P_ATM, T_WALL, B_RATIO, M_INDEX, C_RHO, LEAK,
     HEAT_MODE, HEAT_A, HEAT_RA, PIPE, PIPE_VOLUME, PIPE_C_RHO,
     T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN,
-    LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B, HEAT_TURB, N_PARAMETERS
+    LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B, HEAT_TURB,
+    CHARGE, P_SUPPLY, T_SUPPLY, N_PARAMETERS
 };
 
 /* Subsonic index of the orifice-law leaks [-] (a sharp-edged orifice). */
@@ -101,10 +102,24 @@ static double valve_branch(double a, double p, double t_node, const double *prm)
     return g;
 }
 
+/* Mass flow [kg/s] into the tank at p [Pa] through the component from the supply
+ * (p_s, T_s: the CHARGE slots) upstream of it, times the opening a [-]: the ISO 6358 law
+ * with p1 = p_s, T1 = T_s, r = p / p_s (negative beyond r = 1: the linear end's reverse
+ * flow, a tank above its supply). */
+static double supply_branch(double a, double p, const double *prm)
+{
+    if (a <= 0.0) return 0.0;
+    double p_s = prm[P_SUPPLY];
+    return a * prm[C_RHO] * p_s * prm[SQRT_TN] / sqrt(prm[T_SUPPLY])
+           * pu_flow_phi(p / p_s, prm[B_RATIO], prm[M_INDEX], prm[R_LIN]);
+}
+
 /* dy/dt of y = (p [Pa], T [K][, p_pipe [Pa]]) at t [s].
  * Flows out of the tank: the valve branch (through the pipe when there is one), the
  * upstream laminar leak LEAK (p - p_atm) and the upstream orifice-law leak (C_leak rho_n,
- * b_leak), both active whether the valve is open or not. */
+ * b_leak), both active whether the valve is open or not. A charge (CHARGE 1): the
+ * component fills the tank from the supply instead, its inflow carrying the supply's
+ * enthalpy c_p T_s (the leaks still go from the tank to p_atm; no pipe). */
 void pu_rhs(double t, const double *y, const double *prm, double *dy)
 {
     double p1 = y[0], t1 = y[1];
@@ -112,6 +127,23 @@ void pu_rhs(double t, const double *y, const double *prm, double *dy)
     double p_atm = prm[P_ATM], t_wall = prm[T_WALL], sq_tn = prm[SQRT_TN];
     double r_lin = prm[R_LIN];
     double g1 = 0.0;
+    if (prm[CHARGE] > 0.0) {
+        double g_in = supply_branch(a, p1, prm);
+        double g_leak = prm[LEAK] * (p1 - p_atm);
+        if (prm[OLEAK_C_RHO] > 0.0)
+            g_leak += prm[OLEAK_C_RHO] * p1 * sq_tn / sqrt(t1)
+                      * pu_flow_phi(p_atm / p1, prm[OLEAK_B], LEAK_M_INDEX, r_lin);
+        double q = pu_heat_flow(prm[HEAT_MODE], prm[HEAT_A], prm[HEAT_RA], t_wall, p1, t1,
+                                prm[HEAT_TURB]);
+        double vol = prm[VOLUME];
+        /* the inflow brings c_p T_s per kg (a reverse flow, g_in < 0, leaves at T) */
+        double h_in = g_in >= 0.0 ? prm[T_SUPPLY] : t1;
+        double dp = (prm[GAMMA] - 1.0) / vol
+                    * (q + prm[CP] * (g_in * h_in - g_leak * t1));
+        dy[0] = dp;
+        dy[1] = t1 / p1 * dp - prm[R_GAS] * t1 * t1 / (p1 * vol) * (g_in - g_leak);
+        return;
+    }
     if (prm[PIPE] > 0.0) {
         double p2 = y[2];
         g1 = prm[PIPE_C_RHO] * p1 * sq_tn / sqrt(t1) * pu_flow_phi(p2 / p1, 0.5, 0.5, r_lin);

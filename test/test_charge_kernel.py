@@ -1,0 +1,73 @@
+"""The kernel's charge: a tank filled through the component from a supply (closed forms).
+
+The same right-hand side as the discharge with the flow's direction: the component's
+upstream side is the supply (p_s, T_s), its inflow carries the supply's enthalpy c_p T_s.
+Checked against what the balances give in closed form: the choked rise of an adiabatic
+charge is a straight line, an adiabatic fill ends at the temperature its energy balance
+gives, and a wall at constant hA brings the gas back to the wall's temperature.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pneumatic_unload.config import RigConfig
+from pneumatic_unload.model import kernel
+from pneumatic_unload.model.ode import kernel_parameters
+
+GAMMA, R = 1.4, 287.05
+RHO_N, T_N = 1.185, 293.15
+V, C, B = 0.01, 1e-8, 0.4
+
+
+def _charge(p0: float, t0: float, p_s: float, t_s: float, t_end: float, *,
+            heat_a: float = 0.0, t_wall: float = 293.15, points: int = 4001):
+    cfg = RigConfig(volume=V, conductance=C, critical_ratio=B, initial_pressure=7e5,
+                    initial_temperature=t0)
+    prm = kernel_parameters(cfg, 0.0)
+    prm[kernel.CHARGE], prm[kernel.P_SUPPLY], prm[kernel.T_SUPPLY] = 1.0, p_s, t_s
+    prm[kernel.HEAT_MODE] = kernel.HEAT_FIXED if heat_a > 0.0 else kernel.HEAT_NONE
+    prm[kernel.HEAT_A], prm[kernel.T_WALL] = heat_a, t_wall
+    t = np.linspace(0.0, t_end, points)
+    out = np.zeros((t.size, 2))
+    status, rows, _, _ = kernel.integrate(np.array([p0, t0]), np.array([0.0, t_end]), t, prm,
+                                          1e-10, np.array([1e-6, 1e-9]), 0.0, 0.0, 200_000,
+                                          out)
+    assert status == kernel.OK and rows == t.size
+    return t, out[:, 0], out[:, 1]
+
+
+@pytest.mark.parametrize("t_s", [293.15, 330.0])
+def test_an_adiabatic_choked_charge_rises_along_a_straight_line(t_s):
+    """While p <= b p_s the inflow G = C rho_N p_s sqrt(T_N/T_s) is constant and the tank's
+    energy balance gives dp/dt = gamma R T_s G / V whatever the gas's temperature."""
+    p_s = 7e5
+    t, p, _ = _charge(1e5, 293.15, p_s, t_s, 5.0)
+    g = C * RHO_N * p_s * math.sqrt(T_N / t_s)
+    slope = GAMMA * R * t_s * g / V
+    choked = p <= B * p_s
+    assert np.count_nonzero(choked) > 100
+    assert np.max(np.abs(p[choked] - (1e5 + slope * t[choked]))) < 1e-6 * p_s
+
+
+def test_an_adiabatic_fill_ends_where_its_energy_balance_says():
+    """From p0, T0 to the supply's p_s the gas gains (p_s - p0) V / (gamma R T_s) of mass
+    at c_p T_s: T_f = p_s V / (R m_f); from a near vacuum T_f -> gamma T_s."""
+    p0, t0, p_s, t_s = 3000.0, 293.15, 1.0e5, 293.15
+    _, p, temp = _charge(p0, t0, p_s, t_s, 400.0)
+    m_f = p0 * V / (R * t0) + (p_s - p0) * V / (GAMMA * R * t_s)
+    assert p[-1] == pytest.approx(p_s, rel=1e-7)
+    assert temp[-1] == pytest.approx(p_s * V / (R * m_f), rel=1e-6)
+    assert temp[-1] > 0.98 * GAMMA * t_s
+
+
+def test_a_wall_brings_the_filled_gas_back_to_its_temperature():
+    """The gas heated by the fill cools at a constant hA toward the wall: the tank ends at
+    the supply's pressure and the wall's temperature."""
+    _, p, temp = _charge(1e5, 293.15, 6e5, 293.15, 1500.0, heat_a=2.0, t_wall=293.15)
+    assert np.max(temp) > 330.0
+    assert temp[-1] == pytest.approx(293.15, abs=0.01)
+    assert p[-1] == pytest.approx(6e5, rel=1e-6)
