@@ -201,6 +201,11 @@ def tau_exp_eq38(
 ) -> float:
     """Predicted unloading time tau_exp = ((p10 - p_atm)/p10) tau0 [s] (eq 38).
 
+    A charge mirrors it: the component's upstream side is the supply, so its initial-slope
+    time constant is this function of (p_s, p10, V, C, T_s) - the supply in the place of
+    p10 and T10, the tank's initial pressure in the place of p_atm (the choked inflow
+    C rho_N p_s sqrt(T_N/T_s) raises p at gamma R T_s / V times it).
+
     Parameters
     ----------
     p10, p_atm : float

@@ -43,9 +43,17 @@ EFFECTS: tuple[str, ...] = (
 )
 
 
+#: Effects of a discharge the charge does not model (the pipe between tank and component,
+#: the leaks in parallel with the component downstream of the valve).
+CHARGE_WITHOUT: tuple[str, ...] = ("pipe_volume", "leak_downstream", "orifice_leak_downstream")
+#: Effects a charge takes.
+CHARGE_EFFECTS: tuple[str, ...] = tuple(e for e in EFFECTS if e not in CHARGE_WITHOUT)
+
+
 @dataclass(frozen=True)
 class RigConfig(TankSpec):
-    """A tank-discharge rig: tank, component, gas, effects and sensor.
+    """A tank rig: tank, component, gas, effects and sensor; the component discharges the
+    tank to p_atm or (``direction`` 'charge') fills it from a supply at p_s, T_s.
 
     Every numeric field is SI; see ``RigConfig.describe()`` for units, ranges and meaning.
     ``effects`` names the real-rig effects switched on (a subset of :data:`EFFECTS`); the
@@ -58,7 +66,17 @@ class RigConfig(TankSpec):
         "sonic conductance C of the component under test")
     critical_ratio: float = number(0.4, "-", 0.0, 0.99, "critical pressure ratio b")
     subsonic_index: float = number(0.5, "-", 0.1, 1.0, "ISO 6358 subsonic index m")
-    initial_pressure: float = number(7e5, "Pa", 1e4, 5e7, "initial tank pressure p10 (absolute)")
+    initial_pressure: float = number(
+        7e5, "Pa", 1e3, 5e7, "initial tank pressure p10 (absolute; a charge's starting "
+        "pressure, e.g. an evacuated tank's few kPa)")
+    direction: str = choice(
+        "discharge", ("discharge", "charge"),
+        "flow through the component: out of the tank to p_atm (a discharge) or into it from "
+        "the supply (a charge)")
+    supply_pressure: float = number(
+        7e5, "Pa", 1e3, 5e7, "a charge's supply pressure p_s (absolute, held; above p10)")
+    supply_temperature: float = number(
+        293.15, "K", 150.0, 600.0, "a charge's supply gas temperature T_s")
     # --- switchable effects
     effects: tuple[str, ...] = names((), EFFECTS, "real-rig effects switched on (names)")
     heat_transfer_mode: str = choice(
@@ -128,6 +146,16 @@ class RigConfig(TankSpec):
         validate(self)
         if self.atmosphere is None:
             raise ConfigError("a simulated rig needs its atmosphere [Pa absolute]")
+        if self.direction == "charge":
+            if self.supply_pressure <= self.initial_pressure:
+                raise ConfigError(
+                    f"a charge needs its supply above the tank: supply_pressure "
+                    f"{self.supply_pressure:g} Pa <= initial_pressure "
+                    f"{self.initial_pressure:g} Pa")
+            off = [e for e in self.effects if e in CHARGE_WITHOUT]
+            if off:
+                raise ConfigError(f"effect(s) {', '.join(off)} not modelled for a charge "
+                                  f"(a charge takes {', '.join(CHARGE_EFFECTS)})")
 
     def has(self, effect: str) -> bool:
         """True when ``effect`` is switched on."""

@@ -142,6 +142,10 @@ def kernel_parameters(cfg: RigConfig, t_open: float) -> FloatArray:
         else math.inf
     prm[kernel.R_LIN] = R_LINEAR
     prm[kernel.SQRT_TN] = math.sqrt(T_N)
+    if cfg.direction == "charge":
+        prm[kernel.CHARGE] = 1.0
+        prm[kernel.P_SUPPLY] = cfg.supply_pressure
+        prm[kernel.T_SUPPLY] = cfg.supply_temperature
     return prm
 
 

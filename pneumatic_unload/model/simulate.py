@@ -62,7 +62,13 @@ class Simulation:
 
 
 def default_duration(cfg: RigConfig) -> float:
-    """Automatic record length after the valve opens: 6 tau_exp (eq 38) [s]."""
+    """Automatic record length after the valve opens: 6 tau_exp (eq 38) [s]; a charge's
+    from the supply (:func:`~pneumatic_unload.physics.tau_exp_eq38` mirrored), 4 of them
+    (within 0.1 % of the supply at their end: its rise is linear while choked)."""
+    if cfg.direction == "charge":
+        tau = tau_exp_eq38(cfg.supply_pressure, cfg.initial_pressure, cfg.volume,
+                           cfg.conductance, cfg.supply_temperature, cfg.gas)
+        return 4.0 * tau * (1.2 if cfg.has("heat_transfer") else 1.0) + opening_ramp(cfg)
     tau = tau_exp_eq38(cfg.initial_pressure, cfg.atmosphere, cfg.volume, cfg.conductance,
                        cfg.initial_temperature, cfg.gas)
     if cfg.has("pipe_volume"):

@@ -71,3 +71,37 @@ def test_a_wall_brings_the_filled_gas_back_to_its_temperature():
     assert np.max(temp) > 330.0
     assert temp[-1] == pytest.approx(293.15, abs=0.01)
     assert p[-1] == pytest.approx(6e5, rel=1e-6)
+
+
+def test_a_simulated_charge_rises_at_the_mirrored_eq38_slope():
+    """``RigConfig(direction='charge')`` through ``simulate``: the choked rise is the
+    straight line of slope gamma R T_s C rho_N p_s sqrt(T_N/T_s) / V, which is (p_s - p10)
+    / tau with tau eq 38 mirrored (supply upstream: p_s, T_s in the place of p10, T10; the
+    tank's p10 in the place of p_atm) up to eq 38's p_N for rho_N R T_N (ISO 8778's
+    rho_N = 1.185 kg/m^3 is 0.28 % below p_N / (R T_N), as for the discharge)."""
+    from pneumatic_unload.model import simulate
+    from pneumatic_unload.physics import tau_exp_eq38
+
+    cfg = RigConfig(direction="charge", volume=V, conductance=C, critical_ratio=B,
+                    initial_pressure=1e5, supply_pressure=7e5, supply_temperature=310.0,
+                    noise_std=0.0, rate=200.0)
+    sim = simulate(cfg)
+    slope = GAMMA * R * 310.0 * C * RHO_N * 7e5 * math.sqrt(T_N / 310.0) / V
+    tau = tau_exp_eq38(7e5, 1e5, V, C, 310.0)
+    assert (7e5 - 1e5) / tau / slope == pytest.approx(1e5 / (RHO_N * R * T_N), rel=1e-12)
+    choked = (sim.t >= sim.t_open) & (sim.pressure <= B * 7e5)
+    line = 1e5 + slope * (sim.t[choked] - sim.t_open)
+    assert np.count_nonzero(choked) > 50
+    assert np.max(np.abs(sim.pressure[choked] - line)) < 1e-5 * 7e5
+    assert sim.pressure[-1] == pytest.approx(7e5, rel=2e-3)  # the record reaches the supply
+
+
+@pytest.mark.parametrize("kw,words", [
+    ({"supply_pressure": 1e5}, "a charge needs its supply above the tank"),
+    ({"effects": ("pipe_volume",)}, "pipe_volume not modelled for a charge"),
+])
+def test_a_charge_the_model_cannot_make_is_refused_with_the_reason(kw, words):
+    from pneumatic_unload.config import ConfigError
+
+    with pytest.raises(ConfigError, match=words):
+        RigConfig(direction="charge", initial_pressure=1e5, **kw)
