@@ -57,6 +57,7 @@ from pneumatic_unload.temperature_evidence import (
     channel,
     channel_noise,
     channel_samples,
+    offset_identified,
     temperature_evidence,
 )
 from pneumatic_unload.wall_moves import law_spread, spread_b, wall_linear
@@ -270,8 +271,9 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
     t_rel, temp = got
     cf = fam.fits[best][0]
     noise = channel_noise(temp)
+    lag_given = fam.settings.thermometer_time_constant
     ev = temperature_evidence(cf.config(fam.settings), cf.t_start - fam.span.t_ref,
-                              t_rel, temp)
+                              t_rel, temp, sensor_tau=lag_given)
     sigma = max(noise, ev.get("rms", noise))
     if not (math.isfinite(cf.rms) and cf.rms > 0 and math.isfinite(sigma)):
         return fam, best, trace, {"why": "not used: the pressure fit's residual is not "
@@ -295,7 +297,9 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
         # log: one that departs misplaces the lag too - 1e-4 s for 1 s on a hot start)
         joint = trace.with_channel(channel(
             t_rel, temp, cf.rms, sigma,
-            ev.get("sensor_time_constant", math.nan) if ev.get("follows") else math.nan))
+            ev.get("sensor_time_constant", math.nan) if ev.get("follows") else math.nan,
+            lag_given=lag_given,
+            offset=offset_identified(fam.settings.wall_temperature is not None)))
         j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
                                        fam.profile_heat, offset=fam.offset,
                                        seeds=seeds, plateau_drifts=fam.plateau_drifts,

@@ -38,12 +38,14 @@ def estimator_model(settings: EstimatorSettings, start: Start, *,
                     p_atm: float | None = None, heat_law: str = "natural",
                     fit_wall: bool = False, fit_m: bool = False,
                     fit_offset: bool = False, thermometer: bool = False,
-                    fit_t10: bool = False) -> ParametricModel:
+                    fit_t10: bool = False, thermometer_offset: bool = False
+                    ) -> ParametricModel:
     """The parametric model of the estimator: heat transfer (``heat_law``, and the wall
     temperature as a parameter with ``fit_wall``) or none; the subsonic index m a parameter
     with ``fit_m`` (else held at 0.5); the transducer's zero offset a parameter ('offset'
     [Pa]) with ``fit_offset``; T10 and a thermometer's lag parameters with ``thermometer``
-    (a logged gas temperature fitted beside); T10 alone with ``fit_t10``."""
+    (a logged gas temperature fitted beside), and its offset [K] with
+    ``thermometer_offset``; T10 alone with ``fit_t10``."""
     effects: tuple[str, ...] = ("heat_transfer",) if settings.heat_model == "natural" else ()
     if fit_offset:
         effects = (*effects, "sensor_offset")
@@ -52,7 +54,8 @@ def estimator_model(settings: EstimatorSettings, start: Start, *,
     return ParametricModel(effects, tank, start, heat_law=heat_law,
                            fit_wall_temperature=fit_wall and bool(effects),
                            subsonic_index=None if fit_m else SUBSONIC_INDEX_START,
-                           thermometer=thermometer, fit_initial_temperature=fit_t10)
+                           thermometer=thermometer, fit_initial_temperature=fit_t10,
+                           thermometer_offset=thermometer_offset)
 
 
 def rig_from_settings(settings: EstimatorSettings, *, conductance: float, p10: float,

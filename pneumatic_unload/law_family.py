@@ -361,7 +361,12 @@ def best_key(fits: dict[str, Fit], n: int) -> str:
 
 
 #: A plateau drifts when its straight line's slope is at least this many of its
-#: standard errors (the residuals' lag-1 correlation counted) [-].
+#: standard errors (the residuals' lag-1 correlation counted) [-]: the hot starts are then
+#: fitted, and the criterion and the gap's gates decide (2, not 5: a 20 K warm gas on a
+#: 1 s plateau at 100 Hz drifts by 2-3 of them and read at T10 = the room's gave C +5.7 %
+#: at z 7.7, -1.1 % at z -0.5 with its hot start tried; a plateau of noise alone trips it
+#: about 1 time in 15, and its hot start, when not rejected by the criterion, widens C's
+#: heat-law line: 3 of 140 foreign-law records, sigma 0.04 % -> 0.4-1.7 %, C unchanged).
 PLATEAU_DRIFT_Z = 2.0
 
 

@@ -85,7 +85,8 @@ def start_from(fit: CurveFit, t0: float, **heat: float) -> dict[str, float]:
     v = {"C": fit.conductance, "t_open": fit.t_start - t0, "p10": fit.p10,
          "b": fit.critical_ratio, "p_atm": fit.p_atm, "m": fit.subsonic_index,
          "t10": fit.gas_temperature.get("t10", math.nan),
-         "tau_thermo": fit.gas_temperature.get("sensor_time_constant", math.nan), **heat}
+         "tau_thermo": fit.gas_temperature.get("sensor_time_constant", math.nan),
+         "t_offset": fit.gas_temperature.get("sensor_offset", math.nan), **heat}
     return {k: x for k, x in v.items() if math.isfinite(x)}
 
 
@@ -155,7 +156,8 @@ def fit_law(
     ch = trace.channel
     model = estimator_model(settings, neutral, heat_law=law, fit_wall=fit_wall, fit_m=fit_m,
                             fit_offset=fit_offset, thermometer=ch is not None,
-                            fit_t10=fit_t10)
+                            fit_t10=fit_t10,
+                            thermometer_offset=ch is not None and ch.offset)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
     if ch is not None and ch.lag is not None:
         fixed["tau_thermo"] = ch.lag
@@ -268,11 +270,14 @@ def fit_law(
 def channel_summary(ch: TemperatureChannel, fun: FloatArray, v: dict[str, float],
                     std: dict[str, float]) -> dict[str, float]:
     """A fit's temperature channel in SI units (the :class:`CurveFit` field
-    ``gas_temperature``): T10 and the thermometer's time constant with their 1-sigma [K],
-    [s], the RMS of fitted minus measured readings [K], readings and weight [-], [Pa/K]."""
+    ``gas_temperature``): T10, the thermometer's time constant and offset with their
+    1-sigma [K], [s], [K] (the offset 0 +- 0 when held), the RMS of fitted minus measured
+    readings [K], readings and weight [-], [Pa/K]."""
     r_t = fun[fun.size - ch.n:] / ch.weight
     return {"t10": v["t10"], "t10_std": float(std.get("t10", math.nan)),
             "sensor_time_constant": v["tau_thermo"],
             "sensor_time_constant_std": float(std.get("tau_thermo", math.nan)),
+            "sensor_offset": float(v.get("t_offset", 0.0)),
+            "sensor_offset_std": float(std.get("t_offset", math.nan)) if ch.offset else 0.0,
             "rms": float(np.sqrt(np.mean(r_t * r_t))), "samples": float(ch.temp.size),
             "weight": ch.weight}

@@ -176,22 +176,36 @@ UNRESOLVED_LAG = 0.05
 
 
 def channel(t: FloatArray, temp: FloatArray, pressure_rms: float, sigma: float,
-            lag_seen: float = math.nan) -> TemperatureChannel:
+            lag_seen: float = math.nan, *, lag_given: float | None = None,
+            offset: bool = False) -> TemperatureChannel:
     """The channel of readings ``temp`` [K] at relative instants t [s] whose residuals
     have the standard deviation ``sigma`` [K], weighted to the pressure residuals'
-    ``pressure_rms`` [Pa]; its lag held at the floor of :data:`SENSOR_TAU_RANGE` where
-    ``lag_seen`` [s] (the comparison's) is below :data:`UNRESOLVED_LAG` of the spacing."""
+    ``pressure_rms`` [Pa]; its lag held at ``lag_given`` [s], else at the floor of
+    :data:`SENSOR_TAU_RANGE` where ``lag_seen`` [s] (the comparison's) is below
+    :data:`UNRESOLVED_LAG` of the spacing, else fitted; its offset fitted with ``offset``
+    (:func:`offset_identified`)."""
     spacing = float(np.median(np.diff(t))) if t.size > 1 else math.inf
-    held = SENSOR_TAU_RANGE[0] if lag_seen < UNRESOLVED_LAG * spacing else None
-    return TemperatureChannel(t, temp, float(pressure_rms / sigma), held)
+    held = lag_given if lag_given is not None else \
+        SENSOR_TAU_RANGE[0] if lag_seen < UNRESOLVED_LAG * spacing else None
+    return TemperatureChannel(t, temp, float(pressure_rms / sigma), held, offset)
+
+
+def offset_identified(wall_given: bool) -> bool:
+    """Whether the thermometer's offset is fitted: where the wall's temperature is given.
+    The gas then relaxes toward a known temperature, which the readings show through the
+    offset; otherwise T10 and the offset move the readings alike (the pressure fixes only
+    C sqrt(T10), and a wall assumed at T10 or fitted moves with it): the offset is held at
+    0 and the probe's accuracy is T10's line of the budget (``temperature_uncertainty``)."""
+    return wall_given
 
 
 def channel_evidence(summary: dict[str, float]) -> dict[str, Any]:
     """JSON ``gas_temperature`` of a joint fit (the curve fit's ``gas_temperature``
     summary): ``used`` true, the fitted readings' ``rms`` [K] against the channel's
     ``noise`` [K] and whether the model ``follows`` the log (within :data:`FOLLOW_FACTOR`
-    noises), the thermometer's ``sensor_time_constant`` [s] and the fitted ``t10`` [K],
-    each with its 1-sigma."""
+    noises), the thermometer's ``sensor_time_constant`` [s] and ``sensor_offset`` [K] (0
+    +- 0 where held: :func:`offset_identified`) and the fitted ``t10`` [K], each with its
+    1-sigma."""
     rms, noise = summary["rms"], summary["noise"]
     follows = rms <= FOLLOW_FACTOR * noise
     return {"used": True, "why": "fitted jointly with the pressure (the thermometer's lag "
@@ -201,7 +215,9 @@ def channel_evidence(summary: dict[str, float]) -> dict[str, Any]:
             "follows": follows, "sensor_time_constant": summary["sensor_time_constant"],
             "sensor_time_constant_std": summary["sensor_time_constant_std"],
             "t10": summary["t10"], "t10_std": summary["t10_std"],
-            "sensor_offset": 0.0, "passes": int(summary.get("passes", 1))}
+            "sensor_offset": summary.get("sensor_offset", 0.0),
+            "sensor_offset_std": summary.get("sensor_offset_std", 0.0),
+            "passes": int(summary.get("passes", 1))}
 
 
 def temperature_terms(fit: Any) -> tuple[BudgetTerm, ...]:

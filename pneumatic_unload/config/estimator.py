@@ -87,6 +87,10 @@ class EstimatorSettings(TankSpec):
     initial_pressure, initial_pressure_std : float or None
         p10 [Pa absolute] and its standard uncertainty [Pa] when the record does not show
         it (with ``start_time``).
+    thermometer_time_constant : float or None
+        First-order time constant of the thermometer of a logged gas temperature [s]
+        (None: fitted with the pressure, within
+        :data:`~pneumatic_unload.model.parametric.THERMOMETER_TAU_RANGE`).
     model_uncertainty : float
         Relative standard uncertainty of the model-based C from the discharge model's own
         limits [-]: ideal gas (real air, Z = 0.997 at 8 bar), a uniform gas state, a heat
@@ -132,6 +136,9 @@ class EstimatorSettings(TankSpec):
         "show it (with start_time)", "the first sample at start_time")
     initial_pressure_std: float | None = optional(
         None, "Pa", 0.0, 1e7, "standard uncertainty of initial_pressure", "0.1 % of it")
+    thermometer_time_constant: float | None = optional(
+        None, "s", 1e-4, 120.0, "first-order time constant of the logged gas temperature's "
+        "thermometer", "fitted with the pressure")
     model_uncertainty: float = number(
         MODEL_UNCERTAINTY, "-", 0.0, 0.5, "relative standard uncertainty of the "
         "model-based C from the model's own limits (ideal gas, uniform state, heat-law "

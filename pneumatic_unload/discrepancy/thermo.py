@@ -35,6 +35,7 @@ from pneumatic_unload.temperature_evidence import (
     TEMPERATURE_WEIGHT_TOLERANCE,
     channel,
     channel_noise,
+    offset_identified,
     temperature_evidence,
 )
 
@@ -69,16 +70,19 @@ def joint_fit(prob: Problem, fit: Fit, t: FloatArray, temp: FloatArray) -> dict[
     -------
     dict
         ``follows`` (the readings' rms within FOLLOW_FACTOR of the channel's ``noise``),
-        ``rms`` [K], ``noise`` [K], ``t10`` [K] and ``sensor_time_constant`` [s] fitted,
+        ``rms`` [K], ``noise`` [K], ``t10`` [K], ``sensor_time_constant`` [s] and
+        ``sensor_offset`` [K] fitted (the offset where the wall is given, else 0),
         ``conductance`` and ``conductance_std`` [m^3/(s Pa)] of the joint fit against the
         pressure fit's ``conductance_pressure``, ``pressure_rms_ratio`` (the joint fit's
         pressure residual rms over the pressure fit's) [-], ``passes``; or ``why`` it
         could not be fitted.
     """
     m = fit.model
+    offset = offset_identified(m.tank.wall_temperature is not None)
     model = ParametricModel(m.effects, m.tank, m.start, heat_law=m.heat_law,
                             fit_wall_temperature=m.fit_wall_temperature,
-                            subsonic_index=m.subsonic_index, thermometer=True)
+                            subsonic_index=m.subsonic_index, thermometer=True,
+                            thermometer_offset=offset)
     p_alone = prob.trace.residual(m)(fit.theta)
     n_p = p_alone.size
     s_p = float(np.sqrt(np.mean(p_alone * p_alone)))
@@ -94,7 +98,8 @@ def joint_fit(prob: Problem, fit: Fit, t: FloatArray, temp: FloatArray) -> dict[
     out: dict[str, Any] = {}
     for k in range(TEMPERATURE_PASSES):
         joint = prob.trace.with_channel(channel(t, temp, s_p, sigma,
-                                                lag if ev.get("follows") else math.nan))
+                                                lag if ev.get("follows") else math.nan,
+                                                offset=offset))
         try:
             res = joint.fit(model, start=start, max_nfev=JOINT_NFEV)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
@@ -108,6 +113,7 @@ def joint_fit(prob: Problem, fit: Fit, t: FloatArray, temp: FloatArray) -> dict[
         out = {"rms": rms, "noise": noise, "follows": rms <= FOLLOW_FACTOR * noise,
                "t10": res.values["t10"],
                "sensor_time_constant": res.values.get("tau_thermo", ch.lag),
+               "sensor_offset": res.values.get("t_offset", 0.0),
                "conductance": res.values["C"], "conductance_std": _std(j),
                "conductance_pressure": fit.theta["C"],
                "pressure_rms_ratio": float(np.sqrt(np.mean(r[:n_p] ** 2))) / s_p,

@@ -64,12 +64,16 @@ class TemperatureChannel:
     lag : float or None
         The thermometer's time constant held [s] (given, or one the readings' spacing
         cannot resolve); None: fitted.
+    offset : bool
+        The thermometer's offset [K] is fitted (its readings are the lagged gas
+        temperature plus it); False: held at 0.
     """
 
     t: FloatArray
     temp: FloatArray
     weight: float
     lag: float | None = None
+    offset: bool = False
 
     @property
     def n(self) -> int:

@@ -45,6 +45,8 @@ SUBSONIC_INDEX_RANGE = (0.1, 1.0)
 #: thermowell) and its start.
 THERMOMETER_TAU_RANGE = (1e-4, 120.0)
 THERMOMETER_TAU_START = 1.0
+#: Bounds of a thermometer's fitted offset [K] (a probe's calibration, a few K).
+THERMOMETER_OFFSET_RANGE = (-20.0, 20.0)
 #: Points of the model's gas temperature between a thermometer's first and last reading
 #: (geometric from the opening; the lag is exact for the piecewise-linear interpolant of
 #: its input) [-].
@@ -87,7 +89,8 @@ class ParametricModel:
     def __init__(self, effects: tuple[str, ...], tank: TankSpec, start: Start, *,
                  heat_law: str = "natural", fit_wall_temperature: bool = False,
                  subsonic_index: float | None = SUBSONIC_INDEX_START,
-                 thermometer: bool = False, fit_initial_temperature: bool = False) -> None:
+                 thermometer: bool = False, fit_initial_temperature: bool = False,
+                 thermometer_offset: bool = False) -> None:
         bad = [e for e in effects if e not in CANDIDATES]
         if bad:
             raise ValueError(f"unknown effect(s) {bad}; known: {', '.join(CANDIDATES)}")
@@ -104,6 +107,7 @@ class ParametricModel:
         self.fit_wall_temperature = fit_wall_temperature or self.hot_start
         self.subsonic_index = subsonic_index
         self.thermometer = thermometer
+        self.thermometer_offset = thermometer and thermometer_offset
         self.fit_initial_temperature = fit_initial_temperature or thermometer
         #: effects of the configuration (the hot start is heat transfer in the simulator)
         self.config_effects = tuple("heat_transfer" if e == HOT_START else e
@@ -138,6 +142,10 @@ class ParametricModel:
             lo, hi = THERMOMETER_TAU_RANGE
             ps.append(Parameter("tau_thermo", THERMOMETER_TAU_START, lo, hi, "s", log=True,
                                 scale=1.0, doc="thermometer's first-order time constant"))
+        if self.thermometer_offset:
+            lo, hi = THERMOMETER_OFFSET_RANGE
+            ps.append(Parameter("t_offset", 0.0, lo, hi, "K", scale=0.5,
+                                doc="thermometer's offset (its reading minus the gas's)"))
         if self.tank.atmosphere is None:
             ps.append(Parameter("p_atm", s.p_atm, 0.3 * s.p_atm, 3.0 * s.p_atm, "Pa",
                                 scale=1e-3 * s.p_atm, doc="atmospheric pressure (absolute)"))
@@ -277,7 +285,9 @@ class ParametricModel:
     def seen(v: Values, grid: FloatArray, gas: FloatArray, t: FloatArray, first: float
              ) -> FloatArray:
         """The thermometer's readings [K] at t [s] (a subset of ``grid`` [s], where the gas
-        temperature is ``gas`` [K]) from ``first`` [K] at t[0]."""
+        temperature is ``gas`` [K]) from ``first`` [K] at t[0]: the lagged gas temperature
+        plus the offset 't_offset' [K] (0 when not a parameter)."""
+        off = float(v.get("t_offset", 0.0))
         lag = first_order_lag(grid[1:], gas[1:], float(v["tau_thermo"]),
-                              (float(grid[0]), float(gas[0]), float(first)))[0]
-        return np.concatenate(([float(first)], lag))[np.searchsorted(grid, t)]
+                              (float(grid[0]), float(gas[0]), float(first) - off))[0]
+        return np.concatenate(([float(first)], lag + off))[np.searchsorted(grid, t)]
