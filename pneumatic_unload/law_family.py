@@ -174,14 +174,31 @@ class Family:
         start = SUBSONIC_INDEX_START if name == "m" else 0.0
         return linear_twin(self.common["trace"], kept, model, name, start)
 
+    def warm_twin(self, key: str) -> Twin | None:
+        """The first-order twin of the fit ``key`` with T10 freed and the wall held at the
+        room's temperature (the warm gas of a hot start whose T10 was not measured: at
+        T10 = the room's it is the fit itself); None without it."""
+        kept = self.raw.get(key)
+        if not kept or "model" not in kept:
+            return None
+        law, _wall, fit_m = split_key(key)
+        room = dataclasses.replace(self.settings, wall_temperature=AMBIENT_TEMPERATURE)
+        model = estimator_model(room, kept["model"].start, heat_law=law, fit_m=fit_m,
+                                fit_offset=self.offset, fit_t10=True)
+        return linear_twin(self.common["trace"], kept, model, "t10",
+                           self.settings.initial_temperature)
+
     def worth(self, tw: Twin | None) -> bool:
         """A twin worth fitting in full: not computable, or its predicted BIC gain above
         :data:`TWIN_BIC_MARGIN`, in the residual variance the twin would leave (not
         inflated: where the held fit leaves structure the twin may take it up)."""
-        if tw is None:
-            return True
+        return tw is None or self.twin_bic_gain(tw) > TWIN_BIC_MARGIN
+
+    def twin_bic_gain(self, tw: Twin) -> float:
+        """A twin's predicted BIC gain [-]: its chi^2 drop in the residual variance it
+        would leave, less the parameter's ln n."""
         unit = max((tw.chi2 - tw.gain) / max(tw.dof, 1), 1e-300)
-        return tw.gain / unit - math.log(max(self.span.n, 2)) > TWIN_BIC_MARGIN
+        return tw.gain / unit - math.log(max(self.span.n, 2))
 
     def run(self, laws: tuple[str, ...], sfx: str) -> None:
         """Fit ``laws`` with m held (``sfx`` '') or fitted ('|m'), the laws already in the
@@ -260,6 +277,15 @@ class Family:
             if not math.isfinite(base.conductance):
                 continue
             key = f"{law}+wall{sfx}"
+            if self.t10_assumed and not (least > HOT_START_INFLATION) and \
+                    not self.worth(tw := self.warm_twin(law + sfx)):
+                # a plateau's drift of noise alone (1 in 15 at 2 sigma) is no warm gas:
+                # freeing T10 gains less than the criterion asks, to first order
+                assert tw is not None
+                self.not_offered[key] = (f"T10 not measured: freeing it would gain "
+                                         f"{self.twin_bic_gain(tw):.1f} in BIC, to first "
+                                         "order: no warm gas shown")
+                continue
             hot = self.fit(key, start=self.start_of(base), max_nfev=120)
             # a hot start is a claim about the rig: a wall clearly away from T10 (3 of the
             # temperature's uncertainties, at least 3 K) makes it, or one nearer that turns
