@@ -32,6 +32,7 @@ from pneumatic_unload.fit.reduced import Reducer
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.law_family import (
     HOT_START_INFLATION,
+    LAW_BIC_THRESHOLD,
     TWIN_BIC_MARGIN,
     Family,
     best_key,
@@ -70,8 +71,6 @@ __all__ = ["CURVE_FIT_RESOLUTION", "HOT_START_INFLATION", "CurveFit", "curve_fit
 
 #: Laws fitted in turn by :func:`fit_curve` when the natural model is on (the data choose).
 CURVE_FIT_LAWS: tuple[str, ...] = ("natural", "fixed", "density", "natural+turbulent")
-#: Delta-BIC below which another law counts as fitting about as well [-].
-LAW_BIC_THRESHOLD = 10.0
 #: Largest wall-temperature uncertainty [K] whose effect on C is taken from the fit's
 #: linear response (two model evaluations); above it the chosen law is refitted with the
 #: wall moved (the response is not linear over 10-20 K). Measured at 2-5 K: see

@@ -51,6 +51,8 @@ from pneumatic_unload.subsonic_offer import M_SUFFIX, split_key, subsonic_index_
 #: sqrt(3) WALL_ASSUMED_STD from a room's AMBIENT_TEMPERATURE).
 HOT_START_INFLATION = 1.5
 
+#: Delta-BIC below which another law counts as fitting about as well [-].
+LAW_BIC_THRESHOLD = 10.0
 #: A twin (m or an offset freed) is fitted in full only where its first-order BIC gain is
 #: above this [-] (half of the criterion's threshold of 10: the first order may under-state
 #: a large move).
@@ -188,6 +190,29 @@ class Family:
         return linear_twin(self.common["trace"], kept, model, "t10",
                            self.settings.initial_temperature)
 
+    def _no_warm_gas(self, key: str, family: list[str]) -> str | None:
+        """Why the warm gas of ``key``'s law is not fitted (T10 not measured), or None: its
+        first-order twin (:meth:`warm_twin`) must gain what the criterion asks
+        (:meth:`worth`) and bring the law within :data:`LAW_BIC_THRESHOLD` of the
+        family's best (a plateau's drift of noise alone, 1 in 15 at 2 sigma, is no warm
+        gas; nor does a law the record rejects become one that fits by it)."""
+        tw = self.warm_twin(key)
+        if tw is None:
+            return None
+        gain = self.twin_bic_gain(tw)
+        if gain <= TWIN_BIC_MARGIN:
+            return (f"T10 not measured: freeing it would gain {gain:.1f} in BIC, to first "
+                    "order: no warm gas shown")
+        fits = {k: self.fits[k] for k in family}
+        bic = criterion(fits, self.span.n)
+        unit = criterion_unit(fits)
+        _cf, chi2, k = fits[key]
+        reach = (chi2 - tw.gain) / unit + (k + 1) * math.log(max(self.span.n, 2))
+        if reach - min(bic.values()) > LAW_BIC_THRESHOLD:
+            return (f"T10 not measured: a warm gas would leave the {split_key(key)[0]} law "
+                    f"{reach - min(bic.values()):.0f} in BIC behind the best, to first order")
+        return None
+
     def worth(self, tw: Twin | None) -> bool:
         """A twin worth fitting in full: not computable, or its predicted BIC gain above
         :data:`TWIN_BIC_MARGIN`, in the residual variance the twin would leave (not
@@ -277,14 +302,10 @@ class Family:
             if not math.isfinite(base.conductance):
                 continue
             key = f"{law}+wall{sfx}"
-            if self.t10_assumed and not (least > HOT_START_INFLATION) and \
-                    not self.worth(tw := self.warm_twin(law + sfx)):
-                # a plateau's drift of noise alone (1 in 15 at 2 sigma) is no warm gas:
-                # freeing T10 gains less than the criterion asks, to first order
-                assert tw is not None
-                self.not_offered[key] = (f"T10 not measured: freeing it would gain "
-                                         f"{self.twin_bic_gain(tw):.1f} in BIC, to first "
-                                         "order: no warm gas shown")
+            why = self._no_warm_gas(law + sfx, family) if self.t10_assumed and \
+                least <= HOT_START_INFLATION else None
+            if why:
+                self.not_offered[key] = why
                 continue
             hot = self.fit(key, start=self.start_of(base), max_nfev=120)
             # a hot start is a claim about the rig: a wall clearly away from T10 (3 of the
