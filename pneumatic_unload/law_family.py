@@ -176,40 +176,48 @@ class Family:
         start = SUBSONIC_INDEX_START if name == "m" else 0.0
         return linear_twin(self.common["trace"], kept, model, name, start)
 
-    def warm_twin(self, key: str) -> Twin | None:
-        """The first-order twin of the fit ``key`` with T10 freed and the wall held at the
-        room's temperature (the warm gas of a hot start whose T10 was not measured: at
-        T10 = the room's it is the fit itself); None without it."""
+    def hot_twin(self, key: str) -> Twin | None:
+        """The first-order twin of the fit ``key`` as its hot start: T10 freed and the wall
+        held at the room's temperature where T10 was not measured (a gas warm from its
+        charge), else the wall's temperature freed (at T10, where the fit holds it, the
+        twin is the fit itself); None without it."""
         kept = self.raw.get(key)
         if not kept or "model" not in kept:
             return None
         law, _wall, fit_m = split_key(key)
-        room = dataclasses.replace(self.settings, wall_temperature=AMBIENT_TEMPERATURE)
-        model = estimator_model(room, kept["model"].start, heat_law=law, fit_m=fit_m,
-                                fit_offset=self.offset, fit_t10=True)
-        return linear_twin(self.common["trace"], kept, model, "t10",
-                           self.settings.initial_temperature)
+        warm = self.t10_assumed
+        settings = dataclasses.replace(self.settings, wall_temperature=AMBIENT_TEMPERATURE) \
+            if warm else self.settings
+        model = estimator_model(settings, kept["model"].start, heat_law=law, fit_m=fit_m,
+                                fit_offset=self.offset, fit_t10=warm, fit_wall=not warm,
+                                thermometer=kept["model"].thermometer,
+                                thermometer_offset=kept["model"].thermometer_offset)
+        name = "t10" if warm else "t_wall"
+        start = self.settings.initial_temperature if warm else self.settings.wall
+        return linear_twin(self.common["trace"], kept, model, name, start)
 
-    def _no_warm_gas(self, key: str, family: list[str]) -> str | None:
-        """Why the warm gas of ``key``'s law is not fitted (T10 not measured), or None: its
-        first-order twin (:meth:`warm_twin`) must gain what the criterion asks
-        (:meth:`worth`) and bring the law within :data:`LAW_BIC_THRESHOLD` of the
-        family's best (a plateau's drift of noise alone, 1 in 15 at 2 sigma, is no warm
-        gas; nor does a law the record rejects become one that fits by it)."""
-        tw = self.warm_twin(key)
+    def _no_hot_start(self, key: str, family: list[str]) -> str | None:
+        """Why the hot start of ``key``'s law is not fitted, or None: its first-order twin
+        (:meth:`hot_twin`) must gain what the criterion asks (:meth:`worth`) and bring the
+        law within :data:`LAW_BIC_THRESHOLD` of the family's best (a plateau's drift of
+        noise alone, 1 in 15 at 2 sigma, is no hot start; nor does a law the record
+        rejects become one that fits by it)."""
+        tw = self.hot_twin(key)
         if tw is None:
             return None
+        what = "a warm gas (T10 not measured)" if self.t10_assumed else \
+            "a wall away from T10"
         gain = self.twin_bic_gain(tw)
         if gain <= TWIN_BIC_MARGIN:
-            return (f"T10 not measured: freeing it would gain {gain:.1f} in BIC, to first "
-                    "order: no warm gas shown")
+            return (f"{what} would gain {gain:.1f} in BIC, to first order: the plateau's "
+                    "drift shows no hot start")
         fits = {k: self.fits[k] for k in family}
         bic = criterion(fits, self.span.n)
         unit = criterion_unit(fits)
         _cf, chi2, k = fits[key]
         reach = (chi2 - tw.gain) / unit + (k + 1) * math.log(max(self.span.n, 2))
         if reach - min(bic.values()) > LAW_BIC_THRESHOLD:
-            return (f"T10 not measured: a warm gas would leave the {split_key(key)[0]} law "
+            return (f"{what} would leave the {split_key(key)[0]} law "
                     f"{reach - min(bic.values()):.0f} in BIC behind the best, to first order")
         return None
 
@@ -294,16 +302,18 @@ class Family:
                 and family):
             return
         least = min(self.fits[k][0].inflation for k in family)
-        if not (least > HOT_START_INFLATION or abs(s.initial_temperature - AMBIENT_TEMPERATURE)
-                > math.sqrt(3.0) * WALL_ASSUMED_STD or self.plateau_drifts):
+        far = abs(s.initial_temperature - AMBIENT_TEMPERATURE) > \
+            math.sqrt(3.0) * WALL_ASSUMED_STD
+        if not (least > HOT_START_INFLATION or far or self.plateau_drifts):
             return
         for law in [k for k in ("natural", "fixed") if k + sfx in self.fits]:
             base = self.fits[law + sfx][0]
             if not math.isfinite(base.conductance):
                 continue
             key = f"{law}+wall{sfx}"
-            why = self._no_warm_gas(law + sfx, family) if self.t10_assumed and \
-                least <= HOT_START_INFLATION else None
+            # offered on a plateau's drift alone: screened by its first-order twin
+            why = self._no_hot_start(law + sfx, family) \
+                if least <= HOT_START_INFLATION and not far else None
             if why:
                 self.not_offered[key] = why
                 continue
