@@ -269,7 +269,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         cfg = config_from_args(args)
     except ConfigError as exc:
         raise CliError(str(exc)) from exc
-    if cfg.atmosphere is not None and cfg.initial_pressure <= cfg.atmosphere:
+    if cfg.direction == "discharge" and cfg.atmosphere is not None \
+            and cfg.initial_pressure <= cfg.atmosphere:
         raise CliError(f"initial_pressure={cfg.initial_pressure:g} Pa is not above the "
                        f"atmosphere {cfg.atmosphere:g} Pa: nothing would flow out (pressures "
                        f"are absolute: 6 bar gauge is --initial-pressure 7.01325bar)")

@@ -105,3 +105,22 @@ def test_a_charge_the_model_cannot_make_is_refused_with_the_reason(kw, words):
 
     with pytest.raises(ConfigError, match=words):
         RigConfig(direction="charge", initial_pressure=1e5, **kw)
+
+
+def test_the_cli_simulates_a_charge_from_below_the_atmosphere(tmp_path, capsys):
+    """`simulate --direction charge` from an evacuated tank (3 kPa) to the room: written
+    (the discharge's check that p10 is above p_atm does not apply), the tank's pressure in
+    the bag rising to the supply's."""
+    import json
+
+    from pneumatic_unload.cli import main
+    from pneumatic_unload.records import open_record
+
+    out = tmp_path / "charge"
+    assert main(["simulate", "--direction", "charge", "--initial-pressure", "3000",
+                 "--supply-pressure", "101325", "--volume", "0.016", "--noise-std", "100",
+                 "--rate", "100", "--no-estimate", "--json", "--out", str(out)]) == 0
+    assert json.loads(capsys.readouterr().out)["samples"] > 1000
+    p = np.concatenate([c[1] for c in open_record(out).chunks()])
+    assert p[0] == pytest.approx(3000.0, abs=500.0)
+    assert p[-1] == pytest.approx(101325.0, rel=2e-3)
