@@ -114,7 +114,7 @@ def joint_fit(prob: Problem, fit: Fit, t: FloatArray, temp: FloatArray) -> dict[
                "t10": res.values["t10"],
                "sensor_time_constant": res.values.get("tau_thermo", ch.lag),
                "sensor_offset": res.values.get("t_offset", 0.0),
-               "conductance": res.values["C"], "conductance_std": _std(j),
+               "conductance": res.values["C"], "conductance_std": j.std_or_nan("C"),
                "conductance_pressure": fit.theta["C"],
                "pressure_rms_ratio": float(np.sqrt(np.mean(r[:n_p] ** 2))) / s_p,
                "samples": int(temp.size), "passes": k + 1, "fit": j, "channel": ch}
@@ -123,15 +123,6 @@ def joint_fit(prob: Problem, fit: Fit, t: FloatArray, temp: FloatArray) -> dict[
             break
         sigma, start = now, dict(res.values)
     return out
-
-
-def _std(f: Fit) -> float:
-    """1-sigma of C of a fit [m^3/(s Pa)] (nan when its covariance is not usable)."""
-    try:
-        s = f.std("C")
-    except (ValueError, IndexError, ZeroDivisionError, ArithmeticError):
-        return math.nan
-    return s if math.isfinite(s) and s >= 0 else math.nan
 
 
 def judge(prob: Problem, fits: list[Fit], series: tuple[FloatArray, FloatArray], *,
