@@ -124,3 +124,37 @@ def test_the_cli_simulates_a_charge_from_below_the_atmosphere(tmp_path, capsys):
     p = np.concatenate([c[1] for c in open_record(out).chunks()])
     assert p[0] == pytest.approx(3000.0, abs=500.0)
     assert p[-1] == pytest.approx(101325.0, rel=2e-3)
+
+
+@pytest.mark.parametrize("p10,p_s,b,m", [(1e5, 7e5, 0.3, 0.5), (3000.0, 101325.0, 0.5, 0.5),
+                                         (2e5, 6e5, 0.2, 0.7), (1e5, 5e5, 0.7, 0.5)])
+def test_the_mirrored_eq39_bias_is_the_adiabatic_charges_crossing(p10, p_s, b, m):
+    """The charge's p* (63.2 % of the rise) comes at tau_c times the rise integral in the
+    simulated adiabatic charge (the package's model: tau_c from its own slope, rho_N R for
+    eq 38's p_N), and eq 39 mirrored reads C times 1/I (p_N/(rho_N R T_N) apart)."""
+    from pneumatic_unload.charge import charge_eq39_bias, charge_p_star, charge_rise_integral
+    from pneumatic_unload.model import simulate
+    from pneumatic_unload.physics import conductance_eq39
+
+    cfg = RigConfig(direction="charge", volume=V, conductance=C, critical_ratio=b,
+                    subsonic_index=m, initial_pressure=p10, supply_pressure=p_s,
+                    noise_std=0.0, rate=2000.0, pre_time=0.0)
+    sim = simulate(cfg)
+    target = charge_p_star(p10, p_s)
+    k = int(np.argmax(sim.pressure >= target))
+    t_cross = float(np.interp(target, sim.pressure[k - 1:k + 1], sim.t[k - 1:k + 1]))
+    slope = GAMMA * R * 293.15 * C * RHO_N * p_s / V  # T_s = T_N
+    tau_c = (p_s - p10) / slope
+    assert t_cross == pytest.approx(tau_c * charge_rise_integral(p10 / p_s, b, m), rel=2e-5)
+    c_eq39 = conductance_eq39(t_cross, p_s, p10, V, 293.15)
+    ratio = 1e5 / (RHO_N * R * T_N)
+    assert c_eq39 / C == pytest.approx(charge_eq39_bias(p10, p_s, b, m) / ratio, rel=2e-5)
+
+
+def test_the_bias_is_1_over_0632_while_choked_at_p_star():
+    from pneumatic_unload.charge import charge_eq39_bias, charge_rise_integral
+
+    assert charge_eq39_bias(1e5, 5e5, 0.75) == pytest.approx(1.0 / 0.632, rel=1e-12)
+    assert charge_rise_integral(0.2, 0.3, 0.5) > 0.632
+    with pytest.raises(ValueError, match="p10/p_s < 1"):
+        charge_rise_integral(1.0, 0.3)
