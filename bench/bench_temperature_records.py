@@ -79,6 +79,23 @@ as a warm gas where T10 is not measured (main d99a694; 105 s wall):
   claimed. Not hot: unchanged, 12/12.
 * CPU per analysis with the temperature: 2.8 s mean (6.2 max) not hot, 10.0 s (20.1) hot
   starts (the joint family, up to 3 passes of its weight); without: 1.4 (3.5), 2.3 (4.5).
+
+Measured after the hot start's first-order screen (main 17a3af2: a plateau's drift from 2
+of its sigmas, and where T10 is not measured the warm gas's twin on every record; a gas
+colder than the room only on a drifting plateau; the thermometer's offset fitted where the
+wall is given - not here - and ``--record-only`` dropping T10's line with the column):
+
+* Default inputs (24 traces, 98 s wall): unchanged with the temperature (C, b, rms,
+  offsets 24/24; z_C SD 0.09); without it, hot: C within 2 % 11/12 (10/12 before), |z_C|
+  <= 2 12/12 (11/12): c13-hot20 +5.74 % (z 7.7) -> -1.11 % (z -0.5), T10 316.6 K read
+  for 313; c15-hot5 +2.05 % (z 1.6), its 5 K within a room's spread, remains.
+* ``--record-only --seeds 2`` (48 traces, 156 s): with the temperature C within 1 % 48/48,
+  |z_C| <= 2 45/48 (94 %, z_C SD 0.81: the record's own sigma honest once T10's line
+  goes with the probe's exactness), b 48/48, temperature followed 48/48, offsets 48/48;
+  without it, not hot 24/24; hot C within 2 % 23/24 (21/24 before), |z_C| <= 2 21/24
+  (88 %; 19/24 before): c13-hot20's second draw, whose drift is under 2 sigma, +5.71 %
+  (z 17.9) -> -0.37 %; c23-hot5 (+0.87 %, z 2.6 and 2.1) and c15-hot5 remain, 5 K of
+  warm gas within a room's spread.
 """
 
 from __future__ import annotations
