@@ -158,3 +158,32 @@ def test_the_bias_is_1_over_0632_while_choked_at_p_star():
     assert charge_rise_integral(0.2, 0.3, 0.5) > 0.632
     with pytest.raises(ValueError, match="p10/p_s < 1"):
         charge_rise_integral(1.0, 0.3)
+
+
+@pytest.mark.parametrize("p10,p_s,t_s,tau_heat,m", [
+    (1e5, 7e5, 293.15, math.inf, 0.5),     # adiabatic
+    (1e5, 6e5, 310.0, 8.0, 0.5),           # a warmer supply, the wall cooling the gas
+    (3000.0, 101325.0, 293.15, 20.0, 0.62),  # the room into an evacuated tank
+])
+def test_the_charge_agrees_with_an_independent_model(p10, p_s, t_s, tau_heat, m):
+    """The package's charge (its kernel, through ``simulate``) against
+    ``foreign/newton_tank.charge`` (mass and internal energy, Radau; written apart): the
+    same tank, component and constant hA give the same pressure and gas temperature."""
+    from foreign.newton_tank import charge
+
+    from pneumatic_unload.model import simulate
+
+    cv = R / (GAMMA - 1.0)
+    h_a = 0.0 if math.isinf(tau_heat) else p10 * V / (R * 293.15) * cv / tau_heat
+    cfg = RigConfig(direction="charge", volume=V, conductance=C, critical_ratio=B,
+                    subsonic_index=m, initial_pressure=p10, initial_temperature=293.15,
+                    supply_pressure=p_s, supply_temperature=t_s, noise_std=0.0, rate=100.0,
+                    pre_time=0.5, effects=("heat_transfer",) if h_a else (),
+                    heat_transfer_mode="fixed", heat_transfer_coefficient=h_a or 1.0)
+    sim = simulate(cfg, rtol=1e-10)
+    gas = np.empty_like(sim.t)
+    p = charge(sim.t, volume=V, p10=p10, t10=293.15, p_supply=p_s, t_supply=t_s,
+               tau_heat=tau_heat, t_open=sim.t_open, conductance=C, b=B, subsonic_index=m,
+               temperature_out=gas)
+    assert np.max(np.abs(sim.pressure - p)) < 2e-6 * p_s
+    assert np.max(np.abs(sim.temperature - gas)) < 1e-4

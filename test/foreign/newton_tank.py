@@ -322,3 +322,63 @@ def thermocouple(t: np.ndarray, gas: np.ndarray, lag: float, y0: float) -> np.nd
     for k in range(t.size - 1):
         y[k + 1] = gas[k + 1] - s_lag[k] + (y[k] - gas[k] + s_lag[k]) * a[k]
     return y
+
+
+def charge(t: np.ndarray, *, volume: float, p10: float, t10: float, p_supply: float,
+           t_supply: float, tau_heat: float, t_open: float, conductance: float | None = None,
+           b: float | None = None, subsonic_index: float = 0.5,
+           flow_law: FlowLaw | None = None, t_wall: float | None = None,
+           r_gas: float = 287.05, gamma: float = 1.4,
+           temperature_out: np.ndarray | None = None) -> np.ndarray:
+    """Tank pressure [Pa absolute] at instants t [s] of a charge: the tank at (p10, t10)
+    at t[0] is filled through the component from a supply held at p_supply [Pa absolute],
+    t_supply [K] once the valve opens at t_open [s]. The component's upstream side is the
+    supply: mass flow C rho_ref p_supply sqrt(T_ref/t_supply) phi(p / p_supply), carrying
+    the supply's enthalpy c_p t_supply into the tank (a reverse flow, p above the supply,
+    would carry the tank's). Newton cooling at a constant hA = m0 c_v / tau_heat to a wall
+    at ``t_wall`` (default t10; tau_heat inf: none). The flow law as :func:`discharge`'s.
+    ``temperature_out`` receives the gas temperature [K] at t."""
+    if flow_law is None:
+        if conductance is None or b is None:
+            raise ValueError("give conductance and b, or a flow_law")
+        flow_law = IsoLaw(conductance, b, subsonic_index)
+    law_c, law_phi = flow_law.conductance, flow_law.phi
+    wall = t10 if t_wall is None else t_wall
+    cv = r_gas / (gamma - 1.0)
+    cp = cv + r_gas
+    m0 = p10 * volume / (r_gas * t10)
+    h_a = 0.0 if math.isinf(tau_heat) else m0 * cv / tau_heat  # [W/K]
+    g_choked = law_c * RHO_REF * p_supply * math.sqrt(T_REF / t_supply)  # [kg/s]
+
+    def rhs(_t: float, y: np.ndarray, valve: float = 1.0) -> list[float]:
+        m, u = y  # gas mass [kg] and internal energy [J]
+        temp = u / (m * cv)
+        p = m * r_gas * temp / volume
+        g = valve * g_choked * law_phi(p / p_supply)  # into the tank [kg/s]
+        h = cp * (t_supply if g >= 0.0 else temp)
+        return [g, g * h + h_a * (wall - temp)]
+
+    y0 = [m0, m0 * cv * t10]
+    out = np.full(t.size, p10)
+    temps = np.full(t.size, float(t10))
+    atol = [m0 * 1e-12, m0 * cv * t10 * 1e-12]
+    before = t < t_open
+    if wall != t10 and h_a > 0.0 and t[0] < t_open:
+        grid = np.append(t[before], t_open)
+        sol = solve_ivp(lambda tt, y: rhs(tt, y, 0.0), (float(t[0]), t_open), y0,
+                        method="Radau", t_eval=grid, rtol=1e-10, atol=atol)
+        m, u = sol.y
+        out[before] = (m * r_gas * (u / (m * cv)) / volume)[:-1]
+        temps[before] = (u / (m * cv))[:-1]
+        y0 = [float(m[-1]), float(u[-1])]
+    after = t >= t_open
+    if np.any(after):
+        ts = t[after] - t_open
+        sol = solve_ivp(rhs, (0.0, float(ts[-1])), y0, method="Radau", t_eval=ts,
+                        rtol=1e-10, atol=atol)
+        m, u = sol.y
+        out[after] = m * r_gas * (u / (m * cv)) / volume
+        temps[after] = u / (m * cv)
+    if temperature_out is not None:
+        temperature_out[:] = temps
+    return out
