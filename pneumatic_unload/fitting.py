@@ -146,11 +146,11 @@ def fit_curve(
         settled = float(np.mean(np.asarray(p, dtype=float)[tr >= 0.98 * tr[-1]]))
     common = dict(t_start=t_start, p10=p10, p_atm=p_atm, conductance=conductance,
                   fit_heat=bool(fit_heat and natural), trace=trace, hold=hold)
-    drifts = reduced is None and plateau_drift(tr, np.asarray(p, dtype=float),
-                                               t_start - float(t[0]))
+    drifts = plateau_drift(tr, np.asarray(p, dtype=float), t_start - float(t[0])) \
+        if reduced is None else 0.0
     logged = temperature is not None
     fam, best = _choose(Family(span, settings, common, profile_heat,
-                               plateau_drifts=drifts, t10_logged=logged), tried)
+                               plateau_drift_z=drifts, t10_logged=logged), tried)
     offset_why = ""
     if settings.atmosphere is not None:
         # p_atm given: a record that settles away from it (a transducer's zero offset)
@@ -160,7 +160,7 @@ def fit_curve(
         offset_why = _offer_offset(fam, best, settled - settings.atmosphere)
         if offset_why is None:
             fam, best = _choose(Family(span, settings, common, profile_heat, offset=True,
-                                       plateau_drifts=drifts, t10_logged=logged), tried)
+                                       plateau_drift_z=drifts, t10_logged=logged), tried)
             cf0 = fam.fits[best][0]
             offset_why = (f"fitted: the record settles {cf0.pressure_offset:+.0f} +- "
                           f"{cf0.pressure_offset_std:.0f} Pa from the given p_atm")
@@ -301,7 +301,7 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
             offset=offset_identified(fam.settings.wall_temperature is not None)))
         j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
                                        fam.profile_heat, offset=fam.offset,
-                                       seeds=seeds, plateau_drifts=fam.plateau_drifts,
+                                       seeds=seeds, plateau_drift_z=fam.plateau_drift_z,
                                        t10_logged=True),
                                 tried)
         summary = j_fam.fits[j_best][0].gas_temperature
@@ -380,7 +380,7 @@ def _offer_offset(fam: Family, best: str, gap: float) -> str | None:
                 f"{TWIN_BIC_MARGIN:g}, to first order)")
     key = best if best.endswith(M_SUFFIX) else best + M_SUFFIX
     probe = Family(fam.span, fam.settings, fam.common, offset=True,
-                   plateau_drifts=fam.plateau_drifts, t10_logged=fam.t10_logged)
+                   plateau_drift_z=fam.plateau_drift_z, t10_logged=fam.t10_logged)
     base = held[0]
     start = fam.start_of(base)
     if math.isfinite(gap):

@@ -106,9 +106,10 @@ class Family:
         Key -> starting values [SI] of that key's fit, replacing the one the family would
         take (e.g. the same law's fit to the pressure alone, for the joint fit with the
         logged temperature).
-    plateau_drifts : bool
-        The plateau before the opening drifts (:func:`plateau_drift`): the hot starts are
-        fitted too.
+    plateau_drift_z : float
+        The plateau's slope before the opening in its standard errors (:func:`plateau_drift`;
+        beyond :data:`PLATEAU_DRIFT_Z` either way the hot starts are fitted too, and its
+        sign says which: a cold gas makes it rise, a warm one fall) [-].
     t10_logged : bool
         The record carries the gas temperature (T10 measured, whatever its value).
     """
@@ -122,8 +123,13 @@ class Family:
     raw: dict[str, dict[str, Any]] = field(default_factory=dict)
     not_offered: dict[str, str] = field(default_factory=dict)
     seeds: dict[str, dict[str, float]] = field(default_factory=dict)
-    plateau_drifts: bool = False
+    plateau_drift_z: float = 0.0
     t10_logged: bool = False
+
+    @property
+    def plateau_drifts(self) -> bool:
+        """The plateau drifts by :data:`PLATEAU_DRIFT_Z` or more, either way."""
+        return abs(self.plateau_drift_z) >= PLATEAU_DRIFT_Z
 
     @property
     def t10_assumed(self) -> bool:
@@ -349,12 +355,19 @@ class Family:
                     self.not_offered[key] = (f"T10 not measured: a gas {gap:.0f} K from the "
                                              f"room's is beyond what a charge can make "
                                              f"({hottest:.0f} K, gamma T_room)")
-                elif t10 < hot[0].wall_temperature and not self.plateau_drifts:
+                elif (t10 < hot[0].wall_temperature) != (
+                        self.plateau_drift_z >= (COLD_DRIFT_Z if t10 < hot[0].wall_temperature
+                                                 else PLATEAU_DRIFT_Z)):
                     # a charge warms its gas; a cold one (a tank vented, then shut) warms
-                    # on its plateau, which must show it: without that a cold gas absorbs
-                    # other model error (two restrictions in series: T10 286 K, C +3.1 %)
-                    self.not_offered[key] = (f"T10 not measured: a gas {gap:.1f} K colder "
-                                             "than the room's, its plateau not rising")
+                    # on its plateau, which must show it rising, and a warm one must not
+                    # rise: else the gas absorbs other model error (two restrictions in
+                    # series: T10 286 K, C +3.1 %; a gauge's zero with m 0.3 on a plateau
+                    # rising 2.0 sigma by chance: 280 K, +4.8 %)
+                    cold = t10 < hot[0].wall_temperature
+                    self.not_offered[key] = (
+                        f"T10 not measured: a gas {gap:.1f} K {'colder' if cold else 'warmer'}"
+                        f" than the room's, its plateau {'not ' if cold else ''}rising "
+                        f"({self.plateau_drift_z:+.1f} sigma)")
                 elif gap > 3.0 * WALL_ASSUMED_STD:
                     self.fits[key] = hot
                 else:
@@ -437,25 +450,32 @@ def best_key(fits: dict[str, Fit], n: int) -> str:
 #: about 1 time in 15, and its hot start, when not rejected by the criterion, widens C's
 #: heat-law line: 3 of 140 foreign-law records, sigma 0.04 % -> 0.4-1.7 %, C unchanged).
 PLATEAU_DRIFT_Z = 2.0
+#: Where T10 was not measured, a gas colder than the room (a tank vented, then shut) is read
+#: only from a plateau that rises by this many of its standard errors [-]: a test line's
+#: charge makes a warm gas, which is read from the record's shape; a cold one needs the
+#: plateau's own evidence (a 2-sigma rise, 1 in 40 by chance, let a gauge's zero and a
+#: subsonic index 0.3 be read as a gas 14 K cold, C +4.8 %).
+COLD_DRIFT_Z = 5.0
 
 
-def plateau_drift(t: FloatArray, p: FloatArray, t_open: float) -> bool:
-    """The samples before the opening (t [s] < t_open [s], p [Pa]; at least 32) fall or
-    rise along a straight line by :data:`PLATEAU_DRIFT_Z` of its standard errors: the gas
-    exchanges heat with the wall before the opening (a hot start), even where the plateau
-    is short and the rest of the record hides it."""
+def plateau_drift(t: FloatArray, p: FloatArray, t_open: float) -> float:
+    """The slope of the samples before the opening (t [s] < t_open [s], p [Pa]; at least
+    32) along a straight line, in its standard errors (the residuals' lag-1 correlation
+    counted) [-]: negative where the plateau falls (a gas warmer than the wall cooling
+    before the opening, or a leak), positive where it rises (a cold gas warming); 0 where
+    the plateau is too short to tell."""
     pre = t < t_open - 2.0 * float(np.median(np.diff(t[:1001]))) if t.size > 2 else t < t_open
     tt, pp = t[pre], p[pre]
     if tt.size < 32:
-        return False
+        return 0.0
     x = tt - tt.mean()
     sxx = float(x @ x)
     if sxx <= 0.0:
-        return False
+        return 0.0
     slope = float(x @ (pp - pp.mean())) / sxx
     r = pp - pp.mean() - slope * x
     s2 = float(r @ r) / (tt.size - 2)
     rho = float(r[1:] @ r[:-1]) / float(r @ r) if float(r @ r) > 0 else 0.0
     rho = min(max(rho, 0.0), 0.95)
     se = math.sqrt(s2 / sxx * (1.0 + rho) / (1.0 - rho))
-    return se > 0.0 and abs(slope) > PLATEAU_DRIFT_Z * se
+    return slope / se if se > 0.0 else 0.0

@@ -135,7 +135,8 @@ def test_bad_analyze_options_are_one_line_and_exit_2(tmp_path, argv, msg):
 def test_discrepancy_ratios_and_simulate_options_are_checked_too(tmp_path):
     assert "length_diameter_ratio=-3.0" in _one_line_error(
         _cli("discrepancy", "x.csv", "--length-diameter-ratio", "2", "-3"))
-    assert "did you mean 7 bar" in _one_line_error(
+    # 7 kPa is a charge's evacuated tank too: both are offered
+    assert "7 bar = 700000 Pa? (write 7bar)" in _one_line_error(
         _cli("simulate", "--out", str(tmp_path / "b"), "--initial-pressure", "7"))
 
 

@@ -173,6 +173,15 @@ class ConductanceAmbiguity:
                 "parallel_leak_max": PARALLEL_LEAK_MAX, "separating": self.separating}
 
 
+def conductance_std(f: Fit) -> float:
+    """1-sigma of C of a fit [m^3/(s Pa)] (NaN where its covariance is not usable)."""
+    try:
+        s = f.std("C")
+    except (ValueError, IndexError, ZeroDivisionError, ArithmeticError):
+        return math.nan
+    return s if math.isfinite(s) and s >= 0 else math.nan
+
+
 def at_bounds(f: Fit) -> list[str]:
     """Free parameters of a fit at (within :data:`AT_BOUND` of) a bound."""
     params = f.result.params
@@ -216,11 +225,11 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
         :func:`~pneumatic_unload.discrepancy.laws.length_diameter_choice`): members
         when their C differs; stating the L/D (:data:`LD_STATED`) separates them.
     """
-    c0, s0 = final.theta["C"], final.std_or_nan("C")
+    c0, s0 = final.theta["C"], conductance_std(final)
     members: dict[tuple[str, ...], tuple[Fit, str, float]] = {}
 
     def differs(f: Fit) -> bool:
-        c, s = f.theta["C"], f.std_or_nan("C")
+        c, s = f.theta["C"], conductance_std(f)
         comb = math.hypot(s0 if math.isfinite(s0) else 0.0, s if math.isfinite(s) else 0.0)
         return abs(c - c0) > max(comb, C_NEGLIGIBLE * c0)
 
@@ -286,7 +295,7 @@ def conductance_ambiguity(base: Fit, rounds: list[Round], final: Fit, threshold:
         "with the leak" if down else "")
     rows = [(final, why_final, 0.0), *members.values()]
     for f, why, dbic in rows:
-        c, s = f.theta["C"], f.std_or_nan("C")
+        c, s = f.theta["C"], conductance_std(f)
         s = total(c, s)
         out.low = min(out.low, max(c - K_RANGE * s, 0.0))
         out.high = max(out.high, c + K_RANGE * s)

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.discrepancy.ambiguity import ConductanceAmbiguity
+from pneumatic_unload.discrepancy.ambiguity import ConductanceAmbiguity, conductance_std
 from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.types import Fit
 from pneumatic_unload.model.parametric import ParametricModel
@@ -114,7 +114,7 @@ def joint_fit(prob: Problem, fit: Fit, t: FloatArray, temp: FloatArray) -> dict[
                "t10": res.values["t10"],
                "sensor_time_constant": res.values.get("tau_thermo", ch.lag),
                "sensor_offset": res.values.get("t_offset", 0.0),
-               "conductance": res.values["C"], "conductance_std": j.std_or_nan("C"),
+               "conductance": res.values["C"], "conductance_std": conductance_std(j),
                "conductance_pressure": fit.theta["C"],
                "pressure_rms_ratio": float(np.sqrt(np.mean(r[:n_p] ** 2))) / s_p,
                "samples": int(temp.size), "passes": k + 1, "fit": j, "channel": ch}

@@ -185,14 +185,6 @@ class Fit:
         return self.result.params.value_std(name, self.theta[name],
                                             math.sqrt(v) if v >= 0 else math.nan)
 
-    def std_or_nan(self, name: str) -> float:
-        """:meth:`std`, NaN where the covariance is not usable [unit]."""
-        try:
-            s = self.std(name)
-        except (ValueError, IndexError, ZeroDivisionError, ArithmeticError):
-            return math.nan
-        return s if math.isfinite(s) and s >= 0 else math.nan
-
 
 def interval_dict(iv: Interval) -> dict[str, Any]:
     """JSON-ready dict of an interval: an end that is not known (or not finite) is None;
