@@ -236,9 +236,11 @@ def _problems(run: Run) -> list[str]:
     out = run.output()
     problems = []
     code = run.returncode
-    # a SIGINT during the interpreter's own start (site import) ends it with status 1
-    if code not in STOPPED and not (code == 1 and not run.under_way
-                                    and "init_import_site" in out):
+    # a SIGINT during the interpreter's own start (the site import, or runpy's before
+    # ``-m`` runs the node's module: "Could not import runpy module") ends it with status
+    # 1, before any of the node's code exists to handle it
+    if code not in STOPPED and not (code == 1 and not run.under_way and (
+            "init_import_site" in out or "Could not import runpy module" in out)):
         problems.append(f"exit status {code}")
     if run.under_way and "Traceback" in out:
         problems.append("a traceback")
