@@ -65,7 +65,7 @@ Runs ONLY in a venv with HydDown (it must not import pneumatic_unload)::
 
     python3 -m venv /tmp/hyd-venv && /tmp/hyd-venv/bin/pip install hyddown==0.50.0
     /tmp/hyd-venv/bin/python bench/hyddown_fill_traces.py --grid small --blend removed \\
-        --out /tmp/hyd-fill-small-removed
+        --out test/data/hyddown_fill     # the six fills test/test_hyddown_fill.py reads
     /tmp/hyd-venv/bin/python bench/hyddown_fill_traces.py --grid small --blend shipped \\
         --out /tmp/hyd-fill-small-shipped
     /tmp/hyd-venv/bin/python bench/hyddown_fill_traces.py --grid full --blend removed \\

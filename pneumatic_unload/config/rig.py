@@ -94,6 +94,9 @@ class RigConfig(TankSpec):
     heat_transfer_turbulent_ratio: float = number(
         1.0, "-", 0.0, 10.0, "further multiplier on the turbulent branch (Ra >= 1e9) of the "
         "natural-convection correlation, Nu = 0.10 Ra^(1/3) (1.3: McAdams' 0.13)")
+    heat_transfer_jet_scale: float = number(
+        1.0, "-", 0.0, 100.0, "a charge's natural law: multiplier on the incoming jet's "
+        "forced convection, Nu = 0.56 Re^0.67 on the tank's diameter (0: none)")
     valve_opening_time: float = number(
         0.02, "s", 0.0, 10.0, "valve opening: linear ramp of the effective area")
     sensor_lag: float = number(0.01, "s", 0.0, 10.0, "first-order time constant of the sensor")

@@ -12,6 +12,10 @@ The gas exchanges heat with the wall, Q = hA (T_wall - T) [W]. The wall conducta
   McAdams' and Geankoplis', which HydDown uses): ``heat_transfer_turbulent_ratio`` [-]
   multiplies it alone, fitted where a record spans both regimes (:func:`rayleigh`).
 * ``fixed`` - a constant hA = ``heat_transfer_coefficient`` [W/K] (Newton cooling).
+* a charge's ``natural`` law adds the forced convection of the incoming jet (the mixed
+  law of HydDown's fills): hA_jet = A_w k/L 0.56 Re^0.67, Re = 4 |G_in| / (mu pi D) on the
+  tank's diameter D, times ``heat_transfer_jet_scale`` [-] (:func:`jet_coefficient`; 0:
+  none, as in a discharge, whose outflow drives no jet inside the tank).
 * ``density`` - hA = hA_0 (rho/rho_0)^n: ``heat_transfer_coefficient`` hA_0 [W/K] at the
   initial density rho_0 = p10/(R T10), the exponent n = ``heat_transfer_exponent`` [-]
   (convection whose h follows the gas density: n = 0 is ``fixed``; laminar natural
@@ -37,6 +41,7 @@ from pneumatic_unload.model.kernel import (
     HEAT_FIXED,
     HEAT_NATURAL,
     HEAT_NONE,
+    JET_EXPONENT,
     heat_flow,
 )
 from pneumatic_unload.physics import G_ACCEL, tank_geometry
@@ -87,6 +92,24 @@ def heat_parameters(cfg: RigConfig) -> tuple[float, float, float, float]:
     ra_const = _rayleigh_constant(cfg)
     hk = area * gas.conductivity / length * cfg.heat_transfer_scale
     return HEAT_NATURAL, hk, ra_const, float(cfg.heat_transfer_turbulent_ratio)
+
+
+#: Forced-convection correlation of a charge's jet, Nu = JET_NU Re^JET_EXPONENT [-].
+JET_NU = 0.56
+
+
+def jet_coefficient(cfg: RigConfig) -> float:
+    """The coefficient K of a charge's jet-driven convection, hA = K |G_in|^0.67
+    [W/K / (kg/s)^0.67]: A_w k/L 0.56 (4 / (mu pi D))^0.67 times
+    ``heat_transfer_jet_scale``; 0 unless a charge with the natural heat law on."""
+    if not (cfg.direction == "charge" and cfg.has("heat_transfer")
+            and cfg.heat_transfer_mode == "natural"):
+        return 0.0
+    gas = cfg.gas
+    length, diameter, area = tank_geometry(cfg.volume, cfg.length_diameter_ratio)
+    re_per_flow = 4.0 / (gas.viscosity * math.pi * diameter)  # Re per kg/s [s/kg]
+    return (area * gas.conductivity / length * JET_NU * re_per_flow**JET_EXPONENT
+            * cfg.heat_transfer_jet_scale)
 
 
 def _rayleigh_constant(cfg: RigConfig) -> float:

@@ -15,8 +15,11 @@ enum {
     HEAT_MODE, HEAT_A, HEAT_RA, PIPE, PIPE_VOLUME, PIPE_C_RHO,
     T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN,
     LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B, HEAT_TURB,
-    CHARGE, P_SUPPLY, T_SUPPLY, N_PARAMETERS
+    CHARGE, P_SUPPLY, T_SUPPLY, HEAT_JET, N_PARAMETERS
 };
+
+/* Exponent of the inflow's Reynolds number in a charge's jet-driven convection [-]. */
+#define JET_EXPONENT 0.67
 
 /* Subsonic index of the orifice-law leaks [-] (a sharp-edged orifice). */
 #define LEAK_M_INDEX 0.5
@@ -135,6 +138,9 @@ void pu_rhs(double t, const double *y, const double *prm, double *dy)
                       * pu_flow_phi(p_atm / p1, prm[OLEAK_B], LEAK_M_INDEX, r_lin);
         double q = pu_heat_flow(prm[HEAT_MODE], prm[HEAT_A], prm[HEAT_RA], t_wall, p1, t1,
                                 prm[HEAT_TURB]);
+        /* forced convection by the incoming jet: hA = HEAT_JET |g_in|^0.67 [W/K] */
+        if (prm[HEAT_JET] > 0.0 && g_in != 0.0)
+            q += prm[HEAT_JET] * pow(fabs(g_in), JET_EXPONENT) * (t_wall - t1);
         double vol = prm[VOLUME];
         /* the inflow brings c_p T_s per kg (a reverse flow, g_in < 0, leaves at T) */
         double h_in = g_in >= 0.0 ? prm[T_SUPPLY] : t1;

@@ -60,9 +60,13 @@ T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN = 16, 17, 18, 19, 20
 LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B = 21, 22, 23, 24, 25
 # multiplier on the turbulent branch of the natural-convection correlation [-]
 HEAT_TURB = 26
-# a charge (1.0; 0.0: a discharge) from a supply at P_SUPPLY [Pa abs], T_SUPPLY [K]
-CHARGE, P_SUPPLY, T_SUPPLY = 27, 28, 29
-N_PARAMETERS = 30
+# a charge (1.0; 0.0: a discharge) from a supply at P_SUPPLY [Pa abs], T_SUPPLY [K]; the
+# coefficient of its jet-driven convection, hA = HEAT_JET |G_in|^JET_EXPONENT [W/K]
+CHARGE, P_SUPPLY, T_SUPPLY, HEAT_JET = 27, 28, 29, 30
+N_PARAMETERS = 31
+#: Exponent of the inflow's Reynolds number in a charge's jet-driven convection
+#: (JET_EXPONENT of kernel.c) [-].
+JET_EXPONENT = 0.67
 
 #: Subsonic index m of the orifice-law leaks [-] (LEAK_M_INDEX of kernel.c).
 LEAK_M_INDEX = 0.5

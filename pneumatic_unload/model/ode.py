@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 import pneumatic_unload.model.kernel as kernel
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.model.heat import heat_parameters
+from pneumatic_unload.model.heat import heat_parameters, jet_coefficient
 from pneumatic_unload.physics import R_LINEAR, RHO_N, T_N
 
 FloatArray = NDArray[np.float64]
@@ -146,6 +146,7 @@ def kernel_parameters(cfg: RigConfig, t_open: float) -> FloatArray:
         prm[kernel.CHARGE] = 1.0
         prm[kernel.P_SUPPLY] = cfg.supply_pressure
         prm[kernel.T_SUPPLY] = cfg.supply_temperature
+        prm[kernel.HEAT_JET] = jet_coefficient(cfg)
     return prm
 
 
