@@ -79,7 +79,6 @@ and exits 0.
 from __future__ import annotations
 
 import argparse
-import importlib.metadata
 import json
 import math
 import sys
@@ -91,18 +90,24 @@ from typing import Any
 
 import numpy as np
 
-GAMMA = 1.4  # air, ideal [-]
-R_AIR = 287.05  # [J/(kg K)]
-RHO_N = 1.185  # ISO 6358 reference density [kg/m^3]
-T_N = 293.15  # ISO 6358 reference temperature [K]
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # run from anywhere
+# the discharge script's constants (air, ISO 6358's reference, the steel wall) and its truth C
+from hyddown_traces import (
+    GAMMA,
+    H_OUTER,
+    R_AIR,
+    RHO_N,
+    T_N,
+    WALL,
+    truth_conductance,
+    versions,
+)
+
 P_ROOM = 101325.0  # the room as a supply [Pa abs]
 P_TANK_1BAR = 1e5  # a tank at 1 bar [Pa abs]
 STEPS_PER_TAU = 1000  # Euler steps per tau0 [-]
 TAUS = 4.0  # run length in tau0 [-]
 RISE_FRACTION = 0.632  # t63: p = p10 + 0.632 (p_s - p10)
-#: Steel wall: thickness [m], heat capacity [J/(kg K)], density [kg/m^3].
-WALL = {"thickness": 0.005, "heat_capacity": 500.0, "density": 7800.0}
-H_OUTER = 10.0  # outside wall to room [W/(m^2 K)]
 BLENDS = ("shipped", "removed")
 
 
@@ -120,14 +125,6 @@ class Case:
     t10: float
     supply_pressure: float
     h_inner: str | float
-
-
-def truth_conductance(orifice_diameter: float, discharge_coef: float) -> float:
-    """Sonic conductance C of the orifice [m^3/(s Pa)] (ideal-gas choked flow, ISO 6358)."""
-    area = math.pi * orifice_diameter**2 / 4.0
-    g = GAMMA
-    psi = math.sqrt(g / R_AIR * (2.0 / (g + 1.0)) ** ((g + 1.0) / (g - 1.0)))
-    return discharge_coef * area * psi / (RHO_N * math.sqrt(T_N))
 
 
 def tau0(case: Case) -> float:
@@ -237,11 +234,6 @@ class FullEnthalpySupply:
     def umass(self) -> float:
         """The supply's specific enthalpy [J/kg] in the place of its internal energy."""
         return float(self._state.hmass())
-
-
-def versions() -> dict[str, str]:
-    """Installed versions of the simulator's stack."""
-    return {m: importlib.metadata.version(m) for m in ("hyddown", "CoolProp", "numpy")}
 
 
 def rise_time(t: np.ndarray, p: np.ndarray, p10: float, p_s: float,

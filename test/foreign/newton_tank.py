@@ -49,6 +49,7 @@ and m is fitted, which is that method.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -283,31 +284,8 @@ def discharge(t: np.ndarray, *, volume: float, conductance: float | None = None,
         h_now = h_a * (m / m0) ** density_exponent  # rho/rho_0 = m/m0 in a rigid tank
         return [-g, -g * h_out + h_now * (wall - temp)]
 
-    y0 = [m0, m0 * cv * t10]
-    out = np.full(t.size, p10)
-    temps = np.full(t.size, float(t10))
-    atol = [m0 * 1e-12, m0 * cv * t10 * 1e-12]
-    before = t < t_open
-    if wall != t10 and t[0] < t_open:
-        # the closed tank: no flow, heat exchange only, from t[0] to the opening
-        grid = np.append(t[before], t_open)
-        sol = solve_ivp(lambda tt, y: rhs(tt, y, 0.0), (float(t[0]), t_open), y0,
-                        method="Radau", t_eval=grid, rtol=1e-10, atol=atol)
-        m, u = sol.y
-        out[before] = (m * r_gas * (u / (m * cv)) / volume)[:-1]
-        temps[before] = (u / (m * cv))[:-1]
-        y0 = [float(m[-1]), float(u[-1])]
-    after = t >= t_open
-    if np.any(after):
-        ts = t[after] - t_open
-        sol = solve_ivp(rhs, (0.0, float(ts[-1])), y0, method="Radau", t_eval=ts,
-                        rtol=1e-10, atol=atol)
-        m, u = sol.y
-        out[after] = m * r_gas * (u / (m * cv)) / volume
-        temps[after] = u / (m * cv)
-    if temperature_out is not None:
-        temperature_out[:] = temps
-    return out
+    return _integrate(rhs, t, t_open, p10, t10, cv, volume, r_gas,
+                      closed=wall != t10 and t[0] < t_open, temperature_out=temperature_out)
 
 
 def thermocouple(t: np.ndarray, gas: np.ndarray, lag: float, y0: float) -> np.ndarray:
@@ -358,12 +336,26 @@ def charge(t: np.ndarray, *, volume: float, p10: float, t10: float, p_supply: fl
         h = cp * (t_supply if g >= 0.0 else temp)
         return [g, g * h + h_a * (wall - temp)]
 
+    return _integrate(rhs, t, t_open, p10, t10, cv, volume, r_gas,
+                      closed=wall != t10 and h_a > 0.0 and t[0] < t_open,
+                      temperature_out=temperature_out)
+
+
+def _integrate(rhs: Callable[..., list[float]], t: np.ndarray, t_open: float, p10: float,
+               t10: float, cv: float, volume: float, r_gas: float, *, closed: bool,
+               temperature_out: np.ndarray | None) -> np.ndarray:
+    """The tank's pressure [Pa] at t [s] from (p10 [Pa], t10 [K]) at t[0]: with ``closed``
+    the shut tank first (``rhs(t, y, 0.0)``: heat exchange only) up to the opening t_open
+    [s], then ``rhs`` (y = gas mass [kg], internal energy [J]), Radau at rtol 1e-10;
+    ``temperature_out`` receives the gas temperature [K]."""
+    m0 = p10 * volume / (r_gas * t10)
     y0 = [m0, m0 * cv * t10]
     out = np.full(t.size, p10)
     temps = np.full(t.size, float(t10))
     atol = [m0 * 1e-12, m0 * cv * t10 * 1e-12]
     before = t < t_open
-    if wall != t10 and h_a > 0.0 and t[0] < t_open:
+    if closed:
+        # the closed tank: no flow, heat exchange only, from t[0] to the opening
         grid = np.append(t[before], t_open)
         sol = solve_ivp(lambda tt, y: rhs(tt, y, 0.0), (float(t[0]), t_open), y0,
                         method="Radau", t_eval=grid, rtol=1e-10, atol=atol)
