@@ -10,6 +10,7 @@ gives, and a wall at constant hA brings the gas back to the wall's temperature.
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -187,3 +188,23 @@ def test_the_charge_agrees_with_an_independent_model(p10, p_s, t_s, tau_heat, m)
                temperature_out=gas)
     assert np.max(np.abs(sim.pressure - p)) < 2e-6 * p_s
     assert np.max(np.abs(sim.temperature - gas)) < 1e-4
+
+
+@pytest.mark.parametrize("p10,p_s", [(1e5, 6e5), (3000.0, 101325.0)])
+def test_a_charge_given_to_analyze_is_said_to_be_one(p10, p_s):
+    """A rising record holds no unload; the library says why in words (a charge, from and
+    to which pressure), not "no drop" nor a gauge reading (a vacuum fill ends at p_atm)."""
+    from pneumatic_unload.estimation import EstimatorSettings, analyze, explain_no_unload
+    from pneumatic_unload.model import simulate
+
+    sim = simulate(RigConfig(direction="charge", volume=V, conductance=C, critical_ratio=B,
+                             initial_pressure=p10, supply_pressure=p_s, noise_std=200.0,
+                             rate=200.0))
+    s = EstimatorSettings(volume=V, atmosphere=101325.0)
+    assert not [r for r in analyze(sim.t, sim.measured, s) if r.status == "ok"]
+    why = explain_no_unload(sim.t, sim.measured, s)
+    got = re.match(r"the pressure rises from (\S+) Pa to (\S+) Pa and never falls: a charge",
+                   why)
+    assert got, why
+    assert float(got[1]) == pytest.approx(p10, abs=500.0)
+    assert float(got[2]) == pytest.approx(p_s, rel=5e-3)
