@@ -186,14 +186,19 @@ def gauge_evidence(final: float, n_low: int, n_finite: int,
     return f"readings look like gauge pressures ({'; '.join(evidence)}): {GAUGE_FIX}"
 
 
+#: Smallest rise of a record, as a fraction of its end level, read as a charge [-].
+CHARGE_RISE = 0.05
+
+
 def _charge_reason(pp: np.ndarray, s: EstimatorSettings, hi: float) -> str | None:
     """Why a record that only rises holds no unload (a charge: the tank filled through the
     component), or None. pp: the finite pressures [Pa]; hi: their maximum [Pa]."""
     threshold = s.trigger_sigma * max(_noise_std(pp), 1e-9 * abs(hi))
     start = float(np.median(pp[:4]))
-    if hi <= start + threshold or np.any(pp < start - threshold):
-        return None
     end = float(np.median(pp[-max(4, pp.size // 50):]))
+    # a charge rises by a good part of its end level (a vacuum fill by nearly all of it)
+    if end - start <= max(threshold, CHARGE_RISE * end) or np.any(pp < start - threshold):
+        return None
     return (f"the pressure rises from {start:.0f} Pa to {end:.0f} Pa and never falls: a "
             f"charge (the tank filled through the component)? analyze finds discharges, a "
             f"fall from a plateau; the charge test is not analysed yet")
@@ -246,12 +251,12 @@ def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | 
         return (f"time stamps are not increasing ({back} of {dt.size} steps go backwards or "
                 f"stand still; a reversed record?): sort the samples by time")
     hi = float(np.max(pp))
-    rise = _charge_reason(pp, s, hi)
-    if rise is not None:
-        return rise
     if hi <= 0.0:
         return (f"all readings are at or below 0 Pa (highest {hi:.0f} Pa): gauge pressures "
                 f"taken as absolute? {GAUGE_FIX}")
+    rise = _charge_reason(pp, s, hi)
+    if rise is not None:
+        return rise
     if s.atmosphere is not None and hi <= s.atmosphere:
         return (f"all readings are at or below p_atm = {s.atmosphere:.0f} Pa (highest "
                 f"{hi:.0f} Pa): gauge pressures taken as absolute? {GAUGE_FIX}")
