@@ -80,10 +80,11 @@ as a warm gas where T10 is not measured (main d99a694; 105 s wall):
 * CPU per analysis with the temperature: 2.8 s mean (6.2 max) not hot, 10.0 s (20.1) hot
   starts (the joint family, up to 3 passes of its weight); without: 1.4 (3.5), 2.3 (4.5).
 
-Measured after the hot start's first-order screen (main 17a3af2: a plateau's drift from 2
-of its sigmas, and where T10 is not measured the warm gas's twin on every record; a gas
-colder than the room only on a drifting plateau; the thermometer's offset fitted where the
-wall is given - not here - and ``--record-only`` dropping T10's line with the column):
+Measured after the hot start's first-order screen (main 17a3af2; the same figures at
+42704bd, where a cold gas needs a plateau rising by 5 sigma): a plateau's drift from 2 of
+its sigmas, and where T10 is not measured the warm gas's twin on every record; the
+thermometer's offset fitted where the wall is given (not here); ``--record-only``
+dropping T10's line with the column:
 
 * Default inputs (24 traces, 98 s wall): unchanged with the temperature (C, b, rms,
   offsets 24/24; z_C SD 0.09); without it, hot: C within 2 % 11/12 (10/12 before), |z_C|
