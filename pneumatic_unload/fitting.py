@@ -53,13 +53,12 @@ from pneumatic_unload.law_fit import (
 from pneumatic_unload.subsonic_offer import M_SUFFIX, held_lines, split_key, twin_lines
 from pneumatic_unload.temperature_evidence import (
     FOLLOW_FACTOR,
-    TEMPERATURE_PASSES,
-    TEMPERATURE_WEIGHT_TOLERANCE,
     channel,
     channel_noise,
     channel_samples,
     offset_identified,
     temperature_evidence,
+    weighted_passes,
 )
 from pneumatic_unload.wall_moves import law_spread, spread_b, wall_linear
 
@@ -291,26 +290,31 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
     window = temp.size + 2.0 * LAW_BIC_THRESHOLD
     near = {split_key(k)[0] for k in bic if bic[k] - bic[best] <= window}
     tried = tuple(law for law in tried if law in near) or (split_key(best)[0],)
-    for k in range(TEMPERATURE_PASSES):
+    last: dict[str, Any] = {}
+
+    def attempt(sigma_t: float, k: int) -> float:
+        # the later passes start from the previous pass's fits
+        starts = seeds if k == 0 else {key: last["fam"].start_of(f[0])
+                                       for key, f in last["fam"].fits.items()}
         # (a lag the comparison finds unresolved is held only where its model follows the
         # log: one that departs misplaces the lag too - 1e-4 s for 1 s on a hot start)
         joint = trace.with_channel(channel(
-            t_rel, temp, cf.rms, sigma,
+            t_rel, temp, cf.rms, sigma_t,
             ev.get("sensor_time_constant", math.nan) if ev.get("follows") else math.nan,
             lag_given=lag_given,
             offset=offset_identified(fam.settings.wall_temperature is not None)))
         j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
                                        fam.profile_heat, offset=fam.offset,
-                                       seeds=seeds, plateau_drift_z=fam.plateau_drift_z,
+                                       seeds=starts, plateau_drift_z=fam.plateau_drift_z,
                                        t10_logged=True),
                                 tried)
         summary = j_fam.fits[j_best][0].gas_temperature
         summary.update(noise=noise, passes=k + 1)
-        now = max(noise, summary["rms"])
-        if abs(math.log(now / sigma)) <= math.log(TEMPERATURE_WEIGHT_TOLERANCE):
-            break
-        sigma = now
-        seeds = {key: j_fam.start_of(f[0]) for key, f in j_fam.fits.items()}
+        last.update(fam=j_fam, best=j_best, joint=joint, summary=summary)
+        return float(summary["rms"])
+
+    weighted_passes(attempt, sigma, noise)
+    j_fam, j_best, joint, summary = last["fam"], last["best"], last["joint"], last["summary"]
     if summary["rms"] <= FOLLOW_FACTOR * noise:
         return j_fam, j_best, joint, {}
     jc = j_fam.fits[j_best][0]

@@ -187,6 +187,13 @@ class Family:
         start = SUBSONIC_INDEX_START if name == "m" else 0.0
         return linear_twin(self.common["trace"], kept, model, name, start)
 
+    def _plateau_shows(self, cold: bool) -> bool:
+        """Whether the plateau's drift allows a gas colder (``cold``) or warmer than the
+        wall: a cold one warms on it, rising by :data:`COLD_DRIFT_Z`; a warm one cools,
+        and must not rise by :data:`PLATEAU_DRIFT_Z`."""
+        z = self.plateau_drift_z
+        return z >= COLD_DRIFT_Z if cold else z < PLATEAU_DRIFT_Z
+
     def hot_twin(self, key: str) -> Twin | None:
         """The first-order twin of the fit ``key`` as its hot start: T10 freed and the wall
         held at the room's temperature where T10 was not measured (a gas warm from its
@@ -209,8 +216,8 @@ class Family:
 
     def _no_hot_start(self, key: str, family: list[str]) -> str | None:
         """Why the hot start of ``key``'s law is not fitted, or None: its first-order twin
-        (:meth:`hot_twin`) must gain what the criterion asks (:meth:`worth`) and bring the
-        law within :data:`LAW_BIC_THRESHOLD` of the family's best (a plateau's drift of
+        (:meth:`hot_twin`) must predict a BIC gain above :data:`HOT_TWIN_MARGIN` and bring
+        the law within :data:`LAW_BIC_THRESHOLD` of the family's best (a plateau's drift of
         noise alone, 1 in 15 at 2 sigma, is no hot start; nor does a law the record
         rejects become one that fits by it)."""
         tw = self.hot_twin(key)
@@ -355,15 +362,12 @@ class Family:
                     self.not_offered[key] = (f"T10 not measured: a gas {gap:.0f} K from the "
                                              f"room's is beyond what a charge can make "
                                              f"({hottest:.0f} K, gamma T_room)")
-                elif (t10 < hot[0].wall_temperature) != (
-                        self.plateau_drift_z >= (COLD_DRIFT_Z if t10 < hot[0].wall_temperature
-                                                 else PLATEAU_DRIFT_Z)):
+                elif not self._plateau_shows(cold := t10 < hot[0].wall_temperature):
                     # a charge warms its gas; a cold one (a tank vented, then shut) warms
                     # on its plateau, which must show it rising, and a warm one must not
                     # rise: else the gas absorbs other model error (two restrictions in
                     # series: T10 286 K, C +3.1 %; a gauge's zero with m 0.3 on a plateau
                     # rising 2.0 sigma by chance: 280 K, +4.8 %)
-                    cold = t10 < hot[0].wall_temperature
                     self.not_offered[key] = (
                         f"T10 not measured: a gas {gap:.1f} K {'colder' if cold else 'warmer'}"
                         f" than the room's, its plateau {'not ' if cold else ''}rising "
@@ -447,8 +451,9 @@ def best_key(fits: dict[str, Fit], n: int) -> str:
 #: fitted, and the criterion and the gap's gates decide (2, not 5: a 20 K warm gas on a
 #: 1 s plateau at 100 Hz drifts by 2-3 of them and read at T10 = the room's gave C +5.7 %
 #: at z 7.7, -1.1 % at z -0.5 with its hot start tried; a plateau of noise alone trips it
-#: about 1 time in 15, and its hot start, when not rejected by the criterion, widens C's
-#: heat-law line: 3 of 140 foreign-law records, sigma 0.04 % -> 0.4-1.7 %, C unchanged).
+#: about 1 time in 15: its hot starts are screened by their first-order twin,
+#: :meth:`Family._no_hot_start`, without which they widened C's heat-law line on 3 of 140
+#: foreign-law records, sigma 0.04 % -> 0.4-1.7 %, C unchanged).
 PLATEAU_DRIFT_Z = 2.0
 #: Where T10 was not measured, a gas colder than the room (a tank vented, then shut) is read
 #: only from a plateau that rises by this many of its standard errors [-]: a test line's

@@ -16,6 +16,7 @@ SI units: s, K.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -188,6 +189,20 @@ def channel(t: FloatArray, temp: FloatArray, pressure_rms: float, sigma: float,
     held = lag_given if lag_given is not None else \
         SENSOR_TAU_RANGE[0] if lag_seen < UNRESOLVED_LAG * spacing else None
     return TemperatureChannel(t, temp, float(pressure_rms / sigma), held, offset)
+
+
+def weighted_passes(attempt: Callable[[float, int], float], sigma: float,
+                    noise: float) -> None:
+    """The joint fit's weight iterated (the estimator's and the discrepancy workflow's
+    rule): ``attempt(sigma, k)`` fits with the readings' residuals taken to have the
+    standard deviation sigma [K] (pass k) and returns their rms [K]; it is called again
+    with the larger of ``noise`` [K] and that rms until the two agree within
+    :data:`TEMPERATURE_WEIGHT_TOLERANCE`, at most :data:`TEMPERATURE_PASSES` times."""
+    for k in range(TEMPERATURE_PASSES):
+        now = max(noise, attempt(sigma, k))
+        if abs(math.log(now / sigma)) <= math.log(TEMPERATURE_WEIGHT_TOLERANCE):
+            return
+        sigma = now
 
 
 def offset_identified(wall_given: bool) -> bool:

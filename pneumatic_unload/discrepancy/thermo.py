@@ -31,12 +31,11 @@ from pneumatic_unload.model.parametric import ParametricModel
 from pneumatic_unload.temperature_evidence import (
     CHANNEL_MIN_SAMPLES,
     FOLLOW_FACTOR,
-    TEMPERATURE_PASSES,
-    TEMPERATURE_WEIGHT_TOLERANCE,
     channel,
     channel_noise,
     offset_identified,
     temperature_evidence,
+    weighted_passes,
 )
 
 FloatArray = NDArray[np.float64]
@@ -96,32 +95,34 @@ def joint_fit(prob: Problem, fit: Fit, t: FloatArray, temp: FloatArray) -> dict[
     if math.isfinite(lag):
         start["tau_thermo"] = lag
     out: dict[str, Any] = {}
-    for k in range(TEMPERATURE_PASSES):
-        joint = prob.trace.with_channel(channel(t, temp, s_p, sigma,
+
+    def attempt(sigma_t: float, k: int) -> float:
+        if k:  # the later passes start from the previous pass's fit
+            start.update(out["fit"].theta)
+        joint = prob.trace.with_channel(channel(t, temp, s_p, sigma_t,
                                                 lag if ev.get("follows") else math.nan,
                                                 offset=offset))
-        try:
-            res = joint.fit(model, start=start, max_nfev=JOINT_NFEV)
-        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-            return {"why": f"the joint fit failed: {exc}"}
+        res = joint.fit(model, start=start, max_nfev=JOINT_NFEV)
         r = joint.residual(model)(res.values)
         ch = joint.channel
         assert ch is not None
         rt = r[n_p:] / ch.weight
         rms = float(np.sqrt(np.mean(rt * rt)))
         j = Fit(model=model, result=res)
-        out = {"rms": rms, "noise": noise, "follows": rms <= FOLLOW_FACTOR * noise,
+        out.update({"rms": rms, "noise": noise, "follows": rms <= FOLLOW_FACTOR * noise,
                "t10": res.values["t10"],
                "sensor_time_constant": res.values.get("tau_thermo", ch.lag),
                "sensor_offset": res.values.get("t_offset", 0.0),
                "conductance": res.values["C"], "conductance_std": conductance_std(j),
                "conductance_pressure": fit.theta["C"],
                "pressure_rms_ratio": float(np.sqrt(np.mean(r[:n_p] ** 2))) / s_p,
-               "samples": int(temp.size), "passes": k + 1, "fit": j, "channel": ch}
-        now = max(noise, rms)
-        if abs(math.log(now / sigma)) <= math.log(TEMPERATURE_WEIGHT_TOLERANCE):
-            break
-        sigma, start = now, dict(res.values)
+               "samples": int(temp.size), "passes": k + 1, "fit": j, "channel": ch})
+        return rms
+
+    try:
+        weighted_passes(attempt, sigma, noise)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        return {"why": f"the joint fit failed: {exc}"}
     return out
 
 
