@@ -253,8 +253,9 @@ def format_budget(d: dict[str, Any], unit: float = 1e-9,
     out = []
     for t in d["terms"]:
         std = t["std"] if t["std"] is not None and math.isfinite(t["std"]) else 0.0
+        value = "" if t["value"] is None else f"{t['value']:.6g} "
         given = "" if t["input_std"] is None or not math.isfinite(t["input_std"]) else \
-            f"; {t['value']:.6g} +- {t['input_std']:.3g} {t['unit']}"
+            f"; {value}+- {t['input_std']:.3g} {t['unit']}"
         note = f" ({t['note']})" if t["note"] else ""
         out.append(f"    {t['kind']:5s} {t['name']:46s} {std / unit:9.4f}"
                    f"  {100 * std**2 / var:5.1f} %{given}{note}")

@@ -50,9 +50,10 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
     type_a_std, model_form_std : float
         b's 1-sigma from the record and the heat laws' spread [-] (NaN: 0).
     p10, p_atm : float
-        Initial and atmospheric pressures [Pa absolute].
+        Initial and atmospheric pressures [Pa absolute] (a charge's: p_atm the supply's,
+        b = p2/p_s at the transition, an offset moving the tank's p2).
     atmosphere_measured : bool
-        p_atm came from the record.
+        p_atm (a charge's supply) came from the record.
     wall : tuple, optional
         (b's standard uncertainty from the wall [-], the wall's standard uncertainty [K],
         where it comes from); None without a heat law.
@@ -73,15 +74,24 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
         "moves the gas-wall gap as the given wall's uncertainty does" if gap_moves else
         "the wall moves with T10 (or is fitted); the time scale does not move b"))
     d = u["pressure"]
-    terms.append(BudgetTerm(
-        "pressure transducer (offset)", "B", p10, d, "Pa",
-        abs(d * b * (1.0 - b) / p_atm) if atmosphere_measured else abs(d * b * b / p_atm),
-        "first order at the transition: p_atm " + ("and p1 move" if atmosphere_measured
-                                                   else "given, p1 moves")))
+    if s.charge:  # b = p2/p_s at the transition: the tank's pressure p2 moves
+        terms.append(BudgetTerm(
+            "pressure transducer (offset)", "B", p10, d, "Pa",
+            abs(d * (1.0 - b) / p_atm) if atmosphere_measured else abs(d / p_atm),
+            "first order at the transition: p2 " + ("and p_s move" if atmosphere_measured
+                                                    else "moves, p_s given")))
+    else:
+        terms.append(BudgetTerm(
+            "pressure transducer (offset)", "B", p10, d, "Pa",
+            abs(d * b * (1.0 - b) / p_atm) if atmosphere_measured else abs(d * b * b / p_atm),
+            "first order at the transition: p_atm " + ("and p1 move" if atmosphere_measured
+                                                       else "given, p1 moves")))
     if not atmosphere_measured:
-        ua = u["atmosphere"]
-        terms.append(BudgetTerm("atmosphere p_atm (given)", "B", p_atm, ua, "Pa",
-                                abs(b * ua / p_atm), "atmosphere_uncertainty"))
+        ua = s.end_uncertainty
+        terms.append(BudgetTerm("supply p_s (given)" if s.charge else
+                                "atmosphere p_atm (given)", "B", p_atm, ua, "Pa",
+                                abs(b * ua / p_atm), "supply_pressure_uncertainty"
+                                if s.charge else "atmosphere_uncertainty"))
     if wall_fitted:
         terms.append(BudgetTerm(WALL_TERM, "B", s.wall, math.nan, "K", 0.0,
                                 "fitted (a hot start): in the curve fit's line"))

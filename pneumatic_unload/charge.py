@@ -40,9 +40,18 @@ SI units: Pa absolute, K, s, m^3/(s Pa).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from pneumatic_unload.physics import P_STAR_FRACTION, R_LINEAR, flow_function
+from pneumatic_unload.physics import (
+    AIR,
+    P_STAR_FRACTION,
+    R_LINEAR,
+    Gas,
+    conductance_eq39,
+    flow_function,
+)
 
 #: Points of the Gauss-Legendre rule of :func:`charge_eq39_bias` on each side of the
 #: choked end [-] (phi is smooth there: the integral is exact to ~1e-12).
@@ -82,3 +91,19 @@ def charge_eq39_bias(p10: float, p_s: float, critical_ratio: float,
     1 / :func:`charge_rise_integral` (see the module's note; 1/0.632 = 1.582 while choked
     at p*)."""
     return 1.0 / charge_rise_integral(p10 / p_s, critical_ratio, subsonic_index)
+
+
+def charge_conductance_adiabatic(tau: float, p_cross: float, p10: float, p_s: float,
+                                 volume: float, t_supply: float, critical_ratio: float,
+                                 subsonic_index: float = 0.5, gas: Gas = AIR) -> float:
+    """C [m^3/(s Pa)] of the adiabatic charge from p10 that reaches ``p_cross`` at ``tau``
+    [s] after the opening (pressures Pa absolute, V [m^3], T_s [K], b and m of the
+    component [-]): the closed form of the module's note, C = eq 39 mirrored times
+    I(p10/p_s, x) with x = (p_cross - p10)/(p_s - p10) (the charge's counterpart of the
+    discharge's isentropic inversion, exact for any b and m). NaN unless
+    p10 < p_cross < p_s and tau > 0."""
+    if not (0.0 <= p10 < p_cross < p_s and tau > 0.0):
+        return math.nan
+    x = (p_cross - p10) / (p_s - p10)
+    integral = charge_rise_integral(p10 / p_s, critical_ratio, subsonic_index, to=x)
+    return conductance_eq39(tau, p_s, p10, volume, t_supply, gas) * integral

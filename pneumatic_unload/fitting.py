@@ -151,12 +151,12 @@ def fit_curve(
     fam, best = _choose(Family(span, settings, common, profile_heat,
                                plateau_drift_z=drifts, t10_logged=logged), tried)
     offset_why = ""
-    if settings.atmosphere is not None:
+    if settings.end_pressure is not None:
         # p_atm given: a record that settles away from it (a transducer's zero offset)
         # has the offset fitted, the family fitted again with it, where the criterion
         # clearly prefers it (by LAW_BIC_THRESHOLD; an offset it does not determine is not
         # offered); else it is said not to be
-        offset_why = _offer_offset(fam, best, settled - settings.atmosphere)
+        offset_why = _offer_offset(fam, best, settled - settings.end_pressure)
         if offset_why is None:
             fam, best = _choose(Family(span, settings, common, profile_heat, offset=True,
                                        plateau_drift_z=drifts, t10_logged=logged), tried)
@@ -394,7 +394,7 @@ def _offer_offset(fam: Family, best: str, gap: float) -> str | None:
     except (ValueError, FloatingPointError, np.linalg.LinAlgError):
         return "not fitted: the fit with an offset failed"
     off, sd = got[0].pressure_offset, got[0].pressure_offset_std
-    drop = got[0].p10 - fam.settings.atmosphere
+    drop = abs(got[0].p10 - fam.settings.end_pressure)  # type: ignore[operator]
     if not (abs(off) <= OFFSET_MAX_FRACTION * drop
             and abs(gap - off) <= SETTLED_FRACTION * drop):
         # a zero offset is a small shift of a record that settles: one that ends before

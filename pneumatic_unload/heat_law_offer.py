@@ -100,7 +100,7 @@ def next_law_start(first: CurveFit, settings: EstimatorSettings, t0: float
         start["tau_heat"] = HEAT_FIXED.params[0].hi
     if math.isfinite(first.critical_ratio):
         start["b"] = first.critical_ratio
-    if settings.atmosphere is None:
+    if settings.end_pressure is None:
         start["p_atm"] = first.p_atm
     if first.subsonic_index_fitted:
         start["m"] = first.subsonic_index

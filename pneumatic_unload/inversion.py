@@ -49,13 +49,18 @@ def estimator_model(settings: EstimatorSettings, start: Start, *,
     effects: tuple[str, ...] = ("heat_transfer",) if settings.heat_model == "natural" else ()
     if fit_offset:
         effects = (*effects, "sensor_offset")
-    tank = settings.tank if p_atm is None else dataclasses.replace(settings.tank,
-                                                                  atmosphere=p_atm)
+    charge = None
+    tank = settings.tank
+    if settings.charge:  # p_atm: the end level, the supply's
+        charge = (settings.supply_pressure if p_atm is None else p_atm,
+                  settings.supply_gas_temperature)
+    elif p_atm is not None:
+        tank = dataclasses.replace(settings.tank, atmosphere=p_atm)
     return ParametricModel(effects, tank, start, heat_law=heat_law,
                            fit_wall_temperature=fit_wall and bool(effects),
                            subsonic_index=None if fit_m else SUBSONIC_INDEX_START,
                            thermometer=thermometer, fit_initial_temperature=fit_t10,
-                           thermometer_offset=thermometer_offset)
+                           thermometer_offset=thermometer_offset, charge=charge)
 
 
 def rig_from_settings(settings: EstimatorSettings, *, conductance: float, p10: float,
@@ -93,7 +98,8 @@ def _configuring_model(settings: EstimatorSettings, p_atm: float) -> ParametricM
 
 def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float, *,
                         rtol: float = 1e-7) -> float:
-    """Time for the model's tank pressure to fall from p10 to p_star [s].
+    """Time for the model's tank pressure to fall from p10 to p_star [s] (to rise to it,
+    for a charge's configuration).
 
     Parameters
     ----------
@@ -111,7 +117,7 @@ def model_crossing_time(cfg: RigConfig, p_star: float, t_guess: float, *,
     for _ in range(8):
         t = np.linspace(0.0, horizon, 129)
         p, _ = discharge(cfg, t, 0.0, rtol=rtol)
-        k = np.flatnonzero(p < p_star)
+        k = np.flatnonzero(p > p_star if cfg.direction == "charge" else p < p_star)
         if k.size:
             j = int(k[0])
             j0 = min(max(j - 1, 1), t.size - 2)
@@ -449,7 +455,8 @@ def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_
 
 
 def fitted_tau_exp(cfg: RigConfig, t_guess: float) -> float:
-    """tau_exp of a fitted model: its p* crossing (eq 40 with its p10, p_atm) [s].
+    """tau_exp of a fitted model: its p* crossing (eq 40 with its p10, p_atm; a charge's
+    with its p10 and supply) [s].
 
     Uses the whole recorded curve rather than the samples near p* and the start, so it is
     less noisy than the measured tau_exp (reported beside it, never instead of it).
@@ -465,8 +472,9 @@ def fitted_tau_exp(cfg: RigConfig, t_guess: float) -> float:
     if not (math.isfinite(t_guess) and t_guess > 0):
         return math.nan
     try:
-        p10, p_atm = cfg.initial_pressure, cfg.atmosphere
-        ps = p_atm + P_STAR_FRACTION * (p10 - p_atm)
+        rising = cfg.direction == "charge"  # toward the supply
+        p10, p_end = cfg.initial_pressure, cfg.supply_pressure if rising else cfg.atmosphere
+        ps = p_end + P_STAR_FRACTION * (p10 - p_end)
         tc = model_crossing_time(cfg, ps, t_guess)
         if not math.isfinite(tc):
             return math.nan
@@ -477,7 +485,7 @@ def fitted_tau_exp(cfg: RigConfig, t_guess: float) -> float:
             pp, _ = discharge(cfg, tt, 0.0, rtol=1e-10)
         except ArithmeticError:  # the integrator's step budget at the fine tolerance
             return tc
-        k = np.flatnonzero(pp[1:] < ps)
+        k = np.flatnonzero(pp[1:] > ps if rising else pp[1:] < ps)
         if k.size == 0 or k[0] == 0:
             return tc
         j = int(k[0]) + 1

@@ -148,8 +148,10 @@ def fit_law(
     t_start = t_start - t_ref
     natural = settings.heat_model == "natural"
     dt = span.dt
-    tau = tau_exp_eq38(p10, p_atm, settings.volume, conductance, settings.initial_temperature,
-                       settings.gas)
+    tau = tau_exp_eq38(p_atm, p10, settings.volume, conductance,
+                       settings.supply_gas_temperature, settings.gas) if settings.charge \
+        else tau_exp_eq38(p10, p_atm, settings.volume, conductance,
+                          settings.initial_temperature, settings.gas)  # supply upstream
     neutral = Start(conductance=conductance, critical_ratio=settings.critical_ratio,
                   t_open=float(np.clip(t_start, 0.0, span.duration)), p10=p10, p_atm=p_atm,
                   tau=tau, dt=dt, t_first=0.0, t_last=span.duration)
@@ -243,7 +245,7 @@ def fit_law(
     cf = CurveFit(
         conductance=c, conductance_std=float(std["C"]), critical_ratio=b,
         critical_ratio_std=b_std, t_start=v["t_open"] + t_ref, p10=v["p10"],
-        p_atm=v.get("p_atm", p_atm) if settings.atmosphere is None else p_atm,
+        p_atm=v.get("p_atm", p_atm) if settings.end_pressure is None else p_atm,
         heat_scale=h, heat_scale_std=h_std, rms=math.sqrt(s2), n=span.n,
         success=bool(fit.success), inflation=inflation,
         heat_law=f"{law}+wall" if fit_wall else law,

@@ -91,6 +91,18 @@ class EstimatorSettings(TankSpec):
         First-order time constant of the thermometer of a logged gas temperature [s]
         (None: fitted with the pressure, within
         :data:`~pneumatic_unload.model.parametric.THERMOMETER_TAU_RANGE`).
+    direction : str
+        'discharge' (the tank empties through the component to ``atmosphere``) or 'charge'
+        (the tank fills through it from a supply at ``supply_pressure``,
+        ``supply_temperature``: ISO 6358-2's charge; ``atmosphere`` is then the room's,
+        for the leaks alone). Inside the estimator and its fits a charge's end level, the
+        supply, takes the place of p_atm (:attr:`end_pressure`).
+    supply_pressure : float or None
+        A charge's supply pressure p_s [Pa absolute] (None: the record's final plateau).
+    supply_pressure_uncertainty : float or None
+        Standard uncertainty of a given supply pressure [Pa] (None: 0.1 % of it).
+    supply_temperature : float or None
+        A charge's supply gas temperature T_s [K] (None: the wall's, the room's).
     model_uncertainty : float
         Relative standard uncertainty of the model-based C from the discharge model's own
         limits [-]: ideal gas (real air, Z = 0.997 at 8 bar), a uniform gas state, a heat
@@ -139,6 +151,17 @@ class EstimatorSettings(TankSpec):
     thermometer_time_constant: float | None = optional(
         None, "s", 1e-4, 120.0, "first-order time constant of the logged gas temperature's "
         "thermometer", "fitted with the pressure")
+    direction: str = choice("discharge", ("discharge", "charge"),
+                            "flow direction: the tank empties (discharge) or fills (charge)")
+    supply_pressure: float | None = optional(
+        None, "Pa", 1e3, 5e7, "a charge's supply pressure p_s (absolute)",
+        "from the final plateau")
+    supply_pressure_uncertainty: float | None = optional(
+        None, "Pa", 0.0, 1e7, "standard uncertainty of a given supply pressure",
+        "0.1 % of it")
+    supply_temperature: float | None = optional(
+        None, "K", 150.0, 600.0, "a charge's supply gas temperature T_s",
+        "the wall's (the room's)")
     model_uncertainty: float = number(
         MODEL_UNCERTAINTY, "-", 0.0, 0.5, "relative standard uncertainty of the "
         "model-based C from the model's own limits (ideal gas, uniform state, heat-law "
@@ -152,6 +175,36 @@ class EstimatorSettings(TankSpec):
             raise EstimationError(str(exc)) from exc
         if self.signal_gain == 0:
             raise EstimationError("signal_gain must be non-zero")
+        if self.direction == "discharge" and (self.supply_pressure is not None
+                                              or self.supply_temperature is not None):
+            raise EstimationError("supply_pressure and supply_temperature are a charge's "
+                                  "(direction 'charge')")
+
+    @property
+    def charge(self) -> bool:
+        """The tank fills through the component (``direction`` 'charge')."""
+        return self.direction == "charge"
+
+    @property
+    def end_pressure(self) -> float | None:
+        """The level the tank's pressure tends to, where given [Pa absolute]: the
+        atmosphere of a discharge, the supply of a charge; None: the final plateau."""
+        return self.supply_pressure if self.charge else self.atmosphere
+
+    @property
+    def end_uncertainty(self) -> float:
+        """Standard uncertainty of a given :attr:`end_pressure` [Pa] (NaN: not given)."""
+        if self.end_pressure is None:
+            return math.nan
+        if not self.charge:
+            return self.atmosphere_uncertainty
+        return (self.supply_pressure_uncertainty if self.supply_pressure_uncertainty
+                is not None else 1e-3 * self.end_pressure)
+
+    @property
+    def supply_gas_temperature(self) -> float:
+        """A charge's supply temperature T_s in use [K] (the wall's when not given)."""
+        return self.wall if self.supply_temperature is None else self.supply_temperature
 
 
 def wall_uncertainty(settings: EstimatorSettings,

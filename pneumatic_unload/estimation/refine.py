@@ -18,11 +18,17 @@ import numpy as np
 from pneumatic_unload import physics
 from pneumatic_unload.budget import (
     WALL_TERM,
+    Budget,
+    BudgetTerm,
     fitted_wall_term,
     held_wall_term,
     model_budget,
+    model_form_term,
+    model_limits_term,
+    record_term,
     term_std,
     wall_sensitivity,
+    wall_term,
 )
 from pneumatic_unload.budget_b import ratio_budget
 from pneumatic_unload.config.estimator import (
@@ -48,10 +54,16 @@ from pneumatic_unload.temperature_evidence import temperature_terms
 #: Quality figure [0, 1] at most of a result whose model does not describe the record at
 #: its noise level ("model inadequate" in its status text).
 INADEQUATE_QUALITY = 0.7
+#: The type A line of the curve fit's C.
+FINAL_TYPE_A = "curve fit (noise, AR(1), residual structure)"
 #: Initial pressures the discharge model covers [Pa absolute] (RigConfig's bounds).
 P10_RANGE: tuple[float, float] = next(
     (float(f.metadata["min"]), float(f.metadata["max"])) for f in dataclasses.fields(RigConfig)
     if f.name == "initial_pressure")
+#: Supply pressures the charge's model covers [Pa absolute] (RigConfig's bounds).
+SUPPLY_RANGE: tuple[float, float] = next(
+    (float(f.metadata["min"]), float(f.metadata["max"])) for f in dataclasses.fields(RigConfig)
+    if f.name == "supply_pressure")
 
 
 def pressure_problem(p10: float, p_atm: float, p_star: float) -> str | None:
@@ -104,6 +116,10 @@ def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
     """
     if not (math.isfinite(c) and c > 0):
         return None
+    if settings.charge:
+        return charge_final_budget(res, settings, c=c, type_a_std=type_a_std,
+                                   model_form_std=model_form_std, heat_law=heat_law,
+                                   extra_terms=extra_terms, fit=fit)
     wall_std, wall_input = math.nan, None
     if heat_law.endswith("+wall") and fit is not None and math.isfinite(
             fit.wall_temperature_std):
@@ -122,12 +138,42 @@ def final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
             if math.isfinite(res.conductance_model) and res.conductance_model > 0 \
             else wall_std
     return model_budget(settings, c, type_a_std=type_a_std,
-                        type_a_name="curve fit (noise, AR(1), residual structure)",
+                        type_a_name=FINAL_TYPE_A,
                         model_form_std=model_form_std, tau=res.tau_exp, p10=res.p10,
                         p_atm=res.p_atm, p_star=res.p_star,
                         atmosphere_measured=settings.atmosphere is None,
                         wall_std=wall_std, wall_input=wall_input,
                         extra_terms=extra_terms).to_dict()
+
+def charge_final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: float,
+                        type_a_std: float, model_form_std: float, heat_law: str,
+                        extra_terms: tuple[Any, ...], fit: CurveFit | None
+                        ) -> dict[str, Any]:
+    """A charge's budget of the final C [m^3/(s Pa)]: the fit's type A line; the
+    crossing budget's stated inputs (V, T_s, the transducer's offset, a given supply: at
+    fixed pressures each is proportional to C) scaled to ``c``; the wall's (fitted by a
+    hot-start law: in the type A line; assumed: the fit's refits with the wall moved);
+    ``extra_terms``; the heat laws' spread and the model's limits."""
+    ref = res.extra.get("budget") or {}
+    k = c / ref["value"] if ref.get("value") else math.nan
+    terms = [record_term(FINAL_TYPE_A, type_a_std)]
+    for t in ref.get("terms", ()):
+        if t["kind"] == "B" and t["name"] != WALL_TERM:
+            terms.append(BudgetTerm(t["name"], "B", math.nan if t["value"] is None
+                                    else t["value"], math.nan if t["input_std"] is None
+                                    else t["input_std"], t["unit"],
+                                    math.nan if t["std"] is None else t["std"] * k,
+                                    t["note"]))
+    if heat_law.endswith("+wall") and fit is not None:
+        terms.append(fitted_wall_term(fit.wall_temperature, fit.wall_temperature_std,
+                                      heat_law))
+    elif heat_law != "none" and fit is not None and math.isfinite(fit.wall_uncertainty):
+        terms.append(wall_term(settings, c, fit.wall_std, fit.wall_uncertainty,
+                               fit.wall_source))
+    terms += [*extra_terms, model_form_term(model_form_std),
+              model_limits_term(c, settings.model_uncertainty)]
+    return Budget(c, tuple(terms)).to_dict()
+
 
 def b_budget(fit: CurveFit, settings: EstimatorSettings,
              res: UnloadResult) -> dict[str, Any]:
@@ -142,7 +188,7 @@ def b_budget(fit: CurveFit, settings: EstimatorSettings,
         wall = (fit.wall_std_b, u, why)
     return ratio_budget(settings, fit.critical_ratio, type_a_std=fit.critical_ratio_std,
                         model_form_std=fit.model_form_std_b, p10=fit.p10, p_atm=fit.p_atm,
-                        atmosphere_measured=settings.atmosphere is None, wall=wall,
+                        atmosphere_measured=settings.end_pressure is None, wall=wall,
                         wall_fitted=law.endswith("+wall"),
                         extra_terms=(subsonic_term(fit, "b"),)).to_dict()
 
@@ -337,8 +383,13 @@ def refine_with_curve_fit(
         return dataclasses.replace(res, final=True, extra={
             **res.extra, "curve_fit_error": f"the fit did not determine C ({fit.conductance:.3g}"
                                             f" +- {c_std:.3g} m^3/(s Pa))"})
-    lo, hi = ATMOSPHERE_RANGE
-    if not lo <= fit.p_atm <= hi:
+    lo, hi = (res.p10, SUPPLY_RANGE[1]) if settings.charge else ATMOSPHERE_RANGE
+    if settings.charge and not lo < fit.p_atm <= hi:
+        return dataclasses.replace(res, final=True, extra={
+            **res.extra, "curve_fit_error": f"the fit moved the supply to {fit.p_atm:.0f} "
+                                            f"Pa, not above p10 ({lo:.0f} Pa): give it "
+                                            "(--supply PA)"})
+    if not settings.charge and not lo <= fit.p_atm <= hi:
         # p_atm fitted (not given) beyond any atmosphere: the fit describes something else
         return dataclasses.replace(res, final=True, extra={
             **res.extra, "curve_fit_error": f"the fit moved p_atm to {fit.p_atm:.0f} Pa, not "
@@ -380,7 +431,12 @@ def refine_with_curve_fit(
     why = inadequacy(nrms, fit.whiteness_p, fit.inflation)
     extra["model_inadequate"] = why or ""
     b = fit.critical_ratio
-    if math.isfinite(b) and b > 0:
+    if settings.charge:
+        if math.isfinite(b) and b > 0:
+            choked = res.p_star / res.p_atm <= b
+            text = (f"{text}; {'choked' if choked else 'subsonic'} at p* with the fitted "
+                    f"b = {b:.3f} (p*/p_s = {res.p_star / res.p_atm:.3f})")
+    elif math.isfinite(b) and b > 0:
         # the fit measured b: whether the flow stayed choked down to p* is now known
         limit = res.p_atm / b
         if res.p_star >= limit and status == "not_choked":

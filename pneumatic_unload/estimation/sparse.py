@@ -16,10 +16,14 @@ the record need not end on a plateau.
 * The curve fit uses every point with the opening and p10 held where they were given or
   read; p10's uncertainty is a line of the budget (stated: type B; read off the first
   sample: its noise, the fit's residual RMS, type A). The fit's own sigma comes from the
-  residual variance of the points themselves. Below :data:`FEW_POINTS` points the heat
-  exchange is not fitted (the published correlation, with its 30 % uncertainty, as the
-  crossing inversion does: fitted on 12-20 points it traded against C, errors up to 9 %),
-  and the spread between the fit and the crossing inversion is a model-form line.
+  residual variance of the points themselves. Below :data:`FEW_POINTS` points, and
+  without a logged gas temperature to pin it, the heat exchange is not fitted (the
+  published correlation, with its 30 % uncertainty, as the crossing inversion does: fitted
+  on 12-20 points it traded against C, errors up to 9 %), and the spread between the fit
+  and the crossing inversion is a model-form line.
+* A charge (``direction`` 'charge') is the same with the supply for p_atm: given, or the
+  mean of the record's final plateau (:func:`supply_level`); the crossing's C by
+  :mod:`~pneumatic_unload.estimation.charge_crossing`.
 
 SI units: s, Pa absolute, m^3/(s Pa).
 """
@@ -34,7 +38,9 @@ from numpy.typing import ArrayLike
 
 from pneumatic_unload import physics
 from pneumatic_unload.budget import MODEL_FORM_TERM, BudgetTerm, with_terms
+from pneumatic_unload.charge import charge_conductance_adiabatic, charge_p_star
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.estimation.charge_crossing import charge_crossing_estimate
 from pneumatic_unload.estimation.crossing import HEAT_NOT_SEEN, crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.refine import refine_with_curve_fit
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
@@ -85,7 +91,7 @@ def settle_index(p: np.ndarray, k: int, p10: float, p_atm: float) -> int | None:
     :data:`SETTLE_FRACTION` (p10 - p_atm) of p_atm (p [Pa absolute], finite); None when it
     does not."""
     hit, _run = settle_scan(np.asarray(p[k + 1:], dtype=float),
-                            SETTLE_FRACTION * (p10 - p_atm), p_atm)
+                            SETTLE_FRACTION * abs(p10 - p_atm), p_atm)
     return None if hit is None else k + 1 + hit
 
 
@@ -114,28 +120,69 @@ def initial_pressure(ts: np.ndarray, ps: np.ndarray, s: EstimatorSettings
                           f"{first}): give the initial pressure (--initial-pressure)")
 
 
+#: A charge's supply from the final plateau: the trailing samples within this fraction of
+#: the rise from the last one [-] ...
+PLATEAU_BAND = 0.01
+#: ... at least this many of them [-].
+PLATEAU_POINTS = 3
+
+
+def supply_level(ps: np.ndarray, p10: float, s: EstimatorSettings
+                 ) -> tuple[float, float, str]:
+    """A charge's supply pressure p_s [Pa absolute], its standard uncertainty [Pa] and
+    where it comes from: given (``supply_pressure``), or the mean of the record's final
+    plateau (the trailing samples ps [Pa absolute] within :data:`PLATEAU_BAND` of the rise
+    from the last one; its standard error, type A).
+
+    Raises
+    ------
+    EstimationError
+        No supply given and no final plateau of :data:`PLATEAU_POINTS` samples."""
+    if s.supply_pressure is not None:
+        return float(s.supply_pressure), s.end_uncertainty, "given (supply_pressure)"
+    last = float(ps[-1])
+    band = PLATEAU_BAND * abs(last - p10)
+    off = np.flatnonzero(np.abs(ps - last) > band)
+    tail = ps[int(off[-1]) + 1:] if off.size else ps
+    if tail.size < PLATEAU_POINTS:
+        raise EstimationError(
+            f"the record does not end on a plateau ({tail.size} sample(s) within "
+            f"{100 * PLATEAU_BAND:g} % of the rise of the last; need {PLATEAU_POINTS}): "
+            "give the supply pressure (--supply PA)")
+    std = float(np.std(tail, ddof=1) / math.sqrt(tail.size))
+    return float(np.mean(tail)), std, f"the final plateau ({tail.size} samples)"
+
+
 def interpolated_crossing(t: np.ndarray, p: np.ndarray, p_star: float, p_atm: float
                           ) -> tuple[float, float, int]:
     """Instant where the samples (t [s], p [Pa]) first fall to p_star [Pa], interpolated
     linearly in log(p - p_atm) between the bracketing samples; with its interpolation error
     [s] (against linear interpolation in p) and the index of the first sample at or below.
+    With p_atm above p_star (a charge's end level, the supply) the samples rise to p_star,
+    interpolated in log(p_atm - p).
 
     Raises
     ------
     EstimationError
         The record never falls to p*, or starts below it.
     """
-    below = np.flatnonzero(p <= p_star)
+    rising = p_atm > p_star  # a charge: p_atm is the end level, the supply
+    sign = -1.0 if rising else 1.0
+    below = np.flatnonzero(sign * p <= sign * p_star)
     if below.size == 0:
-        raise EstimationError(f"the record never falls to p* = {p_star:.0f} Pa (lowest "
-                              f"{float(np.min(p)):.0f} Pa): record longer, or check p_atm")
+        extreme = float(np.max(p) if rising else np.min(p))
+        raise EstimationError(
+            f"the record never {'rises' if rising else 'falls'} to p* = {p_star:.0f} Pa "
+            f"({'highest' if rising else 'lowest'} {extreme:.0f} Pa): record longer, or "
+            f"check {'the supply' if rising else 'p_atm'}")
     k = int(below[0])
     if k == 0:
-        raise EstimationError(f"the first sample ({p[0]:.0f} Pa) is already at or below p* = "
-                              f"{p_star:.0f} Pa: check start_time and initial_pressure")
+        raise EstimationError(f"the first sample ({p[0]:.0f} Pa) is already at or "
+                              f"{'above' if rising else 'below'} p* = {p_star:.0f} Pa: "
+                              "check start_time and initial_pressure")
     t0, t1, p0, p1 = float(t[k - 1]), float(t[k]), float(p[k - 1]), float(p[k])
     lin = t0 + (t1 - t0) * (p0 - p_star) / (p0 - p1) if p0 != p1 else t1
-    y0, y1, ys = (math.log(max(x - p_atm, 1e-9)) for x in (p0, p1, p_star))
+    y0, y1, ys = (math.log(max(sign * (x - p_atm), 1e-9)) for x in (p0, p1, p_star))
     log = t0 + (t1 - t0) * (y0 - ys) / (y0 - y1) if y0 != y1 else lin
     return log, abs(log - lin), k
 
@@ -169,7 +216,7 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, 
     s = settings
     if s.start_time is None:
         raise EstimationError("analyze_from_start needs settings.start_time [s]")
-    if s.atmosphere is None:
+    if s.atmosphere is None and not s.charge:
         raise EstimationError("a record analysed from a given start time needs the "
                               "atmosphere (--atmosphere): it need not end on a plateau")
     t = np.asarray(t, dtype=float).ravel()
@@ -189,11 +236,22 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, 
         raise EstimationError(f"{ts.size} sample(s) from the start time {t_open:g} s on; "
                               f"need at least {MIN_POINTS}")
     p10, p10_std, p10_note = initial_pressure(ts, ps, s)
-    p_atm = float(s.atmosphere)
-    if not p10 > p_atm:
-        raise EstimationError(f"p10 ({p10:.0f} Pa) is not above p_atm ({p_atm:.0f} Pa): "
-                              "gauge readings? (--gauge)")
-    p_star = physics.p_star(p10, p_atm)
+    extra_note: dict[str, object] = {}
+    if s.charge:  # p_atm: the end level, the supply's
+        p_atm, supply_std, where = supply_level(ps, p10, s)
+        extra_note = {"supply_source": where, "supply_pressure_std": supply_std}
+        if not p_atm > p10:
+            raise EstimationError(
+                f"the supply ({p_atm:.0f} Pa, {where}) is not above p10 ({p10:.0f} Pa): "
+                "nothing flows into the tank (a supply below the tank, or a tank already "
+                "at the supply)")
+        p_star = charge_p_star(p10, p_atm)
+    else:
+        p_atm = float(s.atmosphere)  # type: ignore[arg-type]
+        if not p10 > p_atm:
+            raise EstimationError(f"p10 ({p10:.0f} Pa) is not above p_atm ({p_atm:.0f} "
+                                  "Pa): gauge readings? (--gauge)")
+        p_star = physics.p_star(p10, p_atm)
     if s.initial_pressure is not None and not (abs(ts[0] - t_open) <= eps):
         ts, ps = np.concatenate(([t_open], ts)), np.concatenate(([p10], ps))
     t_cross, interp_err, k = interpolated_crossing(ts, ps, p_star, p_atm)
@@ -204,6 +262,7 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, 
     tau_std = max(interp_err, 1e-9 * tau)
     res = _crossing(s, tau=tau, tau_std=tau_std, p10=p10, p_atm=p_atm, p_star=p_star,
                     t_open=t_open, t_cross=t_cross, n=ts.size, k=k, interp_err=interp_err)
+    res.extra.update(extra_note)
     out = [res]
     if s.curve_fit and math.isfinite(res.conductance_model):
         terms: tuple[BudgetTerm, ...] = ()
@@ -211,9 +270,11 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, 
             terms = (_p10_term(s, ts, ps, p10, p10_std, p_atm, t_open, res),)
         # the opening and p10 are held where they were given or read; p10's uncertainty
         # (stated, or the sample's noise: the fit's residual RMS) is a line of the budget
+        # few points hold the heat law, unless a logged gas temperature pins it
+        few = ts.size < FEW_POINTS and temperature is None
         final = refine_with_curve_fit(res, ts, ps, s, noise_std=math.nan,
                                       hold=("t_open", "p10"), extra_terms=terms,
-                                      fit_heat=None if ts.size >= FEW_POINTS else False,
+                                      fit_heat=None if not few else False,
                                       temperature=temperature)
         if final is not None:
             extra = {**final.extra, "p10_source": p10_note}
@@ -222,7 +283,7 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, 
             more = []
             if not terms and math.isfinite(rms) and rms > 0:
                 more.append(_p10_term(s, ts, ps, p10, rms, p_atm, t_open, res))
-            if ts.size < FEW_POINTS:
+            if few:
                 # few points leave the fitted heat exchange and C loosely tied: the fit and
                 # the inversion with the published correlation are both plausible, and
                 # their difference enters as a model-form line (measured: without it the
@@ -251,16 +312,22 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, 
 def _crossing(s: EstimatorSettings, *, tau: float, tau_std: float, p10: float,
               p_atm: float, p_star: float, t_open: float, t_cross: float, n: int, k: int,
               interp_err: float) -> UnloadResult:
-    plan = plan_crossing(s, p10=p10, p_atm=p_atm, p_star=p_star, tau_ref=tau)
-    est = crossing_estimate(plan, tau, tau_std)
+    status, text = "ok", (f"start given; p* crossing interpolated log-linearly between "
+                          f"samples {k - 1} and {k} (interpolation error {interp_err:.3g} s)")
+    if s.charge:
+        est = charge_crossing_estimate(s, tau, tau_std, p10=p10, p_s=p_atm, p_star=p_star,
+                                       supply_measured=s.supply_pressure is None)
+        if est.problem is not None:
+            status, text = "bad_data", est.problem
+    else:
+        plan = plan_crossing(s, p10=p10, p_atm=p_atm, p_star=p_star, tau_ref=tau)
+        est = crossing_estimate(plan, tau, tau_std)
+        if plan.subsonic is not None:
+            status, text = "not_choked", text + "; " + plan.subsonic
     c39, c_isen, c_model = est.conductance, est.conductance_isentropic, \
         est.conductance_model
     c39_std, c_model_std, budgets, method = est.conductance_std, \
         est.conductance_model_std, est.extra, est.method
-    status, text = "ok", (f"start given; p* crossing interpolated log-linearly between "
-                          f"samples {k - 1} and {k} (interpolation error {interp_err:.3g} s)")
-    if plan.subsonic is not None:
-        status, text = "not_choked", text + "; " + plan.subsonic
     return UnloadResult(
         index=0, status=status, status_text=text, t_start=t_open, t_cross=t_cross,
         tau_exp=tau, tau_exp_std=tau_std, p10=p10, p_atm=p_atm, p_star=p_star,
@@ -281,14 +348,20 @@ def _p10_term(s: EstimatorSettings, ts: np.ndarray, ps: np.ndarray, p10: float,
     for d in (p10_std, -p10_std):
         pp = ps.copy()
         pp[0] = p10 + d
-        level = physics.p_star(p10 + d, p_atm)
+        level = charge_p_star(p10 + d, p_atm) if s.charge else physics.p_star(p10 + d,
+                                                                                p_atm)
         try:
             tc, _e, _k = interpolated_crossing(ts, pp, level, p_atm)
         except EstimationError:
             return BudgetTerm("initial pressure p10 (given)", "B", p10, p10_std, "Pa",
                               math.nan, "crossing lost when p10 moves")
-        cs.append(physics.conductance_isentropic_inversion(
-            tc - t_open, level, p10 + d, s.volume, s.initial_temperature, s.gas))
+        if s.charge:
+            cs.append(charge_conductance_adiabatic(
+                tc - t_open, level, p10 + d, p_atm, s.volume, s.supply_gas_temperature,
+                s.critical_ratio, 0.5, s.gas))
+        else:
+            cs.append(physics.conductance_isentropic_inversion(
+                tc - t_open, level, p10 + d, s.volume, s.initial_temperature, s.gas))
     std = abs(cs[0] - cs[1]) / 2.0 * res.conductance_model / res.conductance_isentropic
     if s.initial_pressure is None:
         return BudgetTerm("initial pressure p10 (first sample)", "A", p10, p10_std, "Pa",

@@ -47,6 +47,11 @@ THERMOMETER_TAU_RANGE = (1e-4, 120.0)
 THERMOMETER_TAU_START = 1.0
 #: Bounds of a thermometer's fitted offset [K] (a probe's calibration, a few K).
 THERMOMETER_OFFSET_RANGE = (-20.0, 20.0)
+#: Initial pressures a fit's configuration takes [Pa absolute] (RigConfig's: an evacuated
+#: tank of a charge from 1 kPa).
+P10_BOUNDS = (1e3, 5e7)
+#: The effects a charge's model takes (the others' records are written for a discharge).
+CHARGE_FIT_EFFECTS = ("heat_transfer", "hot_start", "sensor_offset", "subsonic_index")
 #: Points of the model's gas temperature between a thermometer's first and last reading
 #: (geometric from the opening; the lag is exact for the piecewise-linear interpolant of
 #: its input) [-].
@@ -84,16 +89,28 @@ class ParametricModel:
     fit_initial_temperature : bool
         T10 ('t10') is a parameter without a thermometer (a hot start whose T10 was not
         measured, the wall held at a room's temperature).
+    charge : tuple of (float or None, float), optional
+        The tank fills through the component (ISO 6358-2's charge, the one model's
+        ``direction`` 'charge'): (the supply pressure p_s [Pa absolute], None: fitted; the
+        supply temperature T_s [K]). The end level the pressure tends to, 'p_atm' of the
+        parameters and of :class:`Start`, is then the supply's; ``tank.atmosphere`` is the
+        room's. Effects other than the heat exchange and the transducer's offset are
+        refused (their records are written for a discharge).
     """
 
     def __init__(self, effects: tuple[str, ...], tank: TankSpec, start: Start, *,
                  heat_law: str = "natural", fit_wall_temperature: bool = False,
                  subsonic_index: float | None = SUBSONIC_INDEX_START,
                  thermometer: bool = False, fit_initial_temperature: bool = False,
-                 thermometer_offset: bool = False) -> None:
+                 thermometer_offset: bool = False,
+                 charge: tuple[float | None, float] | None = None) -> None:
         bad = [e for e in effects if e not in CANDIDATES]
         if bad:
             raise ValueError(f"unknown effect(s) {bad}; known: {', '.join(CANDIDATES)}")
+        if charge is not None and (bad := [e for e in effects if e not in CHARGE_FIT_EFFECTS]):
+            raise ValueError(f"effect(s) {bad} not modelled for a charge; a charge takes "
+                             f"{', '.join(CHARGE_FIT_EFFECTS)}")
+        self.charge = charge
         if HOT_START in effects and "heat_transfer" in effects:
             raise ValueError("hot_start is heat_transfer with the wall temperature fitted: "
                              "give one of them")
@@ -146,9 +163,10 @@ class ParametricModel:
             lo, hi = THERMOMETER_OFFSET_RANGE
             ps.append(Parameter("t_offset", 0.0, lo, hi, "K", scale=0.5,
                                 doc="thermometer's offset (its reading minus the gas's)"))
-        if self.tank.atmosphere is None:
+        if (self.tank.atmosphere if self.charge is None else self.charge[0]) is None:
             ps.append(Parameter("p_atm", s.p_atm, 0.3 * s.p_atm, 3.0 * s.p_atm, "Pa",
-                                scale=1e-3 * s.p_atm, doc="atmospheric pressure (absolute)"))
+                                scale=1e-3 * s.p_atm, doc="atmospheric pressure (absolute)"
+                                if self.charge is None else "supply pressure (absolute)"))
         for rec in self.records:
             for q in rec.params:
                 c = q.centre(s)
@@ -211,16 +229,20 @@ class ParametricModel:
         tank = self.tank
         c = clamp(v["C"], 1e-13, 1e-5)
         vv = {**v, "C": c}
-        p_atm = v.get("p_atm", tank.atmosphere if tank.atmosphere is not None else 101325.0)
+        room = tank.atmosphere if tank.atmosphere is not None else 101325.0
         kw: dict[str, object] = {
             "conductance": c, "critical_ratio": clamp(v["b"], 0.0, 0.99),
-            "initial_pressure": clamp(v["p10"], 1e4, 5e7),
-            "atmosphere": clamp(p_atm, 1e3, 2e5),
+            "initial_pressure": clamp(v["p10"], *P10_BOUNDS),
             "subsonic_index": clamp(v.get("m", self.subsonic_index or SUBSONIC_INDEX_START),
                                     *SUBSONIC_INDEX_RANGE),
             "wall_temperature": float(v.get("t_wall", tank.wall if "t10" not in v or
                                             tank.wall_temperature is not None
                                             else clamp(v["t10"], 150.0, 600.0)))}
+        if self.charge is None:
+            kw["atmosphere"] = clamp(v.get("p_atm", room), 1e3, 2e5)
+        else:  # the end level is the supply's (above p10: a fit may step past it)
+            supply = v.get("p_atm", self.charge[0] if self.charge[0] is not None else room)
+            kw["supply_pressure"] = clamp(supply, 1.0001 * kw["initial_pressure"], 5e7)
         if "t10" in v:
             kw["initial_temperature"] = clamp(v["t10"], 150.0, 600.0)
         for rec in self.records:
@@ -230,6 +252,9 @@ class ParametricModel:
         if self._base_config is None:
             gas = tank.gas
             kw.setdefault("initial_temperature", tank.initial_temperature)
+            if self.charge is not None:
+                kw.update(direction="charge", atmosphere=room,
+                          supply_temperature=self.charge[1])
             self._base_config = RigConfig(
                 volume=tank.volume, length_diameter_ratio=tank.length_diameter_ratio,
                 gas_constant=gas.gas_constant, gamma=gas.gamma, effects=self.config_effects,
