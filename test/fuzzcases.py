@@ -147,6 +147,8 @@ def estimator_settings(draw: st.DrawFn, near: EstimatorSettings | None = None
             base[f["name"]] = draw(_field_value(f))
     if base["signal_gain"] == 0:
         base["signal_gain"] = 1.0
+    if base["direction"] == "discharge":  # a supply is a charge's
+        base.update(supply_pressure=None, supply_temperature=None)
     return EstimatorSettings(**base)
 
 

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pneumatic_unload.charge import charge_p_star
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.decisions import LAG, PERIOD, PLATEAU, block_threshold
 from pneumatic_unload.estimation.sparse import analyze_from_start
@@ -200,8 +201,45 @@ def _charge_reason(pp: np.ndarray, s: EstimatorSettings, hi: float) -> str | Non
     if end - start <= max(threshold, CHARGE_RISE * end) or np.any(pp < start - threshold):
         return None
     return (f"the pressure rises from {start:.0f} Pa to {end:.0f} Pa and never falls: a "
-            f"charge (the tank filled through the component)? analyze finds discharges, a "
-            f"fall from a plateau; the charge test is not analysed yet")
+            f"charge (the tank filled through the component)? analyse it as one: "
+            f"--direction charge (library: direction='charge'; the supply from the final "
+            f"plateau or --supply-pressure PA)")
+
+
+def _no_charge_reason(t: ArrayLike, p: ArrayLike, tt: np.ndarray, pp: np.ndarray,
+                      s: EstimatorSettings, diagnostics: Sequence[Diagnostic] | None) -> str:
+    """Why a record analysed as a charge holds none (tt [s], pp [Pa]: its finite samples):
+    no rise (a discharge?), no plateau before it, a rise that never reaches p*, else the
+    estimator's diagnostics."""
+    threshold = s.trigger_sigma * max(_noise_std(pp), 1e-9 * float(np.max(np.abs(pp))))
+    start = float(np.median(pp[:4]))
+    above = np.flatnonzero(pp > start + threshold)
+    if above.size == 0:
+        fell = float(np.min(pp)) < start - threshold
+        return (f"no rise: the pressure never rises {threshold:.3g} Pa (trigger_sigma="
+                f"{s.trigger_sigma:g} noise std) above its initial {start:.0f} Pa"
+                + (": it falls, a discharge? (--direction discharge)" if fell else
+                   "; no charge recorded (or the record starts after it)"))
+    i_rise = int(above[0])
+    if i_rise < s.min_plateau:
+        return (f"no plateau before the rise: the pressure rises from sample {i_rise} "
+                f"(t = {tt[i_rise]:.6g} s), but a pre-trigger plateau of at least "
+                f"min_plateau={s.min_plateau} samples is needed: record from before the "
+                f"valve opens; or, for a record that begins at the opening, pass "
+                f"--start-time S and --initial-pressure PA")
+    p10 = float(np.median(pp[:i_rise]))
+    supply = s.supply_pressure if s.supply_pressure is not None else \
+        float(np.median(pp[-max(4, pp.size // 50):]))
+    if not supply > p10:
+        return (f"the supply ({supply:.0f} Pa) is not above p10 ({p10:.0f} Pa): nothing "
+                f"flows into the tank")
+    ps = charge_p_star(p10, supply)
+    high = float(np.max(pp[i_rise:]))
+    if high < ps:
+        return (f"the pressure never rose to p* = {ps:.0f} Pa (p10 = {p10:.0f} Pa, supply = "
+                f"{supply:.0f} Pa, highest reading {high:.0f} Pa): the valve closed early "
+                f"or the record ends too soon")
+    return estimator_reason(t, p, s, diagnostics)
 
 
 def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | None = None,
@@ -254,6 +292,8 @@ def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | 
     if hi <= 0.0:
         return (f"all readings are at or below 0 Pa (highest {hi:.0f} Pa): gauge pressures "
                 f"taken as absolute? {GAUGE_FIX}")
+    if s.charge:
+        return _no_charge_reason(t, p, tt, pp, s, diagnostics)
     rise = _charge_reason(pp, s, hi)
     if rise is not None:
         return rise

@@ -38,7 +38,7 @@ from pneumatic_unload.budget import (
 )
 from pneumatic_unload.charge import charge_conductance_adiabatic
 from pneumatic_unload.config.estimator import EstimatorSettings
-from pneumatic_unload.estimation.crossing import CrossingEstimate
+from pneumatic_unload.estimation.types import CrossingEstimate
 from pneumatic_unload.inversion import (
     CRITICAL_RATIO_PRIOR_STD,
     HEAT_CORRELATION_REL_STD,

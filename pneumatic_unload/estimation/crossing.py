@@ -35,11 +35,16 @@ from pneumatic_unload.budget import (
     wall_term,
 )
 from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
+from pneumatic_unload.estimation.charge_crossing import (
+    charge_crossing_estimate,
+    charge_pressure_problem,
+)
 from pneumatic_unload.estimation.refine import (
     crossing_inversion,
     prepare_inversion,
     pressure_problem,
 )
+from pneumatic_unload.estimation.types import CrossingEstimate
 from pneumatic_unload.inversion import may_turn_subsonic
 
 #: The type A line of the crossing's model-based C.
@@ -101,37 +106,6 @@ class CrossingPlan:
     isentropic_factor: float = math.nan
 
 
-@dataclass(frozen=True)
-class CrossingEstimate:
-    """The numbers of a crossing estimate (see :func:`crossing_estimate`).
-
-    Attributes
-    ----------
-    problem : str or None
-        Why there is no model C (bad pressures, no crossing time, time running backwards).
-    conductance, conductance_std : float
-        eq 39's C and its combined 1-sigma [m^3/(s Pa)].
-    conductance_isentropic : float
-        The isentropic inversion's C [m^3/(s Pa)].
-    conductance_model, conductance_model_std : float
-        The model-based C and its combined 1-sigma [m^3/(s Pa)].
-    method : str
-        How the model-based C was computed.
-    extra : dict
-        The budgets ('budget', 'budget_eq39'), as :meth:`~pneumatic_unload.budget.Budget.
-        to_dict`.
-    """
-
-    problem: str | None
-    conductance: float
-    conductance_std: float
-    conductance_isentropic: float
-    conductance_model: float
-    conductance_model_std: float
-    method: str
-    extra: dict[str, Any]
-
-
 def plan_crossing(settings: EstimatorSettings, *, p10: float, p_atm: float, p_star: float,
                   t_mid: float = math.nan, p_mid: float = math.nan,
                   tau_ref: float = math.nan) -> CrossingPlan:
@@ -142,7 +116,9 @@ def plan_crossing(settings: EstimatorSettings, *, p10: float, p_atm: float, p_st
     settings : EstimatorSettings
         Tank, gas, heat model and the inputs' uncertainties.
     p10, p_atm, p_star : float
-        Pressures [Pa absolute].
+        Pressures [Pa absolute] (a charge's: p_atm the supply's; its plan holds the
+        pressures alone, :func:`crossing_estimate` computes the charge's closed forms,
+        :mod:`.charge_crossing`).
     t_mid, p_mid : float
         Time from the start [s] and pressure [Pa absolute] half way to p*: the expected C
         for the inversion table (NaN: no table).
@@ -151,6 +127,9 @@ def plan_crossing(settings: EstimatorSettings, *, p10: float, p_atm: float, p_st
         t_mid); the lines are proportional to C whatever it is.
     """
     s = settings
+    if s.charge:  # p_atm: the supply; the closed forms are cheap (charge_crossing)
+        return CrossingPlan(s, p10, p_atm, p_star, charge_pressure_problem(p10, p_atm, p_star),
+                            None, None, None, None, wall_uncertainty(s))
     problem = pressure_problem(p10, p_atm, p_star)
     subsonic = None
     if s.critical_ratio > 0 and p_star < p_atm / s.critical_ratio:
@@ -207,6 +186,9 @@ def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> Crossin
     tau [s] and its 1-sigma tau_std [s] (see :func:`plan_crossing`)."""
     s = plan.settings
     p10, p_atm, p_star = plan.p10, plan.p_atm, plan.p_star
+    if s.charge:
+        return charge_crossing_estimate(s, tau, tau_std, p10=p10, p_s=p_atm, p_star=p_star,
+                                        supply_measured=s.supply_pressure is None)
     a39, b39 = plan.eq39_factors  # physics.conductance_eq39, prepared
     c39 = a39 / (b39 * tau) if a39 == a39 else physics.conductance_eq39(
         tau, p10, p_atm, s.volume, s.initial_temperature, s.gas)

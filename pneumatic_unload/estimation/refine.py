@@ -84,7 +84,8 @@ def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> boo
     """True when the model-based C needs the discharge model (not the closed form): heat
     transfer, or a flow that may turn subsonic before p* (pressures [Pa absolute])."""
 
-    return settings.heat_model != "adiabatic" or may_turn_subsonic(settings, p_atm, p_star)
+    return settings.heat_model != "adiabatic" or settings.charge or may_turn_subsonic(
+        settings, p_atm, p_star)
 
 
 
@@ -368,7 +369,8 @@ def refine_with_curve_fit(
         return None
 
     try:
-        fit = fit_curve(t, p, settings, t_start=res.t_start, p10=res.p10, p_atm=res.p_atm,
+        fit = fit_curve(t, p, settings, t_start=res.t_start, p10=res.p10,
+                        p_atm=res.end_pressure,
                         conductance=res.conductance_model, hold=hold, fit_heat=fit_heat,
                         reduced=reduced, temperature=temperature)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
@@ -433,9 +435,9 @@ def refine_with_curve_fit(
     b = fit.critical_ratio
     if settings.charge:
         if math.isfinite(b) and b > 0:
-            choked = res.p_star / res.p_atm <= b
-            text = (f"{text}; {'choked' if choked else 'subsonic'} at p* with the fitted "
-                    f"b = {b:.3f} (p*/p_s = {res.p_star / res.p_atm:.3f})")
+            ratio = res.p_star / res.end_pressure
+            text = (f"{text}; {'choked' if ratio <= b else 'subsonic'} at p* with the "
+                    f"fitted b = {b:.3f} (p*/p_s = {ratio:.3f})")
     elif math.isfinite(b) and b > 0:
         # the fit measured b: whether the flow stayed choked down to p* is now known
         limit = res.p_atm / b

@@ -40,10 +40,9 @@ from pneumatic_unload import physics
 from pneumatic_unload.budget import MODEL_FORM_TERM, BudgetTerm, with_terms
 from pneumatic_unload.charge import charge_conductance_adiabatic, charge_p_star
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.estimation.charge_crossing import charge_crossing_estimate
 from pneumatic_unload.estimation.crossing import HEAT_NOT_SEEN, crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.refine import refine_with_curve_fit
-from pneumatic_unload.estimation.types import FloatArray, UnloadResult
+from pneumatic_unload.estimation.types import FloatArray, UnloadResult, end_fields
 
 #: Fewest samples from the opening on [-].
 MIN_POINTS = 10
@@ -127,12 +126,13 @@ PLATEAU_BAND = 0.01
 PLATEAU_POINTS = 3
 
 
-def supply_level(ps: np.ndarray, p10: float, s: EstimatorSettings
+def supply_level(ts: np.ndarray, ps: np.ndarray, p10: float, s: EstimatorSettings
                  ) -> tuple[float, float, str]:
     """A charge's supply pressure p_s [Pa absolute], its standard uncertainty [Pa] and
     where it comes from: given (``supply_pressure``), or the mean of the record's final
-    plateau (the trailing samples ps [Pa absolute] within :data:`PLATEAU_BAND` of the rise
-    from the last one; its standard error, type A).
+    plateau (the trailing samples ts [s], ps [Pa absolute] within :data:`PLATEAU_BAND` of
+    the rise from the last one, whose straight line moves by less than half that band
+    over them: a record still rising is no plateau; its standard error, type A).
 
     Raises
     ------
@@ -143,12 +143,17 @@ def supply_level(ps: np.ndarray, p10: float, s: EstimatorSettings
     last = float(ps[-1])
     band = PLATEAU_BAND * abs(last - p10)
     off = np.flatnonzero(np.abs(ps - last) > band)
-    tail = ps[int(off[-1]) + 1:] if off.size else ps
-    if tail.size < PLATEAU_POINTS:
+    first = int(off[-1]) + 1 if off.size else 0
+    tail, tt = ps[first:], ts[first:]
+    moves = abs(float(np.polyfit(tt - tt[0], tail, 1)[0]) * float(tt[-1] - tt[0])) \
+        if tail.size >= PLATEAU_POINTS else math.inf
+    if not moves < 0.5 * band:
         raise EstimationError(
             f"the record does not end on a plateau ({tail.size} sample(s) within "
-            f"{100 * PLATEAU_BAND:g} % of the rise of the last; need {PLATEAU_POINTS}): "
-            "give the supply pressure (--supply PA)")
+            f"{100 * PLATEAU_BAND:g} % of the rise of the last"
+            + (f", rising {moves:.3g} Pa over them" if math.isfinite(moves) else "")
+            + f"; need {PLATEAU_POINTS}, flat): give the supply pressure "
+            "(--supply-pressure PA)")
     std = float(np.std(tail, ddof=1) / math.sqrt(tail.size))
     return float(np.mean(tail)), std, f"the final plateau ({tail.size} samples)"
 
@@ -238,7 +243,7 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, 
     p10, p10_std, p10_note = initial_pressure(ts, ps, s)
     extra_note: dict[str, object] = {}
     if s.charge:  # p_atm: the end level, the supply's
-        p_atm, supply_std, where = supply_level(ps, p10, s)
+        p_atm, supply_std, where = supply_level(ts, ps, p10, s)
         extra_note = {"supply_source": where, "supply_pressure_std": supply_std}
         if not p_atm > p10:
             raise EstimationError(
@@ -314,23 +319,19 @@ def _crossing(s: EstimatorSettings, *, tau: float, tau_std: float, p10: float,
               interp_err: float) -> UnloadResult:
     status, text = "ok", (f"start given; p* crossing interpolated log-linearly between "
                           f"samples {k - 1} and {k} (interpolation error {interp_err:.3g} s)")
-    if s.charge:
-        est = charge_crossing_estimate(s, tau, tau_std, p10=p10, p_s=p_atm, p_star=p_star,
-                                       supply_measured=s.supply_pressure is None)
-        if est.problem is not None:
-            status, text = "bad_data", est.problem
-    else:
-        plan = plan_crossing(s, p10=p10, p_atm=p_atm, p_star=p_star, tau_ref=tau)
-        est = crossing_estimate(plan, tau, tau_std)
-        if plan.subsonic is not None:
-            status, text = "not_choked", text + "; " + plan.subsonic
+    plan = plan_crossing(s, p10=p10, p_atm=p_atm, p_star=p_star, tau_ref=tau)
+    est = crossing_estimate(plan, tau, tau_std)
+    if s.charge and est.problem is not None:
+        status, text = "bad_data", est.problem
+    if plan.subsonic is not None:
+        status, text = "not_choked", text + "; " + plan.subsonic
     c39, c_isen, c_model = est.conductance, est.conductance_isentropic, \
         est.conductance_model
     c39_std, c_model_std, budgets, method = est.conductance_std, \
         est.conductance_model_std, est.extra, est.method
     return UnloadResult(
         index=0, status=status, status_text=text, t_start=t_open, t_cross=t_cross,
-        tau_exp=tau, tau_exp_std=tau_std, p10=p10, p_atm=p_atm, p_star=p_star,
+        tau_exp=tau, tau_exp_std=tau_std, p10=p10, **end_fields(s, p_atm), p_star=p_star,
         initial_temperature=s.initial_temperature, volume=s.volume, conductance=c39,
         conductance_model=c_model, conductance_model_std=c_model_std,
         conductance_std=c39_std, conductance_isentropic=c_isen,

@@ -273,6 +273,9 @@ def abort_result(st: EstimatorState, i: int, recovered: bool, text: str = "") ->
     res.i_start = u.i0 + st.buf.shift
     if st.mode != RECOVERY:
         return res
+    if s.charge:  # eq 23 is the discharge's: its isochoric re-heating after a closing
+        res.status_text += "; no SSE value for a charge (eq 23 is a discharge's)"
+        return res
     fit = u.rec_fit
     if not recovered and i - u.i_close >= 16 and i - u.i_close != u.rec_span:
         fit = fit_recovery_to(st, i)

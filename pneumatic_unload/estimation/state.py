@@ -275,6 +275,7 @@ class EstimatorState:
         res = UnloadResult(
             index=self.n_unloads, status=status, status_text=text, t_start=nan, t_cross=nan,
             tau_exp=nan, tau_exp_std=nan, p10=nan, p_atm=s.atmosphere or nan, p_star=nan,
+            direction=s.direction, supply_pressure=s.supply_pressure or nan,
             initial_temperature=s.initial_temperature, volume=s.volume, conductance=nan,
             conductance_model=nan, conductance_model_std=nan, quality=0.0,
             method="unloading-time", i_complete=i + self.buf.shift,

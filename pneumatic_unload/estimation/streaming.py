@@ -11,6 +11,7 @@ signal units with ``signal_gain``/``signal_offset``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 
@@ -60,6 +61,14 @@ def _check_streaming(settings: EstimatorSettings) -> None:
             "(analyze, --start-time); the streaming estimator detects each start")
 
 
+def _core_settings(settings: EstimatorSettings) -> EstimatorSettings:
+    """The settings the core runs on: a charge's with the signal gain negated (its samples
+    are fed negated, :class:`StreamingEstimator`)."""
+    if not settings.charge:
+        return settings
+    return dataclasses.replace(settings, signal_gain=-settings.signal_gain)
+
+
 class StreamingEstimator:
     """Sample-by-sample unloading-time estimator; see the package docstring.
 
@@ -107,7 +116,14 @@ class StreamingEstimator:
                  defer_final_fit: bool = False) -> None:
         settings = settings or EstimatorSettings()
         _check_streaming(settings)
-        self._st = EstimatorState(settings, live=live, defer_final_fit=defer_final_fit)
+        self._user_settings = settings
+        #: A charge is analysed mirrored: the core sees -signal, with the signal gain
+        #: negated, so that a rising step is the falling one it detects and every level it
+        #: converts (to_pa) is the pressure again; the physics (the crossing's closed
+        #: forms, the curve fit) takes the direction from the settings.
+        self._mirror = settings.charge
+        self._st = EstimatorState(_core_settings(settings), live=live,
+                                  defer_final_fit=defer_final_fit)
         #: The first and the last diagnostics (a bounded
         #: :class:`~.history.DiagnosticLog`; ``diagnostics.total`` counts all).
         self.diagnostics = self._st.diagnostics
@@ -130,12 +146,17 @@ class StreamingEstimator:
     def settings(self) -> EstimatorSettings:
         """The settings in use; a new value applies from the next unload (set it while
         :attr:`state` is 'waiting' to be sure the unload under way is not mixed)."""
-        return self._st.settings
+        return self._user_settings
 
     @settings.setter
     def settings(self, value: EstimatorSettings) -> None:
         _check_streaming(value)
-        self._st.settings = value
+        if value.direction != self._user_settings.direction:
+            raise EstimationError(
+                f"the direction of a stream is fixed ({self._user_settings.direction!r}): "
+                f"make a new estimator for {value.direction!r}")
+        self._user_settings = value
+        self._st.settings = _core_settings(value)
 
     @property
     def state(self) -> str:
@@ -193,6 +214,10 @@ class StreamingEstimator:
         list of UnloadResult
             Results completed by this sample (usually empty).
         """
+        return self._push(t, -p if self._mirror else p)
+
+    def _push(self, t: float, p: float) -> list[UnloadResult]:
+        """:meth:`push` of a sample in the core's sign (a charge's mirrored)."""
         if self._suspect is not None:
             return self._push_after_suspect(t, p)
         st = self._st
@@ -228,14 +253,17 @@ class StreamingEstimator:
         list of UnloadResult
             Results completed inside the block.
         """
-        t = np.asarray(t, dtype=float).ravel()
         p = np.asarray(p, dtype=float).ravel()
+        return self._push_block(np.asarray(t, dtype=float).ravel(), -p if self._mirror else p)
+
+    def _push_block(self, t: FloatArray, p: FloatArray) -> list[UnloadResult]:
+        """:meth:`push_block` of samples in the core's sign (a charge's mirrored)."""
         if t.shape != p.shape:
             raise EstimationError(f"t and p differ in length: {t.size} vs {p.size}")
         if t.size == 0:
             return []
         if self._suspect is not None and t[0] == t[0] and abs(t[0]) <= MAX_ABS_STAMP:
-            return self._resolve_suspect(float(t[0])) + self.push_block(t, p)
+            return self._resolve_suspect(float(t[0])) + self._push_block(t, p)
         st = self._st
         # validity: finite, each stamp at least MIN_STAMP_STEP after the one before (the
         # last accepted stamp for the first): then the steps are the gaps too; one compiled
@@ -252,7 +280,7 @@ class StreamingEstimator:
         while k < size:
             if math.isnan(st.dt_nominal):
                 # sample by sample until the nominal period (and so the gap limit) is known
-                out += self.push(float(t[k]), float(p[k]))
+                out += self._push(float(t[k]), float(p[k]))
                 k += 1
                 continue
             if not longest > st.gap_limit:  # no gap in the block
@@ -262,7 +290,7 @@ class StreamingEstimator:
                 d = np.diff(t, prepend=last_t)
             gaps = np.flatnonzero(d[k:] > st.gap_limit)
             if gaps.size and gaps[0] == 0:
-                out += self.push(float(t[k]), float(p[k]))  # diagnoses the gap
+                out += self._push(float(t[k]), float(p[k]))  # diagnoses the gap
                 k += 1
                 continue
             g = k + int(gaps[0]) if gaps.size else size
@@ -399,7 +427,7 @@ class StreamingEstimator:
         if t != t or not abs(t) <= MAX_ABS_STAMP:
             return self._reject(t, p)
         out = self._resolve_suspect(t)
-        return out + self.push(t, p)
+        return out + self._push(t, p)
 
     def _resolve_suspect(self, t: float) -> list[UnloadResult]:
         """Decide what the suspect stamp was, from the next stamp t [s] (inf: the stream
@@ -454,7 +482,7 @@ class StreamingEstimator:
     def _push_slow(self, t: FloatArray, p: FloatArray) -> list[UnloadResult]:
         out: list[UnloadResult] = []  # push() records them in self.results
         for ti, pi in zip(t.tolist(), p.tolist(), strict=True):
-            out += self.push(ti, pi)
+            out += self._push(ti, pi)
         return out
 
     def _on_gap(self, t: float) -> None:

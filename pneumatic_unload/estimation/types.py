@@ -81,6 +81,18 @@ class UnloadResult:
     #: (NaN when not fitted: the record settles at the given p_atm, or p_atm was fitted).
     pressure_offset: float = math.nan
     pressure_offset_std: float = math.nan
+    #: 'discharge' (the tank emptied through the component) or 'charge' (it filled
+    #: through it from a supply: ``p_atm`` is then the room's, NaN when not given).
+    direction: str = "discharge"
+    #: A charge's supply pressure p_s, given or its final plateau [Pa absolute] (NaN for
+    #: a discharge).
+    supply_pressure: float = math.nan
+
+    @property
+    def end_pressure(self) -> float:
+        """The level the tank's pressure tends to [Pa absolute]: p_atm of a discharge,
+        the supply of a charge."""
+        return self.supply_pressure if self.direction == "charge" else self.p_atm
 
     @property
     def bias(self) -> float:
@@ -173,6 +185,17 @@ def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
     }
 
 
+def end_fields(settings: Any, end: float) -> dict[str, Any]:
+    """The fields of an :class:`UnloadResult` that the level ``end`` [Pa absolute] the
+    pressure tends to fills: p_atm (a discharge), or the supply with the direction and the
+    room's p_atm (``settings.atmosphere``, NaN when not given) for a charge."""
+    if getattr(settings, "direction", "discharge") != "charge":
+        return {"p_atm": end}
+    room = settings.atmosphere
+    return {"p_atm": math.nan if room is None else float(room), "supply_pressure": end,
+            "direction": "charge"}
+
+
 def recommended(r: UnloadResult) -> dict[str, Any]:
     """The one C to report for a result, with its combined and expanded (k = 2)
     uncertainty [m^3/(s Pa)] and where it comes from: the model-based C (curve fit or
@@ -186,3 +209,34 @@ def recommended(r: UnloadResult) -> dict[str, Any]:
         c, sd = r.conductance, r.conductance_std
     return {"conductance": c, "std": sd, "expanded": 2.0 * sd, "coverage_factor": 2.0,
             "source": source}
+
+
+@dataclass(frozen=True)
+class CrossingEstimate:
+    """The numbers of a crossing estimate (see :func:`crossing_estimate`).
+
+    Attributes
+    ----------
+    problem : str or None
+        Why there is no model C (bad pressures, no crossing time, time running backwards).
+    conductance, conductance_std : float
+        eq 39's C and its combined 1-sigma [m^3/(s Pa)].
+    conductance_isentropic : float
+        The isentropic inversion's C [m^3/(s Pa)].
+    conductance_model, conductance_model_std : float
+        The model-based C and its combined 1-sigma [m^3/(s Pa)].
+    method : str
+        How the model-based C was computed.
+    extra : dict
+        The budgets ('budget', 'budget_eq39'), as :meth:`~pneumatic_unload.budget.Budget.
+        to_dict`.
+    """
+
+    problem: str | None
+    conductance: float
+    conductance_std: float
+    conductance_isentropic: float
+    conductance_model: float
+    conductance_model_std: float
+    method: str
+    extra: dict[str, Any]

@@ -27,7 +27,7 @@ from pneumatic_unload.estimation.decisions import (
     stalled,
 )
 from pneumatic_unload.estimation.reduction import reduce_due, reduce_unload, window_start
-from pneumatic_unload.estimation.refine import needs_model
+from pneumatic_unload.estimation.refine import SUPPLY_RANGE, needs_model
 from pneumatic_unload.estimation.regression import (
     crossing_window,
     first_below_in,
@@ -39,7 +39,12 @@ from pneumatic_unload.estimation.regression import (
 from pneumatic_unload.estimation.sse import abort_result, on_abort
 from pneumatic_unload.estimation.state import TAIL, EstimatorState, UnloadState
 from pneumatic_unload.estimation.tail import finish_tail
-from pneumatic_unload.estimation.types import STUCK_TEXT, FloatArray, UnloadResult
+from pneumatic_unload.estimation.types import (
+    STUCK_TEXT,
+    FloatArray,
+    UnloadResult,
+    end_fields,
+)
 from pneumatic_unload.physics import P_STAR_FRACTION
 
 
@@ -48,7 +53,7 @@ def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
     plateau); the start is refined once the drop reaches 10 % of the pressure change."""
     s, u = st.settings, st.unload
     p_plateau = st.plateau_level
-    p_atm = s.atmosphere
+    p_atm = s.end_pressure  # a charge's: the supply
     atm_signal = math.nan
     if p_atm is not None:
         atm_signal = (p_atm - s.signal_offset) / s.signal_gain
@@ -58,7 +63,11 @@ def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
     dp = p_plateau - guess_atm
     u.dp_guess = abs(dp) if math.isfinite(dp) else abs(p_plateau) * 0.5
     u.noisy = st.sigma > 0.0
-    if p_atm is not None and dp * math.copysign(1.0, s.signal_gain) <= 0:
+    if p_atm is not None and (dp <= 0 if s.charge  # mirrored: the signal falls to it
+                              else dp * math.copysign(1.0, s.signal_gain) <= 0):
+        if s.charge:
+            return st.bad(i, f"the supply ({p_atm:.0f} Pa) is not above p10 "
+                             f"({st.to_pa(p_plateau):.0f} Pa): nothing to charge")
         return st.bad(i, f"p10 ({st.to_pa(p_plateau):.0f} Pa) is not above p_atm "
                          f"({p_atm:.0f} Pa): nothing to unload")
     u.refined = False
@@ -238,7 +247,7 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     u.slope0 = slope
     st.sigma = max(rms, 1e-12)
     u.refined = True
-    if st.settings.atmosphere is not None:
+    if st.settings.end_pressure is not None:
         st.set_pstar(u.atm)
         if needs_model(st.settings, st.to_pa(u.atm), st.to_pa(u.pstar)):
             # first stop half way to p*: tabulate the model there, so that the crossing
@@ -376,6 +385,13 @@ def atmosphere_problem(st: EstimatorState, level: float) -> str | None:
     auto), or None: outside :data:`~pneumatic_unload.config.tank.ATMOSPHERE_RANGE` [Pa]
     (gauge readings, a signal in another unit, a sensor that is not where it seems)."""
     p_atm = st.to_pa(level)
+    if st.settings.charge:  # the supply, above p10
+        p10 = st.to_pa(st.unload.p10)
+        if p_atm > p10 and p_atm <= SUPPLY_RANGE[1]:
+            return None
+        return (f"the final plateau, taken as the supply (auto), is at {p_atm:.0f} Pa, not "
+                f"above p10 ({p10:.0f} Pa): give the supply (--supply-pressure PA) and "
+                "check the pressure unit")
     lo, hi = ATMOSPHERE_RANGE
     if lo <= p_atm <= hi:
         return None
@@ -492,8 +508,9 @@ def crossing_result(st: EstimatorState, i: int, t_cross: float, tau_std: float,
     shift = st.buf.shift
     res = UnloadResult(
         index=st.n_unloads, status=status, status_text=text, t_start=u.t0,
-        t_cross=t_cross, tau_exp=tau, tau_exp_std=tau_std, p10=p10, p_atm=p_atm,
-        p_star=p_star, initial_temperature=plan.settings.initial_temperature,
+        t_cross=t_cross, tau_exp=tau, tau_exp_std=tau_std, p10=p10,
+        **end_fields(s, p_atm), p_star=p_star,
+        initial_temperature=plan.settings.initial_temperature,
         volume=plan.settings.volume, conductance=c39, conductance_model=c_model,
         conductance_model_std=est.conductance_model_std,
         conductance_std=est.conductance_std, extra=est.extra,

@@ -118,7 +118,8 @@ def _warm_up(settings: EstimatorSettings) -> None:
                              noise_std=500.0, seed=0))
     analyze(sim.t, sim.measured, dataclasses.replace(
         settings, volume=1e-3, signal_gain=1.0, signal_offset=0.0, atmosphere=101325.0,
-        initial_temperature=293.15, curve_fit=True, start_time=None, initial_pressure=None))
+        initial_temperature=293.15, curve_fit=True, start_time=None, initial_pressure=None,
+        direction="discharge", supply_pressure=None, supply_temperature=None))
 
 
 class EstimatorNode(Node):

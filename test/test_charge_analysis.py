@@ -1,0 +1,175 @@
+"""The charge test analysed (#26): C, b from a tank filled through the component.
+
+Data the package did not make: HydDown's fills (``test/data/hyddown_fill``, its u-to-h
+blend removed; a peer code) and the independent charge model ``test/foreign/newton_tank``
+(mass and internal energy, written apart). The package's estimator detects the rising step
+(mirrored in its core), takes the supply from the final plateau or as given, and fits the
+one model in the charge direction.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from foreign import newton_tank
+from pneumatic_unload.charge import charge_conductance_adiabatic, charge_eq39_bias
+from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.estimation import StreamingEstimator, analyze
+
+FILLS = sorted((Path(__file__).resolve().parent / "data" / "hyddown_fill").glob("*.npz"))
+EXACT = {"volume_uncertainty": 0.0, "temperature_uncertainty": 0.0,
+         "pressure_uncertainty": 0.0, "wall_temperature_uncertainty": 0.0}
+
+
+def _final(results: list) -> object:
+    finals = [r for r in results if r.final]
+    assert len(finals) == 1, [r.status_text for r in results]
+    return finals[0]
+
+
+@pytest.mark.parametrize("path", FILLS, ids=[p.stem for p in FILLS])
+def test_hyddown_fills_give_c_within_2_percent(path: Path) -> None:
+    """HydDown's fills (3-8 bar supplies into 1 bar, the room into 2-10 kPa; fixed and
+    jet-driven heat transfer) with 0.1 % FS noise, read from the opening: the model C
+    within 2 % of HydDown's orifice. Measured (seed 1): -0.7..+1.5 %, |z| <= 1.5 on five,
+    3.2 on the 50 L room fill (its sigma does not yet cover HydDown's warming wall: #26
+    open)."""
+    d = np.load(path)
+    meta = json.loads(str(d["meta"]))
+    t, p = d["t"], d["p"]
+    noisy = p + np.random.default_rng(1).normal(0.0, 1e-3 * meta["supply_pressure"], p.size)
+    s = EstimatorSettings(direction="charge", volume=meta["volume"],
+                          length_diameter_ratio=meta["length_diameter_ratio"],
+                          initial_temperature=meta["t10"],
+                          supply_temperature=meta["supply_temperature"],
+                          start_time=float(t[0]), initial_pressure=meta["p10"], **EXACT)
+    r = _final(analyze(t, noisy, s))
+    truth = meta["truth_conductance"]
+    assert r.direction == "charge"
+    assert r.supply_pressure == pytest.approx(meta["supply_pressure"], rel=2e-3)
+    assert r.conductance_model == pytest.approx(truth, rel=0.02)
+    assert abs(r.conductance_model - truth) < 3.5 * r.conductance_model_std
+    # eq 39 mirrored over-reads, as its bias says (1.14-1.51 here, with the heat exchange)
+    assert 1.05 < r.conductance / truth < 1.6
+    assert r.critical_ratio == pytest.approx(0.528, abs=0.03)
+
+
+def _foreign_charge(p10: float, p_s: float, *, tau_heat: float, m: float = 0.5,
+                    b: float = 0.45, seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+    """A charge of the independent model with a plateau before the opening: 1 kHz, 0.1 %
+    FS noise; (t [s], p [Pa], true C)."""
+    c = 5e-9
+    t = np.arange(0.0, 12.0, 1e-3)
+    p = newton_tank.charge(t, volume=5e-3, p10=p10, t10=293.15, p_supply=p_s,
+                           t_supply=293.15, tau_heat=tau_heat, t_open=0.3, conductance=c,
+                           b=b, subsonic_index=m)
+    return t, p + np.random.default_rng(seed).normal(0.0, 1e-3 * p_s, t.size), c
+
+
+@pytest.mark.parametrize(("p10", "p_s", "supply_given"), [
+    (1e5, 6e5, False), (1e5, 6e5, True), (5e3, 101325.0, False)],
+    ids=["6bar-plateau", "6bar-given", "room-into-vacuum"])
+def test_a_detected_charge_of_an_independent_model(p10: float, p_s: float,
+                                                   supply_given: bool) -> None:
+    t, p, c = _foreign_charge(p10, p_s, tau_heat=8.0)
+    s = EstimatorSettings(direction="charge", volume=5e-3,
+                          supply_pressure=p_s if supply_given else None, **EXACT)
+    out = analyze(t, p, s)
+    crossing = [r for r in out if not r.final]
+    assert len(crossing) == 1 and crossing[0].status == "ok"
+    x = crossing[0]  # the correlation's heat before p* (tau_heat 8 s is more): its sigma
+    assert abs(x.conductance_model - c) < 2.0 * x.conductance_model_std
+    r = _final(out)
+    assert r.status == "ok", r.status_text
+    assert r.t_start == pytest.approx(0.3, abs=5e-3)  # detected
+    assert r.t_start_model == pytest.approx(0.3, abs=1e-3)  # fitted
+    assert r.p10 == pytest.approx(p10, abs=5e-3 * p_s)
+    assert r.supply_pressure == pytest.approx(p_s, rel=3e-3)
+    assert r.p_atm == 101325.0  # the room's, as given (the default)
+    assert r.conductance_model == pytest.approx(c, rel=0.01)
+    assert abs(r.conductance_model - c) < 2.5 * r.conductance_model_std
+    assert r.critical_ratio == pytest.approx(0.45, abs=0.03)
+
+
+def test_charge_and_discharge_of_one_component_agree() -> None:
+    """The same component (C 5e-9, b 0.45) measured both ways on the independent model: C
+    within 1 %, b within 0.03."""
+    c, b = 5e-9, 0.45
+    t = np.arange(0.0, 12.0, 1e-3)
+    rng = np.random.default_rng(3)
+    dis = newton_tank.discharge(t, volume=5e-3, p10=6e5, t10=293.15, p_atm=101325.0,
+                                tau_heat=8.0, t_open=0.3, conductance=c, b=b)
+    r_d = _final(analyze(t, dis + rng.normal(0.0, 600.0, t.size),
+                         EstimatorSettings(volume=5e-3, **EXACT)))
+    t_c, p_c, _c = _foreign_charge(1e5, 6e5, tau_heat=8.0, b=b, seed=4)
+    r_c = _final(analyze(t_c, p_c, EstimatorSettings(direction="charge", volume=5e-3,
+                                                     **EXACT)))
+    assert r_c.conductance_model == pytest.approx(r_d.conductance_model, rel=0.01)
+    assert abs(r_c.critical_ratio - r_d.critical_ratio) <= 0.03
+
+
+def test_per_sample_and_block_charges_are_identical() -> None:
+    t, p, _c = _foreign_charge(1e5, 6e5, tau_heat=8.0)
+    s = EstimatorSettings(direction="charge", volume=5e-3, curve_fit=False)
+    one = StreamingEstimator(s)
+    a = [r for k in range(t.size) for r in one.push(float(t[k]), float(p[k]))]
+    blk = StreamingEstimator(s)
+    b = [r for k in range(0, t.size, 500) for r in blk.push_block(t[k:k + 500],
+                                                                   p[k:k + 500])]
+    assert len(a) == len(b) == 1
+    assert a[0] == b[0]
+
+
+def test_the_adiabatic_closed_form_inverts_the_bias() -> None:
+    """charge_conductance_adiabatic at p* is eq 39 mirrored over its bias (the same
+    integral), for a choked and a subsonic crossing."""
+    from pneumatic_unload import physics
+    for b in (0.3, 0.75):
+        p10, p_s, tau = 1e5, 6e5, 2.0
+        p_star = p10 + 0.632 * (p_s - p10)
+        c39 = physics.conductance_eq39(tau, p_s, p10, 5e-3, 293.15)
+        got = charge_conductance_adiabatic(tau, p_star, p10, p_s, 5e-3, 293.15, b)
+        assert got == pytest.approx(c39 / charge_eq39_bias(p10, p_s, b), rel=1e-3)
+    assert math.isnan(charge_conductance_adiabatic(2.0, 7e5, 1e5, 6e5, 5e-3, 293.15, 0.4))
+
+
+def test_bad_charges_get_a_clear_status() -> None:
+    t, p, _c = _foreign_charge(1e5, 6e5, tau_heat=8.0)
+    # a supply stated below the tank
+    out = analyze(t, p, EstimatorSettings(direction="charge", supply_pressure=9e4))
+    assert all(math.isnan(r.conductance_model) for r in out)
+    assert any("not above p10" in r.status_text for r in out)
+    # a discharge analysed as a charge, and a charge as a discharge
+    fall = p[::-1].copy()
+    why = analyze(t, fall, EstimatorSettings(direction="charge")).no_unload_reason
+    assert why is not None and "--direction discharge" in why
+    why = analyze(t, p, EstimatorSettings()).no_unload_reason
+    assert why is not None and "--direction charge" in why
+    # an aborted charge: the valve closes at 40 % of the rise
+    k = int(np.argmax(p > 1e5 + 0.4 * 5e5))
+    aborted = p.copy()
+    aborted[k:] = aborted[k]
+    out = analyze(t, aborted, EstimatorSettings(direction="charge", supply_pressure=6e5))
+    assert out and all(r.status != "ok" for r in out)
+    assert all(math.isnan(r.conductance_model) for r in out)
+    # a supply only for a charge; a stream's direction is fixed
+    with pytest.raises(EstimationError, match="charge"):
+        EstimatorSettings(supply_pressure=6e5)
+    est = StreamingEstimator(EstimatorSettings(direction="charge"))
+    with pytest.raises(EstimationError, match="direction"):
+        est.settings = EstimatorSettings()
+
+
+def test_a_record_from_the_opening_needs_a_plateau_or_the_supply() -> None:
+    t, p, _c = _foreign_charge(1e5, 6e5, tau_heat=8.0)
+    k = int(np.argmax(t >= 0.3))
+    cut_t, cut_p = t[k:k + 1500], p[k:k + 1500]  # ends before the supply's plateau
+    s = EstimatorSettings(direction="charge", start_time=float(cut_t[0]),
+                          initial_pressure=1e5)
+    with pytest.raises(EstimationError, match="--supply"):
+        analyze(cut_t, cut_p, s)
