@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from foreign import newton_tank
+
 from pneumatic_unload.charge import charge_conductance_adiabatic, charge_eq39_bias
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation import StreamingEstimator, analyze
