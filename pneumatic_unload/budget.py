@@ -43,6 +43,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pneumatic_unload.config.estimator import (
+    CHARGE_MODEL_UNCERTAINTY,
     MODEL_UNCERTAINTY,
     EstimatorSettings,
     wall_uncertainty,
@@ -68,11 +69,13 @@ PRESSURE_REL_DEFAULT = 0.001
 EXACT_INPUTS: dict[str, float] = {"volume_uncertainty": 0.0, "temperature_uncertainty": 0.0,
                                   "wall_temperature_uncertainty": 0.0,
                                   "pressure_uncertainty": 0.0, "atmosphere_uncertainty": 0.0,
+                                  "charge_model_uncertainty": 0.0,
                                   "model_uncertainty": 0.0}
 #: The stated inputs exact, the model's limits kept: a peer simulation (HydDown) analysed
 #: with its own tank and gas.
-EXACT_INPUTS_FOREIGN_MODEL: dict[str, float] = {**EXACT_INPUTS,
-                                                "model_uncertainty": MODEL_UNCERTAINTY}
+EXACT_INPUTS_FOREIGN_MODEL: dict[str, float] = {
+    **EXACT_INPUTS, "model_uncertainty": MODEL_UNCERTAINTY,
+    "charge_model_uncertainty": CHARGE_MODEL_UNCERTAINTY}
 
 
 @dataclass(frozen=True)

@@ -96,6 +96,8 @@ def _estimate(i: int) -> dict:
         "p_star": 101_325.0 + 0.368 * (6.0e5 - 101_325.0),
         "initial_temperature": 293.15,
         "volume": 1.2e-3,
+        "direction": "discharge" if i == 0 else "charge",
+        "supply_pressure": float("nan") if i == 0 else 6.5e5,
     }
 
 

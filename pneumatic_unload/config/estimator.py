@@ -38,6 +38,11 @@ class EstimationError(ValueError):
 #: bench/bench_hyddown.py (0.34 %; branch h11); the committed six of test_hyddown.py test
 #: its coverage.
 MODEL_UNCERTAINTY = 0.0034
+#: Default relative standard uncertainty of a charge's model-based C from the model's own
+#: limits [-]: the RMS error of the charge's model C against HydDown's fills (u-to-h blend
+#: removed) over the 24-fill grid of bench/bench_hyddown_fill.py at 1 kHz with 0.1 % FS
+#: noise, 2 seeds, from the opening (0.21 %) and from a plateau (0.35 %): 0.29 %.
+CHARGE_MODEL_UNCERTAINTY = 0.0029
 
 
 @dataclass(frozen=True)
@@ -103,6 +108,12 @@ class EstimatorSettings(TankSpec):
         Standard uncertainty of a given supply pressure [Pa] (None: 0.1 % of it).
     supply_temperature : float or None
         A charge's supply gas temperature T_s [K] (None: the wall's, the room's).
+    charge_model_uncertainty : float
+        ``model_uncertainty`` of a charge [-]: default :data:`CHARGE_MODEL_UNCERTAINTY`
+        (0.29 %), the RMS error of the charge's model C against HydDown's fills (blend
+        removed) over the 24-fill grid of ``bench/bench_hyddown_fill.py``, from the opening
+        and from a plateau; the six committed fills of ``test/test_charge_analysis.py`` were
+        not used for it.
     model_uncertainty : float
         Relative standard uncertainty of the model-based C from the discharge model's own
         limits [-]: ideal gas (real air, Z = 0.997 at 8 bar), a uniform gas state, a heat
@@ -162,6 +173,9 @@ class EstimatorSettings(TankSpec):
     supply_temperature: float | None = optional(
         None, "K", 150.0, 600.0, "a charge's supply gas temperature T_s",
         "the wall's (the room's)")
+    charge_model_uncertainty: float = number(
+        CHARGE_MODEL_UNCERTAINTY, "-", 0.0, 0.5, "relative standard uncertainty of a "
+        "charge's model-based C from the model's own limits")
     model_uncertainty: float = number(
         MODEL_UNCERTAINTY, "-", 0.0, 0.5, "relative standard uncertainty of the "
         "model-based C from the model's own limits (ideal gas, uniform state, heat-law "
@@ -200,6 +214,13 @@ class EstimatorSettings(TankSpec):
             return self.atmosphere_uncertainty
         return (self.supply_pressure_uncertainty if self.supply_pressure_uncertainty
                 is not None else 1e-3 * self.end_pressure)
+
+    @property
+    def model_limits(self) -> float:
+        """The relative standard uncertainty of the model-based C from the model's own
+        limits in use [-]: ``charge_model_uncertainty`` for a charge, else
+        ``model_uncertainty``."""
+        return self.charge_model_uncertainty if self.charge else self.model_uncertainty
 
     @property
     def supply_gas_temperature(self) -> float:

@@ -173,7 +173,7 @@ def charge_crossing_estimate(settings: EstimatorSettings, tau: float, tau_std: f
     b_std = abs(adiabatic(b_=b_hi) - adiabatic(b_=b_lo)) / 2.0 * c_model / c_adi
     type_a = math.sqrt((c_model * tau_std / tau) ** 2 + b_std**2 + heat_std**2)
     bm = Budget(c_model, (record_term(CHARGE_TYPE_A, type_a), *inputs(c_model, adi_of),
-                          form, model_limits_term(c_model, s.model_uncertainty)))
+                          form, model_limits_term(c_model, s.model_limits)))
     extra["budget"] = bm.to_dict()
     return CrossingEstimate(None, c39, budget39.combined_std, c_adi, c_model,
                             bm.combined_std, method, extra)

@@ -76,6 +76,11 @@ def check_opening_settings(settings: EstimatorSettings) -> None:
     pass)."""
     if settings.start_time is None:
         raise EstimationError("the opening-start mode needs start_time [s, record clock]")
+    if settings.charge:
+        raise EstimationError("the live opening-start mode analyses a discharge; a charge "
+                              "recorded from its opening is analysed offline (analyze "
+                              "--direction charge --start-time S), a live charge from its "
+                              "plateau (start_time unset)")
     if settings.atmosphere is None:
         raise EstimationError("start_time needs the atmosphere (a record that begins at the "
                               "opening need not end on a plateau): set atmosphere [Pa]")

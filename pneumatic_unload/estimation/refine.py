@@ -80,6 +80,27 @@ def pressure_problem(p10: float, p_atm: float, p_star: float) -> str | None:
             f"signal without signal_gain/signal_offset?")
 
 
+def end_level_problem(settings: EstimatorSettings, level: float, p10: float) -> str | None:
+    """Why a final plateau at ``level`` [Pa absolute] cannot be the end level the pressure
+    tends to (taken from the record: p_atm auto, a charge's supply auto), or None: an
+    atmosphere outside :data:`~pneumatic_unload.config.tank.ATMOSPHERE_RANGE` (gauge
+    readings, a signal in another unit, a sensor that is not where it seems); a supply not
+    above p10 [Pa absolute] or beyond :data:`SUPPLY_RANGE`."""
+    if settings.charge:
+        if p10 < level <= SUPPLY_RANGE[1]:
+            return None
+        return (f"the final plateau, taken as the supply (auto), is at {level:.0f} Pa, not "
+                f"above p10 ({p10:.0f} Pa): give the supply (--supply-pressure PA) and "
+                "check the pressure unit")
+    lo, hi = ATMOSPHERE_RANGE
+    if lo <= level <= hi:
+        return None
+    return (f"the final plateau, taken as p_atm (auto), is at {level:.0f} Pa, not an "
+            f"atmosphere ({lo:.0f}-{hi:.0f} Pa absolute): gauge readings, another unit, or "
+            f"a signal without signal_gain/signal_offset? Give the atmosphere (--atmosphere "
+            f"PA) and check the pressure unit")
+
+
 def needs_model(settings: EstimatorSettings, p_atm: float, p_star: float) -> bool:
     """True when the model-based C needs the discharge model (not the closed form): heat
     transfer, or a flow that may turn subsonic before p* (pressures [Pa absolute])."""
@@ -172,7 +193,7 @@ def charge_final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: fl
         terms.append(wall_term(settings, c, fit.wall_std, fit.wall_uncertainty,
                                fit.wall_source))
     terms += [*extra_terms, model_form_term(model_form_std),
-              model_limits_term(c, settings.model_uncertainty)]
+              model_limits_term(c, settings.model_limits)]
     return Budget(c, tuple(terms)).to_dict()
 
 

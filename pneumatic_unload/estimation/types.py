@@ -181,6 +181,7 @@ def estimate_fields(r: UnloadResult, frame_id: str = "tank") -> dict[str, Any]:
             "subsonic_index_fitted", False)) if r.final else False,
         "pressure_offset": r.pressure_offset, "pressure_offset_std": r.pressure_offset_std,
         "tau_exp": r.tau_exp, "p10": r.p10, "p_atm": r.p_atm, "p_star": r.p_star,
+        "direction": r.direction, "supply_pressure": r.supply_pressure,
         "initial_temperature": r.initial_temperature, "volume": r.volume,
     }
 

@@ -10,7 +10,6 @@ import math
 
 import numpy as np
 
-from pneumatic_unload.config.tank import ATMOSPHERE_RANGE
 from pneumatic_unload.estimation import reduction
 from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.decisions import (
@@ -27,7 +26,7 @@ from pneumatic_unload.estimation.decisions import (
     stalled,
 )
 from pneumatic_unload.estimation.reduction import reduce_due, reduce_unload, window_start
-from pneumatic_unload.estimation.refine import SUPPLY_RANGE, needs_model
+from pneumatic_unload.estimation.refine import end_level_problem, needs_model
 from pneumatic_unload.estimation.regression import (
     crossing_window,
     first_below_in,
@@ -380,27 +379,6 @@ def auto_too_long(st: EstimatorState, i: int) -> list[UnloadResult]:
     return [res]
 
 
-def atmosphere_problem(st: EstimatorState, level: float) -> str | None:
-    """Why a final plateau at ``level`` [signal units] cannot be the atmosphere (p_atm
-    auto), or None: outside :data:`~pneumatic_unload.config.tank.ATMOSPHERE_RANGE` [Pa]
-    (gauge readings, a signal in another unit, a sensor that is not where it seems)."""
-    p_atm = st.to_pa(level)
-    if st.settings.charge:  # the supply, above p10
-        p10 = st.to_pa(st.unload.p10)
-        if p_atm > p10 and p_atm <= SUPPLY_RANGE[1]:
-            return None
-        return (f"the final plateau, taken as the supply (auto), is at {p_atm:.0f} Pa, not "
-                f"above p10 ({p10:.0f} Pa): give the supply (--supply-pressure PA) and "
-                "check the pressure unit")
-    lo, hi = ATMOSPHERE_RANGE
-    if lo <= p_atm <= hi:
-        return None
-    return (f"the final plateau, taken as p_atm (auto), is at {p_atm:.0f} Pa, not an "
-            f"atmosphere ({lo:.0f}-{hi:.0f} Pa absolute): gauge readings, another unit, or "
-            f"a signal without signal_gain/signal_offset? Give the atmosphere (--atmosphere "
-            f"PA) and check the pressure unit")
-
-
 def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
                              ) -> list[UnloadResult]:
     """p_atm auto: once the final plateau is reached, set p* and find the crossing
@@ -411,7 +389,8 @@ def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
     if at_end:
         w = max((i - u.i0) // 8, 8)
         level = st.buf.mean(i - w + 1, i + 1)
-        if (why := atmosphere_problem(st, level)) is not None:
+        if (why := end_level_problem(st.settings, st.to_pa(level),
+                                     st.to_pa(st.unload.p10))) is not None:
             return st.bad(i, why)
         st.set_pstar(level)
         u.atm_var = st.sigma**2 / w
@@ -427,7 +406,8 @@ def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
     drop = u.p10 - level
     if drop < 0.5 * u.dp_guess:
         return on_abort(st, i)
-    if (why := atmosphere_problem(st, level)) is not None:
+    if (why := end_level_problem(st.settings, st.to_pa(level),
+                                 st.to_pa(st.unload.p10))) is not None:
         return st.bad(i, why)
     st.set_pstar(level)
     u.atm_var = st.sigma**2 / w

@@ -58,6 +58,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, Temperature
 from std_msgs.msg import String
@@ -275,7 +276,9 @@ class EstimatorNode(Node):
         except EstimationError as exc:
             return str(exc)
         if new != self._settings:
-            opening = new.start_time is not None or self._settings.start_time is not None
+            # start-time mode: one estimator per start time; a new direction: a new stream
+            opening = new.start_time is not None or self._settings.start_time is not None \
+                or new.direction != self._settings.direction
             with self._lock:
                 idle = ("waiting", "done", "error") if opening else ("waiting",)
                 if self._est.state not in idle:
@@ -283,7 +286,6 @@ class EstimatorNode(Node):
                 old = self._settings
                 self._settings = new
                 try:
-                    # start-time mode: one estimator per start time
                     self._est = self._new_core() if opening else self._est
                 except EstimationError as exc:
                     self._settings = old
@@ -724,6 +726,20 @@ class EstimatorNode(Node):
             unloads_before = {r.index for r in self.results}
         t0 = time.monotonic()
         fb = self._Measure.Feedback()
+        if goal.direction and goal.direction != self._settings.direction:
+            # the direction of this measurement: the parameter set, as a user would (the
+            # estimator switched when it is idle; else refused, with the reason)
+            why = "" if goal.direction in ("discharge", "charge") else (
+                f"direction {goal.direction!r} is neither 'discharge' nor 'charge'")
+            if not why:
+                done = self.set_parameters([Parameter("direction", value=goal.direction)])
+                why = "" if done[0].successful else done[0].reason
+            if why:
+                goal_handle.abort()
+                result.success, result.message = False, f"direction not set: {why}"
+                return result
+            # a new stream (its indices from 0): any of its results answers the goal
+            n_before, unloads_before = self.n_results, set()
         # an unload already under way is not ours: only a new unload index answers the goal
         if goal.trigger_valve:
             service = goal.valve_service or self._p("valve_service")

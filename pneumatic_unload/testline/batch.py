@@ -394,7 +394,29 @@ def part_summary(unloads: Sequence[dict[str, Any]],
                     "conductance_std": statistics.stdev(cs) if len(cs) > 1 else None,
                     "conductance_min": min(cs) if cs else None,
                     "conductance_max": max(cs) if cs else None,
-                    "verdict": verdict, "verdict_reason": why})
+                    "verdict": verdict, "verdict_reason": why,
+                    "by_direction": by_direction(us)})
+    return out
+
+
+def by_direction(unloads: Sequence[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """A part's C per flow direction ('discharge', 'charge'; rows of older databases
+    without one are discharges): the n, the inverse-variance weighted mean of the
+    recommended C and its standard uncertainty [m^3/(s Pa)] of the unloads with a C and a
+    finite, positive uncertainty."""
+    out: dict[str, dict[str, float]] = {}
+    for d in ("discharge", "charge"):
+        cs = [(u["recommended_conductance"], u["recommended_std"]) for u in unloads
+              if (u.get("direction") or "discharge") == d
+              and u.get("status") in ("ok", "aborted_sse", "not_choked")
+              and u.get("recommended_conductance") is not None
+              and u.get("recommended_std") is not None
+              and math.isfinite(u["recommended_conductance"])
+              and math.isfinite(u["recommended_std"]) and u["recommended_std"] > 0]
+        if cs:
+            w = [1.0 / s**2 for _c, s in cs]
+            out[d] = {"n": len(cs), "conductance": sum(c * x for (c, _s), x in zip(
+                cs, w, strict=True)) / sum(w), "std": math.sqrt(1.0 / sum(w))}
     return out
 
 

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 #: Schema version written by this package [-].
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 #: How long a writer waits for the write lock before giving up [s].
 BUSY_TIMEOUT = 60.0
 
@@ -52,8 +52,11 @@ V2_COLUMNS: tuple[tuple[str, str], ...] = (
     ("subsonic_index", "REAL"), ("subsonic_index_std", "REAL"),
     ("pressure_offset", "REAL"), ("pressure_offset_std", "REAL"),
 )
+#: Columns added by version 3: the flow's direction ('discharge' or 'charge'; NULL in rows
+#: of older versions: discharges) and a charge's supply pressure [Pa absolute].
+V3_COLUMNS: tuple[tuple[str, str], ...] = (("direction", "TEXT"), ("supply_pressure", "REAL"))
 #: Every column of ``unloads`` taken from a result's JSON.
-UNLOAD_COLUMNS = V1_COLUMNS + V2_COLUMNS
+UNLOAD_COLUMNS = V1_COLUMNS + V2_COLUMNS + V3_COLUMNS
 
 _V1 = f"""
 CREATE TABLE files (
@@ -91,7 +94,8 @@ CREATE INDEX files_part ON files (part_id);
 
 #: Schema steps: MIGRATIONS[k] takes a database from version k to k + 1.
 _V2 = ";\n".join(f"ALTER TABLE unloads ADD COLUMN {n} {t}" for n, t in V2_COLUMNS)
-MIGRATIONS: tuple[str, ...] = (_V1, _V2)
+_V3 = ";\n".join(f"ALTER TABLE unloads ADD COLUMN {n} {t}" for n, t in V3_COLUMNS)
+MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3)
 
 
 class ResultsDBError(Exception):

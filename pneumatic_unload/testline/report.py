@@ -125,6 +125,26 @@ def control_chart(points: Sequence[tuple[float, float, str]], title: str) -> str
     return "".join(out)
 
 
+def _directions(part: dict[str, Any]) -> str:
+    """Table cells of a part's C by flow direction (weighted mean +- its standard
+    uncertainty, dm^3/(s bar)) and the charge's minus the discharge's in their combined
+    sigma; '-' where a direction was not measured."""
+    d = part.get("by_direction") or {}
+    cells = []
+    for k in ("discharge", "charge"):
+        x = d.get(k)
+        cells.append("-" if x is None else f"{_c(x['conductance'])} &plusmn; "
+                                           f"{_c(x['std'], 5)} (n {x['n']})")
+    if "discharge" in d and "charge" in d:
+        a, b = d["discharge"], d["charge"]
+        diff = b["conductance"] - a["conductance"]
+        z = diff / math.hypot(a["std"], b["std"])
+        cells.append(f"{100 * diff / a['conductance']:+.2f} % ({z:+.1f} &sigma;)")
+    else:
+        cells.append("-")
+    return "".join(f"<td>{c}</td>" for c in cells)
+
+
 def pooled_repeatability(parts: Sequence[dict[str, Any]]) -> float | None:
     """Pooled repeatability standard deviation of parts with n >= 2 [m^3/(s Pa)]:
     sqrt(sum (n_i - 1) s_i^2 / sum (n_i - 1))."""
@@ -167,6 +187,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
         "unload to see its pressure curve.</p>",
         "<h2>Parts</h2><table id='parts'><tr><th class='l'>part</th><th class='l'>type</th>"
         "<th>n</th><th>C mean</th><th>s(C)</th><th>s/mean</th><th>min</th><th>max</th>"
+        "<th>C discharge</th><th>C charge</th><th>charge - discharge</th>"
         "<th class='l'>verdict</th><th class='l'>reason</th></tr>"]
     for p in parts:
         rel = (f"{100 * p['conductance_std'] / p['conductance_mean']:.2f} %"
@@ -175,7 +196,8 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
                  f"<td class='l'>{_e(p['part_type'])}</td><td>{p['n']}</td>"
                  f"<td>{_c(p['conductance_mean'])}</td><td>{_c(p['conductance_std'])}</td>"
                  f"<td>{rel}</td><td>{_c(p['conductance_min'])}</td>"
-                 f"<td>{_c(p['conductance_max'])}</td><td class='l'>{_e(p['verdict'] or '-')}"
+                 f"<td>{_c(p['conductance_max'])}</td>{_directions(p)}"
+                 f"<td class='l'>{_e(p['verdict'] or '-')}"
                  f"</td><td class='l'>{_e(p['verdict_reason'] or '')}</td></tr>")
     h.append("</table><h2>Control charts of C</h2>")
     types = sorted({u["part_type"] or "" for u in unloads})
@@ -203,7 +225,8 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
     if not bad_files and not any(u["verdict"] == "fail" for u in unloads):
         h.append("<li>none</li>")
     h.append("</ul><h2>Unloads</h2><table id='unloads'><tr><th class='l'>part</th>"
-             "<th class='l'>input</th><th>#</th><th class='l'>status</th><th>C</th>"
+             "<th class='l'>input</th><th>#</th><th class='l'>direction</th>"
+             "<th class='l'>status</th><th>C</th>"
              "<th>u(C)</th><th>b</th><th>m</th><th>tau_exp [s]</th><th class='l'>heat law</th>"
              "<th class='l'>verdict</th></tr>")
     curves: dict[str, Any] = {}
@@ -217,6 +240,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
         h.append(f"<tr class='unload {_e(u['verdict'] or '')}' data-k='{k}'>"
                  f"<td class='l'>{_e(u['part_id'])}</td><td class='l'>"
                  f"{_e(Path(u['path']).name)}</td><td>{u['unload_index']}</td>"
+                 f"<td class='l'>{_e(u.get('direction') or 'discharge')}</td>"
                  f"<td class='l'>{_e(u['status'])}</td>"
                  f"<td>{_c(u['recommended_conductance'])}</td>"
                  f"<td>{_c(u['recommended_std'], 5)}</td>"
