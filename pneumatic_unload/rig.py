@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.config import RigConfig
+from pneumatic_unload.config import ConfigError, RigConfig
 from pneumatic_unload.model import SensorChain, default_duration, discharge
 
 FloatArray = NDArray[np.float64]
@@ -149,6 +149,32 @@ class RigStream:
         self._p_charge0 = self._p_hold
         return ""
 
+    def reverse(self) -> str:
+        """Turn the flow for the next step: the tank, held where the last step left it
+        (pressure and gas temperature), is its initial state; after a charge, a discharge
+        from there to the atmosphere, after a discharge a charge from there toward
+        ``supply_pressure`` (ISO 6358-2's two tests of one component in turn; the wall
+        stays at its temperature).
+
+        Returns
+        -------
+        str
+            '' when the tank is ready for the reversed step (opened by :meth:`open_valve`),
+            else why not (only after a step, from the vented state).
+        """
+        if self._phase != "vented":
+            return f"the flow turns after a step (phase {self._phase})"
+        cfg = self.cfg
+        try:
+            self.cfg = cfg.replace(
+                direction="discharge" if cfg.direction == "charge" else "charge",
+                initial_pressure=self._p_hold, initial_temperature=self._temp_hold,
+                wall_temperature=cfg.wall)
+        except ConfigError as exc:
+            return f"the flow cannot turn: {exc}"
+        self._phase, self._phase_k0 = "charged", self._k
+        return ""
+
     # ------------------------------------------------------------------ samples
     def next_block(self, n: int) -> Block:
         """The next ``n`` samples (true state and sensor output).
@@ -215,7 +241,8 @@ class RigStream:
 
 
 def run_cycles(cfg: RigConfig, unloads: int, *, settle_time: float = 2.0,
-               vent_time: float = 1.0, charge_time: float = 1.0) -> Block:
+               vent_time: float = 1.0, charge_time: float = 1.0,
+               alternate: bool = False) -> Block:
     """A recorded run of several unloads, as the simulator node's cycle mode produces it.
 
     ``cfg.pre_time`` of charged plateau, then per unload: the unload (``cfg.duration``, or
@@ -230,6 +257,10 @@ def run_cycles(cfg: RigConfig, unloads: int, *, settle_time: float = 2.0,
         Number of unloads [-] (>= 1).
     settle_time, vent_time, charge_time : float
         Phase durations [s].
+    alternate : bool
+        Each step in turn the other way (:meth:`RigStream.reverse`: a charge then a
+        discharge of the same component, no recharge between them), starting with
+        ``cfg.direction``.
 
     Returns
     -------
@@ -254,7 +285,12 @@ def run_cycles(cfg: RigConfig, unloads: int, *, settle_time: float = 2.0,
         while rs.phase == "unloading":
             take(0.1)
         take(vent_time)
-        if k + 1 < unloads:
+        if k + 1 < unloads and alternate:
+            why = rs.reverse()
+            if why:
+                raise ValueError(why)
+            take(settle_time)
+        elif k + 1 < unloads:
             rs.charge()
             take(charge_time)
             take(settle_time)

@@ -17,9 +17,9 @@ import numpy as np
 from pneumatic_unload.config import RigConfig, adapters
 from pneumatic_unload.estimation import (
     EstimatorSettings,
-    StreamingEstimator,
     UnloadResult,
     estimate_fields,
+    stream_estimator,
 )
 from pneumatic_unload.model import simulate
 
@@ -77,7 +77,7 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
     settings = settings_for(cfg)
     step = max(1, int(round(cfg.rate / TEMPERATURE_RATE)))
     if analyze_live:
-        est = StreamingEstimator(settings)
+        est = stream_estimator(settings)
         # the stamps and temperatures as a subscriber or the bag reader sees them: integer
         # ns -> s, K -> degrees C -> K
         t_seen = t_ns * 1e-9

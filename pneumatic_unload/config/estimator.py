@@ -5,6 +5,7 @@ the model-based fits below the estimator use them without importing it. SI units
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -97,11 +98,13 @@ class EstimatorSettings(TankSpec):
         (None: fitted with the pressure, within
         :data:`~pneumatic_unload.model.parametric.THERMOMETER_TAU_RANGE`).
     direction : str
-        'discharge' (the tank empties through the component to ``atmosphere``) or 'charge'
+        'discharge' (the tank empties through the component to ``atmosphere``), 'charge'
         (the tank fills through it from a supply at ``supply_pressure``,
         ``supply_temperature``: ISO 6358-2's charge; ``atmosphere`` is then the room's,
-        for the leaks alone). Inside the estimator and its fits a charge's end level, the
-        supply, takes the place of p_atm (:attr:`end_pressure`).
+        for the leaks alone) or 'both' (charges and discharges of one component in turn, a
+        cycle: each step analysed in its direction, :class:`~pneumatic_unload.estimation.
+        two_way.TwoWayEstimator`). Inside the estimator and its fits a charge's end level,
+        the supply, takes the place of p_atm (:attr:`end_pressure`).
     supply_pressure : float or None
         A charge's supply pressure p_s [Pa absolute] (None: the record's final plateau).
     supply_pressure_uncertainty : float or None
@@ -162,8 +165,9 @@ class EstimatorSettings(TankSpec):
     thermometer_time_constant: float | None = optional(
         None, "s", 1e-4, 120.0, "first-order time constant of the logged gas temperature's "
         "thermometer", "fitted with the pressure")
-    direction: str = choice("discharge", ("discharge", "charge"),
-                            "flow direction: the tank empties (discharge) or fills (charge)")
+    direction: str = choice("discharge", ("discharge", "charge", "both"),
+                            "flow direction: the tank empties (discharge), fills (charge), "
+                            "or both in turn (a cycle)")
     supply_pressure: float | None = optional(
         None, "Pa", 1e3, 5e7, "a charge's supply pressure p_s (absolute)",
         "from the final plateau")
@@ -198,6 +202,13 @@ class EstimatorSettings(TankSpec):
     def charge(self) -> bool:
         """The tank fills through the component (``direction`` 'charge')."""
         return self.direction == "charge"
+
+    def one_way(self, direction: str) -> EstimatorSettings:
+        """These settings for one flow direction ('discharge' or 'charge'; a discharge's
+        without the supply's fields) [-]."""
+        supply = {} if direction == "charge" else {"supply_pressure": None,
+                                                   "supply_temperature": None}
+        return dataclasses.replace(self, direction=direction, **supply)
 
     @property
     def end_pressure(self) -> float | None:

@@ -99,7 +99,9 @@ def _simulator() -> list[ParameterSpec]:
     return [
         *parameter_specs(RigConfig).values(),
         _str("mode", "service", "'service': unload on ~/start_unload; 'cycle': charge, "
-             "settle, unload, repeat", ("service", "cycle")),
+             "settle, unload, repeat; 'alternate': a cycle of steps in turn the other way "
+             "(a charge through the component, then its discharge)",
+             ("service", "cycle", "alternate")),
         _double("start_delay", -1.0, "open the valve once by itself after this delay "
                 "(< 0: never)", "s", -1.0, 1e6),
         _double("settle_time", 2.0, "cycle mode: plateau before each unload", "s", 0.05, 1e5),

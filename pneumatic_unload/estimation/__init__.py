@@ -52,6 +52,7 @@ from pneumatic_unload.estimation.regression import corner_fit, crossing_fit, hin
 from pneumatic_unload.estimation.sse import SSE_MODEL_REL_STD
 from pneumatic_unload.estimation.streaming import StreamingEstimator
 from pneumatic_unload.estimation.tail import FinalFit
+from pneumatic_unload.estimation.two_way import TwoWayEstimator, stream_estimator
 from pneumatic_unload.estimation.types import (
     SENSOR_FAULT_TEXTS,
     STATUSES,
@@ -82,6 +83,7 @@ __all__ = [
     "OpeningFinal",
     "OpeningStartEstimator",
     "StreamingEstimator",
+    "TwoWayEstimator",
     "UnloadResult",
     "analyze",
     "analyze_chunks",
@@ -94,4 +96,5 @@ __all__ = [
     "hinge_fit",
     "merge_final",
     "recommended",
+    "stream_estimator",
 ]

@@ -14,7 +14,7 @@ from pneumatic_unload.charge import charge_p_star
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.decisions import LAG, PERIOD, PLATEAU, block_threshold
 from pneumatic_unload.estimation.sparse import analyze_from_start
-from pneumatic_unload.estimation.streaming import StreamingEstimator
+from pneumatic_unload.estimation.two_way import stream_estimator
 from pneumatic_unload.estimation.types import Analysis, Diagnostic, UnloadResult
 from pneumatic_unload.physics import p_star
 
@@ -62,7 +62,7 @@ def analyze(
         return Analysis(found, no_unload_reason=why)
     if t.size < 16:
         raise EstimationError(f"too few samples ({t.size}); need at least 16 ({START_HINT})")
-    est = StreamingEstimator(settings)
+    est = stream_estimator(settings or EstimatorSettings())
     out = est.push_block(t, p)
     out += est.finish()
     why = None if out else explain_no_unload(t, p, settings, diagnostics=est.diagnostics)
@@ -292,6 +292,10 @@ def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | 
     if hi <= 0.0:
         return (f"all readings are at or below 0 Pa (highest {hi:.0f} Pa): gauge pressures "
                 f"taken as absolute? {GAUGE_FIX}")
+    if s.direction == "both":
+        return (f"no step either way: as a discharge, "
+                f"{explain_no_unload(t, p, s.one_way('discharge'), stride=stride)}; as a "
+                f"charge, {explain_no_unload(t, p, s.one_way('charge'), stride=stride)}")
     if s.charge:
         return _no_charge_reason(t, p, tt, pp, s, diagnostics)
     rise = _charge_reason(pp, s, hi)
@@ -391,7 +395,7 @@ def estimator_reason(t: ArrayLike, p: ArrayLike, s: EstimatorSettings,
     """The estimator's warnings and errors on the trace (t [s], p [Pa]; ``diagnostics``:
     those of a run with settings ``s`` already made), or a generic reason."""
     if diagnostics is None:
-        est = StreamingEstimator(s)
+        est = stream_estimator(s)
         est.push_block(np.asarray(t, dtype=float), np.asarray(p, dtype=float))
         est.finish()
         diagnostics = est.diagnostics

@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.batch import explain_no_unload, gauge_evidence
 from pneumatic_unload.estimation.sparse import analyze_from_start
-from pneumatic_unload.estimation.streaming import StreamingEstimator
+from pneumatic_unload.estimation.two_way import stream_estimator
 from pneumatic_unload.estimation.types import Diagnostic, FloatArray, UnloadResult
 
 #: Samples kept in full for the explanation and plots [-] (a longer record is decimated).
@@ -157,7 +157,7 @@ def analyze_chunks(chunks: Iterable[tuple[ArrayLike, ArrayLike]],
     """
     s = settings or EstimatorSettings()
     sparse = s.start_time is not None  # begins at the opening: small, analysed whole
-    est = None if sparse else StreamingEstimator(s)
+    est = None if sparse else stream_estimator(s)
     if est is not None and temperature is not None:
         est.push_temperature(*temperature)
     run = ChunkedAnalysis(published=[], samples=0, settings=s,

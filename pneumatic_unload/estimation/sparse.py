@@ -221,6 +221,9 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, 
     s = settings
     if s.start_time is None:
         raise EstimationError("analyze_from_start needs settings.start_time [s]")
+    if s.direction == "both":
+        raise EstimationError("a record that begins at the opening holds one step: give its "
+                              "direction (--direction charge or discharge), not 'both'")
     if s.atmosphere is None and not s.charge:
         raise EstimationError("a record analysed from a given start time needs the "
                               "atmosphere (--atmosphere): it need not end on a plateau")

@@ -173,8 +173,12 @@ class EstimatorState:
     """
 
     def __init__(self, settings: EstimatorSettings, *, live: bool = False,
-                 defer_final_fit: bool = False) -> None:
+                 defer_final_fit: bool = False, diagnostics: DiagnosticLog | None = None,
+                 tag: str = "") -> None:
         self.settings = settings
+        #: Put before every diagnostic's message (a stream's two estimators, one per flow
+        #: direction, share one log: :class:`~.two_way.TwoWayEstimator`).
+        self.tag = tag
         self.live = live
         self.defer_final_fit = defer_final_fit
         #: Final-fit jobs not yet taken (``defer_final_fit``; :class:`~.tail.FinalFit`).
@@ -183,7 +187,7 @@ class EstimatorState:
         #: The logged gas temperature [s], [K] fitted beside the pressure by the final fits.
         self.temperature = ReadingLog()
         #: The first and the last diagnostics (bounded, see :mod:`.history`).
-        self.diagnostics = DiagnosticLog()
+        self.diagnostics = DiagnosticLog() if diagnostics is None else diagnostics
         self.n_unloads = 0
         self.last_t = -math.inf  # last accepted stamp [s]
         self.dt_nominal = math.nan  # nominal sample period [s]
@@ -255,7 +259,7 @@ class EstimatorState:
 
     def diag(self, level: str, message: str, t: float) -> None:
         """Record a diagnostic ('ok', 'warn', 'error') at sample time t [s]."""
-        self.diagnostics.append(Diagnostic(level, self.mode, message, t))
+        self.diagnostics.append(Diagnostic(level, self.mode, f"{self.tag}{message}", t))
 
     def to_pa(self, x: float) -> float:
         """Signal value to pressure [Pa]."""

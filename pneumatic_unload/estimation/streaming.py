@@ -22,7 +22,7 @@ from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation import decisions, detector, sse, tail, unloading
 from pneumatic_unload.estimation.buffer import ReadingLog, SampleBuffer
 from pneumatic_unload.estimation.decisions import SCAN_HORIZON
-from pneumatic_unload.estimation.history import recent_results
+from pneumatic_unload.estimation.history import DiagnosticLog, recent_results
 from pneumatic_unload.estimation.regression import block_steps, first_below_in
 from pneumatic_unload.estimation.state import (
     CONFIRM,
@@ -59,6 +59,10 @@ def _check_streaming(settings: EstimatorSettings) -> None:
         raise EstimationError(
             "start_time is for offline records that begin at the valve opening "
             "(analyze, --start-time); the streaming estimator detects each start")
+    if settings.direction == "both":
+        raise EstimationError(
+            "direction 'both' (charges and discharges in one stream) is two streaming "
+            "estimators: TwoWayEstimator (analyze and the node use it)")
 
 
 def _core_settings(settings: EstimatorSettings) -> EstimatorSettings:
@@ -87,6 +91,10 @@ class StreamingEstimator:
         :meth:`take_final_fits` and run by the caller (a live node publishes the crossing
         estimate at once and fits on a worker thread). ``job.run()`` gives the very result
         the inline path returns; it is not added to :attr:`results`.
+    diagnostics : DiagnosticLog, optional
+        The log to record diagnostics into (default: its own).
+    tag : str
+        Put before each of its diagnostics' messages (e.g. 'charge: ').
 
     Examples
     --------
@@ -113,7 +121,8 @@ class StreamingEstimator:
     SCAN_HORIZON = decisions.SCAN_HORIZON
 
     def __init__(self, settings: EstimatorSettings | None = None, *, live: bool = False,
-                 defer_final_fit: bool = False) -> None:
+                 defer_final_fit: bool = False, diagnostics: DiagnosticLog | None = None,
+                 tag: str = "") -> None:
         settings = settings or EstimatorSettings()
         _check_streaming(settings)
         self._user_settings = settings
@@ -123,7 +132,8 @@ class StreamingEstimator:
         #: forms, the curve fit) takes the direction from the settings.
         self._mirror = settings.charge
         self._st = EstimatorState(_core_settings(settings), live=live,
-                                  defer_final_fit=defer_final_fit)
+                                  defer_final_fit=defer_final_fit, diagnostics=diagnostics,
+                                  tag=tag)
         #: The first and the last diagnostics (a bounded
         #: :class:`~.history.DiagnosticLog`; ``diagnostics.total`` counts all).
         self.diagnostics = self._st.diagnostics

@@ -75,8 +75,10 @@ from pneumatic_unload.estimation import (
     OpeningFinal,
     OpeningStartEstimator,
     StreamingEstimator,
+    TwoWayEstimator,
     UnloadResult,
     estimate_fields,
+    stream_estimator,
 )
 from pneumatic_unload.nodes import common
 from pneumatic_unload.testline import ResultsDBError, SpecError, load_spec
@@ -94,6 +96,8 @@ MAX_BATCH = 4096
 TEMPERATURE_WAIT = 2.0
 
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+#: The node's estimator: a stream's (one way, or both ways in turn) or a start time's.
+Core = StreamingEstimator | TwoWayEstimator | OpeningStartEstimator
 
 
 def fill_estimate(msg: Any, r: UnloadResult, frame_id: str) -> Any:
@@ -384,7 +388,7 @@ class EstimatorNode(Node):
             if collect:
                 gc.enable()
 
-    def _push(self, est: StreamingEstimator | OpeningStartEstimator, ns: Any, p: Any,
+    def _push(self, est: Core, ns: Any, p: Any,
               arrived: float, arrivals: list[float] | None) -> None:
         """:meth:`_feed` with the collector off."""
         try:
@@ -392,7 +396,7 @@ class EstimatorNode(Node):
                 prev = est.state
                 self._arrived = arrived
                 self._arrivals = arrivals
-                self._base = est.n_samples if isinstance(est, StreamingEstimator) else -1
+                self._base = -1 if isinstance(est, OpeningStartEstimator) else est.n_samples
                 self._pushed = time.monotonic()
                 if isinstance(p, np.ndarray):  # a PressureBlock
                     if not p.size:
@@ -411,7 +415,7 @@ class EstimatorNode(Node):
         self._loss.update(ns)  # after the push: off the crossing estimate's latency
         self._last_pressure = p
         self._last_arrival = arrived if arrivals is None else arrivals[-1]
-        if not isinstance(est, StreamingEstimator):
+        if isinstance(est, OpeningStartEstimator):
             # start-time mode: its results are returned only (the streaming core's are
             # published at their hand-over, _on_core_result)
             for r in out:
@@ -433,14 +437,14 @@ class EstimatorNode(Node):
                 self._diagnose(level, dg.message)
             self._n_diag = est.diagnostics.total
 
-    def _new_core(self) -> StreamingEstimator | OpeningStartEstimator:
+    def _new_core(self) -> Core:
         """A streaming estimator with the node's settings: live (a stream joined mid-unload
         skips that unload), its final fits handed to the worker, each result published
         the moment it is complete (:meth:`_on_core_result`); with ``start_time``, the
         estimator of the unload that begins then (start-time mode)."""
         if self._settings.start_time is not None:
             return OpeningStartEstimator(self._settings)
-        est = StreamingEstimator(self._settings, live=True, defer_final_fit=True)
+        est = stream_estimator(self._settings, live=True, defer_final_fit=True)
         est.on_result = self._on_core_result
         return est
 

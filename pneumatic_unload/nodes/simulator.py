@@ -13,7 +13,11 @@ Services
     ~/charge (std_srvs/Trigger): recharge to p10 after an unload.
 Parameters
     Every RigConfig field (tank, component, effects, sensor; see ``RigConfig.describe()``),
-    with ranges; plus ``mode`` ('service' or 'cycle'), ``start_delay`` [s] (open once by
+    with ranges (``direction`` 'charge': the tank filled through the component from
+    ``supply_pressure``); plus ``mode`` ('service', 'cycle', or 'alternate': a cycle whose
+    steps go in turn the other way, a charge then a discharge of the same component from
+    where the last left the tank, :meth:`~pneumatic_unload.rig.RigStream.reverse`),
+    ``start_delay`` [s] (open once by
     itself after this delay; < 0: never), ``settle_time`` [s], ``vent_time`` [s],
     ``charge_time`` [s], ``cycles`` (0: forever), ``auto_charge``, ``temperature_rate`` [Hz],
     ``block_size``, ``frame_id``, ``output_volts`` (publish the transducer's volts instead of
@@ -43,7 +47,7 @@ from pneumatic_unload.config import nodes as config_nodes
 from pneumatic_unload.nodes import common
 from pneumatic_unload.rig import RigStream
 
-MODES = ("service", "cycle")
+MODES = ("service", "cycle", "alternate")
 
 
 #: Above this sample rate [Hz] the node publishes blocks by default and advises the block
@@ -265,15 +269,24 @@ class SimulatorNode(Node):
         """Automatic valve and charge actions of the modes."""
         cycles = int(self._p("cycles"))
         with self._lock:
+            auto = self._mode in ("cycle", "alternate")
             if phase == "charged":
-                if self._mode == "cycle" and in_phase >= self._p("settle_time") and (
+                if auto and in_phase >= self._p("settle_time") and (
                         cycles == 0 or unloads_done < cycles):
                     self._stream.open_valve()
                 elif 0 <= start_delay <= t_now:
                     self._stream.open_valve()
             elif phase == "vented" and in_phase >= self._p("vent_time") and (
-                    self._mode == "cycle" or self._p("auto_charge")):
-                if self._mode == "cycle" and cycles and unloads_done >= cycles:
+                    auto or self._p("auto_charge")):
+                if auto and cycles and unloads_done >= cycles:
+                    return
+                if self._mode == "alternate":  # the other direction from where it is
+                    why = self._stream.reverse()
+                    if why:
+                        self.get_logger().error(why, throttle_duration_sec=5.0)
+                    else:  # /rig/config says the step's direction and initial state
+                        self._cfg = self._stream.cfg
+                        self._publish_config()
                     return
                 self._stream.charge()
 
