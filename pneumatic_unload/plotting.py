@@ -30,7 +30,8 @@ def _model_curve(t: NDArray[np.float64], r: UnloadResult, settings: EstimatorSet
     fit: dict[str, Any] = r.extra.get("curve_fit", {}) if r.extra else {}
     t0 = float(fit.get("t_start", r.t_start))
     p10 = float(fit.get("p10", r.p10))
-    p_atm = float(fit.get("p_atm", r.p_atm))
+    p_atm = float(fit.get("p_atm", r.end_pressure))  # a charge's: the supply
+    settings = settings.one_way(r.direction)
     if not (math.isfinite(t0) and math.isfinite(p10) and math.isfinite(p_atm)):
         return None
     if fit:

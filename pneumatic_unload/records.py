@@ -351,7 +351,8 @@ def with_temperature_evidence(record: Record, settings: EstimatorSettings,
             ev = channel_evidence(joint)
         else:
             fit = CurveFit(**cf)
-            ev = temperature_evidence(fit.config(settings), fit.t_start, *series)
+            ev = temperature_evidence(fit.config(settings.one_way(r.direction)), fit.t_start,
+                                      *series)
             if joint.get("why"):
                 ev["why"] = f"compared, {joint['why']}"
         text = departure_text(ev)

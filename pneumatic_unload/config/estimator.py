@@ -110,7 +110,8 @@ class EstimatorSettings(TankSpec):
     supply_pressure_uncertainty : float or None
         Standard uncertainty of a given supply pressure [Pa] (None: 0.1 % of it).
     supply_temperature : float or None
-        A charge's supply gas temperature T_s [K] (None: the wall's, the room's).
+        A charge's supply gas temperature T_s [K] (None: the wall's where given, else a
+        room's 20 C: :attr:`supply_gas_temperature`).
     charge_model_uncertainty : float
         ``model_uncertainty`` of a charge [-]: default :data:`CHARGE_MODEL_UNCERTAINTY`
         (0.29 %), the RMS error of the charge's model C against HydDown's fills (blend
@@ -176,7 +177,7 @@ class EstimatorSettings(TankSpec):
         "0.1 % of it")
     supply_temperature: float | None = optional(
         None, "K", 150.0, 600.0, "a charge's supply gas temperature T_s",
-        "the wall's (the room's)")
+        "the wall's where given, else 293.15 K")
     charge_model_uncertainty: float = number(
         CHARGE_MODEL_UNCERTAINTY, "-", 0.0, 0.5, "relative standard uncertainty of a "
         "charge's model-based C from the model's own limits")
@@ -205,7 +206,10 @@ class EstimatorSettings(TankSpec):
 
     def one_way(self, direction: str) -> EstimatorSettings:
         """These settings for one flow direction ('discharge' or 'charge'; a discharge's
-        without the supply's fields) [-]."""
+        without the supply's fields) [-]: those of a result of that direction (with
+        ``direction`` 'both', each step's)."""
+        if direction == self.direction:
+            return self
         supply = {} if direction == "charge" else {"supply_pressure": None,
                                                    "supply_temperature": None}
         return dataclasses.replace(self, direction=direction, **supply)
@@ -235,8 +239,13 @@ class EstimatorSettings(TankSpec):
 
     @property
     def supply_gas_temperature(self) -> float:
-        """A charge's supply temperature T_s in use [K] (the wall's when not given)."""
-        return self.wall if self.supply_temperature is None else self.supply_temperature
+        """A charge's supply temperature T_s in use [K]: given, else the wall's (the
+        room's) where given, else a room's :data:`AMBIENT_TEMPERATURE` (not T10: the gas
+        in the tank may be out of equilibrium - a tank just discharged is cold - while the
+        supply is not)."""
+        if self.supply_temperature is not None:
+            return self.supply_temperature
+        return AMBIENT_TEMPERATURE if self.wall_temperature is None else self.wall_temperature
 
 
 def wall_uncertainty(settings: EstimatorSettings,

@@ -281,12 +281,11 @@ class SimulatorNode(Node):
                 if auto and cycles and unloads_done >= cycles:
                     return
                 if self._mode == "alternate":  # the other direction from where it is
+                    # (/rig/config stays the cycle's: a recorder starts a new bag on a new
+                    # configuration, and the cycle is one recording)
                     why = self._stream.reverse()
                     if why:
                         self.get_logger().error(why, throttle_duration_sec=5.0)
-                    else:  # /rig/config says the step's direction and initial state
-                        self._cfg = self._stream.cfg
-                        self._publish_config()
                     return
                 self._stream.charge()
 
