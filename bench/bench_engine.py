@@ -201,25 +201,33 @@ def _pct(x: np.ndarray) -> str:
     return f"{np.percentile(x, 50):.3f} / {np.percentile(x, 99):.3f} / {x.max():.3f}"
 
 
-def bench_live(tmp: Path, unloads: int, block: int = 0,
-               rate: float = RATE_BIG) -> list[dict[str, object]]:
+#: The charge of the live part (``--direction charge``): the bench rig's tank filled from
+#: 7 bar abs at 1 bar, the estimator taking the supply from the final plateau.
+CHARGE = {"direction": "charge", "initial_pressure": 101325.0, "supply_pressure": 7e5}
+
+
+def bench_live(tmp: Path, unloads: int, block: int = 0, rate: float = RATE_BIG,
+               direction: str = "discharge") -> list[dict[str, object]]:
     """Part 3: simulator (cycle mode, ``unloads`` cycles) -> estimator latencies.
 
     The setup of ``bench_nodes.bench_estimator`` (same rig, cycle timing and estimator
     parameters; per-sample FluidPressure input, or PressureBlock of ``block`` samples),
     run until ``unloads`` unloads got their final curve fit (or the time limit), the raw
-    latency lists taken from the estimator's ``stats`` line.
+    latency lists taken from the estimator's ``stats`` line. ``direction`` 'charge': the
+    rig's tank filled through the component (:data:`CHARGE`; the cycle's recharge vents it
+    back to 1 bar), the estimator in the charge direction.
     """
     from bench_nodes import RIG
 
     from pneumatic_unload.launch import NodeProcess
 
     cycle = {"settle_time": 0.6, "vent_time": 0.3, "charge_time": 0.3, "duration": 1.2}
+    charge = CHARGE if direction == "charge" else {}
     est = NodeProcess("estimator", {"volume": RIG["volume"], "diagnostics_period": 0.5,
                                     "input": "block" if block else "sample",
                                     "qos": "reliable" if block else "sensor_data",
-                                    "curve_fit": True}, tmp)
-    sim = NodeProcess("simulator", {**RIG, "rate": rate, "mode": "cycle", **cycle,
+                                    "curve_fit": True, "direction": direction}, tmp)
+    sim = NodeProcess("simulator", {**RIG, **charge, "rate": rate, "mode": "cycle", **cycle,
                                     "cycles": unloads, "wait_for_subscribers": 1,
                                     "temperature_rate": 0.0, "block_size": block,
                                     "per_sample": not block}, tmp)
@@ -251,7 +259,8 @@ def bench_live(tmp: Path, unloads: int, block: int = 0,
     seen = {int(i) for i in re.findall(r"\] \[estimator\]: unload (\d+):", text)}
     n_final = len(re.findall(r"\] \[estimator\]: unload \d+:.*\(final\)", text))
     received = int(stats.get("received", 0))
-    what = f"PressureBlock x{block}" if block else "FluidPressure"
+    what = (f"PressureBlock x{block}" if block else "FluidPressure") + (
+        f" ({direction}, {rate:g} Hz)" if direction != "discharge" else "")
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
     print(f"\nLive, {what}: {len(seen)} unloads seen ({lat.size} crossing estimates, "
           f"{n_final} final fits) in {wall:.0f} s at {rate:g} Hz; published {published:,}, "
@@ -300,6 +309,9 @@ def main() -> int:
                     help="unloads in the live part (default 55, --quick 10)")
     ap.add_argument("--input", choices=("sample", "block", "both"), default="both",
                     help="live part: per-sample FluidPressure, PressureBlock x100 or both")
+    ap.add_argument("--direction", choices=("discharge", "charge"), default="discharge",
+                    help="live part: the rig discharges (10 kHz), or charges (the issue's "
+                         "targets: per-sample input at 1 kHz, blocks at 10 kHz)")
     args = ap.parse_args()
     blocks = {"sample": [0], "block": [100], "both": [0, 100]}[args.input]
     repeats = 1 if args.quick else 3
@@ -325,7 +337,8 @@ def main() -> int:
                 os.environ["ROS_DOMAIN_ID"] = str(free_domain_id())
             rows = []
             for block in blocks:
-                rows += bench_live(tmp, unloads, block)
+                rate = RATE_BIG if args.direction == "discharge" or block else 1000.0
+                rows += bench_live(tmp, unloads, block, rate, args.direction)
             print(f"\n## 3. Live estimator latency at 10 kHz (ROS_DOMAIN_ID="
                   f"{os.environ['ROS_DOMAIN_ID']})\n")
             print(_table(rows))

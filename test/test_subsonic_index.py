@@ -145,5 +145,5 @@ def test_results_database_of_schema_1_gains_the_m_columns(tmp_path):
     con = sqlite3.connect(path)
     cols = {row[1] for row in con.execute("PRAGMA table_info(unloads)")}
     assert {"subsonic_index", "subsonic_index_std", "pressure_offset",
-            "pressure_offset_std"} <= cols
-    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 2
+            "pressure_offset_std", "direction", "supply_pressure"} <= cols
+    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3

@@ -404,3 +404,38 @@ def test_live_results_keep_one_row_per_unload_with_its_verdict(tmp_path: Path):
         load_spec(tmp_path / "missing.yaml")
     with pytest.raises(ResultsDBError):
         LiveResults(tmp_path / "no" / "l2.sqlite", "estimator")
+
+
+def test_a_part_measured_both_ways_is_reported_side_by_side(tmp_path: Path):
+    """A charge bag and a discharge bag of one part, two batches (each with its direction)
+    into one database: the rows carry the direction, the report's parts table gives each
+    direction's C and their difference in combined sigma (#26)."""
+    from pneumatic_unload.testline.report import html_report
+
+    d = tmp_path / "in"
+    c_true = 5e-9
+    common = {"volume": 1e-3, "conductance": c_true, "critical_ratio": 0.45,
+              "noise_std": 500.0, "pre_time": 0.3, "effects": ("heat_transfer",)}
+    write_simulated_bag(RigConfig(**common, initial_pressure=6e5, duration=3.0, seed=1),
+                        d / "V14-009_discharge", analyze_live=False)
+    write_simulated_bag(RigConfig(**common, direction="charge", initial_pressure=101325.0,
+                                  supply_pressure=6e5, duration=3.0, seed=2),
+                        d / "V14-009_charge", analyze_live=False)
+    db = tmp_path / "both.sqlite"
+    for direction in ("discharge", "charge"):
+        run_batch([str(d / f"V14-009_{direction}")], InputOptions(
+            part_regex=r"(V14-\d+)", settings={"direction": direction}), db_path=db)
+    rows = _rows(db)
+    assert sorted((r["direction"], r["status"]) for r in rows) == [
+        ("charge", "ok"), ("discharge", "ok")]
+    charge = next(r for r in rows if r["direction"] == "charge")
+    assert charge["supply_pressure"] == pytest.approx(6e5, rel=3e-3)
+    (part,) = part_summary(rows)
+    both = part["by_direction"]
+    assert set(both) == {"discharge", "charge"}
+    for x in both.values():
+        assert x["conductance"] == pytest.approx(c_true, rel=0.01)
+    out = tmp_path / "report.html"
+    html_report(db, out)
+    page = out.read_text()
+    assert "C charge" in page and "charge - discharge" in page and "&sigma;)" in page
