@@ -24,6 +24,7 @@ from pneumatic_unload.estimation import (
     StreamingEstimator,
     UnloadResult,
 )
+from pneumatic_unload.estimation.batch import charge_reason
 from pneumatic_unload.fit.noise import estimate_noise
 from pneumatic_unload.fit.trace import TemperatureChannel, Trace
 from pneumatic_unload.model.effects import Start
@@ -73,6 +74,11 @@ class Problem:
                 r.tau_exp, r.p10, r.p_atm, r.conductance)) and math.isfinite(r.t_start))]
         if not results:
             _refuse_bad_data(every, math.inf)
+            if charge_reason(y[np.isfinite(y)], est) is not None:
+                raise DiscrepancyError(
+                    "the pressure rises and never falls: a charge; the discrepancy workflow "
+                    "analyses discharges (a charge's C, b and budget: analyze --direction "
+                    "charge)")
             raise DiscrepancyError("no complete unload found in the trace (the pressure "
                                    "must fall from a plateau through p*)")
         r = results[0]

@@ -191,9 +191,10 @@ def gauge_evidence(final: float, n_low: int, n_finite: int,
 CHARGE_RISE = 0.05
 
 
-def _charge_reason(pp: np.ndarray, s: EstimatorSettings, hi: float) -> str | None:
+def charge_reason(pp: np.ndarray, s: EstimatorSettings) -> str | None:
     """Why a record that only rises holds no unload (a charge: the tank filled through the
-    component), or None. pp: the finite pressures [Pa]; hi: their maximum [Pa]."""
+    component), or None. pp: the finite pressures [Pa]."""
+    hi = float(np.max(pp)) if pp.size else 0.0
     threshold = s.trigger_sigma * max(_noise_std(pp), 1e-9 * abs(hi))
     start = float(np.median(pp[:4]))
     end = float(np.median(pp[-max(4, pp.size // 50):]))
@@ -298,7 +299,7 @@ def explain_no_unload(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings | 
                 f"charge, {explain_no_unload(t, p, s.one_way('charge'), stride=stride)}")
     if s.charge:
         return _no_charge_reason(t, p, tt, pp, s, diagnostics)
-    rise = _charge_reason(pp, s, hi)
+    rise = charge_reason(pp, s)
     if rise is not None:
         return rise
     if s.atmosphere is not None and hi <= s.atmosphere:

@@ -257,6 +257,14 @@ class EstimatorState:
         cq = self.buf.sums()[1] if isinstance(k, np.ndarray) else self.buf.cq
         return stuck_run(cq, k, first=u.trigger) & u.noisy
 
+    def end_unknown(self, where: str = "") -> str:
+        """What is unknown without a final plateau (``where``: said after it), and what
+        to give."""
+        if self.settings.charge:
+            return (f"the supply unknown{where} (give the supply pressure, "
+                    "--supply-pressure PA)")
+        return f"p_atm unknown{where} (give the atmospheric pressure, --atmosphere PA)"
+
     def diag(self, level: str, message: str, t: float) -> None:
         """Record a diagnostic ('ok', 'warn', 'error') at sample time t [s]."""
         self.diagnostics.append(Diagnostic(level, self.mode, f"{self.tag}{message}", t))

@@ -332,8 +332,8 @@ class StreamingEstimator:
                 out += tail.finish_tail(st, n - 1, ended=True)
         elif st.mode == UNLOADING:
             auto = u.refined and not math.isfinite(u.pstar)
-            text = ("stream ended before the final plateau: p_atm unknown (give the "
-                    "atmospheric pressure)" if auto else "stream ended before the p* crossing")
+            text = (f"stream ended before the final plateau: {st.end_unknown()}" if auto
+                    else "stream ended before the p* crossing")
             st.diag("warn", text, st.last_t)
             out.append(sse.abort_result(st, n - 1, recovered=False, text=text))
         elif st.mode == TAIL and u.pending is not None:

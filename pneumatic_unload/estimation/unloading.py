@@ -370,8 +370,8 @@ def auto_too_long(st: EstimatorState, i: int) -> list[UnloadResult]:
     plateau yet (memory bound): close it as aborted with the reason and the fix, and skip
     the rest of it (one physical unload, one result)."""
     n = reduction.AUTO_HOLD_MAX
-    text = (f"no final plateau after {n} samples of the unload ({st.dt * n:.0f} s): p_atm "
-            "unknown within the memory bound (give the atmospheric pressure, --atmosphere)")
+    text = (f"no final plateau after {n} samples of the unload ({st.dt * n:.0f} s): "
+            f"{st.end_unknown(' within the memory bound')}")
     st.diag("warn", text, float(st.buf.t[i]))
     res = abort_result(st, i, recovered=False, text=text)
     res.final = True

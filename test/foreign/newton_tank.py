@@ -307,7 +307,7 @@ def charge(t: np.ndarray, *, volume: float, p10: float, t10: float, p_supply: fl
            b: float | None = None, subsonic_index: float = 0.5,
            flow_law: FlowLaw | None = None, t_wall: float | None = None,
            r_gas: float = 287.05, gamma: float = 1.4,
-           temperature_out: np.ndarray | None = None) -> np.ndarray:
+           temperature_out: np.ndarray | None = None, droop: float = 0.0) -> np.ndarray:
     """Tank pressure [Pa absolute] at instants t [s] of a charge: the tank at (p10, t10)
     at t[0] is filled through the component from a supply held at p_supply [Pa absolute],
     t_supply [K] once the valve opens at t_open [s]. The component's upstream side is the
@@ -315,7 +315,10 @@ def charge(t: np.ndarray, *, volume: float, p10: float, t10: float, p_supply: fl
     the supply's enthalpy c_p t_supply into the tank (a reverse flow, p above the supply,
     would carry the tank's). Newton cooling at a constant hA = m0 c_v / tau_heat to a wall
     at ``t_wall`` (default t10; tau_heat inf: none). The flow law as :func:`discharge`'s.
-    ``temperature_out`` receives the gas temperature [K] at t."""
+    ``temperature_out`` receives the gas temperature [K] at t. ``droop`` [-]: a regulated
+    supply that sags with its flow, p_s = p_supply (1 - droop g / g_choked) (a pressure
+    regulator's droop: ``droop`` below its set point at the choked flow, back at it when
+    the flow stops)."""
     if flow_law is None:
         if conductance is None or b is None:
             raise ValueError("give conductance and b, or a flow_law")
@@ -333,6 +336,9 @@ def charge(t: np.ndarray, *, volume: float, p10: float, t10: float, p_supply: fl
         temp = u / (m * cv)
         p = m * r_gas * temp / volume
         g = valve * g_choked * law_phi(p / p_supply)  # into the tank [kg/s]
+        for _ in range(6 if droop else 0):  # the sagging supply: a fixed point in g
+            p_s = p_supply * (1.0 - droop * g / g_choked)
+            g = valve * g_choked * p_s / p_supply * law_phi(min(p / p_s, 1.0))
         h = cp * (t_supply if g >= 0.0 else temp)
         return [g, g * h + h_a * (wall - temp)]
 
