@@ -284,6 +284,14 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, 
                                       hold=("t_open", "p10"), extra_terms=terms,
                                       fit_heat=None if not few else False,
                                       temperature=temperature)
+        if ts.size < FEW_POINTS and not few and final is not None and "rms" not in (
+                final.extra.get("curve_fit", {}).get("gas_temperature") or {}):
+            # the log followed by no heat law pins nothing: the few points hold the law
+            # (the log stays the evidence of the budget's departure line)
+            few = True
+            final = refine_with_curve_fit(res, ts, ps, s, noise_std=math.nan,
+                                          hold=("t_open", "p10"), extra_terms=terms,
+                                          fit_heat=False, temperature=temperature)
         if final is not None:
             extra = {**final.extra, "p10_source": p10_note}
             rms = float(extra.get("curve_fit", {}).get("rms", math.nan))
