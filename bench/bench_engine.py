@@ -202,7 +202,8 @@ def _pct(x: np.ndarray) -> str:
 
 
 #: The charge of the live part (``--direction charge``): the bench rig's tank filled from
-#: 7 bar abs at 1 bar, the estimator taking the supply from the final plateau.
+#: a regulated 7 bar abs at 1 bar, the supply given to the estimator as the atmosphere is
+#: for a discharge (taken from the final plateau, the crossing is known only there).
 CHARGE = {"direction": "charge", "initial_pressure": 101325.0, "supply_pressure": 7e5}
 
 
@@ -226,7 +227,9 @@ def bench_live(tmp: Path, unloads: int, block: int = 0, rate: float = RATE_BIG,
     est = NodeProcess("estimator", {"volume": RIG["volume"], "diagnostics_period": 0.5,
                                     "input": "block" if block else "sample",
                                     "qos": "reliable" if block else "sensor_data",
-                                    "curve_fit": True, "direction": direction}, tmp)
+                                    "curve_fit": True, "direction": direction,
+                                    **({"supply_pressure": CHARGE["supply_pressure"]}
+                                       if charge else {})}, tmp)
     sim = NodeProcess("simulator", {**RIG, **charge, "rate": rate, "mode": "cycle", **cycle,
                                     "cycles": unloads, "wait_for_subscribers": 1,
                                     "temperature_rate": 0.0, "block_size": block,

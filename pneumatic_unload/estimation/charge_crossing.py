@@ -22,8 +22,12 @@ SI units: s, Pa absolute, K, m^3, m^3/(s Pa).
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from pneumatic_unload import physics
 from pneumatic_unload.budget import (
@@ -90,41 +94,84 @@ def charge_model_inversion(settings: EstimatorSettings, tau: float, p10: float,
     return math.exp(x1) if abs(y0) < 1e-3 else math.nan
 
 
-def charge_crossing_estimate(settings: EstimatorSettings, tau: float, tau_std: float, *,
-                             p10: float, p_s: float, p_star: float,
-                             supply_measured: bool) -> CrossingEstimate:
-    """eq 39 mirrored, the adiabatic closed form and the model-based C of a charge with
-    their budgets, for the crossing time tau [s] and its 1-sigma tau_std [s] (p10, p_s,
-    p* [Pa absolute]; ``supply_measured``: p_s is the record's final plateau, moved by a
-    transducer's offset with p10)."""
+@dataclass(frozen=True)
+class ChargePlan:
+    """A charge's crossing estimate prepared before the crossing (half way to p*, off the
+    crossing's latency): at fixed pressures eq 39 mirrored and the adiabatic closed form
+    are exactly proportional to 1/tau, so are their input lines, and the model's
+    crossing time is tabulated around the expected C.
+
+    Attributes
+    ----------
+    settings : EstimatorSettings
+        The settings it was made with.
+    p10, p_s, p_star : float
+        Initial, supply and crossing pressures [Pa absolute].
+    supply_measured : bool
+        p_s is the record's final plateau.
+    problem : str or None
+        Why no C can come from these pressures.
+    tau_ref : float
+        The reference crossing time [s].
+    c39_ref, c_adi_ref : float
+        eq 39 mirrored and the adiabatic closed form at tau_ref [m^3/(s Pa)].
+    lines39, lines_adi : tuple of BudgetTerm
+        Their stated inputs' lines at the reference (proportional to C).
+    b_rel : float
+        The b prior's line relative to C [-].
+    table : tuple of float or None
+        log C = a + b log t + c (log t)^2 of the model's crossing time t [s] over
+        (t_lo, t_hi) [s]: (a, b, c, t_lo, t_hi); None without a heat law.
+    """
+
+    settings: EstimatorSettings
+    p10: float
+    p_s: float
+    p_star: float
+    supply_measured: bool
+    problem: str | None
+    tau_ref: float = math.nan
+    c39_ref: float = math.nan
+    c_adi_ref: float = math.nan
+    lines39: tuple[BudgetTerm, ...] = ()
+    lines_adi: tuple[BudgetTerm, ...] = ()
+    b_rel: float = math.nan
+    table: tuple[float, float, float, float, float] | None = None
+
+
+#: C of the model tabulated about the expected C [-] (the crossing within +-25 %).
+TABLE_FACTORS = (0.7, 1.0, 1.4)
+
+
+def plan_charge(settings: EstimatorSettings, *, p10: float, p_s: float, p_star: float,
+                supply_measured: bool, tau_ref: float = math.nan, t_mid: float = math.nan,
+                p_mid: float = math.nan) -> ChargePlan:
+    """Prepare a charge's crossing estimate at a reference crossing time ``tau_ref`` [s],
+    or, from the time t_mid [s] and pressure p_mid [Pa absolute] half way to p*, at the
+    crossing the adiabatic closed form expects (pressures [Pa absolute])."""
     s = settings
-    t_s = s.supply_gas_temperature
-    gas = s.gas
     problem = charge_pressure_problem(p10, p_s, p_star)
-    if problem is None and not (math.isfinite(tau) and tau > 0):
-        problem = f"no p* crossing time after the opening (tau_exp = {tau:.6g} s)"
-    if problem is None and not math.isfinite(tau_std):
-        problem = "tau_exp has no uncertainty: the opening of the charge is undetermined"
     if problem is not None:
-        c39 = physics.conductance_eq39(tau, p_s, p10, s.volume, t_s, gas) \
-            if p_s > 0 and tau > 0 else math.nan
-        return CrossingEstimate(problem, c39, math.nan, math.nan, math.nan, math.nan,
-                                "eq39-charge", {})
-    b = s.critical_ratio
+        return ChargePlan(s, p10, p_s, p_star, supply_measured, problem)
+    t_s, gas, b = s.supply_gas_temperature, s.gas, s.critical_ratio
 
-    def adiabatic(tau_: float = tau, p10_: float = p10, p_s_: float = p_s,
-                  p_cross: float = p_star, b_: float = b, vol: float = s.volume,
-                  ts: float = t_s) -> float:
-        return charge_conductance_adiabatic(tau_, p_cross, p10_, p_s_, vol, ts, b_, 0.5, gas)
-
-    c39 = physics.conductance_eq39(tau, p_s, p10, s.volume, t_s, gas)
-    c_adi = adiabatic()
+    def adiabatic(tau: float, p10_: float = p10, p_s_: float = p_s, p_cross: float = p_star,
+                  b_: float = b) -> float:
+        return charge_conductance_adiabatic(tau, p_cross, p10_, p_s_, s.volume, t_s, b_, 0.5,
+                                            gas)
+    if not (math.isfinite(tau_ref) and tau_ref > 0):
+        c_mid = charge_conductance_adiabatic(t_mid, p_mid, p10, p_s, s.volume, t_s, b, 0.5,
+                                             gas)
+        tau_ref = adiabatic(1.0) / c_mid if math.isfinite(c_mid) and c_mid > 0 else 1.0
+    c39 = physics.conductance_eq39(tau_ref, p_s, p10, s.volume, t_s, gas)
+    c_adi = adiabatic(tau_ref)
     u = input_uncertainties(s, max(p_s, p10))
     d = u["pressure"]
     ds = d if supply_measured else 0.0
 
-    def inputs(c: float, closed: Any) -> list[BudgetTerm]:
-        """The type B lines of a C [m^3/(s Pa)] by the closed form ``closed``."""
+    def inputs(c: float, closed: Any) -> tuple[BudgetTerm, ...]:
+        """The stated inputs' lines of a C [m^3/(s Pa)] of the closed form ``closed``."""
+        base = closed(p10, p_s, p_star)
         out = [BudgetTerm("volume V", "B", s.volume, u["volume"], "m^3",
                           abs(c) * u["volume"] / s.volume,
                           "stated" if s.volume_uncertainty is not None
@@ -136,44 +183,91 @@ def charge_crossing_estimate(settings: EstimatorSettings, tau: float, tau_std: f
         moved = [closed(p10 + e, p_s + e * (ds / d if d else 0.0), p_star + e)
                  for e in (d, -d)]
         out.append(BudgetTerm("pressure transducer (offset)", "B", p10, d, "Pa",
-                              abs(moved[0] - moved[1]) / 2.0 * abs(c) / closed(
-                                  p10, p_s, p_star),
+                              abs(moved[0] - moved[1]) / 2.0 * abs(c) / base,
                               "stated" if s.pressure_uncertainty is not None
                               else "default 0.1 % of the supply"))
         if not supply_measured:
             ua = s.end_uncertainty
             given = [closed(p10, p_s + e, p_star + 0.632 * e) for e in (ua, -ua)]
             out.append(BudgetTerm("supply pressure p_s (given)", "B", p_s, ua, "Pa",
-                                  abs(given[0] - given[1]) / 2.0 * abs(c) / closed(
-                                      p10, p_s, p_star), "supply_pressure_uncertainty"))
-        return out
+                                  abs(given[0] - given[1]) / 2.0 * abs(c) / base,
+                                  "supply_pressure_uncertainty"))
+        return tuple(out)
 
-    def eq39_of(p10_: float, p_s_: float, _p: float) -> float:
-        return physics.conductance_eq39(tau, p_s_, p10_, s.volume, t_s, gas)
+    lines39 = inputs(c39, lambda a, p, _x: physics.conductance_eq39(tau_ref, p, a, s.volume,
+                                                                     t_s, gas))
+    lines_adi = inputs(c_adi, lambda a, p, x: adiabatic(tau_ref, a, p, x))
+    # the prior of b moves the closed form's integral (the flow turns subsonic before p*)
+    b_lo, b_hi = max(b - CRITICAL_RATIO_PRIOR_STD, 0.01), min(b + CRITICAL_RATIO_PRIOR_STD,
+                                                              0.99)
+    b_rel = abs(adiabatic(tau_ref, b_=b_hi) - adiabatic(tau_ref, b_=b_lo)) / 2.0 / c_adi
+    table = None
+    if s.heat_model == "natural" and math.isfinite(c_adi):
+        logs = []
+        for k in TABLE_FACTORS:
+            cfg = rig_from_settings(s, conductance=k * c_adi, p10=p10, p_atm=p_s)
+            t_k = model_crossing_time(cfg, p_star, tau_ref / k)
+            if not (math.isfinite(t_k) and t_k > 0):
+                break
+            logs.append((math.log(t_k), math.log(k * c_adi)))
+        if len(logs) == len(TABLE_FACTORS):
+            x = np.array([v[0] for v in logs])
+            coef = np.polyfit(x, np.array([v[1] for v in logs]), 2)
+            table = (float(coef[2]), float(coef[1]), float(coef[0]),
+                     float(math.exp(x.min())), float(math.exp(x.max())))
+    return ChargePlan(s, p10, p_s, p_star, supply_measured, None, tau_ref, c39, c_adi,
+                      lines39, lines_adi, b_rel, table)
 
-    def adi_of(p10_: float, p_s_: float, p_cross: float) -> float:
-        return adiabatic(p10_=p10_, p_s_=p_s_, p_cross=p_cross)
 
-    budget39 = Budget(c39, (tau_term(c39, tau, tau_std), *inputs(c39, eq39_of)))
+def _scaled(lines: tuple[BudgetTerm, ...], k: float) -> tuple[BudgetTerm, ...]:
+    """Budget lines with their contributions times k [-]."""
+    return tuple(dataclasses.replace(t, std=t.std * k) for t in lines)
+
+
+def charge_crossing_estimate(plan: ChargePlan, tau: float, tau_std: float
+                             ) -> CrossingEstimate:
+    """eq 39 mirrored, the adiabatic closed form and the model-based C of a charge with
+    their budgets, for the crossing time tau [s] and its 1-sigma tau_std [s], from the
+    plan (:func:`plan_charge`): a few multiplications and the table's lookup; the model
+    inverted by its secant (a few integrations) only where the crossing lies outside the
+    table."""
+    s = plan.settings
+    problem = plan.problem
+    if problem is None and not (math.isfinite(tau) and tau > 0):
+        problem = f"no p* crossing time after the opening (tau_exp = {tau:.6g} s)"
+    if problem is None and not math.isfinite(tau_std):
+        problem = "tau_exp has no uncertainty: the opening of the charge is undetermined"
+    if problem is not None:
+        c39 = physics.conductance_eq39(tau, plan.p_s, plan.p10, s.volume,
+                                       s.supply_gas_temperature, s.gas) \
+            if plan.p_s > 0 and tau > 0 else math.nan
+        return CrossingEstimate(problem, c39, math.nan, math.nan, math.nan, math.nan,
+                                "eq39-charge", {})
+    k = plan.tau_ref / tau  # both closed forms are C ~ 1/tau at fixed pressures
+    c39, c_adi = plan.c39_ref * k, plan.c_adi_ref * k
+    budget39 = Budget(c39, (tau_term(c39, tau, tau_std), *_scaled(plan.lines39, k)))
     extra: dict[str, Any] = {"budget_eq39": budget39.to_dict(), "direction": "charge"}
     c_model, method = c_adi, "adiabatic-charge"
     form = model_form_term(0.0, "no heat law")
     heat_std = 0.0
     if s.heat_model == "natural" and math.isfinite(c_adi):
-        c_heat = charge_model_inversion(s, tau, p10, p_s, p_star, c_adi)
+        t = plan.table
+        if t is not None and t[3] <= tau <= t[4]:
+            x = math.log(tau)
+            c_heat = math.exp(t[0] + t[1] * x + t[2] * x * x)
+        else:
+            c_heat = charge_model_inversion(s, tau, plan.p10, plan.p_s, plan.p_star, c_adi)
         if math.isfinite(c_heat):
             c_model, method = c_heat, "model-inversion-charge"
             form = model_form_term(abs(c_heat - c_adi) / math.sqrt(3.0),
                                    "heat law not yet seen: uniform between none "
                                    "(adiabatic) and the correlation's")
             heat_std = HEAT_CORRELATION_REL_STD * abs(c_heat - c_adi)
-    # the prior of b moves the closed form's integral (the flow turns subsonic before p*)
-    b_lo, b_hi = max(b - CRITICAL_RATIO_PRIOR_STD, 0.01), min(b + CRITICAL_RATIO_PRIOR_STD,
-                                                              0.99)
-    b_std = abs(adiabatic(b_=b_hi) - adiabatic(b_=b_lo)) / 2.0 * c_model / c_adi
+    b_std = plan.b_rel * c_model
     type_a = math.sqrt((c_model * tau_std / tau) ** 2 + b_std**2 + heat_std**2)
-    bm = Budget(c_model, (record_term(CHARGE_TYPE_A, type_a), *inputs(c_model, adi_of),
-                          form, model_limits_term(c_model, s.model_limits)))
+    bm = Budget(c_model, (record_term(CHARGE_TYPE_A, type_a),
+                          *_scaled(plan.lines_adi, c_model / plan.c_adi_ref), form,
+                          model_limits_term(c_model, s.model_limits)))
     extra["budget"] = bm.to_dict()
     return CrossingEstimate(None, c39, budget39.combined_std, c_adi, c_model,
                             bm.combined_std, method, extra)

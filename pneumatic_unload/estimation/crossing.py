@@ -36,8 +36,9 @@ from pneumatic_unload.budget import (
 )
 from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
 from pneumatic_unload.estimation.charge_crossing import (
+    ChargePlan,
     charge_crossing_estimate,
-    charge_pressure_problem,
+    plan_charge,
 )
 from pneumatic_unload.estimation.refine import (
     crossing_inversion,
@@ -88,6 +89,8 @@ class CrossingPlan:
     isentropic_factor : float
         The isentropic inversion as C = k / tau (:func:`~pneumatic_unload.physics.
         isentropic_factor`; NaN when the pressures have a problem) [m^3/Pa].
+    charge : ChargePlan or None
+        A charge's plan (:func:`~.charge_crossing.plan_charge`; p_atm is its supply).
     """
 
     settings: EstimatorSettings
@@ -104,6 +107,7 @@ class CrossingPlan:
     adiabatic_settings: EstimatorSettings | None = None
     eq39_factors: tuple[float, float] = (math.nan, math.nan)
     isentropic_factor: float = math.nan
+    charge: ChargePlan | None = None
 
 
 def plan_crossing(settings: EstimatorSettings, *, p10: float, p_atm: float, p_star: float,
@@ -127,9 +131,12 @@ def plan_crossing(settings: EstimatorSettings, *, p10: float, p_atm: float, p_st
         t_mid); the lines are proportional to C whatever it is.
     """
     s = settings
-    if s.charge:  # p_atm: the supply; the closed forms are cheap (charge_crossing)
-        return CrossingPlan(s, p10, p_atm, p_star, charge_pressure_problem(p10, p_atm, p_star),
-                            None, None, None, None, wall_uncertainty(s))
+    if s.charge:  # p_atm: the supply (charge_crossing)
+        cp = plan_charge(s, p10=p10, p_s=p_atm, p_star=p_star,
+                         supply_measured=s.supply_pressure is None, tau_ref=tau_ref,
+                         t_mid=t_mid, p_mid=p_mid)
+        return CrossingPlan(s, p10, p_atm, p_star, cp.problem, None, None, None, None,
+                            wall_uncertainty(s), charge=cp)
     problem = pressure_problem(p10, p_atm, p_star)
     subsonic = None
     if s.critical_ratio > 0 and p_star < p_atm / s.critical_ratio:
@@ -187,8 +194,10 @@ def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> Crossin
     s = plan.settings
     p10, p_atm, p_star = plan.p10, plan.p_atm, plan.p_star
     if s.charge:
-        return charge_crossing_estimate(s, tau, tau_std, p10=p10, p_s=p_atm, p_star=p_star,
-                                        supply_measured=s.supply_pressure is None)
+        cp = plan.charge if plan.charge is not None else plan_charge(
+            s, p10=p10, p_s=p_atm, p_star=p_star, supply_measured=s.supply_pressure is None,
+            tau_ref=tau)
+        return charge_crossing_estimate(cp, tau, tau_std)
     a39, b39 = plan.eq39_factors  # physics.conductance_eq39, prepared
     c39 = a39 / (b39 * tau) if a39 == a39 else physics.conductance_eq39(
         tau, p10, p_atm, s.volume, s.initial_temperature, s.gas)
