@@ -283,9 +283,13 @@ class Family:
                 self.not_offered[key] = why
                 continue
             self.fits[key] = got
-            if start is None and got[0].inflation < 2.0 and math.isfinite(got[0].conductance):
+            if start is None and got[0].inflation < 2.0 and math.isfinite(got[0].conductance) \
+                    and not self.settings.charge:
                 # the next law starts from this fit when it is close (white residuals);
-                # otherwise from the neutral values, with a second start screened
+                # otherwise from the neutral values, with a second start screened (a
+                # charge's laws each from the neutral values: a near-isothermal fill with C
+                # gamma times higher fits the rise as well as the truth, and a law started
+                # from the other's basin stays there - a vacuum fill read C +37 %)
                 start = next_law_start(got[0], self.settings, self.span.t_ref)
         self._explore(sfx)
         self._hot_starts(sfx)
@@ -318,6 +322,16 @@ class Family:
         family = [k for k in self.fits if k.endswith(M_SUFFIX) == bool(sfx)]
         if not (self.natural and self.common["fit_heat"] and s.wall_temperature is None
                 and family):
+            return
+        if s.charge and not self.t10_logged:
+            # a charge's pressure barely carries T10 (the inflow's enthalpy sets the rise):
+            # fitted from it, T10 traded against C and b (an adiabatic rig's 1 kHz charge:
+            # T10 440 K, C +7.7 % at z 7); a warm tank's charge is read with its log
+            for law in ("natural", "fixed"):
+                if law + sfx in self.fits:
+                    self.not_offered[f"{law}+wall{sfx}"] = (
+                        "a charge's T10 is not fitted from its pressure (the inflow's "
+                        "enthalpy sets the rise): give the gas temperature's log")
             return
         least = min(self.fits[k][0].inflation for k in family)
         far = abs(s.initial_temperature - AMBIENT_TEMPERATURE) > \
