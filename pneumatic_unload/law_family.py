@@ -283,13 +283,9 @@ class Family:
                 self.not_offered[key] = why
                 continue
             self.fits[key] = got
-            if start is None and got[0].inflation < 2.0 and math.isfinite(got[0].conductance) \
-                    and not self.settings.charge:
+            if start is None and got[0].inflation < 2.0 and math.isfinite(got[0].conductance):
                 # the next law starts from this fit when it is close (white residuals);
-                # otherwise from the neutral values, with a second start screened (a
-                # charge's laws each from the neutral values: a near-isothermal fill with C
-                # gamma times higher fits the rise as well as the truth, and a law started
-                # from the other's basin stays there - a vacuum fill read C +37 %)
+                # otherwise from the neutral values, with a second start screened
                 start = next_law_start(got[0], self.settings, self.span.t_ref)
         self._explore(sfx)
         self._hot_starts(sfx)
