@@ -17,6 +17,8 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        # ros2 launch pneumatic_unload bench.launch.yaml
+        (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.yaml"))),
         # a Foxglove Studio layout: pressure, p*, the crossing and the estimates
         (f"share/{PACKAGE}/foxglove", sorted(glob("foxglove/*.json"))),
     ],

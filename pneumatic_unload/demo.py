@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.launch import NodeProcess, free_domain_id
+from pneumatic_unload.launch import free_domain_id, load_launch, package_share, start_launch
 from pneumatic_unload.physics import orifice_conductance
 
 #: The embedded default rig of the demo.
@@ -65,15 +65,20 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"{cfg.critical_ratio}, effects: {', '.join(cfg.effects)}; "
           f"nodes on ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}")
     t0 = time.monotonic()
-    rec = NodeProcess("recorder", {"output": str(out), "topics": ["/estimator/settings"]},
-                      logs, env=env)
-    est = NodeProcess("estimator", {"volume": cfg.volume, "initial_temperature":
-                                    cfg.initial_temperature, "atmosphere": cfg.atmosphere},
-                      logs, env=env)
-    rig = {k: getattr(cfg, k) for k in _RIG_PARAMS}
-    sim = NodeProcess("simulator", {**rig, "effects": ",".join(cfg.effects),
-                                    "start_delay": 1.5, "wait_for_subscribers": 2,
-                                    "duration": 8.0, "auto_charge": False}, logs, env=env)
+    # the launch file's nodes (launch/bench.launch.yaml, what `ros2 launch` starts), with
+    # the demo's rig and timing over its arguments
+    nodes = {n["name"]: n for n in load_launch(
+        package_share() / "launch" / "bench.launch.yaml",
+        {"volume": repr(cfg.volume), "initial_pressure": repr(cfg.initial_pressure),
+         "conductance": repr(cfg.conductance), "start_delay": "1.5", "output": str(out)})}
+    nodes["recorder"]["params"]["topics"] = ["/estimator/settings"]
+    nodes["estimator"]["params"].update(initial_temperature=cfg.initial_temperature,
+                                        atmosphere=cfg.atmosphere)
+    nodes["simulator"]["params"].update(
+        {k: getattr(cfg, k) for k in _RIG_PARAMS}, effects=",".join(cfg.effects),
+        wait_for_subscribers=2, duration=8.0, auto_charge=False)
+    rec, est, sim = start_launch([nodes[k] for k in ("recorder", "estimator", "simulator")],
+                                 logs, env=env)
     procs = (sim, est, rec)
     ok = True
     try:

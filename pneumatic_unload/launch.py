@@ -143,3 +143,201 @@ class NodeProcess:
         if not self._log.closed:
             self._log.close()
         return self.returncode
+
+
+# --------------------------------------------------------------------------- launch files
+#: Substitutions of the ROS 2 launch format this launcher resolves.
+SUBSTITUTION = re.compile(r"\$\((var|find-pkg-share|env)\s+([^)\s]+)(?:\s+([^)]*))?\)")
+#: The package whose share folder ``$(find-pkg-share ...)`` resolves here.
+PACKAGE = "pneumatic_unload"
+#: The node executables of the package (its console scripts and node modules).
+EXECUTABLES = ("simulator", "estimator", "recorder", "replay")
+
+
+class LaunchError(ValueError):
+    """A launch file this launcher cannot run, with the reason."""
+
+
+def package_share(package: str = PACKAGE) -> Path:
+    """The share folder of the package: the source tree beside this module (``config/``
+    there), else the installed ``share/<package>`` (ament index).
+
+    Raises
+    ------
+    LaunchError
+        Another package, or none found."""
+    if package != PACKAGE:
+        raise LaunchError(f"$(find-pkg-share {package}): only {PACKAGE} is known here")
+    root = Path(__file__).resolve().parent.parent
+    if (root / "config" / "estimator.yaml").is_file():
+        return root
+    for prefix in [*os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep), sys.prefix]:
+        share = Path(prefix) / "share" / package
+        if (share / "config").is_dir():
+            return share
+    raise LaunchError(f"no share folder of {package} (config/ not found)")
+
+
+def _substitute(text: Any, args: dict[str, str]) -> Any:
+    """``text`` with its substitutions resolved (non-strings as they are)."""
+    if not isinstance(text, str):
+        return text
+
+    def one(m: re.Match[str]) -> str:
+        kind, name, rest = m.group(1), m.group(2), m.group(3)
+        if kind == "var":
+            if name not in args:
+                raise LaunchError(f"$(var {name}): no such argument (declared: "
+                                  f"{', '.join(sorted(args)) or 'none'})")
+            return args[name]
+        if kind == "env":
+            value = os.environ.get(name, rest)
+            if value is None:
+                raise LaunchError(f"$(env {name}): not set and no default")
+            return value
+        return str(package_share(name))
+    return SUBSTITUTION.sub(one, text)
+
+
+def _typed(text: Any) -> Any:
+    """A parameter value as ROS reads it from a launch file: YAML (a number, a bool, a
+    list), an empty string kept."""
+    if not isinstance(text, str) or text == "":
+        return text
+    import yaml
+
+    value = yaml.safe_load(text)
+    return text if value is None else value
+
+
+def load_launch(path: str | Path, overrides: dict[str, str] | None = None
+                ) -> list[dict[str, Any]]:
+    """The nodes of a ROS 2 YAML launch file, its arguments set from ``overrides``
+    (``name:=value`` of the command line) or their defaults: per node its ``exec``,
+    ``name``, parameter files and parameter values (typed as ROS types them).
+
+    Raises
+    ------
+    LaunchError
+        Not a launch file, an unknown entry or argument, a missing value, another package
+        or executable."""
+    import yaml
+
+    try:
+        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as exc:
+        raise LaunchError(f"{path}: cannot read the launch file: {exc}") from exc
+    if not isinstance(doc, dict) or not isinstance(doc.get("launch"), list):
+        raise LaunchError(f"{path}: not a ROS 2 YAML launch file (no 'launch:' list)")
+    given = dict(overrides or {})
+    args: dict[str, str] = {}
+    nodes = []
+    for entry in doc["launch"]:
+        if not isinstance(entry, dict) or len(entry) != 1:
+            raise LaunchError(f"{path}: an entry is not one 'arg' or 'node': {entry!r}")
+        (kind, body), = entry.items()
+        if kind == "arg":
+            name = str(body.get("name", ""))
+            if name in given:
+                args[name] = str(given.pop(name))
+            elif "default" in body:
+                args[name] = _substitute(str(body["default"]), args)
+            else:
+                raise LaunchError(f"argument {name!r} has no default: give {name}:=VALUE")
+        elif kind == "node":
+            if body.get("pkg") != PACKAGE or body.get("exec") not in EXECUTABLES:
+                raise LaunchError(f"node {body.get('pkg')}/{body.get('exec')}: this "
+                                  f"launcher runs {PACKAGE}'s {', '.join(EXECUTABLES)}")
+            files, values = [], {}
+            for p in body.get("param", []) or []:
+                if "from" in p:
+                    files.append(Path(_substitute(p["from"], args)))
+                else:
+                    values[str(p["name"])] = _typed(_substitute(p.get("value"), args))
+            nodes.append({"exec": body["exec"], "name": body.get("name", body["exec"]),
+                          "files": files, "params": values})
+        else:
+            raise LaunchError(f"{path}: entry {kind!r} is not supported here (arg, node)")
+    if given:
+        raise LaunchError(f"unknown launch argument(s) {', '.join(sorted(given))}; "
+                          f"declared: {', '.join(sorted(args))}")
+    return nodes
+
+
+def start_launch(nodes: list[dict[str, Any]], log_dir: Path,
+                 env: dict[str, str] | None = None) -> list[NodeProcess]:
+    """Start the nodes of :func:`load_launch`, each in its own process, with ``env``
+    (default this environment: its ``ROS_DOMAIN_ID``): its parameter files, then its
+    values (written to a parameter file of its own in ``log_dir``: a ``-p name:=`` of an
+    empty string is no valid override), then its name."""
+    import yaml
+
+    log_dir.mkdir(parents=True, exist_ok=True)
+    procs = []
+    for n in nodes:
+        extra: list[str] = []
+        for f in n["files"]:
+            extra += ["--params-file", str(f)]
+        if n["params"]:
+            own = log_dir / f"{n['name']}-{os.getpid()}-launch.yaml"
+            own.write_text(yaml.safe_dump({"/**": {"ros__parameters": n["params"]}}))
+            extra += ["--params-file", str(own)]
+        if n["name"] != n["exec"]:
+            extra += ["-r", f"__node:={n['name']}"]
+        procs.append(NodeProcess(n["exec"], {}, log_dir, extra=extra, env=env))
+    return procs
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m pneumatic_unload.launch FILE [name:=value ...]``: run a launch file's
+    nodes until Ctrl-C (or one of them exits); exit code 0 when all stopped cleanly."""
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv or argv[0] in ("-h", "--help"):
+        print("usage: python -m pneumatic_unload.launch FILE.launch.yaml [name:=value ...]")
+        return 0 if argv else 2
+    overrides = {}
+    for a in argv[1:]:
+        if ":=" not in a:
+            print(f"launch: {a!r} is not name:=value", file=sys.stderr)
+            return 2
+        k, v = a.split(":=", 1)
+        overrides[k] = v
+    try:
+        nodes = load_launch(argv[0], overrides)
+    except LaunchError as exc:
+        print(f"launch: {exc}", file=sys.stderr)
+        return 2
+    log_dir = Path(os.environ.get("PNEUMATIC_UNLOAD_LOG_DIR", "runs/logs"))
+
+    def interrupt(_sig: int, _frame: Any) -> None:
+        raise KeyboardInterrupt
+    signal.signal(signal.SIGTERM, interrupt)  # a supervisor's stop: as Ctrl-C
+    procs = start_launch(nodes, log_dir)
+    print(f"launch: {', '.join(n['name'] for n in nodes)} started on ROS_DOMAIN_ID="
+          f"{os.environ.get('ROS_DOMAIN_ID', '0')}; logs in {log_dir}/; Ctrl-C stops them",
+          flush=True)
+    try:
+        while all(p.proc.poll() is None for p in procs):
+            time.sleep(0.2)
+        for p in procs:
+            if p.proc.poll() is not None:
+                print(f"launch: {p.name} exited with code {p.proc.returncode}; its log "
+                      f"{p.log_path}:\n{p.output()[-1500:]}", file=sys.stderr)
+    except KeyboardInterrupt:
+        pass
+    # stopping: the nodes get one SIGINT each from here (a terminal's Ctrl-C reached them
+    # too; a second one to the launcher must not cut their shutdown short)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    codes = []
+    for p in reversed(procs):
+        try:
+            codes.append(p.stop())
+        except AssertionError as exc:
+            print(f"launch: {exc}", file=sys.stderr)
+            codes.append(1)
+    return 0 if all(c == 0 for c in codes) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
