@@ -269,3 +269,32 @@ def test_a_charge_measures_the_iso_6358_1_law(m: float, b: float, p10: float,
     assert r.critical_ratio == pytest.approx(b, abs=0.02)
     assert r.subsonic_index == pytest.approx(m, abs=0.02)
     assert abs(r.subsonic_index - m) < 3.0 * r.subsonic_index_std + 0.005
+
+
+def test_a_live_charge_from_a_given_opening_equals_the_offline_one() -> None:
+    """The node's start-time mode for a charge (the supply given): the samples from the
+    opening, the crossing when one rises to p*, the final fit on the samples up to where
+    the record settles; the same numbers as ``analyze --start-time`` on the record."""
+    from pneumatic_unload.estimation import OpeningStartEstimator
+
+    t, p, c = _foreign_charge(1e5, 6e5, tau_heat=8.0)
+    s = EstimatorSettings(direction="charge", volume=5e-3, start_time=0.3,
+                          supply_pressure=6e5, **EXACT)
+    live = OpeningStartEstimator(s)
+    got = [r for k in range(0, t.size, 250) for r in live.push_block(t[k:k + 250],
+                                                                      p[k:k + 250])]
+    live.finish()
+    (job,) = live.take_final_fits()
+    final = job.run()
+    offline = analyze(t, p, s)
+    numbers = ("conductance", "conductance_std", "conductance_model", "conductance_model_std",
+               "tau_exp", "p10", "p_star", "supply_pressure", "critical_ratio", "status")
+    assert len(got) == 1 and final is not None
+    for live_r, off_r in ((got[0], offline[0]), (final, offline[-1])):
+        for key in numbers:  # i_complete differs: live completes the crossing where it is
+            assert getattr(live_r, key) == getattr(off_r, key) or math.isnan(
+                getattr(off_r, key)), key
+    assert final.direction == "charge" and final.conductance_model == pytest.approx(
+        c, rel=0.01)
+    with pytest.raises(EstimationError, match="supply_pressure"):
+        OpeningStartEstimator(EstimatorSettings(direction="charge", start_time=0.0))

@@ -8,7 +8,9 @@ curve fit); the final estimate is the same path on the samples up to where the r
 settles (:func:`~pneumatic_unload.estimation.sparse.settle_index`: the rule the offline
 analysis applies, so that live and offline analyse the same samples), or on every sample
 received when the stream ends first (:meth:`OpeningStartEstimator.finish`). One unload per
-start time: later samples are ignored (a new ``start_time`` starts a new estimator).
+start time: later samples are ignored (a new ``start_time`` starts a new estimator). A
+charge (``direction`` 'charge', its ``supply_pressure`` given) rises to its p* and settles
+at the supply.
 
 The interface is the one the node uses of
 :class:`~pneumatic_unload.estimation.streaming.StreamingEstimator` (push, push_block,
@@ -25,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pneumatic_unload import physics
+from pneumatic_unload.charge import charge_p_star
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.buffer import ReadingLog
 from pneumatic_unload.estimation.history import DiagnosticLog
@@ -76,12 +79,14 @@ def check_opening_settings(settings: EstimatorSettings) -> None:
     pass)."""
     if settings.start_time is None:
         raise EstimationError("the opening-start mode needs start_time [s, record clock]")
-    if settings.charge:
-        raise EstimationError("the live opening-start mode analyses a discharge; a charge "
-                              "recorded from its opening is analysed offline (analyze "
-                              "--direction charge --start-time S), a live charge from its "
-                              "plateau (start_time unset)")
-    if settings.atmosphere is None:
+    if settings.direction == "both":
+        raise EstimationError("a start time begins one step: give its direction (charge or "
+                              "discharge), not 'both'")
+    if settings.charge and settings.supply_pressure is None:
+        raise EstimationError("start_time with a charge needs the supply (a record that "
+                              "begins at the opening need not end on its plateau): set "
+                              "supply_pressure [Pa]")
+    if settings.atmosphere is None and not settings.charge:
         raise EstimationError("start_time needs the atmosphere (a record that begins at the "
                               "opening need not end on a plateau): set atmosphere [Pa]")
 
@@ -164,7 +169,9 @@ class OpeningStartEstimator:
         if self._crossing is None:
             if not math.isfinite(self._p10) and not self._find_p10():
                 return []
-            below = np.flatnonzero(ok & (pa <= self._p_star))
+            # p* reached: fallen to it (a discharge), risen to it (a charge)
+            sign = -1.0 if s.charge else 1.0
+            below = np.flatnonzero(ok & (sign * pa <= sign * self._p_star))
             if below.size == 0:
                 return []
             try:
@@ -178,9 +185,9 @@ class OpeningStartEstimator:
             after = first + int(below[0]) + 1  # the settle rule counts after the crossing
             pa, ok = pa[after - first:], ok[after - first:]
             first = after
-        p_atm = float(s.atmosphere)  # type: ignore[arg-type]
+        end = float(s.end_pressure)  # type: ignore[arg-type]
         idx = np.flatnonzero(ok)
-        hit, self._run = settle_scan(pa[idx], SETTLE_FRACTION * (self._p10 - p_atm), p_atm,
+        hit, self._run = settle_scan(pa[idx], SETTLE_FRACTION * abs(self._p10 - end), end,
                                      self._run)
         if hit is not None:
             self._close(first + int(idx[hit]) + 1)
@@ -192,7 +199,8 @@ class OpeningStartEstimator:
         if self._mode == "tail":
             self._close(self._n)
         elif self._mode == "unloading":
-            self._diagnose("warn", "the stream ended before the record fell to p* "
+            how = "rose" if self._settings.charge else "fell"
+            self._diagnose("warn", f"the stream ended before the record {how} to p* "
                                    f"({self._p_star:.0f} Pa): no estimate")
             self._mode = "done"
         return []
@@ -219,11 +227,16 @@ class OpeningStartEstimator:
         except EstimationError as exc:
             self._fail(str(exc))
             return False
-        if not p10 > s.atmosphere:  # type: ignore[operator]
-            self._fail(f"p10 ({p10:.0f} Pa) is not above p_atm ({s.atmosphere:.0f} Pa)")
+        end = float(s.end_pressure)  # type: ignore[arg-type]
+        if s.charge and not end > p10:
+            self._fail(f"the supply ({end:.0f} Pa) is not above p10 ({p10:.0f} Pa): nothing "
+                       "to charge")
+            return False
+        if not s.charge and not p10 > end:
+            self._fail(f"p10 ({p10:.0f} Pa) is not above p_atm ({end:.0f} Pa)")
             return False
         self._p10 = p10
-        self._p_star = physics.p_star(p10, float(s.atmosphere))  # type: ignore[arg-type]
+        self._p_star = charge_p_star(p10, end) if s.charge else physics.p_star(p10, end)
         return True
 
     def _close(self, n: int) -> None:
