@@ -131,6 +131,8 @@ class StreamingEstimator:
         #: converts (to_pa) is the pressure again; the physics (the crossing's closed
         #: forms, the curve fit) takes the direction from the settings.
         self._mirror = settings.charge
+        if not self._mirror:  # the per-sample hot path without the mirror's extra call
+            self.push = self._push  # type: ignore[method-assign]
         self._st = EstimatorState(_core_settings(settings), live=live,
                                   defer_final_fit=defer_final_fit, diagnostics=diagnostics,
                                   tag=tag)
