@@ -150,11 +150,12 @@ def model_range(name: str) -> tuple[float, float]:
 LOG_C_RANGE = tuple(math.log(v) for v in model_range("conductance"))
 
 
-def in_model_range(p10: float, p_atm: float) -> bool:
-    """True when the discharge model covers p10 and p_atm [Pa absolute] (it would clip
-    them to its range, and answer for other pressures than those measured)."""
+def in_model_range(p10: float, p_atm: float, *, charge: bool = False) -> bool:
+    """True when the model covers p10 and p_atm [Pa absolute] (a charge's p_atm: its
+    supply; it would clip them to its range, and answer for other pressures than those
+    measured)."""
     lo, hi = model_range("initial_pressure")
-    a_lo, a_hi = model_range("atmosphere")
+    a_lo, a_hi = model_range("supply_pressure" if charge else "atmosphere")
     return lo <= p10 <= hi and a_lo <= p_atm <= a_hi
 #: Integrator tolerance of the inversion: crossing times to about 1e-6 relative [-].
 INVERSION_ODE_RTOL = 1e-6
@@ -174,6 +175,46 @@ def may_turn_subsonic(settings: EstimatorSettings, p_atm: float, p_star: float) 
     """
     b_lo = max(settings.critical_ratio - 2.0 * CRITICAL_RATIO_PRIOR_STD, 0.01)
     return p_star < p_atm / b_lo
+
+
+def model_conductance(settings: EstimatorSettings, tau_exp: float, *, p10: float,
+                      p_atm: float, p_star: float, c_start: float) -> float:
+    """C [m^3/(s Pa)] for which the model of the settings (their heat law and direction: a
+    charge's p_atm is its supply) reaches p_star at tau_exp [s] after the opening, by a
+    secant on log t(C) - log tau_exp from ``c_start`` (pressures [Pa absolute]); NaN when
+    the model does not cover the pressures (:func:`in_model_range`) or no C in its range
+    (:data:`LOG_C_RANGE`) does."""
+    if not (math.isfinite(tau_exp) and tau_exp > 0 and math.isfinite(c_start) and c_start > 0
+            and in_model_range(p10, p_atm, charge=settings.charge)):
+        return math.nan
+
+    def g(log_c: float) -> float:
+        """log(model crossing time / tau_exp) at C = exp(log_c)."""
+        cfg = rig_from_settings(settings, conductance=math.exp(log_c), p10=p10, p_atm=p_atm)
+        tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
+        return math.log(tm / tau_exp) if math.isfinite(tm) and tm > 0 else math.nan
+
+    x0 = math.log(c_start)
+    lo, hi = LOG_C_RANGE
+    if not lo <= x0 <= hi:
+        return math.nan
+    f0 = g(x0)
+    if not math.isfinite(f0):
+        return math.nan
+    x1 = x0 + f0  # exact for t proportional to 1/C
+    for _ in range(8):
+        if not lo <= x1 <= hi:  # the model (which clips C) has no such C
+            return math.nan
+        f1 = g(x1)
+        if not math.isfinite(f1):
+            return math.nan
+        if abs(f1) < INVERSION_RTOL:
+            break
+        slope = (f1 - f0) / (x1 - x0) if x1 != x0 else -1.0
+        if not slope < -0.2:  # t(C) falls with C; guard against a flat or noisy secant
+            slope = -1.0
+        x0, f0, x1 = x1, f1, x1 - f1 / slope
+    return math.exp(x1)
 
 
 def invert_crossing(
@@ -202,37 +243,10 @@ def invert_crossing(
     c_start : float
         Starting value, e.g. the isentropic inversion [m^3/(s Pa)].
     """
-    if not (math.isfinite(tau_exp) and tau_exp > 0 and math.isfinite(c_start) and c_start > 0
-            and in_model_range(p10, p_atm)):
+    c = model_conductance(settings, tau_exp, p10=p10, p_atm=p_atm, p_star=p_star,
+                          c_start=c_start)
+    if not math.isfinite(c):
         return math.nan, math.nan
-
-    def g(log_c: float) -> float:
-        """log(model crossing time / tau_exp) at C = exp(log_c)."""
-        cfg = rig_from_settings(settings, conductance=math.exp(log_c), p10=p10, p_atm=p_atm)
-        tm = model_crossing_time(cfg, p_star, tau_exp, rtol=INVERSION_ODE_RTOL)
-        return math.log(tm / tau_exp) if math.isfinite(tm) and tm > 0 else math.nan
-
-    x0 = math.log(c_start)
-    lo, hi = LOG_C_RANGE
-    if not lo <= x0 <= hi:
-        return math.nan, math.nan
-    f0 = g(x0)
-    if not math.isfinite(f0):
-        return math.nan, math.nan
-    x1 = x0 + f0  # exact for t proportional to 1/C
-    for _ in range(8):
-        if not lo <= x1 <= hi:  # the model (which clips C) has no such C
-            return math.nan, math.nan
-        f1 = g(x1)
-        if not math.isfinite(f1):
-            return math.nan, math.nan
-        if abs(f1) < INVERSION_RTOL:
-            break
-        slope = (f1 - f0) / (x1 - x0) if x1 != x0 else -1.0
-        if not slope < -0.2:  # t(C) falls with C; guard against a flat or noisy secant
-            slope = -1.0
-        x0, f0, x1 = x1, f1, x1 - f1 / slope
-    c = math.exp(x1)
     var = (c * tau_std / tau_exp) ** 2
     b0, b_sd = settings.critical_ratio, CRITICAL_RATIO_PRIOR_STD
     if may_turn_subsonic(settings, p_atm, p_star):

@@ -10,8 +10,9 @@ tau_exp after the opening (:func:`~pneumatic_unload.charge.charge_p_star`). From
   inversion): eq 39 mirrored times I(p10/p_s, b, m) with b the settings' prior and m 0.5
   (:func:`~pneumatic_unload.charge.charge_conductance_adiabatic`);
 * **the model-based C**: the one model in the charge direction (the settings' heat law,
-  the incoming jet's convection with it) inverted at the crossing by a secant on
-  log t(C) (:func:`~pneumatic_unload.inversion.model_crossing_time`); its budget states
+  the incoming jet's convection with it) inverted at the crossing from a table of its
+  crossing times, prepared half way (:class:`ChargePlan`), or by the discharge's secant
+  (:func:`~pneumatic_unload.inversion.model_conductance`); its budget states
   the crossing time, the prior of b (one sigma either side), the heat correlation (+-30 %),
   the heat not yet seen (uniform between none and the correlation's), V, T_s, the
   transducer's offset and a given supply. The curve fit that follows the charge's end
@@ -46,17 +47,13 @@ from pneumatic_unload.estimation.types import CrossingEstimate
 from pneumatic_unload.inversion import (
     CRITICAL_RATIO_PRIOR_STD,
     HEAT_CORRELATION_REL_STD,
+    model_conductance,
     model_crossing_time,
     rig_from_settings,
 )
 
 #: The type A line of a charge's crossing model C.
 CHARGE_TYPE_A = "crossing time (noise), b prior, heat correlation"
-#: Secant steps of the charge's crossing inversion [-] (t(C) is nearly 1/C: two suffice
-#: to ~1e-5).
-SECANT_STEPS = 4
-#: Relative tolerance of the inversion on C [-].
-SECANT_RTOL = 1e-6
 
 
 def charge_pressure_problem(p10: float, p_s: float, p_star: float) -> str | None:
@@ -67,31 +64,6 @@ def charge_pressure_problem(p10: float, p_s: float, p_star: float) -> str | None
     return (f"the charge's pressures do not allow a C (p10 = {p10:.6g} Pa, p* = "
             f"{p_star:.6g} Pa, supply = {p_s:.6g} Pa; a charge needs 0 <= p10 < p* < "
             "supply): gauge readings, or a supply below the tank?")
-
-
-def charge_model_inversion(settings: EstimatorSettings, tau: float, p10: float,
-                           p_s: float, p_star: float, c_start: float,
-                           critical_ratio: float | None = None,
-                           heat_scale: float = 1.0) -> float:
-    """C [m^3/(s Pa)] for which the one model in the charge direction (the settings' heat
-    law times ``heat_scale``, b = ``critical_ratio`` or the settings') rises from p10 to
-    p_star at tau [s] (pressures Pa absolute; secant on log t against log C from
-    ``c_start``); NaN when it does not converge."""
-    def log_t(c: float) -> float:
-        cfg = rig_from_settings(settings, conductance=c, p10=p10, p_atm=p_s,
-                                critical_ratio=critical_ratio, heat_scale=heat_scale)
-        return math.log(model_crossing_time(cfg, p_star, tau))
-    x0, y0 = math.log(c_start), log_t(c_start) - math.log(tau)
-    x1 = x0 + y0  # t ~ 1/C
-    for _ in range(SECANT_STEPS):
-        y1 = log_t(math.exp(x1)) - math.log(tau)
-        if not math.isfinite(y1):
-            return math.nan
-        if abs(y1) < SECANT_RTOL:
-            return math.exp(x1)
-        slope = (y1 - y0) / (x1 - x0) if x1 != x0 else -1.0
-        x0, y0, x1 = x1, y1, x1 - y1 / (slope if slope < 0 else -1.0)
-    return math.exp(x1) if abs(y0) < 1e-3 else math.nan
 
 
 @dataclass(frozen=True)
@@ -256,7 +228,8 @@ def charge_crossing_estimate(plan: ChargePlan, tau: float, tau_std: float
             x = math.log(tau)
             c_heat = math.exp(t[0] + t[1] * x + t[2] * x * x)
         else:
-            c_heat = charge_model_inversion(s, tau, plan.p10, plan.p_s, plan.p_star, c_adi)
+            c_heat = model_conductance(s, tau, p10=plan.p10, p_atm=plan.p_s,
+                                       p_star=plan.p_star, c_start=c_adi)
         if math.isfinite(c_heat):
             c_model, method = c_heat, "model-inversion-charge"
             form = model_form_term(abs(c_heat - c_adi) / math.sqrt(3.0),
