@@ -12,7 +12,9 @@ setup(
     packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
     # the model's C kernel and the estimator's crossing fit: compiled with the system's cc
     # on first use (model/kernel.py)
-    package_data={f"{PACKAGE}.model": ["kernel.c"], f"{PACKAGE}.estimation": ["regression.c"]},
+    package_data={f"{PACKAGE}.model": ["kernel.c"], f"{PACKAGE}.estimation": ["regression.c"],
+                  # the results database's Alembic revisions, run when it is opened
+                  f"{PACKAGE}.testline": ["migrations/*.py", "migrations/versions/*.py"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -41,12 +41,17 @@ from pneumatic_unload.testline import (
     write_table,
 )
 from pneumatic_unload.testline.batch import PART_COLUMNS
-from pneumatic_unload.testline.db import EXPORT_COLUMNS, file_rows
+from pneumatic_unload.testline.db import EXPORT_COLUMNS, file_rows, hide_password
 from pneumatic_unload.testline.report import html_report
 from pneumatic_unload.testline.spec import DM3_PER_S_BAR, read_file_data
 
 CSV_OPTIONS = ("time_column", "pressure_column", "temperature_column", "pressure_unit",
                "time_unit", "temperature_unit")
+
+
+#: --db of the reading commands.
+DB_HELP = ("results database: a SQLite file, or a PostgreSQL server's "
+           "postgresql://USER@HOST:PORT/DB (password: PGPASSWORD or ~/.pgpass)")
 
 
 class BatchCliError(Exception):
@@ -124,12 +129,12 @@ def cmd_batch(args: argparse.Namespace) -> int:
         raise BatchCliError(str(exc)) from exc
     finally:
         bar.close()
-    con = open_db(args.db)
     try:
-        rows = unload_rows(con)
-        frows = file_rows(con)
-    finally:
-        con.close()
+        with open_db(args.db) as con:
+            rows = unload_rows(con)
+            frows = file_rows(con)
+    except ResultsDBError as exc:
+        raise BatchCliError(str(exc)) from exc
     mine = {r.content_hash for r in res.records}
     this = [u for u in rows if u["content_hash"] in mine or u["path"] in res.skipped]
     files = [f for f in frows if f["content_hash"] in mine or f["path"] in res.skipped]
@@ -140,7 +145,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
         write_table(parts, stem.with_name(f"{stem.stem}_parts{stem.suffix}"), PART_COLUMNS)
     failed = [r for r in res.records if r.status != "ok"]
     if args.json:
-        out = {"db": str(args.db), "inputs": len(paths), "analysed": len(res.records),
+        out = {"db": hide_password(args.db), "inputs": len(paths), "analysed": len(res.records),
                "skipped": res.skipped, "interrupted": res.interrupted,
                "workers": res.workers,
                "files": [{"path": r.path, "part_id": r.part_id, "status": r.status,
@@ -150,7 +155,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
         print(json.dumps(out, indent=2, allow_nan=False, default=json_default))
     else:
         print(f"{len(paths)} input(s): {len(res.records)} analysed, {len(res.skipped)} "
-              f"already in {args.db}" + (", interrupted" if res.interrupted else ""))
+              f"already in {hide_password(args.db)}" + (", interrupted" if res.interrupted else ""))
         for r in failed:
             print(f"  {r.path}: {r.status}: {r.reason}")
         print(parts_text(parts))
@@ -163,14 +168,20 @@ def cmd_batch(args: argparse.Namespace) -> int:
     return 1 if failed or any(p["verdict"] == "fail" for p in parts) else 0
 
 
+def _existing_db(db: str) -> None:
+    """A SQLite file that is not there is an error of a reading command (a server's URL
+    is tried when opened)."""
+    if "://" not in db and not Path(db).is_file():
+        raise BatchCliError(f"--db {db}: no such database")
+
+
 def cmd_results(args: argparse.Namespace) -> int:
     """``results export`` / ``results parts`` (see the module doc)."""
-    if not Path(args.db).is_file():
-        raise BatchCliError(f"--db {args.db}: no such database")
+    _existing_db(args.db)
     if args.action == "export" and not args.out:
         raise BatchCliError("results export needs --out FILE (.csv or .parquet)")
     try:
-        con = open_db(args.db)
+        con = open_db(args.db, create=False)
         try:
             rows = unload_rows(con)
             frows = file_rows(con)
@@ -196,8 +207,7 @@ def cmd_results(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """``report``: the database as one self-contained HTML page."""
-    if not Path(args.db).is_file():
-        raise BatchCliError(f"--db {args.db}: no such database")
+    _existing_db(args.db)
     if not Path(args.out).parent.is_dir():
         raise BatchCliError(f"--out {args.out}: folder {Path(args.out).parent} does not exist")
     try:
@@ -220,8 +230,9 @@ def add_parsers(sub: Any, add_input_options: Callable[[argparse.ArgumentParser],
                     help="bags (folders or .mcap), CSV logs, or folders searched for them")
     ba.add_argument("--glob", help="pattern of the inputs inside each folder given "
                                    "(e.g. '*/run*.mcap'; default: every bag and log below)")
-    ba.add_argument("--db", default="results.sqlite",
-                    help="results database (SQLite; created when missing)")
+    ba.add_argument("--db", default="results.sqlite", metavar="FILE|URL",
+                    help="results database: a SQLite file (created when missing) or a "
+                         "PostgreSQL server's postgresql://USER@HOST:PORT/DB")
     ba.add_argument("--out", metavar="FILE", help="also write the unloads of this batch "
                     "(.csv or .parquet) and its parts to FILE_parts")
     ba.add_argument("--spec", metavar="YAML", help="specification of the part types")
@@ -245,14 +256,14 @@ def add_parsers(sub: Any, add_input_options: Callable[[argparse.ArgumentParser],
 
     rs = sub.add_parser("results", help="the results database: export, parts table")
     rs.add_argument("action", choices=("export", "parts"))
-    rs.add_argument("--db", default="results.sqlite", help="results database")
+    rs.add_argument("--db", default="results.sqlite", metavar="FILE|URL", help=DB_HELP)
     rs.add_argument("--out", metavar="FILE", help="export: .csv or .parquet")
     rs.add_argument("--parts", action="store_true", help="export the parts table instead")
     rs.add_argument("--json", action="store_true", help="parts: print JSON")
     rs.set_defaults(func=cmd_results)
 
     rp = sub.add_parser("report", help="the results database as one self-contained HTML page")
-    rp.add_argument("--db", default="results.sqlite", help="results database")
+    rp.add_argument("--db", default="results.sqlite", metavar="FILE|URL", help=DB_HELP)
     rp.add_argument("--out", default="report.html", help="HTML file to write")
     rp.add_argument("--title", help="title of the page")
     rp.set_defaults(func=cmd_report)

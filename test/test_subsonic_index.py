@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import sqlite3
 import zlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -131,16 +132,13 @@ def test_coverage_of_c_b_and_m_over_an_iso_grid():
 
 
 def test_results_database_of_schema_1_gains_the_m_columns(tmp_path):
-    from pneumatic_unload.testline.db import MIGRATIONS, SCHEMA_VERSION, open_db
+    import shutil
 
+    from pneumatic_unload.testline.db import SCHEMA_VERSION, open_db
+
+    # a file written by the package at schema 1 (test/data/results_db/make_legacy.py)
     path = tmp_path / "old.sqlite"
-    con = sqlite3.connect(path)
-    for stmt in MIGRATIONS[0].split(";"):
-        if stmt.strip():
-            con.execute(stmt)
-    con.execute("PRAGMA user_version = 1")
-    con.commit()
-    con.close()
+    shutil.copy(Path(__file__).parent / "data" / "results_db" / "schema1.sqlite", path)
     open_db(path).close()
     con = sqlite3.connect(path)
     cols = {row[1] for row in con.execute("PRAGMA table_info(unloads)")}

@@ -223,16 +223,19 @@ def test_two_writers_at_once_lose_nothing(tmp_path: Path):
         assert p.exitcode == 0
     con = open_db(db)
     assert len(file_rows(con)) == 120 and len(unload_rows(con)) == 120
-    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
     con.close()
+    with sqlite3.connect(db) as raw:  # the file itself (open_db's handle is backend-neutral)
+        assert raw.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
 
 
 def test_schema_is_versioned_and_a_newer_one_is_refused(tmp_path: Path):
     db = tmp_path / "v.sqlite"
-    con = open_db(db)
-    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
-    con.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
-    con.close()
+    open_db(db).close()
+    raw = sqlite3.connect(db)  # the file itself (open_db's handle is backend-neutral)
+    assert raw.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
+    raw.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
+    raw.commit()
+    raw.close()
     with pytest.raises(ResultsDBError, match="newer"):
         open_db(db)
     (tmp_path / "junk.sqlite").write_text("not a database " * 100)

@@ -82,8 +82,9 @@ def _estimator() -> list[ParameterSpec]:
         _str("valve_service", "/simulator/start_unload",
              "std_srvs/Trigger service that opens the valve (action ~/measure)"),
         _double("measure_timeout", 60.0, "default timeout of ~/measure", "s", 0.1, 1e6),
-        _str("results_db", "", "results database (SQLite, shared with batch) each unload's "
-             "last estimate is written to ('': none)"),
+        _str("results_db", "", "results database (a SQLite file, or a PostgreSQL server's "
+             "postgresql://USER@HOST:PORT/DB; shared with batch) each unload's last "
+             "estimate is written to ('': none)"),
         _str("part_id", "", "part id of the estimates written to results_db (a ~/measure "
              "goal's part_id replaces it while it runs)"),
         _str("spec_file", "", "specification of the part types (YAML): the verdict of each "

@@ -621,8 +621,9 @@ class EstimatorNode(Node):
         try:
             verdict = self._results_db.write(r, self._settings, part)
         except ResultsDBError as exc:
-            self._diagnose(_ERROR, f"results_db {self._p('results_db')}: estimate of unload "
-                                   f"{r.index} not written: {exc}")
+            # the message names the database (a URL without its password)
+            self._diagnose(_ERROR, f"results_db: estimate of unload {r.index} not written: "
+                                   f"{exc}")
             return
         if verdict is not None:
             self.get_logger().info(f"unload {r.index} of part {part}: {verdict[0]} "

@@ -1,8 +1,9 @@
 """The test line: many inputs analysed in batch (on Dask), the results database, the
 specifications parts are judged against.
 
-* :mod:`~pneumatic_unload.testline.db` - the results database (SQLite, WAL, versioned
-  schema): one row per input and per unload, export to CSV and Parquet;
+* :mod:`~pneumatic_unload.testline.db` - the results database (an embedded SQLite file or
+  a PostgreSQL server): one row per input and per unload, export to CSV and Parquet;
+* :mod:`~pneumatic_unload.testline.schema` - its schema, backends and Alembic migrations;
 * :mod:`~pneumatic_unload.testline.spec` - part types' C, b and sigma limits (YAML);
 * :mod:`~pneumatic_unload.testline.job` - one input: read, analyse, judge (a worker's job);
 * :mod:`~pneumatic_unload.testline.accounting` - where a batch's CPU seconds and idle time

@@ -58,7 +58,8 @@ class BatchResult:
     records : list of FileRecord
         The inputs analysed now, in the order given.
     skipped : list of str
-        Inputs already in the database with the same content and options.
+        Inputs already in the database with the same content and options (when the
+        batch started, or written by another batch or bench while it ran).
     interrupted : bool
         The batch was stopped (Ctrl-C); what was written stays.
     workers : int
@@ -230,12 +231,15 @@ class _Writer:
             pos += 1
         if everything:
             ks += sorted(k for k in self.ready if k >= pos)
-        recs = [r for k in ks if (r := self.ready[k]) is not None]
-        write_files(self.con, recs, replace=self.replace)  # state kept if interrupted
-        for k in ks:
-            rec = self.ready.pop(k)
-            if rec is not None:
+        recs = [(k, r) for k in ks if (r := self.ready[k]) is not None]
+        done = write_files(self.con, [r for _k, r in recs], replace=self.replace)
+        for (k, rec), new in zip(recs, done, strict=True):  # state kept if interrupted
+            if new:
                 self.written[k] = rec
+            else:  # written meanwhile by another batch or bench: there once, skipped here
+                self.skipped.add(k)
+        for k in ks:
+            self.ready.pop(k)
         self.pos = pos
         self.last = time.monotonic()
 
@@ -252,7 +256,8 @@ def run_batch(paths: Sequence[str], options: InputOptions, *, db_path: str | Pat
     options : InputOptions
         Reading, settings, part id and specification, the same for every input.
     db_path : str or Path
-        The results database (created when missing).
+        The results database: a SQLite file (created when missing) or a PostgreSQL URL
+        (``postgresql://USER@HOST:PORT/DB``; see :mod:`~.schema`).
     workers : int
         Worker processes of a local cluster; 1 (or 0): this process, no Dask.
     scheduler : str

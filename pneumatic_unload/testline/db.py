@@ -1,4 +1,5 @@
-"""The results database of a test line: one embedded SQLite file, the system of record.
+"""The results database of a test line, the system of record: an embedded SQLite file
+(the default) or a PostgreSQL server shared by many benches (see :mod:`~.schema`).
 
 Every analysed input is a row of ``files`` (path, content hash, settings hash, part id and
 type, status and reason, the settings, the package version, when, written by whom) and
@@ -8,11 +9,14 @@ transaction (a batch writes many files in one, :func:`write_files`): a batch kil
 instant leaves whole files or nothing, and a rerun skips the files already there (same
 content and settings) without duplicates.
 
-Several writers at once (two estimator nodes, a batch) lose nothing: the database runs in
-WAL mode, each write takes the write lock up front (``BEGIN IMMEDIATE``) and waits for it
-(:data:`BUSY_TIMEOUT` s) instead of failing. The schema carries its version
-(``PRAGMA user_version``); :func:`open_db` migrates an older file in place
-(:data:`MIGRATIONS`) and refuses a newer one. SI units in every column (m^3/(s Pa), s, Pa).
+Several writers at once (estimator nodes on several benches, batches) lose nothing and
+duplicate nothing: an input is inserted only when its (content hash, settings hash) is not
+there yet (``INSERT ... ON CONFLICT``, decided by the database's unique key, not by an
+earlier read), its unloads in the same transaction. SQLite runs in WAL mode and each write
+takes the write lock up front (``BEGIN IMMEDIATE``), waiting for it (:data:`BUSY_TIMEOUT`
+s); on PostgreSQL a transaction that the server aborts for a deadlock or a serialization
+failure is run again. :func:`open_db` creates or migrates the schema and refuses a newer
+one. SI units in every column (m^3/(s Pa), s, Pa).
 """
 
 from __future__ import annotations
@@ -21,85 +25,40 @@ import csv
 import datetime as _dt
 import json
 import math
-import sqlite3
+import numbers
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-#: Schema version written by this package [-].
-SCHEMA_VERSION = 3
-#: How long a writer waits for the write lock before giving up [s].
-BUSY_TIMEOUT = 60.0
+import sqlalchemy as sa
 
-#: Columns of ``unloads`` of schema version 1, taken from a result's JSON
-#: (:func:`~pneumatic_unload.output.unload_json`), with their SQL types; units SI.
-V1_COLUMNS: tuple[tuple[str, str], ...] = (
-    ("status", "TEXT"), ("status_text", "TEXT"), ("final", "INTEGER"),
-    ("t_start", "REAL"), ("tau_exp", "REAL"), ("tau_exp_std", "REAL"),
-    ("p10", "REAL"), ("p_atm", "REAL"), ("p_star", "REAL"),
-    ("initial_temperature", "REAL"), ("volume", "REAL"),
-    ("conductance", "REAL"), ("conductance_std", "REAL"),
-    ("conductance_model", "REAL"), ("conductance_model_std", "REAL"),
-    ("critical_ratio", "REAL"), ("critical_ratio_std", "REAL"),
-    ("recommended_conductance", "REAL"), ("recommended_std", "REAL"),
-    ("heat_law", "TEXT"), ("method", "TEXT"), ("quality", "REAL"),
+from pneumatic_unload.testline.schema import (
+    BUSY_TIMEOUT,
+    FILES,
+    SCHEMA_VERSION,
+    UNLOAD_COLUMNS,
+    UNLOADS,
+    V1_COLUMNS,
+    V2_COLUMNS,
+    V3_COLUMNS,
+    ResultsDBError,
+    database_url,
+    hide_password,
+    make_engine,
+    migrate,
+    one_line,
 )
-#: Columns added by version 2: the ISO 6358-1:2013 subsonic index m and its uncertainty [-],
-#: the transducer's fitted zero offset and its uncertainty [Pa].
-V2_COLUMNS: tuple[tuple[str, str], ...] = (
-    ("subsonic_index", "REAL"), ("subsonic_index_std", "REAL"),
-    ("pressure_offset", "REAL"), ("pressure_offset_std", "REAL"),
-)
-#: Columns added by version 3: the flow's direction ('discharge' or 'charge'; NULL in rows
-#: of older versions: discharges) and a charge's supply pressure [Pa absolute].
-V3_COLUMNS: tuple[tuple[str, str], ...] = (("direction", "TEXT"), ("supply_pressure", "REAL"))
-#: Every column of ``unloads`` taken from a result's JSON.
-UNLOAD_COLUMNS = V1_COLUMNS + V2_COLUMNS + V3_COLUMNS
 
-_V1 = f"""
-CREATE TABLE files (
-    id INTEGER PRIMARY KEY,
-    path TEXT NOT NULL,
-    content_hash TEXT NOT NULL,
-    settings_hash TEXT NOT NULL,
-    part_id TEXT NOT NULL,
-    part_type TEXT,
-    status TEXT NOT NULL,
-    reason TEXT,
-    n_unloads INTEGER NOT NULL,
-    settings_json TEXT,
-    package_version TEXT NOT NULL,
-    analysed_at TEXT NOT NULL,
-    writer TEXT NOT NULL,
-    UNIQUE (content_hash, settings_hash)
-);
-CREATE TABLE unloads (
-    id INTEGER PRIMARY KEY,
-    file_id INTEGER NOT NULL REFERENCES files(id) ON DELETE CASCADE,
-    unload_index INTEGER NOT NULL,
-    part_id TEXT NOT NULL,
-    {", ".join(f"{n} {t}" for n, t in V1_COLUMNS)},
-    verdict TEXT,
-    verdict_reason TEXT,
-    budget_json TEXT,
-    curve_json TEXT,
-    result_json TEXT NOT NULL,
-    UNIQUE (file_id, unload_index)
-);
-CREATE INDEX unloads_part ON unloads (part_id);
-CREATE INDEX files_part ON files (part_id);
-"""
+__all__ = ["BUSY_TIMEOUT", "EXPORT_COLUMNS", "SCHEMA_VERSION", "UNLOAD_COLUMNS", "V1_COLUMNS",
+           "V2_COLUMNS", "V3_COLUMNS", "FileRecord", "ResultsDB", "ResultsDBError", "export",
+           "file_rows", "has_file", "hide_password", "known_contents", "open_db",
+           "unload_rows", "write_file", "write_files", "write_table"]
 
-#: Schema steps: MIGRATIONS[k] takes a database from version k to k + 1.
-_V2 = ";\n".join(f"ALTER TABLE unloads ADD COLUMN {n} {t}" for n, t in V2_COLUMNS)
-_V3 = ";\n".join(f"ALTER TABLE unloads ADD COLUMN {n} {t}" for n, t in V3_COLUMNS)
-MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3)
-
-
-class ResultsDBError(Exception):
-    """The results database cannot be opened or written (a one-line message)."""
+#: SQLSTATEs of a PostgreSQL transaction worth running again: serialization failure,
+#: deadlock detected.
+RETRY_SQLSTATES = ("40001", "40P01")
 
 
 @dataclass
@@ -144,136 +103,183 @@ class FileRecord:
     package_version: str = ""
 
 
-def _connect(path: Path) -> sqlite3.Connection:
-    con = sqlite3.connect(str(path), timeout=BUSY_TIMEOUT, isolation_level=None)
-    con.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT * 1000)}")
-    con.execute("PRAGMA foreign_keys = ON")
-    return con
+class ResultsDB:
+    """An open results database (returned by :func:`open_db`; close it, or use it in a
+    ``with``): its engine and its name in messages (a URL's password hidden).
+
+    Attributes
+    ----------
+    engine : sqlalchemy.Engine
+        The connections (a small pool).
+    label : str
+        The file's path, or the server's URL without its password.
+    """
+
+    def __init__(self, engine: sa.Engine, label: str) -> None:
+        self.engine = engine
+        self.label = label
+
+    @property
+    def backend(self) -> str:
+        """'sqlite' or 'postgresql'."""
+        return self.engine.dialect.name
+
+    def close(self) -> None:
+        """Close every connection."""
+        self.engine.dispose()
+
+    def __enter__(self) -> ResultsDB:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def rows(self, stmt: Any) -> list[dict[str, Any]]:
+        """The rows of a query (a read transaction; SQLite's WAL readers never wait)."""
+        try:
+            with self.engine.connect() as conn:
+                return [dict(r._mapping) for r in conn.execute(stmt)]
+        except sa.exc.SQLAlchemyError as exc:
+            raise ResultsDBError(f"results database {self.label}: {one_line(exc)}") from exc
+
+    def write(self, body: Callable[[sa.Connection], Any]) -> Any:
+        """Run ``body(connection)`` in one write transaction (SQLite: the write lock taken
+        up front), again while SQLite is locked or PostgreSQL aborted it for a deadlock or
+        a serialization failure, up to :data:`BUSY_TIMEOUT` s; returns its value."""
+        deadline = time.monotonic() + BUSY_TIMEOUT
+        while True:
+            try:
+                with self.engine.connect() as conn:
+                    conn.execution_options(write=True)
+                    with conn.begin():
+                        return body(conn)
+            except sa.exc.DBAPIError as exc:
+                again = ("locked" in str(exc.orig) if self.backend == "sqlite" else
+                         getattr(exc.orig, "sqlstate", None) in RETRY_SQLSTATES)
+                if not again or time.monotonic() >= deadline:
+                    raise
+                time.sleep(0.05)
 
 
-def open_db(path: str | Path) -> sqlite3.Connection:
-    """Open (creating or migrating) the results database at ``path``.
+def open_db(target: str | Path, *, create: bool = True) -> ResultsDB:
+    """Open (creating or migrating) the results database ``target``: a file path (SQLite)
+    or a URL ``postgresql://USER@HOST:PORT/DB`` (see :mod:`~.schema`).
+
+    Parameters
+    ----------
+    target : str or Path
+        Where the database is.
+    create : bool
+        Create a missing SQLite file or the tables on an empty server (False: refuse).
 
     Raises
     ------
     ResultsDBError
         The file is not a database, is from a newer package version, or its folder is
-        missing or not writable.
+        missing or not writable; the server cannot be reached, refuses the user or has no
+        such database; an unknown scheme or a bad URL; the driver is missing.
     """
-    p = Path(path)
-    if not p.parent.is_dir():
-        raise ResultsDBError(f"results database {p}: folder {p.parent} does not exist")
+    url = database_url(target)
+    if url.get_backend_name() == "sqlite":
+        p = Path(url.database or "")
+        label = str(p)
+        if not p.parent.is_dir():
+            raise ResultsDBError(f"results database {p}: folder {p.parent} does not exist")
+        if not create and not p.is_file():
+            raise ResultsDBError(f"results database {p}: no such file")
+    else:
+        label = url.render_as_string(hide_password=True)
+    engine = make_engine(url)
     try:
-        con = _connect(p)
-        mode = con.execute("PRAGMA journal_mode = WAL").fetchone()[0]
-        if str(mode).lower() != "wal":
-            raise ResultsDBError(f"results database {p}: WAL mode refused ({mode})")
-        _migrate(con, p)
-    except sqlite3.DatabaseError as exc:
-        raise ResultsDBError(f"results database {p}: {exc}") from exc
-    return con
+        if url.get_backend_name() == "sqlite":
+            raw = engine.raw_connection()  # outside a transaction, as WAL mode needs
+            try:
+                mode = raw.cursor().execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            finally:
+                raw.close()
+            if str(mode).lower() != "wal":
+                raise ResultsDBError(f"results database {p}: WAL mode refused ({mode})")
+        migrate(engine, label, create)
+    except ResultsDBError:
+        engine.dispose()
+        raise
+    except (sa.exc.SQLAlchemyError, engine.dialect.loaded_dbapi.Error, OSError) as exc:
+        engine.dispose()
+        orig = getattr(exc, "orig", None)
+        raise ResultsDBError(f"results database {label}: {one_line(orig or exc)}") from exc
+    return ResultsDB(engine, label)
 
 
-def _migrate(con: sqlite3.Connection, p: Path) -> None:
-    version = int(con.execute("PRAGMA user_version").fetchone()[0])
-    if version > SCHEMA_VERSION:
-        raise ResultsDBError(
-            f"results database {p} has schema version {version}, newer than this package's "
-            f"{SCHEMA_VERSION}: upgrade pneumatic_unload to read it")
-    while version < SCHEMA_VERSION:
-        _write(con, lambda c, v=version: _apply(c, MIGRATIONS[v], v + 1))
-        version = int(con.execute("PRAGMA user_version").fetchone()[0])
-
-
-def _apply(con: sqlite3.Connection, script: str, version: int) -> None:
-    # inside the caller's transaction: statement by statement (executescript would commit)
-    current = int(con.execute("PRAGMA user_version").fetchone()[0])
-    if current >= version:  # another writer migrated first
-        return
-    for stmt in script.split(";"):
-        if stmt.strip():
-            con.execute(stmt)
-    con.execute(f"PRAGMA user_version = {version}")
-
-
-def _write(con: sqlite3.Connection, body: Any) -> Any:
-    """Run ``body(con)`` in one write transaction (the write lock taken up front), retrying
-    while another writer holds the lock, up to :data:`BUSY_TIMEOUT` s."""
-    deadline = time.monotonic() + BUSY_TIMEOUT
-    while True:
-        try:
-            con.execute("BEGIN IMMEDIATE")
-        except sqlite3.OperationalError as exc:
-            if "locked" in str(exc) and time.monotonic() < deadline:
-                time.sleep(0.05)
-                continue
-            raise ResultsDBError(f"results database busy for {BUSY_TIMEOUT:g} s: {exc}"
-                                 ) from exc
-        try:
-            out = body(con)
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
-        con.execute("COMMIT")
-        return out
-
-
-def has_file(con: sqlite3.Connection, content_hash: str, settings_hash: str) -> bool:
+def has_file(con: ResultsDB, content_hash: str, settings_hash: str) -> bool:
     """True when an input of this content was analysed with these settings."""
-    row = con.execute("SELECT 1 FROM files WHERE content_hash = ? AND settings_hash = ?",
-                      (content_hash, settings_hash)).fetchone()
-    return row is not None
+    return bool(con.rows(sa.select(FILES.c.id).where(
+        FILES.c.content_hash == content_hash, FILES.c.settings_hash == settings_hash)))
 
 
-def known_contents(con: sqlite3.Connection, settings_hash: str) -> frozenset[str]:
+def known_contents(con: ResultsDB, settings_hash: str) -> frozenset[str]:
     """Content hashes of the inputs analysed with these settings (one query: what a batch
     skips, decided where each input is hashed)."""
-    rows = con.execute("SELECT content_hash FROM files WHERE settings_hash = ?",
-                       (settings_hash,)).fetchall()
-    return frozenset(r[0] for r in rows)
+    rows = con.rows(sa.select(FILES.c.content_hash).where(
+        FILES.c.settings_hash == settings_hash))
+    return frozenset(r["content_hash"] for r in rows)
 
 
 def _num(x: Any) -> Any:
     if isinstance(x, bool):
         return int(x)
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
+    if isinstance(x, numbers.Integral):
+        return int(x)
+    if isinstance(x, numbers.Real):
+        v = float(x)
+        return v if math.isfinite(v) else None
     return x
 
 
-def _insert(c: sqlite3.Connection, rec: FileRecord, now: str, replace: bool) -> bool:
-    """One input and its unloads, inside the caller's transaction (see :func:`write_files`)."""
-    old = c.execute("SELECT id FROM files WHERE content_hash = ? AND settings_hash = ?",
-                    (rec.content_hash, rec.settings_hash)).fetchone()
-    if old is not None:
-        if not replace:
-            return False
-        c.execute("DELETE FROM unloads WHERE file_id = ?", (old[0],))
-        c.execute("DELETE FROM files WHERE id = ?", (old[0],))
-    cur = c.execute(
-        "INSERT INTO files (path, content_hash, settings_hash, part_id, part_type, "
-        "status, reason, n_unloads, settings_json, package_version, analysed_at, "
-        "writer) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-        (rec.path, rec.content_hash, rec.settings_hash, rec.part_id, rec.part_type,
-         rec.status, rec.reason, len(rec.unloads),
-         json.dumps(rec.settings, sort_keys=True, default=str), rec.package_version,
-         now, rec.writer))
-    fid = cur.lastrowid
-    names = [n for n, _t in UNLOAD_COLUMNS]
-    sql = (f"INSERT INTO unloads (file_id, unload_index, part_id, {', '.join(names)}, "
-           "verdict, verdict_reason, budget_json, curve_json, result_json) VALUES "
-           f"({', '.join('?' * (len(names) + 8))})")
-    c.executemany(sql, [
-        (fid, k, rec.part_id, *[_num(u.get(n)) for n in names],
-         u.get("verdict"), u.get("verdict_reason"),
-         json.dumps(u.get("budget")) if u.get("budget") else None,
-         json.dumps(u["curve"]) if u.get("curve") else None,
-         json.dumps({key: v for key, v in u.items() if key != "curve"}, sort_keys=True))
-        for k, u in enumerate(rec.unloads)])
+_KEY = ("content_hash", "settings_hash")
+_NAMES = [n for n, _t in UNLOAD_COLUMNS]
+
+
+def _insert(c: sa.Connection, rec: FileRecord, now: str, replace: bool) -> bool:
+    """One input and its unloads, inside the caller's transaction (see :func:`write_files`):
+    inserted when its key is new; otherwise nothing, or (``replace``) its row updated and
+    its unloads written anew. The database's unique key decides, so two writers of the same
+    input at once write it once."""
+    if c.dialect.name == "postgresql":
+        from sqlalchemy.dialects.postgresql import insert
+    else:
+        from sqlalchemy.dialects.sqlite import insert
+    values = {"path": rec.path, "content_hash": rec.content_hash,
+              "settings_hash": rec.settings_hash, "part_id": rec.part_id,
+              "part_type": rec.part_type, "status": rec.status, "reason": rec.reason,
+              "n_unloads": len(rec.unloads),
+              "settings_json": json.dumps(rec.settings, sort_keys=True, default=str),
+              "package_version": rec.package_version, "analysed_at": now,
+              "writer": rec.writer}
+    ins = insert(FILES).values(values)
+    if replace:
+        stmt = ins.on_conflict_do_update(index_elements=list(_KEY), set_={
+            k: ins.excluded[k] for k in values if k not in _KEY})
+    else:
+        stmt = ins.on_conflict_do_nothing(index_elements=list(_KEY))
+    fid = c.execute(stmt.returning(FILES.c.id)).scalar()
+    if fid is None:  # there already (written by another writer, perhaps just now)
+        return False
+    if replace:
+        c.execute(UNLOADS.delete().where(UNLOADS.c.file_id == fid))
+    if rec.unloads:
+        c.execute(UNLOADS.insert(), [
+            {"file_id": fid, "unload_index": k, "part_id": rec.part_id,
+             **{n: _num(u.get(n)) for n in _NAMES},
+             "verdict": u.get("verdict"), "verdict_reason": u.get("verdict_reason"),
+             "budget_json": json.dumps(u.get("budget")) if u.get("budget") else None,
+             "curve_json": json.dumps(u["curve"]) if u.get("curve") else None,
+             "result_json": json.dumps({key: v for key, v in u.items() if key != "curve"},
+                                       sort_keys=True)}
+            for k, u in enumerate(rec.unloads)])
     return True
 
 
-def write_files(con: sqlite3.Connection, recs: Sequence[FileRecord], *,
+def write_files(con: ResultsDB, recs: Sequence[FileRecord], *,
                 replace: bool = False) -> list[bool]:
     """Write inputs with their unloads, in the order given, in one transaction: each input
     whole or not at all, and one commit (one sync to disk) for many inputs.
@@ -287,20 +293,21 @@ def write_files(con: sqlite3.Connection, recs: Sequence[FileRecord], *,
     Raises
     ------
     ResultsDBError
-        The database cannot be written (busy beyond :data:`BUSY_TIMEOUT`, disk full, ...).
+        The database cannot be written (busy beyond :data:`BUSY_TIMEOUT`, disk full, the
+        server gone, ...).
     """
     if not recs:
         return []
     now = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     try:
-        return list(_write(con, lambda c: [_insert(c, r, now, replace) for r in recs]))
-    except sqlite3.DatabaseError as exc:
-        raise ResultsDBError(f"results database: writing {recs[0].path}"
+        return list(con.write(lambda c: [_insert(c, r, now, replace) for r in recs]))
+    except sa.exc.SQLAlchemyError as exc:
+        raise ResultsDBError(f"results database {con.label}: writing {recs[0].path}"
                              + (f" and {len(recs) - 1} more" if len(recs) > 1 else "")
-                             + f": {exc}") from exc
+                             + f": {one_line(exc)}") from exc
 
 
-def write_file(con: sqlite3.Connection, rec: FileRecord, *, replace: bool = False) -> bool:
+def write_file(con: ResultsDB, rec: FileRecord, *, replace: bool = False) -> bool:
     """Write one input with its unloads in one transaction (see :func:`write_files`).
 
     Returns
@@ -312,26 +319,20 @@ def write_file(con: sqlite3.Connection, rec: FileRecord, *, replace: bool = Fals
     return write_files(con, [rec], replace=replace)[0]
 
 
-def unload_rows(con: sqlite3.Connection, part_id: str | None = None
-                ) -> list[dict[str, Any]]:
+def unload_rows(con: ResultsDB, part_id: str | None = None) -> list[dict[str, Any]]:
     """Every unload (with its file's path, hashes and time), in the order written."""
-    q = ("SELECT u.*, f.path, f.content_hash, f.settings_hash, f.part_type, "
-         "f.analysed_at, f.package_version, f.writer FROM unloads u JOIN files f "
-         "ON u.file_id = f.id")
-    args: tuple[Any, ...] = ()
+    f = FILES.c
+    q = sa.select(UNLOADS, f.path, f.content_hash, f.settings_hash, f.part_type,
+                  f.analysed_at, f.package_version, f.writer).join_from(
+        UNLOADS, FILES, UNLOADS.c.file_id == f.id)
     if part_id is not None:
-        q += " WHERE u.part_id = ?"
-        args = (part_id,)
-    cur = con.execute(q + " ORDER BY f.id, u.unload_index", args)
-    cols = [d[0] for d in cur.description]
-    return [dict(zip(cols, row, strict=True)) for row in cur.fetchall()]
+        q = q.where(UNLOADS.c.part_id == part_id)
+    return con.rows(q.order_by(f.id, UNLOADS.c.unload_index))
 
 
-def file_rows(con: sqlite3.Connection) -> list[dict[str, Any]]:
+def file_rows(con: ResultsDB) -> list[dict[str, Any]]:
     """Every input (analysed or failed), in the order written."""
-    cur = con.execute("SELECT * FROM files ORDER BY id")
-    cols = [d[0] for d in cur.description]
-    return [dict(zip(cols, row, strict=True)) for row in cur.fetchall()]
+    return con.rows(sa.select(FILES).order_by(FILES.c.id))
 
 
 EXPORT_COLUMNS: tuple[str, ...] = (
@@ -340,7 +341,7 @@ EXPORT_COLUMNS: tuple[str, ...] = (
     "package_version", "writer")
 
 
-def export(con: sqlite3.Connection, out: str | Path) -> int:
+def export(con: ResultsDB, out: str | Path) -> int:
     """Write every unload to ``out`` (.csv or .parquet, by its suffix); returns the rows.
 
     Raises

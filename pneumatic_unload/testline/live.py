@@ -6,7 +6,8 @@ hash made of the node, the unload's start and index: a later estimate of the sam
 replaces the earlier) and one of ``unloads``,
 with the part id of the running ``measure`` goal or of the node's ``part_id`` parameter,
 and the verdict of the part's type in the specification. The database is shared: batches
-and other nodes may write at the same time (see :mod:`~.db`). SI units.
+and other nodes may write at the same time (see :mod:`~.db`); the database stays open (a
+small pool of connections) for the node's life. SI units.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ class LiveResults:
     Parameters
     ----------
     db_path : str or Path
-        The results database (created when missing).
+        The results database: a SQLite file (created when missing) or a PostgreSQL URL.
     writer : str
         Who writes (the node's name).
     spec : Spec, optional
@@ -42,10 +43,10 @@ class LiveResults:
     """
 
     def __init__(self, db_path: str | Path, writer: str, spec: Spec | None = None) -> None:
-        self.db_path = Path(db_path)
+        self.db_path = str(db_path)  # a URL is no Path (its // would be lost)
         self.writer = writer
         self.spec = spec
-        open_db(self.db_path).close()  # created (or migrated) now: errors at start-up
+        self.db = open_db(self.db_path)  # created (or migrated) now: errors at start-up
 
     def judge(self, r: UnloadResult, part_id: str) -> tuple[str, str] | None:
         """('pass' | 'fail', reason) of a result for ``part_id``; None without a spec or a
@@ -80,9 +81,9 @@ class LiveResults:
             and r.status in ("ok", "aborted_sse", "not_choked") else "no_estimate",
             reason="" if r.status == "ok" else f"{r.status}: {r.status_text}",
             unloads=[u], settings=sj, writer=self.writer, package_version=__version__)
-        con = open_db(self.db_path)
-        try:
-            write_file(con, rec, replace=True)  # a later estimate of the unload replaces it
-        finally:
-            con.close()
+        write_file(self.db, rec, replace=True)  # a later estimate of the unload replaces it
         return verdict
+
+    def close(self) -> None:
+        """Close the database's connections."""
+        self.db.close()

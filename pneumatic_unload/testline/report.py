@@ -22,7 +22,7 @@ from typing import Any
 
 from pneumatic_unload import __version__
 from pneumatic_unload.testline.batch import part_summary
-from pneumatic_unload.testline.db import file_rows, open_db, unload_rows
+from pneumatic_unload.testline.db import file_rows, hide_password, open_db, unload_rows
 from pneumatic_unload.testline.spec import DM3_PER_S_BAR
 
 #: d2 of a moving range of two: sigma = average moving range / D2 [-].
@@ -155,8 +155,8 @@ def pooled_repeatability(parts: Sequence[dict[str, Any]]) -> float | None:
 
 
 def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, int]:
-    """Write the report of database ``db`` to ``out`` (see the module doc); returns the
-    counts shown (files, unloads, parts, failing parts).
+    """Write the report of database ``db`` (a SQLite file or a PostgreSQL URL) to ``out``
+    (see the module doc); returns the counts shown (files, unloads, parts, failing parts).
 
     Raises
     ------
@@ -165,7 +165,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
     OSError
         ``out`` cannot be written.
     """
-    con = open_db(db)
+    con = open_db(db, create=False)
     try:
         unloads = unload_rows(con)
         files = file_rows(con)
@@ -181,7 +181,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
         f"<title>{_e(title or 'pneumatic_unload results')}</title><style>{_CSS}</style>"
         "</head><body>",
         f"<h1>{_e(title or 'Test-line results')}</h1>",
-        f"<p>Database {_e(db)}; {len(files)} input(s), {len(unloads)} unload(s), "
+        f"<p>Database {_e(hide_password(db))}; {len(files)} input(s), {len(unloads)} unload(s), "
         f"{len(parts)} part(s), {len(failing)} failing; written {now} by pneumatic_unload "
         f"{__version__}. C in dm^3/(s bar) (1 dm^3/(s bar) = 1e-8 m^3/(s Pa)); click an "
         "unload to see its pressure curve.</p>",
