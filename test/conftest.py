@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from pgserver import pg_server, pg_url  # noqa: F401  (one PostgreSQL per session)
 
 from pneumatic_unload.launch import free_domain_id
 

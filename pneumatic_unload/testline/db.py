@@ -188,7 +188,7 @@ def open_db(target: str | Path, *, create: bool = True) -> ResultsDB:
         if not create and not p.is_file():
             raise ResultsDBError(f"results database {p}: no such file")
     else:
-        label = url.render_as_string(hide_password=True)
+        label = hide_password(target)  # as given (postgresql://...), without a password
     engine = make_engine(url)
     try:
         if url.get_backend_name() == "sqlite":
