@@ -22,6 +22,7 @@ from pneumatic_unload.testline.batch import (
 )
 from pneumatic_unload.testline.db import (
     FileRecord,
+    ResultsDB,
     ResultsDBError,
     export,
     open_db,
@@ -32,7 +33,7 @@ from pneumatic_unload.testline.db import (
 from pneumatic_unload.testline.job import InputOptions, analyze_file
 from pneumatic_unload.testline.spec import Spec, SpecError, load_spec, parse_spec
 
-__all__ = ["BatchError", "BatchResult", "FileRecord", "InputOptions", "ResultsDBError",
-           "Spec", "SpecError", "analyze_file", "discover", "export", "load_spec",
-           "open_db", "parse_spec", "part_summary", "progress_bar", "run_batch",
+__all__ = ["BatchError", "BatchResult", "FileRecord", "InputOptions", "ResultsDB",
+           "ResultsDBError", "Spec", "SpecError", "analyze_file", "discover", "export",
+           "load_spec", "open_db", "parse_spec", "part_summary", "progress_bar", "run_batch",
            "unload_rows", "write_file", "write_table"]

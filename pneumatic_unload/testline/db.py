@@ -142,6 +142,14 @@ class ResultsDB:
         except sa.exc.SQLAlchemyError as exc:
             raise ResultsDBError(f"results database {self.label}: {one_line(exc)}") from exc
 
+    def column(self, stmt: Any) -> list[Any]:
+        """The first column of a query's rows (see :meth:`rows`)."""
+        try:
+            with self.engine.connect() as conn:
+                return list(conn.execute(stmt).scalars())
+        except sa.exc.SQLAlchemyError as exc:
+            raise ResultsDBError(f"results database {self.label}: {one_line(exc)}") from exc
+
     def write(self, body: Callable[[sa.Connection], Any]) -> Any:
         """Run ``body(connection)`` in one write transaction (SQLite: the write lock taken
         up front), again while SQLite is locked or PostgreSQL aborted it for a deadlock or
@@ -212,16 +220,15 @@ def open_db(target: str | Path, *, create: bool = True) -> ResultsDB:
 
 def has_file(con: ResultsDB, content_hash: str, settings_hash: str) -> bool:
     """True when an input of this content was analysed with these settings."""
-    return bool(con.rows(sa.select(FILES.c.id).where(
+    return bool(con.column(sa.select(FILES.c.id).where(
         FILES.c.content_hash == content_hash, FILES.c.settings_hash == settings_hash)))
 
 
 def known_contents(con: ResultsDB, settings_hash: str) -> frozenset[str]:
     """Content hashes of the inputs analysed with these settings (one query: what a batch
     skips, decided where each input is hashed)."""
-    rows = con.rows(sa.select(FILES.c.content_hash).where(
-        FILES.c.settings_hash == settings_hash))
-    return frozenset(r["content_hash"] for r in rows)
+    return frozenset(con.column(sa.select(FILES.c.content_hash).where(
+        FILES.c.settings_hash == settings_hash)))
 
 
 def _num(x: Any) -> Any:
@@ -237,46 +244,76 @@ def _num(x: Any) -> Any:
 
 _KEY = ("content_hash", "settings_hash")
 _NAMES = [n for n, _t in UNLOAD_COLUMNS]
+#: Most inputs in one INSERT statement [-] (SQLite's limit of bound values is far above).
+INSERT_ROWS = 200
 
 
-def _insert(c: sa.Connection, rec: FileRecord, now: str, replace: bool) -> bool:
-    """One input and its unloads, inside the caller's transaction (see :func:`write_files`):
-    inserted when its key is new; otherwise nothing, or (``replace``) its row updated and
-    its unloads written anew. The database's unique key decides, so two writers of the same
-    input at once write it once."""
+def _prepared(rec: FileRecord, now: str) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The row of ``files`` and the rows of ``unloads`` (without their file_id) of an input,
+    made before the transaction (no JSON encoding while SQLite's write lock is held)."""
+    return ({"path": rec.path, "content_hash": rec.content_hash,
+             "settings_hash": rec.settings_hash, "part_id": rec.part_id,
+             "part_type": rec.part_type, "status": rec.status, "reason": rec.reason,
+             "n_unloads": len(rec.unloads),
+             "settings_json": json.dumps(rec.settings, sort_keys=True, default=str),
+             "package_version": rec.package_version, "analysed_at": now,
+             "writer": rec.writer},
+            [{"unload_index": k, "part_id": rec.part_id,
+              **{n: _num(u.get(n)) for n in _NAMES},
+              "verdict": u.get("verdict"), "verdict_reason": u.get("verdict_reason"),
+              "budget_json": json.dumps(u.get("budget")) if u.get("budget") else None,
+              "curve_json": json.dumps(u["curve"]) if u.get("curve") else None,
+              "result_json": json.dumps({key: v for key, v in u.items() if key != "curve"},
+                                        sort_keys=True)}
+             for k, u in enumerate(rec.unloads)])
+
+
+def _dialect_insert(c: sa.Connection) -> Any:
     if c.dialect.name == "postgresql":
         from sqlalchemy.dialects.postgresql import insert
     else:
         from sqlalchemy.dialects.sqlite import insert
-    values = {"path": rec.path, "content_hash": rec.content_hash,
-              "settings_hash": rec.settings_hash, "part_id": rec.part_id,
-              "part_type": rec.part_type, "status": rec.status, "reason": rec.reason,
-              "n_unloads": len(rec.unloads),
-              "settings_json": json.dumps(rec.settings, sort_keys=True, default=str),
-              "package_version": rec.package_version, "analysed_at": now,
-              "writer": rec.writer}
-    ins = insert(FILES).values(values)
-    if replace:
-        stmt = ins.on_conflict_do_update(index_elements=list(_KEY), set_={
-            k: ins.excluded[k] for k in values if k not in _KEY})
-    else:
-        stmt = ins.on_conflict_do_nothing(index_elements=list(_KEY))
-    fid = c.execute(stmt.returning(FILES.c.id)).scalar()
-    if fid is None:  # there already (written by another writer, perhaps just now)
-        return False
-    if replace:
+    return insert
+
+
+def _insert_new(c: sa.Connection, prepared: list[tuple[dict[str, Any], list[dict[str, Any]]]]
+                ) -> list[bool]:
+    """Inputs and their unloads, inside the caller's transaction (see :func:`write_files`),
+    :data:`INSERT_ROWS` inputs per statement: an input is inserted when its key is new,
+    else skipped (False). The database's unique key decides (``ON CONFLICT DO NOTHING``), so
+    two writers of the same input at once write it once, whoever commits first."""
+    insert = _dialect_insert(c)
+    out: list[bool] = []
+    for j in range(0, len(prepared), INSERT_ROWS):
+        part = prepared[j:j + INSERT_ROWS]
+        stmt = insert(FILES).values([f for f, _u in part]).on_conflict_do_nothing(
+            index_elements=list(_KEY)).returning(FILES.c.id, *[FILES.c[k] for k in _KEY])
+        ids = {(h, s): i for i, h, s in c.execute(stmt)}
+        rows: list[dict[str, Any]] = []
+        for f, us in part:
+            fid = ids.pop((f["content_hash"], f["settings_hash"]), None)  # a twin: False
+            out.append(fid is not None)
+            if fid is not None:
+                rows += [{**u, "file_id": fid} for u in us]
+        if rows:
+            c.execute(UNLOADS.insert(), rows)
+    return out
+
+
+def _replace(c: sa.Connection, prepared: list[tuple[dict[str, Any], list[dict[str, Any]]]]
+             ) -> list[bool]:
+    """Inputs written whether there or not, one by one: the row of ``files`` inserted or
+    updated in place (``ON CONFLICT DO UPDATE``: a writer replacing it at the same time
+    waits for the row), its unloads written anew."""
+    insert = _dialect_insert(c)
+    for f, us in prepared:
+        ins = insert(FILES).values(f)
+        fid = c.execute(ins.on_conflict_do_update(index_elements=list(_KEY), set_={
+            k: ins.excluded[k] for k in f if k not in _KEY}).returning(FILES.c.id)).scalar()
         c.execute(UNLOADS.delete().where(UNLOADS.c.file_id == fid))
-    if rec.unloads:
-        c.execute(UNLOADS.insert(), [
-            {"file_id": fid, "unload_index": k, "part_id": rec.part_id,
-             **{n: _num(u.get(n)) for n in _NAMES},
-             "verdict": u.get("verdict"), "verdict_reason": u.get("verdict_reason"),
-             "budget_json": json.dumps(u.get("budget")) if u.get("budget") else None,
-             "curve_json": json.dumps(u["curve"]) if u.get("curve") else None,
-             "result_json": json.dumps({key: v for key, v in u.items() if key != "curve"},
-                                       sort_keys=True)}
-            for k, u in enumerate(rec.unloads)])
-    return True
+        if us:
+            c.execute(UNLOADS.insert(), [{**u, "file_id": fid} for u in us])
+    return [True] * len(prepared)
 
 
 def write_files(con: ResultsDB, recs: Sequence[FileRecord], *,
@@ -288,7 +325,7 @@ def write_files(con: ResultsDB, recs: Sequence[FileRecord], *,
     -------
     list of bool
         Per input: True when written; False when the same content and settings are
-        already there and ``replace`` is False (nothing changed).
+        already there (or earlier in ``recs``) and ``replace`` is False (nothing changed).
 
     Raises
     ------
@@ -299,8 +336,9 @@ def write_files(con: ResultsDB, recs: Sequence[FileRecord], *,
     if not recs:
         return []
     now = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    prepared = [_prepared(r, now) for r in recs]
     try:
-        return list(con.write(lambda c: [_insert(c, r, now, replace) for r in recs]))
+        return list(con.write(lambda c: (_replace if replace else _insert_new)(c, prepared)))
     except sa.exc.SQLAlchemyError as exc:
         raise ResultsDBError(f"results database {con.label}: writing {recs[0].path}"
                              + (f" and {len(recs) - 1} more" if len(recs) > 1 else "")

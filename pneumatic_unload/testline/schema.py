@@ -133,7 +133,10 @@ def database_url(target: str | Path) -> sa.URL:
     except (sa.exc.ArgumentError, ValueError) as exc:
         raise ResultsDBError(f"results database {hide_password(s)}: not a database URL "
                              f"({one_line(exc)})") from exc
-    if scheme == "sqlite" and url.database:
+    if scheme == "sqlite":
+        if not url.database or url.database == ":memory:":
+            raise ResultsDBError(f"results database {s}: give the SQLite file's path "
+                                 "(sqlite:///PATH, or the plain path)")
         return sa.URL.create("sqlite", database=url.database)
     if scheme not in POSTGRES_SCHEMES:
         raise ResultsDBError(f"results database {hide_password(s)}: unknown scheme "
