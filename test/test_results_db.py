@@ -18,11 +18,12 @@ from pathlib import Path
 
 import pytest
 import sqlalchemy as sa
+from dbwriters import open_at, record, write_keys
 from pgserver import BENCH_PASSWORD, PgServer
 
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.runs import write_simulated_bag
-from pneumatic_unload.testline import FileRecord, ResultsDBError, open_db, unload_rows
+from pneumatic_unload.testline import ResultsDBError, open_db, unload_rows
 from pneumatic_unload.testline.db import file_rows, write_files
 from pneumatic_unload.testline.schema import (
     FILES,
@@ -56,12 +57,6 @@ def target(request: pytest.FixtureRequest, tmp_path: Path) -> str:
     if request.param == "sqlite":
         return str(tmp_path / "r.sqlite")
     return request.getfixturevalue("pg_url")
-
-
-def _rec(key: str, c: float, writer: str = "batch", **u: float) -> FileRecord:
-    return FileRecord(path=f"in/{key}", content_hash=key, settings_hash="s", part_id="P",
-                      status="ok", writer=writer,
-                      unloads=[{"status": "ok", "recommended_conductance": c, **u}])
 
 
 def _alembic(con: object, action: str, rev: str) -> None:
@@ -100,7 +95,7 @@ def test_a_sqlite_file_of_the_package_before_alembic_migrates_with_its_rows(
         assert [r["subsonic_index"] for r in rows] == [0.5, 0.5] if version >= 2 else \
             [None, None]
         assert [f["package_version"] for f in file_rows(con)] == [f"schema-{version}"] * 2
-        assert write_files(con, [_rec("new", 7e-9)]) == [True]
+        assert write_files(con, [record("new", 7e-9)]) == [True]
     raw = sqlite3.connect(db)
     assert raw.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
     assert raw.execute("SELECT version_num FROM alembic_version").fetchone()[0] == HEAD
@@ -155,7 +150,7 @@ def test_migrations_on_both_backends(target: str):
 
 def test_doubles_round_trip_exactly(target: str):
     with open_db(target) as con:
-        assert write_files(con, [_rec(f"k{k}", c, tau_exp=c) for k, c in
+        assert write_files(con, [record(f"k{k}", c, tau_exp=c) for k, c in
                                  enumerate(DOUBLES)]) == [True] * len(DOUBLES)
         rows = unload_rows(con)
     assert [r["recommended_conductance"] for r in rows] == list(DOUBLES)
@@ -223,7 +218,7 @@ def test_bad_databases_are_one_line_errors(pg_server: PgServer, pg_url: str, bag
     pg_server.sql(f"CREATE DATABASE bench_{_free_port()} OWNER bench")
     name = pg_server.sql("SELECT datname FROM pg_database WHERE datname LIKE 'bench_%'")[0][0]
     with open_db(pg_server.url(name, "bench", BENCH_PASSWORD)) as con:
-        assert write_files(con, [_rec("k", 5e-9)]) == [True]
+        assert write_files(con, [record("k", 5e-9)]) == [True]
         assert "bench-secret" not in con.label and "***" in con.label
     # a server without the tables is no results database for the reading commands
     with pytest.raises(ResultsDBError, match="no results there yet"):
@@ -251,19 +246,12 @@ def test_bad_databases_are_one_line_errors(pg_server: PgServer, pg_url: str, bag
 # ----------------------------------------------------------------- many writers at once
 
 
-def _open_at(url: str, t0: float) -> None:
-    from pneumatic_unload.testline import open_db as open_
-
-    time.sleep(max(0.0, t0 - time.time()))
-    open_(url).close()
-
-
 def test_openers_at_once_create_the_schema_once(pg_url: str):
     """Six processes open an empty database at the same instant: each succeeds (the
     advisory lock: CREATE TABLE of two transactions at once collides on pg_type)."""
     ctx = mp.get_context("spawn")
-    t0 = time.time() + 3.0  # every process imported and waiting by then
-    procs = [ctx.Process(target=_open_at, args=(pg_url, t0)) for _ in range(6)]
+    t0 = time.time() + 2.0  # every process imported and waiting by then
+    procs = [ctx.Process(target=open_at, args=(pg_url, t0)) for _ in range(6)]
     for p in procs:
         p.start()
     for p in procs:
@@ -272,19 +260,6 @@ def test_openers_at_once_create_the_schema_once(pg_url: str):
     with open_db(pg_url) as con, con.engine.connect() as conn:
         assert conn.execute(sa.text("SELECT version_num FROM alembic_version")).all() == \
             [(HEAD,)]
-
-
-def _write_keys(url: str, who: int, keys: list[str], out: mp.Queue) -> None:
-    from pneumatic_unload.testline import open_db as open_
-    from pneumatic_unload.testline.db import write_files as write
-
-    con = open_(url)
-    written = 0
-    for k in range(0, len(keys), 4):  # several inputs per transaction, as a batch writes
-        written += sum(write(con, [_rec(key, 5e-9, writer=f"w{who}")
-                                   for key in keys[k:k + 4]]))
-    con.close()
-    out.put(written)
 
 
 def test_writers_at_once_lose_nothing_and_duplicate_nothing(target: str):
@@ -296,7 +271,7 @@ def test_writers_at_once_lose_nothing_and_duplicate_nothing(target: str):
     ctx = mp.get_context("spawn")
     out = ctx.Queue()
     orders = [shared, shared[::-1], shared[20:] + shared[:20], shared[::2] + shared[1::2]]
-    procs = [ctx.Process(target=_write_keys, args=(
+    procs = [ctx.Process(target=write_keys, args=(
         target, w, orders[w] + [f"own-{w}-{k}" for k in range(20)], out)) for w in range(4)]
     for p in procs:
         p.start()
@@ -346,24 +321,34 @@ def test_two_benches_and_a_batch_write_at_once(bags: Path, pg_url: str, tmp_path
     benches = {name: NodeProcess("estimator", {
         "volume": 1e-3, "curve_fit": False, "results_db": pg_url, "part_id": f"P-{name}"},
         tmp_path, extra=["-r", f"__node:={name}"]) for name in ("bench_a", "bench_b")}
-    batch = None
+    cmd = [*RUN, "batch", str(bags), "--db", pg_url, "--workers", "1", "--json"]
+    batches: list[subprocess.Popen] = []
     try:
         for est in benches.values():
             est.wait_output(r"estimating on", 60.0)
         sim.wait_output(r"streaming at", 60.0)
-        batch = subprocess.Popen([*RUN, "batch", str(bags), "--db", pg_url, "--workers",
-                                  "1", "--json"], stdout=subprocess.PIPE,
-                                 stderr=subprocess.PIPE, text=True)
-        for name, est in benches.items():
-            est.wait_output(rf"\[{name}\]: unload {cycles - 1}: ", 90.0)
-        out, err = batch.communicate(timeout=300)
+        # batches write all along: the first analyses the inputs, the next ones (--force)
+        # write them again, replacing them, until both benches have measured every cycle
+        batches.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                        text=True))
+        deadline = time.monotonic() + 120.0
+        while not all(re.search(rf"\[{name}\]: unload {cycles - 1}: ", est.output())
+                      for name, est in benches.items()):
+            assert time.monotonic() < deadline, [e.output()[-2000:] for e in benches.values()]
+            assert all(e.proc.poll() is None for e in benches.values())
+            if batches[-1].poll() is not None:
+                batches.append(subprocess.Popen([*cmd, "--force"], stdout=subprocess.PIPE,
+                                                stderr=subprocess.PIPE, text=True))
+            time.sleep(0.1)
+        outs = [b.communicate(timeout=300) for b in batches]
     finally:
-        if batch is not None and batch.poll() is None:
-            batch.kill()
+        for b in batches:
+            if b.poll() is None:
+                b.kill()
         codes = [p.stop() for p in (sim, *benches.values())]
     assert codes == [0, 0, 0], codes
-    assert batch.returncode == 0, err
-    assert json.loads(out)["analysed"] == 8
+    assert [b.returncode for b in batches] == [0] * len(batches), [e for _o, e in outs]
+    assert [json.loads(o)["analysed"] for o, _e in outs] == [8] * len(batches)
     with open_db(pg_url) as con:
         files, rows = file_rows(con), unload_rows(con)
     for name, est in benches.items():

@@ -1,0 +1,34 @@
+"""Writers of the results database in their own processes (multiprocessing spawn targets of
+test_results_db.py: a light module, so that each child imports little before it starts)."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from pneumatic_unload.testline.db import FileRecord, open_db, write_files
+
+
+def record(key: str, c: float, writer: str = "batch", **u: float) -> FileRecord:
+    """An input ``key`` with one unload of recommended C ``c`` (and the fields ``u``)."""
+    return FileRecord(path=f"in/{key}", content_hash=key, settings_hash="s", part_id="P",
+                      status="ok", writer=writer,
+                      unloads=[{"status": "ok", "recommended_conductance": c, **u}])
+
+
+def open_at(url: str, t0: float) -> None:
+    """Open (creating the schema of) ``url`` at the wall-clock instant ``t0``."""
+    time.sleep(max(0.0, t0 - time.time()))
+    open_db(url).close()
+
+
+def write_keys(url: str, who: int, keys: list[str], out: Any) -> None:
+    """Write the inputs ``keys``, four per transaction as a batch does; put the number this
+    writer wrote (not found there) on the queue ``out``."""
+    con = open_db(url)
+    written = 0
+    for k in range(0, len(keys), 4):
+        written += sum(write_files(con, [record(key, 5e-9, writer=f"w{who}")
+                                         for key in keys[k:k + 4]]))
+    con.close()
+    out.put(written)
