@@ -243,9 +243,17 @@ class EstimatorSettings(TankSpec):
         room's) where given, else a room's :data:`AMBIENT_TEMPERATURE` (not T10: the gas
         in the tank may be out of equilibrium - a tank just discharged is cold - while the
         supply is not)."""
-        if self.supply_temperature is not None:
-            return self.supply_temperature
-        return AMBIENT_TEMPERATURE if self.wall_temperature is None else self.wall_temperature
+        return supply_gas_temperature(self.supply_temperature, self.wall_temperature)
+
+
+def supply_gas_temperature(supply: float | None, wall: float | None) -> float:
+    """A charge's supply temperature T_s [K] from the given one ``supply`` [K] and the
+    given wall's ``wall`` [K] (None: not given): the supply's, else the wall's, else
+    :data:`AMBIENT_TEMPERATURE` (never T10: see
+    :attr:`EstimatorSettings.supply_gas_temperature`)."""
+    if supply is not None:
+        return supply
+    return AMBIENT_TEMPERATURE if wall is None else wall
 
 
 def wall_uncertainty(settings: EstimatorSettings,
