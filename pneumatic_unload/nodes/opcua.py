@@ -100,15 +100,17 @@ class OpcUaNode(Node):
         estimator = p("estimator").rstrip("/") or "/estimator"
         self._action = f"{estimator}/measure"
         self._client = ActionClient(self, Measure, self._action)
-        self.create_subscription(UnloadEstimate, f"{estimator}/estimate", self._on_estimate,
-                                 common.LATCHED_QOS)
+        self.create_subscription(
+            UnloadEstimate, f"{estimator}/estimate",
+            lambda msg: self._guarded("estimate", self._on_estimate, msg), common.LATCHED_QOS)
         #: Estimates by unload key, the latest last (executor thread).
         self._seen: OrderedDict[tuple[int, int], Estimate] = OrderedDict()
         self._requests: deque[tuple[str, Callable[[Outcome], None]]] = deque()
         self._current: _Measurement | None = None
         self._estimator_present = False
-        self._wake = self.create_guard_condition(self._take_requests)
-        self.create_timer(0.2, self._tick)
+        self._wake = self.create_guard_condition(
+            lambda: self._guarded("request", self._take_requests))
+        self.create_timer(0.2, lambda: self._guarded("timer", self._tick))
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name="opcua",
                                         daemon=True)
@@ -211,7 +213,7 @@ class OpcUaNode(Node):
                                   part_id=m.part)
         self.get_logger().info(f"measuring part {m.part!r} through {self._action}")
         self._client.send_goal_async(goal).add_done_callback(
-            lambda fut: self._on_goal_response(m, fut))
+            lambda fut: self._guarded("goal response", self._on_goal_response, m, fut))
 
     def _on_goal_response(self, m: _Measurement, fut: Any) -> None:
         if m is not self._current:
@@ -221,7 +223,8 @@ class OpcUaNode(Node):
             self._done(Outcome("BadInvalidState", f"{self._action} refused the goal (a "
                                "measurement is running there)"))
             return
-        handle.get_result_async().add_done_callback(lambda f: self._on_result(m, f))
+        handle.get_result_async().add_done_callback(
+            lambda f: self._guarded("goal result", self._on_result, m, f))
 
     def _on_result(self, m: _Measurement, fut: Any) -> None:
         if m is not self._current:
@@ -246,12 +249,24 @@ class OpcUaNode(Node):
         m, self._current = self._current, None
         if m is None:
             return
-        log = self.get_logger().info if outcome.ok else self.get_logger().warn
         e = outcome.estimate
-        log(f"part {m.part!r}: {outcome.status}: {outcome.message}"
-            + (f"; C={e.conductance:.5g} m^3/(s Pa), b={e.critical_ratio:.4g}"
-               f"{', ' + e.verdict if e.verdict else ''}" if e is not None else ""))
+        text = f"part {m.part!r}: {outcome.status}: {outcome.message}" + (
+            f"; C={e.conductance:.5g} m^3/(s Pa), b={e.critical_ratio:.4g}"
+            f"{', ' + e.verdict if e.verdict else ''}" if e is not None else "")
+        if outcome.ok:
+            self.get_logger().info(text)
+        else:
+            self.get_logger().warn(text)
         m.finish(outcome)
+
+    def _guarded(self, what: str, fn: Callable[..., None], *args: Any) -> None:
+        """Run a callback's work; an error ends the measurement under way
+        (BadInternalError) and is logged, never fatal to the node."""
+        try:
+            fn(*args)
+        except Exception as exc:
+            self.get_logger().error(f"{what}: {type(exc).__name__}: {exc}")
+            self._done(Outcome("BadInternalError", f"{what}: {type(exc).__name__}: {exc}"))
 
     # ------------------------------------------------------------------ shutdown
     def close(self) -> None:

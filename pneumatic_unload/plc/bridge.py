@@ -296,10 +296,7 @@ class BridgeServer:
         refused = self._refuse()
         if refused is not None:
             return refused
-        self._busy = True  # before any await: a second call sees it
-        task = asyncio.get_running_loop().create_task(self._run(part))
-        self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
+        task = await self._begin(part)
         outcome = await asyncio.shield(task)  # a caller gone: the measurement goes on
         if not outcome.ok or outcome.estimate is None:
             return ua.StatusCode(getattr(ua.StatusCodes, outcome.status,
@@ -315,19 +312,28 @@ class BridgeServer:
         refused = self._refuse()
         if refused is not None:
             return refused
-        self._busy = True
-        task = asyncio.get_running_loop().create_task(self._run(part))
-        self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
+        await self._begin(part)
         return []
 
-    async def _run(self, part: str) -> Outcome:
-        """One measurement: its state and results into the variables (``MeasureDone``
-        last)."""
+    async def _begin(self, part: str) -> asyncio.Task[Outcome]:
+        """Start a measurement: busy at once (a second call sees it), ``MeasureDone``
+        False and ``State`` 'measuring' before the call answers; its task."""
+        self._busy = True
         try:
             await self._write(PartId=part, MeasureDone=False, Message="measuring",
                               Verdict="")
             await self._refresh()
+        except BaseException:
+            self._busy = False
+            raise
+        task = asyncio.get_running_loop().create_task(self._run(part))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        return task
+
+    async def _run(self, part: str) -> Outcome:
+        """One measurement: its results into the variables (``MeasureDone`` last)."""
+        try:
             try:
                 outcome = await self.measure(part)
             except asyncio.CancelledError:
