@@ -367,3 +367,34 @@ def test_a_plant_s_bridge_lets_only_its_users_measure(tmp_path: Path) -> None:
 
         _run(main())
         assert bench.alive()
+
+
+def test_without_an_estimator_a_measurement_fails_cleanly_and_sigint_stops_a_call(
+        tmp_path: Path) -> None:
+    """The bridge alone: State 'no estimator'; Measure waits estimator_wait s for the
+    estimator's action server, then answers BadNoCommunication with the reason; SIGINT
+    while a measurement waits stops the node cleanly (exit 0)."""
+    from pneumatic_unload.launch import NodeProcess
+
+    port = _free_port()
+    url = f"opc.tcp://127.0.0.1:{port}/pneumatic_unload/"
+    node = NodeProcess("opcua", {"endpoint": url, "estimator_wait": 2.0}, tmp_path,
+                       env={**os.environ, "ROS_DOMAIN_ID": str(free_domain_id())})
+    try:
+        async def main() -> None:
+            async with _client(url) as (_c, n):
+                assert await n.read("State") == "no estimator"
+                with pytest.raises(ua.uaerrors.BadNoCommunication):
+                    await n.call("Measure", "part-H")
+                assert "/estimator/measure is not available" in await n.read("Message")
+                assert await n.read("State") == "no estimator"
+                assert await n.read("MeasureDone") is True
+                assert await n.call("StartMeasure", "part-I") is None
+                assert await n.read("State") == "measuring"
+                node.proc.send_signal(signal.SIGINT)  # while it waits for the estimator
+
+        _run(main())
+        assert node.stop() == 0, node.output()
+    finally:
+        node.stop()
+    assert "Traceback" not in node.output()
