@@ -157,10 +157,24 @@ def _run(coro: Any) -> Any:
     return asyncio.run(coro)
 
 
+#: The part types of the module's bench: part-* within 2 % of the rig's C, odd-* never.
+SPEC = """part_types:
+  part:
+    match: "^part-"
+    conductance: [7.84e-9, 8.16e-9]
+  odd:
+    match: "^odd-"
+    conductance: [1.0e-9, 2.0e-9]
+"""
+
+
 @pytest.fixture(scope="module")
 def bench(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Bench]:
-    """The launch file's bench with the bridge on a free port (security None)."""
-    with _bench(tmp_path_factory.mktemp("bench")) as b:
+    """The launch file's bench with the bridge on a free port (security None), a part
+    specification (:data:`SPEC`)."""
+    tmp = tmp_path_factory.mktemp("bench")
+    (tmp / "spec.yaml").write_text(SPEC)
+    with _bench(tmp, f"spec_file:={tmp / 'spec.yaml'}") as b:
         yield b
 
 
@@ -181,10 +195,11 @@ def test_measure_over_opc_ua_gives_the_rigs_c(bench: Bench) -> None:
             assert len(ok) == 1 and len(busy) == 1, results
             c, b, verdict = ok[0]
             assert c == pytest.approx(TRUE_C, rel=0.02)
-            assert 0.0 < b < 1.0 and verdict == ""  # no specification given
+            assert 0.0 < b < 1.0 and verdict == "pass"  # the final C against SPEC
             for client in (c1, c2):  # both sessions survived the call
                 assert client.uaclient.state == UaClientState.CONNECTED
             assert await n1.read("Conductance") == c
+            assert await n1.read("Verdict") == "pass"
             assert await n2.read("State") == "done"
             assert await n2.read("MeasureDone") is True
             assert await n2.read("Message") == "ok"
@@ -202,23 +217,25 @@ def test_measure_over_opc_ua_gives_the_rigs_c(bench: Bench) -> None:
 
 
 def test_start_and_poll(bench: Bench) -> None:
-    """StartMeasure answers at once; MeasureDone goes True when the results are written."""
+    """StartMeasure answers at once; MeasureDone goes True when the results are written
+    (the verdict of a part whose type's range excludes the rig's C: fail)."""
 
     async def main() -> None:
         async with _client(bench.url) as (_c, n):
             deadline = time.monotonic() + 60.0
             while True:
-                assert await n.call("StartMeasure", "part-C") is None  # no outputs
+                assert await n.call("StartMeasure", "odd-C") is None  # no outputs
                 while not await n.read("MeasureDone"):
                     await asyncio.sleep(0.2)
-                assert await n.read("PartId") == "part-C"
+                assert await n.read("PartId") == "odd-C"
                 if await n.read("State") == "done":
                     break
                 assert "not charged" in await n.read("Message")  # the rig recharging
                 assert time.monotonic() < deadline
                 await asyncio.sleep(0.5)
             assert await n.read("Conductance") == pytest.approx(TRUE_C, rel=0.02)
-            assert await n.read("PartId") == "part-C"
+            assert await n.read("PartId") == "odd-C"
+            assert await n.read("Verdict") == "fail"  # outside its type's range
             assert await n.read("Message") == "ok"
 
     _run(main())
@@ -398,3 +415,79 @@ def test_without_an_estimator_a_measurement_fails_cleanly_and_sigint_stops_a_cal
     finally:
         node.stop()
     assert "Traceback" not in node.output()
+
+
+# --------------------------------------------------------------------------- the core
+def test_users_file_and_security_settings_are_checked(tmp_path: Path) -> None:
+    """Passwords are kept as salted hashes; a users file or a security setting the bridge
+    cannot run with is refused with the reason."""
+    from pneumatic_unload.plc import Security, SecurityError, load_users
+    from pneumatic_unload.plc.security import Users, check_password
+
+    h = hash_password("s3cret")
+    assert "s3cret" not in h and h != hash_password("s3cret")  # salted
+    assert check_password("s3cret", h) and not check_password("s3cre", h)
+    assert not check_password("s3cret", "md5$x")
+    users = tmp_path / "users.txt"
+    users.write_text(f"# plant\n\nplc:{h}\n")
+    assert load_users(users) == {"plc": h}
+    for text, why in [("plc:secret\n", "not 'name:pbkdf2_sha256"),
+                      (f"plc:{h}\nplc:{h}\n", "given twice"), ("# nobody\n", "no user")]:
+        users.write_text(text)
+        with pytest.raises(SecurityError, match=why):
+            load_users(users)
+    cert = tmp_path / "c.der"
+    cert.write_bytes(b"x")
+    for kwargs, why in [({"policy": "Basic128Rsa15"}, "must be one of"),
+                        ({"policy": "Basic256Sha256"}, "needs the server's certificate"),
+                        ({"policy": "Basic256Sha256", "certificate": str(cert),
+                          "private_key": str(tmp_path / "none.pem")}, "no such file"),
+                        ({"users": {"plc": h}}, "in clear"),
+                        ({"allow_anonymous": False}, "needs users"),
+                        ({"trusted_certs": str(tmp_path / "none")}, "no such folder")]:
+        with pytest.raises(SecurityError, match=why):
+            Security(**kwargs)
+    manager = Users({"plc": h})
+    assert manager.get_user(None, "plc", "s3cret").name == "plc"
+    assert manager.get_user(None, "plc", "wrong") is None
+    assert manager.get_user(None, "nobody", "s3cret") is None
+    assert manager.get_user(None).role.name == "Anonymous"  # may read, not call
+    assert Users(None).get_user(None).role.name == "User"  # a lab bench: may call
+
+
+def test_only_trusted_client_certificates_connect(tmp_path: Path) -> None:
+    """trusted_certs: a client whose certificate is in the folder connects, another is
+    refused (the server in process, a stand-in measurement)."""
+    from pneumatic_unload.plc import BridgeServer, Outcome, Security
+
+    server_cert, server_key = _certificate(tmp_path, "bridge", APPLICATION_URI, True)
+    trusted = tmp_path / "trusted"
+    trusted.mkdir()
+    good = _certificate(tmp_path, "plc", "urn:pneumatic-unload:test-client", False)
+    (trusted / good[0].name).write_bytes(good[0].read_bytes())  # the certificate only
+    bad = _certificate(tmp_path, "intruder", "urn:pneumatic-unload:test-client", False)
+    url = f"opc.tcp://127.0.0.1:{_free_port()}/pneumatic_unload/"
+
+    async def never(_part: str) -> Outcome:
+        return Outcome("BadNoCommunication", "no rig here")
+
+    async def main() -> None:
+        server = BridgeServer(url, never, Security(
+            policy="Basic256Sha256", certificate=str(server_cert),
+            private_key=str(server_key), trusted_certs=str(trusted)))
+        await server.start()
+        try:
+            sec = {"server_certificate": str(server_cert), "retry": False}
+            async with _client(url, certificate=str(good[0]), private_key=str(good[1]),
+                               **sec) as (_c, n):
+                assert await n.read("State") == "no estimator"
+                with pytest.raises(ua.uaerrors.BadNoCommunication):
+                    await n.call("Measure", "part-J")
+            with pytest.raises((ua.UaError, OSError, TimeoutError)):
+                async with _client(url, certificate=str(bad[0]), private_key=str(bad[1]),
+                                   **sec):
+                    pass
+        finally:
+            await server.stop()
+
+    _run(main())

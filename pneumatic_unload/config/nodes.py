@@ -175,7 +175,8 @@ def _opcua() -> list[ParameterSpec]:
                 "estimate after the p* crossing; then Measure returns the crossing's", "s",
                 0.0, 1e6),
         _double("estimator_wait", 10.0, "a measurement waits this long for the "
-                "estimator's ~/measure action server", "s", 0.0, 1e6),
+                "estimator (its ~/measure action server, and pressure samples reaching it: "
+                "its /diagnostics reports)", "s", 0.0, 1e6),
         _str("spec_file", "", "specification of the part types (YAML; the estimator's "
              "file): the Verdict of a measurement's final estimate ('': none)"),
         _str("security_policy", "None", "'None' (a lab bench) or 'Basic256Sha256' "

@@ -7,6 +7,12 @@ of its own thread; this node is the ROS side: an action client of the estimator'
 Subscribes
     <estimator>/estimate (pneumatic_unload_msgs/UnloadEstimate; reliable, transient local):
         each estimate into the server's variables as it arrives.
+    /diagnostics (diagnostic_msgs/DiagnosticArray): the estimator's reports; a measurement
+        starts (``State`` 'ready') only once its count of samples received grows: an
+        estimator that joins the rig's stream after the valve opened skips that unload
+        (no plateau before the drop) and the goal would wait for its timeout. With several
+        estimators on one ROS domain any of their reports counts (the status name is the
+        same).
 Action client
     <estimator>/measure (pneumatic_unload_msgs/action/Measure): one goal per OPC UA
         ``Measure``/``StartMeasure`` call; its crossing estimate is followed by the unload's
@@ -21,7 +27,8 @@ Estimates go to the server with ``asyncio.run_coroutine_threadsafe``, not waited
 state of the one measurement under way lives in the executor's thread only.
 
 Status codes of a failed measurement (its reason in ``Message`` and the log):
-``BadNoCommunication`` (no estimator's action server within ``estimator_wait`` s),
+``BadNoCommunication`` (no estimator's action server, or no samples reaching the estimator,
+within ``estimator_wait`` s),
 ``BadInvalidState`` (the estimator refused the goal: a measurement is running there),
 ``BadTimeout`` (the goal's timeout, or no answer from the estimator), ``BadDeviceFailure``
 (the measurement failed: the valve service, an aborted unload, bad data).
@@ -39,6 +46,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.action import ActionClient
 from rclpy.node import Node
 
@@ -54,6 +62,11 @@ START_TIMEOUT = 60.0
 RESULT_SLACK = 10.0
 #: Estimates kept per unload key, to find a final that came before the goal's result [-].
 KEPT = 32
+#: The name of the estimator's status on /diagnostics (its "samples" value: received).
+ESTIMATOR_DIAGNOSTICS = "pneumatic_unload: estimator"
+#: Oldest estimator report that still tells it hears the rig [s] (it reports each
+#: diagnostics_period, 1 s by default).
+REPORT_AGE = 5.0
 
 
 @dataclass
@@ -80,6 +93,7 @@ class OpcUaNode(Node):
         self._Measure = Measure
         for name, (default, desc) in common.node_parameters("opcua").items():
             self.declare_parameter(name, default, desc)
+        self.add_on_set_parameters_callback(common.validating_callback(self._check))
         p = self._p
         try:
             security = Security(
@@ -108,6 +122,13 @@ class OpcUaNode(Node):
         self._requests: deque[tuple[str, Callable[[Outcome], None]]] = deque()
         self._current: _Measurement | None = None
         self._estimator_present = False
+        #: The estimator's reports of its samples received: (count [-], arrival [s,
+        #: monotonic]) of the last one, and whether the count grew since the one before.
+        self._samples: tuple[int, float] | None = None
+        self._hearing = False
+        self.create_subscription(DiagnosticArray, "/diagnostics",
+                                 lambda msg: self._guarded("diagnostics", self._on_diag, msg),
+                                 10)
         self._wake = self.create_guard_condition(
             lambda: self._guarded("request", self._take_requests))
         self.create_timer(0.2, lambda: self._guarded("timer", self._tick))
@@ -132,6 +153,15 @@ class OpcUaNode(Node):
 
     def _p(self, name: str) -> Any:
         return self.get_parameter(name).value
+
+    @staticmethod
+    def _check(changes: dict[str, Any]) -> str:
+        """The timeouts and trigger_valve change at run time (the next measurement takes
+        them); the server's and security's parameters do not."""
+        fixed = set(changes) - {"measure_timeout", "trigger_valve", "final_timeout",
+                                "estimator_wait"}
+        return f"{', '.join(sorted(fixed))} cannot change at run time (restart the node)" \
+            if fixed else ""
 
     # ------------------------------------------------------------------ asyncio side
     async def measure(self, part: str) -> Outcome:
@@ -172,6 +202,31 @@ class OpcUaNode(Node):
         else:
             self._to_server(self._bridge.show(est))
 
+    def _on_diag(self, msg: Any) -> None:
+        """The estimator's /diagnostics report: its samples received grow (it hears the
+        rig: a measurement's unload will have its plateau before the valve opens)."""
+        for st in msg.status:
+            if st.name != ESTIMATOR_DIAGNOSTICS:
+                continue
+            count = next((int(kv.value) for kv in st.values
+                          if kv.key == "samples" and kv.value.isdigit()), None)
+            if count is None:
+                continue
+            self._hearing = self._samples is not None and count > self._samples[0]
+            self._samples = (count, time.monotonic())
+
+    def _ready(self) -> str:
+        """'' when a measurement can start: the estimator's action server is there and the
+        estimator receives the rig's samples (its reports within the last
+        :data:`REPORT_AGE` s say so); else why not."""
+        if not self._client.server_is_ready():
+            return f"the estimator's action {self._action} is not available"
+        if not (self._hearing and self._samples is not None
+                and time.monotonic() - self._samples[1] < REPORT_AGE):
+            return (f"the estimator receives no pressure samples (its {ESTIMATOR_DIAGNOSTICS!r}"
+                    " reports on /diagnostics)")
+        return ""
+
     def _take_requests(self) -> None:
         while self._requests:
             part, finish = self._requests.popleft()
@@ -183,20 +238,19 @@ class OpcUaNode(Node):
 
     def _tick(self) -> None:
         """Estimator presence (``State``), and the deadlines of the measurement."""
-        present = self._client.server_is_ready()
-        if present != self._estimator_present:
-            self._estimator_present = present
-            self._to_server(self._bridge.set_estimator(present))
+        why = self._ready()
+        if (not why) != self._estimator_present:
+            self._estimator_present = not why
+            self._to_server(self._bridge.set_estimator(not why))
         m = self._current
         if m is None:
             return
         now = time.monotonic()
         if not m.sent:
-            if present:
+            if not why:
                 self._send(m)
             elif now - m.t0 > self._p("estimator_wait"):
-                self._done(Outcome("BadNoCommunication", f"the estimator's action "
-                                   f"{self._action} is not available (waited "
+                self._done(Outcome("BadNoCommunication", f"{why} (waited "
                                    f"{self._p('estimator_wait'):g} s)"))
         elif m.crossing is not None and now > m.final_deadline:
             self._done(Outcome("Good", f"ok (no final estimate within "

@@ -76,7 +76,8 @@ SECOND = Unit("SEC", "s", "second")
 #: The variables of the object: name, type, initial value, unit, meaning.
 VARIABLES: tuple[tuple[str, ua.VariantType, Any, Unit | None, str], ...] = (
     ("State", _String, "starting", None, "no estimator (its ~/measure action is not "
-     "there), ready, measuring, done (the last measurement gave C), failed (see Message)"),
+     "there, or no samples reach it), ready, measuring, done (the last measurement gave "
+     "C), failed (see Message)"),
     ("Conductance", _Double, math.nan, CONDUCTANCE_UNIT,
      "the recommended sonic conductance C of the last estimate"),
     ("ConductanceStd", _Double, math.nan, CONDUCTANCE_UNIT,
@@ -261,7 +262,8 @@ class BridgeServer:
                           Verdict=est.verdict)
 
     async def set_estimator(self, present: bool) -> None:
-        """The estimator's ``~/measure`` action server is there, or not (``State``)."""
+        """The estimator is there (its ``~/measure`` action server, samples reaching it),
+        or not (``State``)."""
         if present != self._estimator:
             self._estimator = present
             await self._refresh()
