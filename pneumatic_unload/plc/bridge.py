@@ -301,8 +301,9 @@ class BridgeServer:
         task = await self._begin(part)
         outcome = await asyncio.shield(task)  # a caller gone: the measurement goes on
         if not outcome.ok or outcome.estimate is None:
-            return ua.StatusCode(getattr(ua.StatusCodes, outcome.status,
-                                         ua.StatusCodes.BadUnexpectedError))
+            code = getattr(ua.StatusCodes, outcome.status, ua.StatusCodes.BadUnexpectedError)
+            return ua.StatusCode(code if code != ua.StatusCodes.Good
+                                 else ua.StatusCodes.BadUnexpectedError)
         e = outcome.estimate
         return [ua.Variant(e.conductance, _Double), ua.Variant(e.critical_ratio, _Double),
                 ua.Variant(e.verdict, _String)]
