@@ -38,6 +38,7 @@ setup(
             f"simulator = {PACKAGE}.nodes.simulator:main",
             f"recorder = {PACKAGE}.nodes.recorder:main",
             f"replay = {PACKAGE}.nodes.replay:main",
+            f"opcua = {PACKAGE}.nodes.opcua:main",
             f"pneumatic-unload = {PACKAGE}.cli:main",
         ],
     },

@@ -381,8 +381,10 @@ def cmd_discrepancy(args: argparse.Namespace) -> int:
 def add_discrepancy_parser(sub: Any) -> None:
     """The ``discrepancy`` sub-command (input options as ``analyze``)."""
     dc = sub.add_parser(
-        "discrepancy", help="name the effect the discharge model misses, with evidence",
-        description="Name the effect the discharge model misses, with evidence. Time "
+        "discrepancy",
+        help="name the effect the model misses, with evidence (a discharge or a charge)",
+        description="Name the effect the model misses, with evidence (a discharge; a "
+                    "charge with --direction charge). Time "
                     "bound: every run ends; its work is bounded in model evaluations (at "
                     "most 3 greedy rounds of at most 12 candidates, at most 10 starts "
                     "each, capped Levenberg-Marquardt iterations, an integrator step "
@@ -405,7 +407,8 @@ def add_discrepancy_parser(sub: Any) -> None:
     adapters.add_options(dc, DiscrepancySettings,
                          only=("fit_wall_temperature", "profile", "bic_threshold",
                                "resolution", "candidates", "time_limit",
-                               "model_uncertainty"))
+                               "model_uncertainty", "direction", "supply_pressure",
+                               "supply_temperature"))
     dc.add_argument("--max-effects", type=int, default=None, choices=(1, 2, 3),
                     help="add at most this many effects (greedy), default 3")
     add_input_options(dc)

@@ -50,6 +50,7 @@ from pneumatic_unload.law_fit import (
     fit_law,
     start_from,
 )
+from pneumatic_unload.model.parametric import CHARGE_HEAT_LAWS
 from pneumatic_unload.subsonic_offer import M_SUFFIX, held_lines, split_key, twin_lines
 from pneumatic_unload.temperature_evidence import (
     FOLLOW_FACTOR,
@@ -130,12 +131,8 @@ def fit_curve(
     if fit_heat is None:
         fit_heat = natural
     tried = (laws or CURVE_FIT_LAWS) if (natural and fit_heat) else ("natural",)
-    if settings.charge and laws is None:
-        # the density law's time constant is set at the initial density, which an
-        # evacuated tank's is a twentieth of the end's: a room-into-vacuum fill of the
-        # independent model (constant hA) took it at tau_heat 0.02 s, C +37 % at a 0.5 %
-        # sigma; a charge is offered the others
-        tried = tuple(law for law in tried if law != "density")
+    if settings.charge and laws is None:  # a charge's laws: CHARGE_HEAT_LAWS's reason
+        tried = tuple(law for law in tried if law in CHARGE_HEAT_LAWS)
     if reduced is not None:
         bins = reduced.bins()
         trace = Trace.from_stats(bins, UNIT_NOISE)  # the same for every law

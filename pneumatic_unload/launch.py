@@ -151,7 +151,7 @@ SUBSTITUTION = re.compile(r"\$\((var|find-pkg-share|env)\s+([^)\s]+)(?:\s+([^)]*
 #: The package whose share folder ``$(find-pkg-share ...)`` resolves here.
 PACKAGE = "pneumatic_unload"
 #: The node executables of the package (its console scripts and node modules).
-EXECUTABLES = ("simulator", "estimator", "recorder", "replay")
+EXECUTABLES = ("simulator", "estimator", "recorder", "replay", "opcua")
 
 
 class LaunchError(ValueError):
@@ -199,6 +199,22 @@ def _substitute(text: Any, args: dict[str, str]) -> Any:
     return SUBSTITUTION.sub(one, text)
 
 
+def _condition(text: Any, args: dict[str, str], what: str) -> bool:
+    """A node's ``if``/``unless`` value as ROS reads it: 'true'/'false' or '1'/'0' (any
+    case) once its substitutions are resolved.
+
+    Raises
+    ------
+    LaunchError
+        Any other value."""
+    value = str(_substitute(str(text), args)).strip().lower()
+    if value in ("true", "1"):
+        return True
+    if value in ("false", "0"):
+        return False
+    raise LaunchError(f"{what}: {text!r} is {value!r}, not true or false")
+
+
 def _typed(text: Any) -> Any:
     """A parameter value as ROS reads it from a launch file: YAML (a number, a bool, a
     list), an empty string kept."""
@@ -214,7 +230,8 @@ def load_launch(path: str | Path, overrides: dict[str, str] | None = None
                 ) -> list[dict[str, Any]]:
     """The nodes of a ROS 2 YAML launch file, its arguments set from ``overrides``
     (``name:=value`` of the command line) or their defaults: per node its ``exec``,
-    ``name``, parameter files and parameter values (typed as ROS types them).
+    ``name``, parameter files and parameter values (typed as ROS types them); a node whose
+    ``if`` is false (or ``unless`` true) is left out.
 
     Raises
     ------
@@ -248,6 +265,11 @@ def load_launch(path: str | Path, overrides: dict[str, str] | None = None
             if body.get("pkg") != PACKAGE or body.get("exec") not in EXECUTABLES:
                 raise LaunchError(f"node {body.get('pkg')}/{body.get('exec')}: this "
                                   f"launcher runs {PACKAGE}'s {', '.join(EXECUTABLES)}")
+            what = f"node {body.get('name', body['exec'])}"
+            if "if" in body and not _condition(body["if"], args, f"{what} if"):
+                continue
+            if "unless" in body and _condition(body["unless"], args, f"{what} unless"):
+                continue
             files, values = [], {}
             for p in body.get("param", []) or []:
                 if "from" in p:

@@ -32,7 +32,7 @@ from pneumatic_unload.fit.uncertainty import (
     structure_inflation,
 )
 from pneumatic_unload.inversion import estimator_model
-from pneumatic_unload.model.effects import Start
+from pneumatic_unload.model.effects import Start, exchange_extremes
 from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
 from pneumatic_unload.physics import tau_exp_eq38
 
@@ -173,8 +173,7 @@ def fit_law(
         starts = [{"t_wall": t10 - 10.0}, {"t_wall": t10 - 30.0}] + ([] if law == "natural" else [
             {"t_wall": t10 + d, "tau_heat": 0.1 * tau} for d in (-10.0, 5.0)])  # strong
     if explore and natural and fit_heat:
-        starts = ([{"heat_scale": 30.0}, {"heat_scale": 0.1}] if law.startswith("natural") else
-                  [{"tau_heat": 0.05 * tau}, {"tau_heat": 20.0 * tau}])
+        starts = exchange_extremes(law, tau)
     if fit_m and (start or {}).get("m", SUBSONIC_INDEX_START) == SUBSONIC_INDEX_START:
         # m freed from a fit with m held: b and m trade along a curved valley (a flow never
         # choked: b 0.23, m 0.30 for 0.10, 0.35), so the search starts screen its far ends

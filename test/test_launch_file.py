@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import time
 from pathlib import Path
@@ -17,10 +18,16 @@ from pneumatic_unload.launch import LaunchError, free_domain_id, load_launch, pa
 LAUNCH = Path(__file__).resolve().parent.parent / "launch" / "bench.launch.yaml"
 
 
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
 def test_the_launch_file_s_nodes_arguments_and_parameter_files() -> None:
     nodes = {n["name"]: n for n in load_launch(LAUNCH, {"volume": "0.001",
                                                         "direction": "both"})}
-    assert set(nodes) == {"simulator", "estimator", "recorder"}
+    assert set(nodes) == {"simulator", "estimator", "recorder", "opcua"}
     share = package_share()
     for name, n in nodes.items():
         assert n["files"] == [share / "config" / f"{name}.yaml"]
@@ -29,6 +36,17 @@ def test_the_launch_file_s_nodes_arguments_and_parameter_files() -> None:
     assert nodes["estimator"]["params"]["direction"] == "both"
     assert nodes["estimator"]["params"]["results_db"] == ""  # an empty string kept
     assert nodes["simulator"]["params"]["start_delay"] == -1.0  # the default
+    assert nodes["opcua"]["params"]["endpoint"] == "opc.tcp://0.0.0.0:4840/pneumatic_unload/"
+    assert nodes["opcua"]["params"]["security_policy"] == "None"  # a string, not null
+
+
+def test_the_opc_ua_bridge_is_optional_and_takes_its_port() -> None:
+    """opcua:=false leaves the bridge out (a node's ``if``); opcua_port sets its endpoint."""
+    assert "opcua" not in {n["name"] for n in load_launch(LAUNCH, {"opcua": "false"})}
+    nodes = {n["name"]: n for n in load_launch(LAUNCH, {"opcua_port": "4855"})}
+    assert nodes["opcua"]["params"]["endpoint"] == "opc.tcp://0.0.0.0:4855/pneumatic_unload/"
+    with pytest.raises(LaunchError, match="not true or false"):
+        load_launch(LAUNCH, {"opcua": "maybe"})
 
 
 @pytest.mark.parametrize(("text", "given", "why"), [
@@ -63,13 +81,17 @@ def test_the_launcher_runs_the_bench_and_stops_cleanly(tmp_path: Path,
                                                        venv_python: Path) -> None:
     """``python -m pneumatic_unload.launch launch/bench.launch.yaml name:=value``: the
     simulator opens the valve, the estimator publishes the final C (within 1 % of the
-    rig's 8e-9), the recorder writes the bag; Ctrl-C stops all three, exit code 0."""
+    rig's 8e-9), the recorder writes the bag; Ctrl-C stops all four (the OPC UA bridge on
+    a free port), exit code 0. The valve opens 5 s after the simulator's start: the
+    estimator (its warm-up, four nodes starting on two cores) must hear the rig's plateau
+    before it, or it skips that unload as one joined midway."""
     env = {**os.environ, "ROS_DOMAIN_ID": str(free_domain_id()),
            "PNEUMATIC_UNLOAD_LOG_DIR": str(tmp_path / "logs")}
     bag = tmp_path / "bag"
     proc = subprocess.Popen(
         [str(venv_python), "-m", "pneumatic_unload.launch", str(LAUNCH), "volume:=0.001",
-         "start_delay:=2.0", f"output:={bag}"], env=env, stdout=subprocess.PIPE,
+         "start_delay:=5.0", f"output:={bag}", f"opcua_port:={_free_port()}"], env=env,
+        stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT, text=True)
     logs = tmp_path / "logs"
     try:

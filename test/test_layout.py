@@ -17,7 +17,7 @@ import pytest
 PKG = "pneumatic_unload"
 MSGS_PKG = "pneumatic_unload_msgs"
 NODES_PKG = f"{PKG}.nodes"
-EXECUTABLES = ("estimator", "simulator", "recorder", "replay")
+EXECUTABLES = ("estimator", "simulator", "recorder", "replay", "opcua")
 # Top-level modules the ROS-free core must never import.
 ROS_MODULES = frozenset(
     {
@@ -305,7 +305,8 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
         shebang = script.read_text().splitlines()[0]
         assert shebang.startswith("#!") and Path(shebang[2:].split()[0]).parent == prefix / "bin"
     assert (pkg_prefix / "share" / PKG / "package.xml").is_file()
-    for yaml_name in ("simulator.yaml", "estimator.yaml", "recorder.yaml", "replay.yaml"):
+    for yaml_name in ("simulator.yaml", "estimator.yaml", "recorder.yaml", "replay.yaml",
+                      "opcua.yaml"):
         assert (pkg_prefix / "share" / PKG / "config" / yaml_name).is_file()
     assert (msgs_prefix / "share" / MSGS_PKG / "msg" / "UnloadEstimate.msg").is_file()
     assert (pkg_prefix / "share" / PKG / "foxglove" / "pneumatic_unload.json").is_file()
@@ -346,6 +347,7 @@ LAYERS: dict[str, int] = {
     "cli": 7,
     "batch_cli": 7,  # the test-line commands of the CLI (batch, results)
     "demo": 7,
+    "plc": 7,  # the OPC UA server of the cell's PLC (asyncua; the opcua node's core)
     "nodes": 8,
 }
 #: Largest core module [lines] ("about 500").

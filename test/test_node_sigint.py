@@ -34,9 +34,10 @@ import pytest
 
 from pneumatic_unload.launch import free_domain_id, ros_args
 
-NODES = ("simulator", "estimator", "recorder", "replay")
+NODES = ("simulator", "estimator", "recorder", "replay", "opcua")
 #: The start line of each node (printed when it is built; the replay prints none).
-READY = {"simulator": "rig at ", "estimator": "estimating on ", "recorder": "recording to "}
+READY = {"simulator": "rig at ", "estimator": "estimating on ", "recorder": "recording to ",
+         "opcua": "OPC UA server on "}
 #: Instants of the SIGINT after the process start [s], SIGINT at its default.
 INSTANTS = (0.05, 0.3, 1.0, 1.5)
 #: Instants of the SIGINT after the process start [s], SIGINT inherited ignored; the one of
@@ -225,6 +226,8 @@ def _params(node: str, tmp_path: Path, k: int) -> dict[str, Any]:
         return {"volume": 1e-3}
     if node == "recorder":
         return {"output": str(tmp_path / f"rec-{k}")}
+    if node == "opcua":  # a port of the system's choice: the runs overlap
+        return {"endpoint": "opc.tcp://127.0.0.1:0/pneumatic_unload/"}
     bag = tmp_path / "replayed"  # looped: a replay that ignored the SIGINT would not end
     return {"bag": str(bag if bag.exists() else _bag(bag)), "rate": 1.0, "loop": True}
 

@@ -24,6 +24,8 @@ NODES: dict[str, str] = {
                  "and rig configuration; services ~/start_unload and ~/charge",
     "recorder": "records the rig's topics (and extra ones) into MCAP bags",
     "replay": "publishes the messages of a bag again, on their original topics",
+    "opcua": "OPC UA server for the cell's PLC: the latest estimate, the state, and the "
+             "methods Measure and StartMeasure (the estimator's ~/measure action)",
 }
 
 
@@ -159,15 +161,46 @@ def _replay() -> list[ParameterSpec]:
     ]
 
 
+def _opcua() -> list[ParameterSpec]:
+    return [
+        _str("endpoint", "opc.tcp://0.0.0.0:4840/pneumatic_unload/",
+             "OPC UA endpoint the server listens on (opc.tcp://HOST:PORT/PATH)"),
+        _str("estimator", "/estimator", "the estimator node: its ~/measure action and "
+             "~/estimate topic"),
+        _double("measure_timeout", 60.0, "a measurement's timeout (the ~/measure goal's); "
+                "an OPC UA client's call timeout must exceed it plus final_timeout", "s",
+                0.1, 1e6),
+        _bool("trigger_valve", True, "a measurement opens the valve (the estimator's "
+              "valve_service); false: it waits for an unload started otherwise"),
+        _double("final_timeout", 30.0, "longest wait for the final (full-curve fit) "
+                "estimate after the p* crossing; then Measure returns the crossing's", "s",
+                0.0, 1e6),
+        _double("estimator_wait", 10.0, "a measurement waits this long for the "
+                "estimator (its ~/measure action server, and pressure samples reaching it: "
+                "its /diagnostics reports)", "s", 0.0, 1e6),
+        _str("spec_file", "", "specification of the part types (YAML; the estimator's "
+             "file): the Verdict of a measurement's final estimate ('': none)"),
+        _str("security_policy", "None", "'None' (a lab bench) or 'Basic256Sha256' "
+             "(SignAndEncrypt; needs certificate and private_key)", ("None", "Basic256Sha256")),
+        _str("certificate", "", "the server's certificate file (DER or PEM)"),
+        _str("private_key", "", "the server's private key file (PEM)"),
+        _str("users_file", "", "users who may call Measure/StartMeasure: 'name:HASH' lines "
+             "(python -m pneumatic_unload.plc.security NAME); '': every session may"),
+        _bool("allow_anonymous", True, "anonymous sessions may connect (with users_file: "
+              "browse, read and subscribe only)"),
+        _str("trusted_certs", "", "folder of the client certificates accepted ('': any)"),
+    ]
+
+
 _SPECS: dict[str, Callable[[], list[ParameterSpec]]] = {
     "estimator": _estimator, "simulator": _simulator, "recorder": _recorder,
-    "replay": _replay,
+    "replay": _replay, "opcua": _opcua,
 }
 
 
 def node_parameters(node: str) -> dict[str, ParameterSpec]:
-    """Every parameter of ``node`` ('estimator', 'simulator', 'recorder', 'replay'), in
-    declaration order."""
+    """Every parameter of ``node`` ('estimator', 'simulator', 'recorder', 'replay',
+    'opcua'), in declaration order."""
     if node not in _SPECS:
         raise KeyError(f"unknown node {node!r}; nodes: {', '.join(_SPECS)}")
     return {s.name: s for s in _SPECS[node]()}

@@ -160,6 +160,12 @@ class RigConfig(TankSpec):
                 raise ConfigError(f"effect(s) {', '.join(off)} not modelled for a charge "
                                   f"(a charge takes {', '.join(CHARGE_EFFECTS)})")
 
+    @property
+    def end_pressure(self) -> float:
+        """The level the tank's pressure tends to [Pa absolute]: the room's
+        (``atmosphere``) for a discharge, the supply's for a charge."""
+        return self.supply_pressure if self.direction == "charge" else float(self.atmosphere)
+
     def has(self, effect: str) -> bool:
         """True when ``effect`` is switched on."""
         return effect in self.effects

@@ -333,6 +333,14 @@ C_MEANING = ("C is the conductance of everything downstream of the shut-off valv
              "bounds it; the bound of one of up to "
              f"{PARALLEL_LEAK_MAX:g} times the component's own C is stated apart "
              "(parallel_leak_low), not in the C range; to exclude one: " + PLUGGED_RUN)
+#: :data:`C_MEANING` of a charge (the supply fills the tank through the component).
+C_MEANING_CHARGE = (
+    "C is the conductance of everything between the supply and the tank once the valve "
+    "opens: a path in parallel with the component (a bypass, a leaking seal of the "
+    "fixture) adds to it and no pressure record bounds it; the bound of one of up to "
+    f"{PARALLEL_LEAK_MAX:g} times the component's own C is stated apart "
+    "(parallel_leak_low), not in the C range; to exclude one: a charge with the component "
+    "removed and its port plugged (any rise is the parallel path)")
 
 
 def _fmt(effects: list[str]) -> str:

@@ -38,7 +38,8 @@ def heat_law_refits(prob: Problem, fit: Fit) -> list[tuple[str, float | None, Fi
         if ld is not None and ld == prob.tank.length_diameter_ratio:
             continue
         p = prob if ld is None else prob.with_length_diameter(ld)
-        for law, rec in HEAT_VARIANTS.items():
+        for law in prob.heat_laws:
+            rec = HEAT_VARIANTS[law]
             if (ld is None and law == fit.model.heat_law) or (
                     ld is not None and law not in NATURAL_LAWS):
                 continue

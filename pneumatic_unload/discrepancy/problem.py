@@ -25,10 +25,11 @@ from pneumatic_unload.estimation import (
     UnloadResult,
 )
 from pneumatic_unload.estimation.batch import charge_reason
+from pneumatic_unload.estimation.refine import CHARGE_SECOND_START
 from pneumatic_unload.fit.noise import estimate_noise
 from pneumatic_unload.fit.trace import TemperatureChannel, Trace
-from pneumatic_unload.model.effects import Start
-from pneumatic_unload.model.parametric import ParametricModel
+from pneumatic_unload.model.effects import HEAT_VARIANTS, Start
+from pneumatic_unload.model.parametric import CHARGE_HEAT_LAWS, ParametricModel
 
 FloatArray = NDArray[np.float64]
 Values = dict[str, float]
@@ -63,7 +64,9 @@ class Problem:
         self.t_ref = float(t[0])
         t = t - self.t_ref
         est = EstimatorSettings(**settings.tank_fields(), heat_model="adiabatic",
-                                curve_fit=False)
+                                curve_fit=False, direction=settings.direction,
+                                supply_pressure=settings.supply_pressure,
+                                supply_temperature=settings.supply_temperature)
         every = _unloads(t, y, est)
         # the estimator's results locate the unload and give the fit its starting values;
         # one it called bad data for a reason of its own timing (e.g. a start it could not
@@ -74,11 +77,13 @@ class Problem:
                 r.tau_exp, r.p10, r.p_atm, r.conductance)) and math.isfinite(r.t_start))]
         if not results:
             _refuse_bad_data(every, math.inf)
-            if charge_reason(y[np.isfinite(y)], est) is not None:
+            if not est.charge and charge_reason(y[np.isfinite(y)], est) is not None:
                 raise DiscrepancyError(
-                    "the pressure rises and never falls: a charge; the discrepancy workflow "
-                    "analyses discharges (a charge's C, b and budget: analyze --direction "
-                    "charge)")
+                    "the pressure rises and never falls: a charge; give the direction "
+                    "(--direction charge; the supply with --supply-pressure, else fitted)")
+            if est.charge:
+                raise DiscrepancyError("no complete charge found in the trace (the "
+                                       "pressure must rise from a plateau through p*)")
             raise DiscrepancyError("no complete unload found in the trace (the pressure "
                                    "must fall from a plateau through p*)")
         r = results[0]
@@ -93,13 +98,28 @@ class Problem:
         dt = float(np.median(np.diff(t)))
         c0 = r.conductance_isentropic if math.isfinite(r.conductance_isentropic) \
             else r.conductance
+        # p_atm of the start and of the fits is the end level: a charge's supply
         self.start = Start(conductance=float(c0), critical_ratio=0.4, t_open=float(r.t_start),
-                           p10=float(r.p10), p_atm=float(r.p_atm), tau=float(r.tau_exp),
+                           p10=float(r.p10), p_atm=float(r.end_pressure),
+                           tau=float(r.tau_exp),
                            dt=dt, t_first=float(t[0]), t_last=float(t[-1]))
         try:
             self.noise = estimate_noise(t, y, r.t_start, r.tau_exp)
         except ValueError as exc:
             raise DiscrepancyError(str(exc)) from exc
+        #: the neutral Cs of the fits [m^3/(s Pa)]: the adiabatic crossing's, and for a
+        #: charge also the heat correlation's and the isothermal one (gamma times the
+        #: adiabatic: a fill whose gas stays at the wall's temperature rises as an
+        #: adiabatic one through C / gamma), each where it differs from those before by
+        #: more than CHARGE_SECOND_START. A charge's heat moves C by up to gamma and each
+        #: C has its own basin: HydDown's vacuum fills read -27 % to -12 % from the
+        #: adiabatic C alone, as the estimator's curve fit did (refine's second start).
+        self.conductances = [float(c0)]
+        if est.charge:
+            for c1 in (_correlation_conductance(t, y, est, r), settings.gas.gamma * c0):
+                if math.isfinite(c1) and c1 > 0 and all(
+                        abs(c1 / c - 1.0) > CHARGE_SECOND_START for c in self.conductances):
+                    self.conductances.append(float(c1))
         self.t, self.y = t, y
         self.trace = Trace(t, y, self.noise, r.t_start, resolution=settings.resolution)
         self.lik = self.trace.lik
@@ -108,7 +128,14 @@ class Problem:
     def model(self, effects: tuple[str, ...], heat_law: str = "natural") -> ParametricModel:
         """The parametric model with these effects."""
         return ParametricModel(effects, self.tank, self.start, heat_law=heat_law,
-                               fit_wall_temperature=self.settings.fit_wall_temperature)
+                               fit_wall_temperature=self.settings.fit_wall_temperature,
+                               charge=self.settings.charge)
+
+    @property
+    def heat_laws(self) -> tuple[str, ...]:
+        """The heat laws this record's direction is fitted with (a charge's:
+        :data:`~pneumatic_unload.model.parametric.CHARGE_HEAT_LAWS`)."""
+        return CHARGE_HEAT_LAWS if self.settings.charge else tuple(HEAT_VARIANTS)
 
     def with_channel(self, channel: TemperatureChannel | None) -> Problem:
         """The same trace and noise with a logged gas temperature fitted beside the
@@ -151,9 +178,15 @@ class Problem:
         """Baseline parameters from the unloading-time estimate [SI units]."""
         s = self.start
         th = {"C": s.conductance, "b": b, "t_open": s.t_open, "p10": s.p10}
-        if self.tank.atmosphere is None:
+        if self.settings.end_fitted:
             th["p_atm"] = s.p_atm
         return th
+
+    def neutral_thetas(self, b: float = 0.4) -> list[Values]:
+        """:meth:`neutral_theta` at each of :attr:`conductances` [SI units] (one for a
+        discharge)."""
+        th = self.neutral_theta(b)
+        return [{**th, "C": c} for c in self.conductances]
 
     def starts_for(self, model: ParametricModel, bases: list[Values],
                    new_effects: tuple[str, ...]) -> list[Values]:
@@ -183,6 +216,22 @@ def _unloads(t: FloatArray, y: FloatArray, est: EstimatorSettings) -> list[Unloa
                 volume=math.nan, conductance=math.nan, conductance_model=math.nan,
                 conductance_model_std=math.nan, t_complete=d.t))
     return out
+
+
+def _correlation_conductance(t: FloatArray, y: FloatArray, est: EstimatorSettings,
+                             r: UnloadResult) -> float:
+    """The model C of the crossing with the estimator's heat correlation [m^3/(s Pa)] of
+    the unload ``r`` located in (t [s], y [Pa]) with the adiabatic ``est`` (NaN when
+    that crossing finds none)."""
+    with_heat = dataclasses.replace(est, heat_model=EstimatorSettings().heat_model)
+    try:
+        se = StreamingEstimator(with_heat)
+        out = se.push_block(t, y) + se.finish()
+    except EstimationError:
+        return math.nan
+    near = [q.conductance_model for q in out
+            if q.status == "ok" and abs(q.t_start - r.t_start) < 0.5 * r.tau_exp]
+    return float(near[0]) if near else math.nan
 
 
 def _refuse_bad_data(results: list[UnloadResult], t_cut: float) -> None:

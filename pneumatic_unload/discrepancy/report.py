@@ -67,7 +67,7 @@ def write_plots(res: DiscrepancyResult, out: Path) -> dict[str, str]:
             label=after_label)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("pressure [bar absolute]")
-    ax.set_title("Measured discharge and the fitted models")
+    ax.set_title(f"Measured {res.settings.direction} and the fitted models")
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -294,7 +294,8 @@ def markdown(res: DiscrepancyResult, files: dict[str, str], title: str = "") -> 
     lines += ["## Method", "",
               "1. Noise correlation from the plateaus before the valve opens and after the "
               "tank has emptied; sigma from those plateaus weighted with the residual of a "
-              "local cubic over the whole trace. 2. Baseline (paper's adiabatic discharge: C, b, "
+              "local cubic over the whole trace. 2. Baseline (paper's adiabatic discharge, or "
+              "the adiabatic charge from the supply: C, b, "
               "opening instant, p10) fitted by least squares from several starts. 3. Each "
               "candidate effect added and the whole model refitted from several starts "
               "(including the neutral values of the baseline). 4. Decision by BIC. 5. "

@@ -71,10 +71,13 @@ def diagnose(prob: Problem, fit: Fit) -> tuple[Diagnostics, FloatArray]:
     # phases from the model's true pressure
     cfg = fit.model.config(th)
     p_true = m if not fit.effects else fit.model.states(th, prob.t)[:, 0]
-    p_atm, b, p10 = cfg.atmosphere, cfg.critical_ratio, cfg.initial_pressure
+    end, b, p10 = cfg.end_pressure, cfg.critical_ratio, cfg.initial_pressure
     pre = prob.t < th["t_open"]
-    plateau = ~pre & (p_true - p_atm < 0.002 * (p10 - p_atm))
-    choked = ~pre & ~plateau & (p_true * b >= p_atm)
+    # the end plateau: the room's (a discharge), the supply's (a charge); choked while the
+    # downstream pressure is below b times the upstream's
+    plateau = ~pre & (np.abs(p_true - end) < 0.002 * abs(p10 - end))
+    up, down = (end, p_true) if cfg.direction == "charge" else (p_true, end)
+    choked = ~pre & ~plateau & (up * b >= down)
     subsonic = ~pre & ~plateau & ~choked
     phases = {}
     for name, sel in (("pre-step", pre), ("choked", choked), ("subsonic", subsonic),
@@ -135,9 +138,12 @@ def fit_candidate(prob: Problem, base: Fit, neutral: list[Values], cand: str,
     effects = (*base.effects, cand)
     if cand not in ("heat_transfer", HOT_START):
         return _fit_law(prob, base, neutral, effects, cand, base.model.heat_law)
+    laws = prob.heat_laws  # a charge's without the density law
     by_law = {law: _fit_law(prob, base, neutral, effects, cand, law)
-              for law, e in HEAT_VARIANTS.items() if len(e.params) == 1}
+              for law in laws if len(HEAT_VARIANTS[law].params) == 1}
     for law, (sub, nested) in HEAT_EXTENSIONS.items():
+        if law not in laws:
+            continue
         f1 = by_law.get(sub)
         offered = law == heat_law if heat_law is not None else \
             f1 is not None and extension_offered(prob, f1, law)
@@ -287,13 +293,14 @@ def decide(base: Fit, fits: dict[str, Fit], threshold: float,
 
 
 def end_level_evidence(prob: Problem, base: Fit, fits: dict[str, Fit]) -> tuple[float, str]:
-    """How far the measured end of the discharge sits from every physics model [-].
+    """How far the measured end of the unload sits from every physics model [-].
 
-    A transducer offset or gain shifts the end level (p_atm, stated) where no physics
-    effect can: a leak, heat transfer or a pipe volume all end at p_atm. The best model of
-    the round without a transducer effect (the base or a physics candidate) is compared
-    with the samples where its pressure is within :data:`END_FRACTION` of p10 - p_atm above
-    p_atm: z = mean residual / its standard error (AR(1) noise).
+    A transducer offset or gain shifts the end level (p_atm, stated; a charge's supply,
+    stated) where no physics effect can: a leak, heat transfer or a pipe volume all end at
+    p_atm (a charge's heat exchange at the supply). The best model of the round without a
+    transducer effect (the base or a physics candidate) is compared with the samples where
+    its pressure is within :data:`END_FRACTION` of abs(p10 - end) of the end level: z =
+    mean residual / its standard error (AR(1) noise).
 
     Returns
     -------
@@ -308,18 +315,21 @@ def end_level_evidence(prob: Problem, base: Fit, fits: dict[str, Fit]) -> tuple[
     best = min(physics, key=lambda f: f.bic)
     cfg = best.model.config(best.theta)
     m = best.model.signal(best.theta, prob.t)
-    p_atm, p10 = cfg.atmosphere, cfg.initial_pressure
-    end = (prob.t > best.theta["t_open"]) & (m - p_atm < END_FRACTION * (p10 - p_atm))
+    level, p10 = cfg.end_pressure, cfg.initial_pressure
+    end = (prob.t > best.theta["t_open"]) & (
+        np.abs(m - level) < END_FRACTION * abs(p10 - level))
     n = int(np.count_nonzero(end))
     label = ", ".join(best.effects) or "the baseline"
+    what = "charge" if cfg.direction == "charge" else "discharge"
     if n < END_SAMPLES:
-        return 0.0, f"the record does not reach the end of the discharge ({n} samples)"
+        return 0.0, f"the record does not reach the end of the {what} ({n} samples)"
     r = prob.y[end] - m[end]
     rho = prob.noise.rho
     se = prob.noise.sigma * math.sqrt((1.0 + rho) / max(1.0 - rho, 1e-6) / n)
     z = abs(float(np.mean(r))) / se
     return z, (f"end level {float(np.mean(r)):+.4g} Pa from {label} over {n} samples "
-               f"({z:.1f} standard errors; p_atm {'stated' if prob.tank.atmosphere else 'fitted'})")
+               f"({z:.1f} standard errors; {'the supply' if what == 'charge' else 'p_atm'} "
+               f"{'fitted' if prob.settings.end_fitted else 'stated'})")
 
 
 def sensor_refusals(prob: Problem, base: Fit, fits: dict[str, Fit], threshold: float

@@ -13,9 +13,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config import EFFECTS, TankSpec
-from pneumatic_unload.config.estimator import MODEL_UNCERTAINTY
+from pneumatic_unload.config.estimator import MODEL_UNCERTAINTY, supply_gas_temperature
 from pneumatic_unload.config.fields import (
     ConfigError,
+    choice,
     flag,
     integer,
     names,
@@ -96,6 +97,17 @@ class DiscrepancySettings(TankSpec):
         Wall-clock cap of the fits [s] (None: none); see
         :func:`~pneumatic_unload.discrepancy.workflow.find_discrepancy` for what happens
         when it is reached.
+    direction : str
+        'discharge' (the tank empties through the component) or 'charge' (it fills from a
+        supply at ``supply_pressure``, ``supply_temperature``: the model's charge, with
+        the effects a charge takes, :data:`~pneumatic_unload.model.parametric.
+        CHARGE_FIT_EFFECTS`; ``atmosphere`` is then the room's).
+    supply_pressure : float or None
+        A charge's supply pressure p_s [Pa absolute] (None: fitted, as p_atm is when
+        ``atmosphere`` is None).
+    supply_temperature : float or None
+        A charge's supply gas temperature T_s [K] (None: the wall's where given, else
+        293.15 K).
     """
 
     fit_wall_temperature: bool = flag(False, "fit the wall temperature with heat transfer")
@@ -116,6 +128,13 @@ class DiscrepancySettings(TankSpec):
         "its next model evaluation (round 1 unfinished: an error; later: the effects "
         "named so far)",
         none="no cap")
+    direction: str = choice("discharge", ("discharge", "charge"),
+                            "flow direction: the tank empties (discharge) or fills (charge)")
+    supply_pressure: float | None = optional(
+        None, "Pa", 1e3, 5e7, "a charge's supply pressure p_s (absolute)", "fitted")
+    supply_temperature: float | None = optional(
+        None, "K", 150.0, 600.0, "a charge's supply gas temperature T_s",
+        "the wall's where given, else 293.15 K")
 
     def __post_init__(self) -> None:
         """Validate (raises :class:`DiscrepancyError` with the reason)."""
@@ -124,6 +143,26 @@ class DiscrepancySettings(TankSpec):
         except ConfigError as exc:
             msg = str(exc).replace("unknown candidates", "unknown candidate effect(s)")
             raise DiscrepancyError(msg) from exc
+        if self.direction == "discharge" and (self.supply_pressure is not None
+                                              or self.supply_temperature is not None):
+            raise DiscrepancyError("supply_pressure and supply_temperature are a charge's "
+                                   "(direction 'charge')")
+
+    @property
+    def charge(self) -> tuple[float | None, float] | None:
+        """A charge's supply as the model takes it ((p_s [Pa] or None: fitted, T_s [K]));
+        None for a discharge."""
+        if self.direction != "charge":
+            return None
+        return self.supply_pressure, supply_gas_temperature(self.supply_temperature,
+                                                            self.wall_temperature)
+
+    @property
+    def end_fitted(self) -> bool:
+        """The end level the pressure tends to (the room's, a charge's supply) is a
+        parameter of the fits: not given."""
+        return (self.atmosphere if self.direction == "discharge"
+                else self.supply_pressure) is None
 
 
 @dataclass
@@ -386,7 +425,11 @@ class DiscrepancyResult:
             return {"effects": list(f.effects), "heat_law": f.heat_law,
                     "parameters": dict(f.theta), "chi2": f.chi2, "bic": f.bic, "k": f.k}
 
+        charge = self.settings is not None and self.settings.charge is not None
         return finite_json({
+            "direction": "charge" if charge else "discharge",
+            "supply_pressure": self.final.model.config(self.final.theta).supply_pressure
+            if charge else None,
             "effect": self.effect, "ambiguous_with": list(self.ambiguous_with),
             "effects": list(self.effects), "named": self.named, "verdict": self.verdict,
             "parameters": {k: interval_dict(v) for k, v in self.parameters.items()},

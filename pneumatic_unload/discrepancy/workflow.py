@@ -92,7 +92,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.discrepancy.ambiguity import C_MEANING, conductance_ambiguity, describe
+from pneumatic_unload.discrepancy.ambiguity import (
+    C_MEANING,
+    C_MEANING_CHARGE,
+    conductance_ambiguity,
+    describe,
+)
 from pneumatic_unload.discrepancy.intervals import (
     geometry_factor_check,
     intervals,
@@ -124,6 +129,7 @@ from pneumatic_unload.discrepancy.types import (
 from pneumatic_unload.fit.profile import Interval
 from pneumatic_unload.fit.trace import FitTimeout
 from pneumatic_unload.model.effects import HOT_START, separating_data
+from pneumatic_unload.model.parametric import CHARGE_FIT_EFFECTS
 
 FloatArray = NDArray[np.float64]
 
@@ -132,7 +138,8 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
                      temperature: tuple[FloatArray, FloatArray] | None = None,
                      progress: Callable[[str], None] | None = None
                      ) -> DiscrepancyResult:
-    """Run the discrepancy workflow on one recorded discharge.
+    """Run the discrepancy workflow on one recorded discharge (or, with ``settings.direction``
+    'charge', one charge).
 
     Parameters
     ----------
@@ -169,7 +176,7 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
             time.perf_counter() - t_wall0)
     thr = settings.bic_threshold
     # 1. baseline, multi-start over b
-    neutral = [prob.neutral_theta(0.3), prob.neutral_theta(0.5)]
+    neutral = [*prob.neutral_thetas(0.3), *prob.neutral_thetas(0.5)]
     try:
         base = prob.fit(prob.model(()), neutral)
     except FitTimeout as exc:
@@ -185,7 +192,9 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
     first_effect, first_amb = "none", []
     remaining = [c for c in settings.candidates
                  if not (c == HOT_START and settings.fit_wall_temperature)]
-    neutral_cur = [prob.neutral_theta(0.4)]
+    untried = [c for c in remaining if settings.charge and c not in CHARGE_FIT_EFFECTS]
+    remaining = [c for c in remaining if c not in untried]
+    neutral_cur = prob.neutral_thetas(0.4)
     prob_k, prob_final = prob, prob
     timed_out = ""
     while remaining and len(claimed) < settings.max_effects:
@@ -280,7 +289,11 @@ def find_discrepancy(t: FloatArray, p: FloatArray, settings: DiscrepancySettings
     say(f"discrepancy: intervals {time.perf_counter() - t_iv:.1f} s")
     extra = separating_data([first_effect, *first_amb]) if first_amb else []
     geo = geometry_factor_check(prob_final.with_channel(None), current)
-    notes = [C_MEANING] + ([timed_out] if timed_out else []) + ([ld_note] if ld_note else [])
+    notes = [C_MEANING_CHARGE if settings.charge else C_MEANING] + (
+        [timed_out] if timed_out else []) + ([ld_note] if ld_note else [])
+    if untried:
+        notes.append(f"a charge: {', '.join(untried)} not tried (the charge's model takes "
+                     f"{', '.join(CHARGE_FIT_EFFECTS)})")
     if prob.noise.source == "differences":
         notes.append("no plateau long enough for the noise model: sigma from second "
                      "differences of the whole trace, rho assumed 0")

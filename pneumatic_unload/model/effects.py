@@ -50,6 +50,7 @@ __all__ = [
     "Effect",
     "EffectParam",
     "Start",
+    "exchange_extremes",
     "separating_data",
 ]
 
@@ -284,6 +285,22 @@ HEAT_DENSITY = Effect(
                {"tau_heat": 7.0 * s.tau, "heat_exponent": 0.5}],
     _heat_density,
 )
+
+def exchange_extremes(law: str, tau: float, isothermal: bool = False
+                      ) -> list[dict[str, float]]:
+    """Starts of a heat law's own parameter at a strong and at a weak exchange, for a
+    search that must not miss either basin (the curve fit's explore, a charge's
+    discrepancy): the natural laws' multiplier 30 and 0.1 [-], the time constant of the
+    others 0.05 and 20 times the unload's ``tau`` [s]. ``isothermal``: a nearly
+    isothermal exchange too (the multiplier 100, the time constant 0.002 tau): an
+    evacuated tank filled slowly stays near the wall's temperature, and its record is an
+    adiabatic fill's with C / gamma (only the transition between the two shows)."""
+    if law.startswith("natural"):
+        return [{"heat_scale": 30.0}, {"heat_scale": 0.1}] + (
+            [{"heat_scale": 100.0}] if isothermal else [])
+    return [{"tau_heat": 0.05 * tau}, {"tau_heat": 20.0 * tau}] + (
+        [{"tau_heat": 0.002 * tau}] if isothermal else [])
+
 
 #: Every effect by name (heat transfer with its default law, natural convection).
 REGISTRY: dict[str, Effect] = {e.name: e for e in (

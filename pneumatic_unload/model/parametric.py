@@ -31,6 +31,7 @@ from pneumatic_unload.model.effects import (
     Start,
     Values,
     clamp,
+    exchange_extremes,
 )
 from pneumatic_unload.model.ode import integrate, valve_events
 from pneumatic_unload.model.sensor import first_order_lag, sensor_response
@@ -52,6 +53,11 @@ THERMOMETER_OFFSET_RANGE = (-20.0, 20.0)
 P10_BOUNDS = (1e3, 5e7)
 #: The effects a charge's model takes (the others' records are written for a discharge).
 CHARGE_FIT_EFFECTS = ("heat_transfer", "hot_start", "sensor_offset", "subsonic_index")
+#: The heat laws a charge is fitted with (:data:`HEAT_VARIANTS` but the density law: its
+#: time constant is set at the initial density, which an evacuated tank's is a twentieth
+#: of the end's; a room-into-vacuum fill of the independent model (constant hA) took it at
+#: tau_heat 0.02 s, C +37 % at a 0.5 % sigma).
+CHARGE_HEAT_LAWS: tuple[str, ...] = tuple(law for law in HEAT_VARIANTS if law != "density")
 #: Points of the model's gas temperature between a thermometer's first and last reading
 #: (geometric from the opening; the lag is exact for the piecewise-linear interpolant of
 #: its input) [-].
@@ -195,6 +201,11 @@ class ParametricModel:
         """Starting values of an effect's parameters (small and large) [SI]."""
         rec = self._record(effect)
         out = rec.starts(self.start)
+        if self.charge is not None and effect in ("heat_transfer", HOT_START):
+            # a charge's exchange spans decades (an evacuated tank's tau_heat, on its
+            # initial mass, is a twentieth of a discharge's): its strong and weak ends too
+            out = out + [{**out[0], **d} for d in exchange_extremes(
+                self.heat_law, self.start.tau, isothermal=True)]
         if effect == HOT_START:
             t10 = self.tank.initial_temperature
             out = [{**d, "t_wall": clamp(t10 - dt, WALL_TEMPERATURE.lo, WALL_TEMPERATURE.hi)}
