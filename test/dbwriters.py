@@ -22,13 +22,16 @@ def open_at(url: str, t0: float) -> None:
     open_db(url).close()
 
 
-def write_keys(url: str, who: int, keys: list[str], out: Any) -> None:
-    """Write the inputs ``keys``, four per transaction as a batch does; put the number this
-    writer wrote (not found there) on the queue ``out``."""
+def write_rounds(url: str, who: int, rounds: list[list[str]], t0: float, step: float,
+                 out: Any) -> None:
+    """Write round ``i``'s inputs in one transaction (one INSERT of many rows) at the
+    wall-clock instant ``t0 + i step``, as the other writers write theirs; put the number
+    this writer wrote (not found there) on the queue ``out``."""
     con = open_db(url)
     written = 0
-    for k in range(0, len(keys), 4):
+    for i, keys in enumerate(rounds):
+        time.sleep(max(0.0, t0 + i * step - time.time()))
         written += sum(write_files(con, [record(key, 5e-9, writer=f"w{who}")
-                                         for key in keys[k:k + 4]]))
+                                         for key in keys]))
     con.close()
     out.put(written)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 import sqlalchemy as sa
-from dbwriters import open_at, record, write_keys
+from dbwriters import open_at, record, write_rounds
 from pgserver import BENCH_PASSWORD, PgServer
 
 from pneumatic_unload.config import RigConfig
@@ -263,26 +263,31 @@ def test_openers_at_once_create_the_schema_once(pg_url: str):
 
 
 def test_writers_at_once_lose_nothing_and_duplicate_nothing(target: str):
-    """Four processes write 40 shared inputs (in different orders: deadlocks on PostgreSQL
-    are retried) and 20 of their own each, at once: every input once with its unload, and
-    the writers' "written" answers add up to the inputs."""
+    """Four processes write, at the same instants, ten rounds of 40 shared inputs (in
+    different orders: on PostgreSQL two transactions then wait for each other's rows and
+    the server aborts one as a deadlock, which is run again) and 5 of their own each: every
+    input once with its unload, and the writers' "written" answers add up to the inputs."""
     open_db(target).close()
-    shared = [f"shared-{k}" for k in range(40)]
+    shared = [f"{k:02d}" for k in range(40)]
+    orders = [shared, shared[::-1], shared[20:] + shared[:20], shared[::2] + shared[1::2]]
+    rounds = [[[f"r{i}-{k}" for k in orders[w]] + [f"own-{w}-{i}-{k}" for k in range(5)]
+               for i in range(10)] for w in range(4)]
     ctx = mp.get_context("spawn")
     out = ctx.Queue()
-    orders = [shared, shared[::-1], shared[20:] + shared[:20], shared[::2] + shared[1::2]]
-    procs = [ctx.Process(target=write_keys, args=(
-        target, w, orders[w] + [f"own-{w}-{k}" for k in range(20)], out)) for w in range(4)]
+    t0 = time.time() + 2.0  # every process imported and waiting by then
+    procs = [ctx.Process(target=write_rounds, args=(target, w, rounds[w], t0, 0.05, out))
+             for w in range(4)]
     for p in procs:
         p.start()
     for p in procs:
         p.join(120)
     assert [p.exitcode for p in procs] == [0] * 4
-    assert sum(out.get(timeout=10) for _ in procs) == 40 + 4 * 20
+    expected = {key for r in rounds for keys in r for key in keys}
+    assert len(expected) == 10 * (40 + 4 * 5)
+    assert sum(out.get(timeout=10) for _ in procs) == len(expected)
     with open_db(target) as con:
         files, rows = file_rows(con), unload_rows(con)
-    assert sorted(f["content_hash"] for f in files) == sorted(
-        shared + [f"own-{w}-{k}" for w in range(4) for k in range(20)])
+    assert sorted(f["content_hash"] for f in files) == sorted(expected)
     assert len(rows) == len(files) and {r["file_id"] for r in rows} == {f["id"] for f in files}
 
 
