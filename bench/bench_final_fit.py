@@ -7,7 +7,8 @@ simulator's cycle mode (:func:`pneumatic_unload.rig.run_cycles`) with ``bench_no
 bench's cycle timing, fed in blocks of 100 to a live
 :class:`~pneumatic_unload.estimation.StreamingEstimator` with the node's settings and
 deferred final fits, as the node runs them. A second rig is slow: a 5 L tank with wall heat
-transfer simulated (``--slow``; 1 kHz, C 2e-8, 60 s per unload).
+transfer simulated (``--slow``; 1 kHz, C 2e-8, 60 s per unload). ``--charge N``: the bench
+rig charged from a 7 bar supply (``bench_engine.py --direction charge``), at 1 and 10 kHz.
 
 For every final fit it records the residual evaluations (calls of the binned likelihood,
 load-independent: the primary figure) per heat law and in all, the CPU time of the fit
@@ -20,7 +21,7 @@ law's raw chi^2 (in residual variances).
 Run::
 
     PYTHONPATH=. .venv/bin/python bench/bench_final_fit.py [--unloads 60] [--slow N]
-        [--repeat 3] [--json out.json] [--compare before.json]
+        [--charge N] [--repeat 3] [--json out.json] [--compare before.json]
 """
 
 from __future__ import annotations
@@ -206,6 +207,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--unloads", type=int, default=60)
     ap.add_argument("--slow", type=int, default=0, help="unloads of the slow 5 L rig")
+    ap.add_argument("--charge", type=int, default=0,
+                    help="charges of the bench rig (bench_engine's --direction charge: 7 "
+                         "bar abs into 1 bar, the supply given), at 1 kHz and at 10 kHz")
     ap.add_argument("--repeat", type=int, default=1,
                     help="run each fit this many times, CPU the least of them (load)")
     ap.add_argument("--json", type=Path)
@@ -226,6 +230,15 @@ def main() -> int:
                         effects=("heat_transfer",))
         rows += measure("slow rig 5 L heat transfer, 1 kHz", cfg,
                         EstimatorSettings(volume=5e-3), args.slow, counter, args.repeat)
+    if args.charge:
+        from bench_engine import CHARGE
+
+        settings = EstimatorSettings(volume=RIG["volume"], direction="charge",
+                                     supply_pressure=CHARGE["supply_pressure"])
+        for rate in (1000.0, 10_000.0):
+            cfg = RigConfig(rate=rate, pre_time=0.2, duration=1.2, **RIG, **CHARGE)
+            rows += measure(f"bench rig 0.2 L charge, {rate:g} Hz", cfg, settings,
+                            args.charge, counter, args.repeat)
     report(rows)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
