@@ -291,13 +291,19 @@ class BridgeServer:
             return _bad("BadShutdown")
         return None
 
-    async def _call_measure(self, _parent: ua.NodeId, *args: Any) -> Any:
+    def _admit(self, args: tuple[Any, ...]) -> str | ua.CallMethodResult:
+        """The part id of a call that may start a measurement now, else the answer that
+        refuses it (a malformed call, busy, shut down)."""
         part = self._part_id(args)
         if isinstance(part, ua.CallMethodResult):
             return part
         refused = self._refuse()
-        if refused is not None:
-            return refused
+        return part if refused is None else refused
+
+    async def _call_measure(self, _parent: ua.NodeId, *args: Any) -> Any:
+        part = self._admit(args)
+        if isinstance(part, ua.CallMethodResult):
+            return part
         task = await self._begin(part)
         outcome = await asyncio.shield(task)  # a caller gone: the measurement goes on
         if not outcome.ok or outcome.estimate is None:
@@ -309,12 +315,9 @@ class BridgeServer:
                 ua.Variant(e.verdict, _String)]
 
     async def _call_start(self, _parent: ua.NodeId, *args: Any) -> Any:
-        part = self._part_id(args)
+        part = self._admit(args)
         if isinstance(part, ua.CallMethodResult):
             return part
-        refused = self._refuse()
-        if refused is not None:
-            return refused
         await self._begin(part)
         return []
 
