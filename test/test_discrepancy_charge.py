@@ -130,6 +130,7 @@ def test_a_nearly_isothermal_fill_is_said_to_be_ambiguous() -> None:
     assert amb.low < truth < amb.high
     assert amb.low < truth / 1.3  # the adiabatic reading is in the range too
     assert "heat_transfer" in [res.effect, *res.ambiguous_with], res.verdict
+    assert any("gas temperature measurement" in x for x in res.extra_data)  # what separates
 
 
 def test_the_direction_is_asked_for_and_refused_clearly(tmp_path: Path) -> None:

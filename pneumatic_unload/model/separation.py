@@ -63,6 +63,14 @@ for _b in ("leak", "orifice_leak"):
         "(a closed tank held at p10: a leak keeps its pressure falling, a cooling gas stops)")
 for _b in EFFECTS:
     SEPARATING_DATA.setdefault(frozenset({"hot_start", _b}), _HOT_TEMPERATURE)
+#: The heat exchange and the component's subsonic index m (ISO 6358-1:2013) both bend the
+#: curve; the gas's temperature tells them apart (a nearly isothermal fill and an
+#: adiabatic one through C / gamma with m moved differ by about 100 K in the gas).
+for _a in ("heat_transfer", "hot_start"):
+    SEPARATING_DATA[frozenset({_a, "subsonic_index"})] = (
+        "a gas temperature measurement during the run (the heat exchange sets the gas's "
+        "temperature, m does not), or a run from another initial pressure (m shapes only "
+        "the subsonic part)")
 
 
 def separating_data(names: list[str]) -> list[str]:
