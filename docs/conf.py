@@ -27,6 +27,8 @@ extensions = [
     "generated_reference",
 ]
 exclude_patterns = ["_build"]
+# option names and help texts as the command prints them ('--x', not an en dash and quotes)
+smartquotes = False
 html_theme = "alabaster"
 html_theme_options = {"description": "sonic conductance from tank discharges (ROS 2)"}
 html_sidebars = {"**": ["about.html", "navigation.html", "relations.html", "searchbox.html"]}

@@ -69,10 +69,11 @@ UNLOAD_JSON_KEYS: dict[str, str] = {
     "subsonic_index_fitted": "the subsonic index m was fitted (true) or held at 0.5 (false)",
     "subsonic_source": "why m was fitted or held, in words ('' without a curve fit)",
     "offset_source": "why the transducer's zero offset was fitted or not, in words",
-    "gas_temperature": "when the record carries a gas temperature, or the final fit used "
-                       "one: its evidence ('used', 'why', and with a log the fitted "
-                       "readings' rms and the channel's noise [K], the thermometer's time "
-                       "constant [s] and offset [K], t10 [K])",
+    "gas_temperature": "final results in 'unloads': the evidence of the record's gas "
+                       "temperature: 'used' (false, with 'why', when the record carries "
+                       "none); when used, the fitted readings' rms and the channel's noise "
+                       "[K], whether the model 'follows' the log, the thermometer's time "
+                       "constant [s] and offset [K] and t10 [K], each with its 1-sigma",
     "model_inadequate": "why the model does not describe the record, or '' when it does",
     "recommended": "the C to report: conductance, std, expanded (k = 2) [m^3/(s Pa)], "
                    "coverage_factor and its source (model-based C, or eq 39's when there "

@@ -167,8 +167,7 @@ def _option_lines(parser: argparse.ArgumentParser, action: argparse.Action) -> l
         facts.append("Takes several values." if action.nargs == "+" else
                      "Takes any number of values.")
     text = " ".join(x for x in [body[0], *facts] if x)
-    return [f".. option:: {_invocation(parser, action)}", "",
-            *indent([text or "(no help text)"]), ""]
+    return [f".. option:: {_invocation(parser, action)}", "", *indent([text]), ""]
 
 
 def cli_page() -> str:
@@ -309,7 +308,8 @@ def json_page() -> str:
               ":class:`~pneumatic_unload.estimation.UnloadResult` (:func:`~pneumatic_unload."
               "output.unload_json`), then the keys it adds.", "",
               *heading("The result's fields", "~")]
-    rows = [[literal(n), literal(t), esc(d)] for n, t, d in unload_fields()]
+    # (a #: comment is reStructuredText, as autodoc renders it)
+    rows = [[literal(n), literal(t), d] for n, t, d in unload_fields()]
     lines += list_table(["Key", "Type", "Meaning"], rows, "22 10 68")
     lines += heading("Keys added by unload_json", "~")
     rows = [[literal(k), esc(v)] for k, v in output.UNLOAD_JSON_KEYS.items()]
@@ -359,13 +359,14 @@ def layer_comments(path: Path) -> dict[str, str]:
 
 
 def _summary(module: str) -> str:
-    """First sentence of a module's docstring, read without importing it."""
+    """First sentence of a module's docstring (reStructuredText), read without importing
+    the module; '' without a docstring."""
     spec = importlib.util.find_spec(module)
     if spec is None or spec.origin is None:
         return ""
     doc = ast.get_docstring(ast.parse(Path(spec.origin).read_text(encoding="utf-8"))) or ""
     first = " ".join(doc.split("\n\n")[0].split())
-    m = re.match(r"(.+?[.:])(\s|$)", first)
+    m = re.match(r"(.+?\.)(\s|$)", first)
     return m.group(1) if m else first
 
 
@@ -398,18 +399,20 @@ def architecture_page(srcdir: Path) -> str:
              "(with its comments), the test that enforces them: a module imports only from "
              "its own layer or lower ones, never from a higher one, and there is no import "
              "cycle. The ROS-free core never imports ``rclpy`` or a message package; only "
-             "the nodes (the highest layer) do. Each part's role is its module docstring's "
-             "first sentence.", ""]
+             "the nodes (the highest layer) do. In italics, the comment of ``LAYERS``; then "
+             "the first sentence of each module's docstring.", ""]
     for level in sorted(set(layers.values())):
         parts = [p for p, lv in layers.items() if lv == level]
         lines += heading(f"Layer {level}: {', '.join(parts)}", "-")
         for part in parts:
             mods = _part_modules(part)
             role = comments.get(part, "")
-            lines += [f"``{PKG}.{part}``" + (f" ({esc(role)})" if role else "") + ": "
-                      + esc(_summary(mods[0])), ""]
+            text = " ".join(x for x in (f"*{esc(role)}*." if role else "",
+                                        _summary(mods[0])) if x)
+            lines += [f"``{PKG}.{part}``" + (f": {text}" if text else ""), ""]
             if len(mods) > 1:
-                lines += [f"* ``{m}``: {esc(_summary(m))}" for m in mods[1:]] + [""]
+                lines += [f"* ``{m}``" + (f": {t}" if (t := _summary(m)) else "")
+                          for m in mods[1:]] + [""]
     return "\n".join(lines) + "\n"
 
 

@@ -112,10 +112,12 @@ class UnloadResult:
     #: (fitted where the record determines it, else held at 0.5 with the uncertainty of the
     #: components' range; NaN before the final fit).
     subsonic_index: float = math.nan
+    #: Standard uncertainty of ``subsonic_index`` [-].
     subsonic_index_std: float = math.nan
     #: The pressure transducer's zero offset fitted by the final fit and its 1-sigma [Pa]
     #: (NaN when not fitted: the record settles at the given p_atm, or p_atm was fitted).
     pressure_offset: float = math.nan
+    #: Standard uncertainty (1-sigma) of ``pressure_offset`` [Pa].
     pressure_offset_std: float = math.nan
     #: 'discharge' (the tank emptied through the component) or 'charge' (it filled
     #: through it from a supply: ``p_atm`` is then the room's, NaN when not given).
