@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
+
+from sphinx.application import Sphinx
+from sphinx.ext.napoleon.docstring import GoogleDocstring
 
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
@@ -30,13 +34,28 @@ exclude_patterns = ["_build"]
 # option names and help texts as the command prints them ('--x', not an en dash and quotes)
 smartquotes = False
 html_theme = "alabaster"
-html_theme_options = {"description": "sonic conductance from tank discharges (ROS 2)"}
+html_theme_options = {"description": "sonic conductance from tank discharges (ROS 2)",
+                      "page_width": "1240px", "sidebar_width": "240px"}
 html_sidebars = {"**": ["about.html", "navigation.html", "relations.html", "searchbox.html"]}
 
-# numpy-style docstrings throughout; keep each docstring's own section names
+# numpy-style docstrings; Google style ("Args:") only in pneumatic_unload.io (see setup:
+# elsewhere a "Parameters:" paragraph, as in the node modules' docstrings, is plain text)
 napoleon_google_docstring = False
 napoleon_numpy_docstring = True
 napoleon_use_rtype = False
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
-autodoc_default_options = {"show-inheritance": True}
+
+
+
+def _google_style_in_io(app: Sphinx, what: str, name: str, obj: Any, options: Any,
+                        lines: list[str]) -> None:
+    """The Google-style docstrings of pneumatic_unload.io ("Args:", "Returns:",
+    "Raises:") as reST, the way napoleon converts them."""
+    if name == "pneumatic_unload.io" or name.startswith("pneumatic_unload.io."):
+        lines[:] = GoogleDocstring(lines, app.config, app, what, name, obj, options).lines()
+
+
+def setup(app: Sphinx) -> None:
+    """Connect the io docstrings' converter (before napoleon's numpy-style pass)."""
+    app.connect("autodoc-process-docstring", _google_style_in_io, priority=400)

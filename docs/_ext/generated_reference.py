@@ -46,6 +46,9 @@ from sphinx.pycode import ModuleAnalyzer
 PKG = "pneumatic_unload"
 #: The library modules documented with ``automodule`` on the API page.
 API_MODULES: tuple[str, ...] = (
+    "pneumatic_unload.physics",
+    "pneumatic_unload.charge",
+    "pneumatic_unload.io",
     "pneumatic_unload.estimation",
     "pneumatic_unload.config",
     "pneumatic_unload.model",
@@ -155,7 +158,7 @@ def _option_lines(parser: argparse.ArgumentParser, action: argparse.Action) -> l
             "Show the command's help and exit." if isinstance(action, argparse._HelpAction)
             else ""]
     facts = []
-    if action.required:
+    if action.required and action.option_strings:  # (a positional always is)
         facts.append("Required.")
     if action.choices is not None and not isinstance(action, argparse._SubParsersAction):
         facts.append("Choices: " + ", ".join(literal(c) for c in action.choices) + ".")
@@ -166,7 +169,8 @@ def _option_lines(parser: argparse.ArgumentParser, action: argparse.Action) -> l
     if action.nargs in ("+", "*"):
         facts.append("Takes several values." if action.nargs == "+" else
                      "Takes any number of values.")
-    text = " ".join(x for x in [body[0], *facts] if x)
+    help_text = body[0] + ("." if body[0] and facts and body[0][-1] not in ".)" else "")
+    text = " ".join(x for x in [help_text, *facts] if x)
     return [f".. option:: {_invocation(parser, action)}", "", *indent([text]), ""]
 
 
@@ -324,8 +328,14 @@ def api_page() -> str:
              "The library's public modules, from their docstrings (numpy style; SI units, "
              "each parameter's unit in brackets).", ""]
     for mod in API_MODULES:
-        lines += [f".. _api-{mod.rsplit('.', 1)[-1]}:", "", *heading(f"``{mod}``", "-"),
-                  f".. automodule:: {mod}", "   :members:", ""]
+        lines += [f".. _api-{mod.rsplit('.', 1)[-1]}:", "", *heading(mod, "-")]
+        spec = importlib.util.find_spec(mod)
+        if spec is not None and spec.origin is None:  # a namespace package: its modules
+            lines += [f"The modules of the namespace package ``{mod}``.", ""]
+            for sub in _part_modules(mod.split(".", 1)[1])[1:]:
+                lines += [*heading(sub, "~"), f".. automodule:: {sub}", "   :members:", ""]
+        else:
+            lines += [f".. automodule:: {mod}", "   :members:", ""]
     return "\n".join(lines) + "\n"
 
 
