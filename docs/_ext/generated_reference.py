@@ -154,9 +154,10 @@ def _invocation(parser: argparse.ArgumentParser, action: argparse.Action) -> str
 
 
 def _option_lines(parser: argparse.ArgumentParser, action: argparse.Action) -> list[str]:
-    body = [esc(action.help) if action.help and action.help != argparse.SUPPRESS else
-            "Show the command's help and exit." if isinstance(action, argparse._HelpAction)
-            else ""]
+    """An ``option`` directive: the help (as ``--help`` prints it, %-formats expanded), then
+    whether it is required, its choices, default and number of values."""
+    shown = action.help and action.help != argparse.SUPPRESS
+    body = esc(_formatter(parser)._expand_help(action)) if shown else ""
     facts = []
     if action.required and action.option_strings:  # (a positional always is)
         facts.append("Required.")
@@ -169,7 +170,7 @@ def _option_lines(parser: argparse.ArgumentParser, action: argparse.Action) -> l
     if action.nargs in ("+", "*"):
         facts.append("Takes several values." if action.nargs == "+" else
                      "Takes any number of values.")
-    help_text = body[0] + ("." if body[0] and facts and body[0][-1] not in ".)" else "")
+    help_text = body + ("." if body and facts and body[-1] not in ".)" else "")
     text = " ".join(x for x in [help_text, *facts] if x)
     return [f".. option:: {_invocation(parser, action)}", "", *indent([text]), ""]
 
