@@ -3,7 +3,7 @@ SHELL := /bin/bash
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup demo test lint bench lock bags clean
+.PHONY: setup demo test lint docs bench lock bags clean
 
 setup:
 	@bash scripts/setup_venv.sh
@@ -18,6 +18,12 @@ test: setup
 lint: setup
 	@$(VENV)/bin/ruff check .
 
+# the documentation site (docs/_build/html/index.html); its reference pages are generated
+# from the code at each build; a warning fails the build
+docs: setup
+	@$(PY) -m sphinx -W --keep-going -q -b html docs docs/_build/html
+	@echo "docs/_build/html/index.html"
+
 bench: setup
 	@for b in bench/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
@@ -28,4 +34,4 @@ lock:
 	@bash scripts/lock.sh
 
 clean:
-	rm -rf build install log runs
+	rm -rf build install log runs docs/_build docs/_generated

@@ -21,6 +21,65 @@ EXIT_STATUS = {0: "at least one unload gives C (a finite recommended C, status n
                   "or gauge readings taken as absolute; the reason on stderr and in --json",
                2: "unreadable input or bad options (one line on stderr)"}
 
+#: The object ``analyze --json`` prints (:func:`pneumatic_unload.cli.cmd_analyze`): each key
+#: and its meaning (the documentation site's JSON reference is generated from this).
+ANALYZE_JSON_KEYS: dict[str, str] = {
+    "source": "the input PATH as given",
+    "samples": "number of pressure samples read",
+    "settings": "the estimator settings used (EstimatorSettings' fields, SI): the command "
+                "line's, else those recorded in the bag, else the defaults",
+    "inputs": "every input the analysis used, with where it came from (the command line, "
+              "the record, a default)",
+    "unloads": "one object per unload found (see below): its final (curve-fit) result "
+               "where it exists, else its crossing estimate",
+    "published": "every result the streaming estimator published, in order (the crossing "
+                 "estimate, then the final one, of each unload), as a live node would",
+    "no_unload_reason": "why no unload was found, with what would fix it where known; null "
+                        "when one was found",
+    "no_estimate_reason": "why no unload gives C; null when at least one does",
+    "input_problem": "a problem of the input that voids the analysis (e.g. gauge readings "
+                     "taken as absolute); null when none",
+    "exit_status": "the command's exit status (EXIT_STATUS)",
+    "input_warnings": "what was assumed about the input (also printed as warnings on "
+                      "stderr)",
+}
+#: The fields of :class:`~pneumatic_unload.estimation.UnloadResult` that
+#: :func:`unload_json` leaves out (their parts it keeps are in :data:`UNLOAD_JSON_KEYS`).
+UNLOAD_JSON_DROPPED = ("extra",)
+#: The keys :func:`unload_json` adds to a result's fields, and their meaning (keys marked
+#: "when known" are present only when the result carries them).
+UNLOAD_JSON_KEYS: dict[str, str] = {
+    "budget": "when known: the uncertainty budget of conductance_model (GUM): value, "
+              "combined_std, expanded (k = 2), type_a_std, type_b_std, model_form_std, the "
+              "largest line and the terms, each with its standard uncertainty "
+              "[m^3/(s Pa)] (pneumatic_unload.budget)",
+    "budget_eq39": "when known: the same budget for eq 39's conductance",
+    "budget_b": "when known (final results): the budget of the critical ratio b [-], with "
+                "C's lines",
+    "budget_m": "when known (final results): the budget of the subsonic index m [-]",
+    "heat_law": "heat law of the final (curve-fit) C: 'natural', 'fixed' (constant hA), "
+                "'none' (adiabatic), ...; '' for a crossing estimate",
+    "heat_laws": "final results: the heat laws offered to the fit with their C and BIC "
+                 "('offered'), those not offered with the reason ('not_offered'), and the "
+                 "chosen law's heat_scale, tau_heat [s], heat_exponent, heat_turbulent, "
+                 "wall_temperature [K] and wall_temperature_std [K]",
+    "reproducibility": "the fit's numerical reproducibility of C ('conductance_model') and "
+                       "b ('critical_ratio') [-, relative]: what another machine's last bits "
+                       "may change; null when there is no curve fit",
+    "subsonic_index_fitted": "the subsonic index m was fitted (true) or held at 0.5 (false)",
+    "subsonic_source": "why m was fitted or held, in words ('' without a curve fit)",
+    "offset_source": "why the transducer's zero offset was fitted or not, in words",
+    "gas_temperature": "final results in 'unloads': the evidence of the record's gas "
+                       "temperature: 'used' (false, with 'why', when the record carries "
+                       "none); when used, the fitted readings' rms and the channel's noise "
+                       "[K], whether the model 'follows' the log, the thermometer's time "
+                       "constant [s] and offset [K] and t10 [K], each with its 1-sigma",
+    "model_inadequate": "why the model does not describe the record, or '' when it does",
+    "recommended": "the C to report: conductance, std, expanded (k = 2) [m^3/(s Pa)], "
+                   "coverage_factor and its source (model-based C, or eq 39's when there "
+                   "is none)",
+}
+
 
 def gives_c(r: UnloadResult) -> bool:
     """The result carries an estimate of C: its recommended C (:func:`recommended`) is
@@ -37,7 +96,7 @@ def unload_json(r: UnloadResult) -> dict[str, Any]:
     bits may change; null when no curve fit), whether the model describes the record
     ('model_inadequate': the reason, or '') and the C to report."""
     d = r.to_dict()
-    extra = d.pop("extra", None) or {}
+    extra = d.pop("extra", None) or {}  # UNLOAD_JSON_DROPPED
     for key in ("budget", "budget_eq39", "budget_b", "budget_m"):
         if key in extra:
             d[key] = extra[key]

@@ -133,9 +133,9 @@ def analyze_chunks(chunks: Iterable[tuple[ArrayLike, ArrayLike]],
 
     Parameters
     ----------
-    chunks : iterable of (t, p)
-        Consecutive pieces of the record: sample instants [s] and pressures [Pa absolute]
-        (or a signal converted by ``signal_gain``/``signal_offset``).
+    chunks : iterable of tuple of array_like
+        Consecutive pieces of the record, each (t, p): sample instants [s] and pressures
+        [Pa absolute] (or a signal converted by ``signal_gain``/``signal_offset``).
     settings : EstimatorSettings, optional
         Tank and detection settings.
     overview_samples : int

@@ -38,34 +38,70 @@ class UnloadResult:
     ended (``final=True``).
     """
 
+    #: Sequence number of this unload in the record or since the estimator started (0, 1,
+    #: ...).
     index: int
+    #: One of :data:`STATUSES` ('ok', 'aborted_sse', 'aborted', 'not_choked', 'bad_data');
+    #: ``status_text`` gives the reason.
     status: str
+    #: Why the status, in words (and what else was noticed: a gap in the samples, ...).
     status_text: str
+    #: Detected start of the unload step (the valve opening) [s, the record's clock].
     t_start: float
+    #: Instant of the p* crossing, where tau_exp ends [s, the record's clock].
     t_cross: float
+    #: Experimental unloading time: from the unload's start to the p* crossing [s].
     tau_exp: float
+    #: Standard uncertainty of ``tau_exp`` [s].
     tau_exp_std: float
+    #: Initial tank pressure before the step [Pa absolute].
     p10: float
+    #: Atmospheric (final) pressure [Pa absolute].
     p_atm: float
+    #: Threshold p* = p_atm + 0.368 (p10 - p_atm) (eq 40) [Pa absolute].
     p_star: float
+    #: Initial gas temperature T10 [K].
     initial_temperature: float
+    #: Tank volume [m^3].
     volume: float
+    #: Sonic conductance by the paper's eq 39 from tau_exp [m^3/(s Pa)] (biased by design).
     conductance: float
+    #: Model-based sonic conductance, eq 39's bias removed [m^3/(s Pa)]: the value to report.
     conductance_model: float
+    #: Combined standard uncertainty of ``conductance_model`` (GUM) [m^3/(s Pa)].
     conductance_model_std: float
+    #: One standard deviation of ``conductance`` (eq 39) from the record and the stated
+    #: inputs [m^3/(s Pa)]; eq 39's bias by design is not in it.
     conductance_std: float = math.nan
+    #: Critical pressure ratio b [-]; NaN when not identifiable.
     critical_ratio: float = math.nan
+    #: Standard deviation of ``critical_ratio`` [-].
     critical_ratio_std: float = math.nan
+    #: C that makes the isentropic choked closed form (eq 22) reach p* at the measured
+    #: crossing [m^3/(s Pa)].
     conductance_isentropic: float = math.nan
+    #: Quality figure in [0, 1]: 1 = clean crossing, well-identified fit; 0 = unusable.
     quality: float = 0.0
+    #: Method text, e.g. "eq39+isentropic-inversion+curve-fit".
     method: str = ""
+    #: True for the final result (the full-curve fit, once the unload's tail is recorded);
+    #: False for the estimate at the p* crossing.
     final: bool = False
+    #: Standard deviation of the pressure noise before the step [Pa].
     noise_std: float = math.nan
+    #: Index of the unload's first sample in the record (-1: not known).
     i_start: int = -1
+    #: Index of the first sample at or after the p* crossing (-1: not known).
     i_cross: int = -1
+    #: Index of the sample at which the crossing estimate was complete (-1: not known).
     i_complete: int = -1
+    #: Time of that sample [s, the record's clock].
     t_complete: float = math.nan
+    #: Time of the last sample of the unload's tail, where its final fit ends [s, the
+    #: record's clock]; NaN before the tail is recorded.
     t_end: float = math.nan
+    #: Details by name: the uncertainty budgets, the curve fit's results, the logged
+    #: temperature's evidence (the JSON output takes some of them as keys of their own).
     extra: dict[str, Any] = field(default_factory=dict)
     #: Start instant of the fitted discharge model [s] (final results; NaN otherwise).
     t_start_model: float = math.nan
@@ -76,10 +112,12 @@ class UnloadResult:
     #: (fitted where the record determines it, else held at 0.5 with the uncertainty of the
     #: components' range; NaN before the final fit).
     subsonic_index: float = math.nan
+    #: Standard uncertainty of ``subsonic_index`` [-].
     subsonic_index_std: float = math.nan
     #: The pressure transducer's zero offset fitted by the final fit and its 1-sigma [Pa]
     #: (NaN when not fitted: the record settles at the given p_atm, or p_atm was fitted).
     pressure_offset: float = math.nan
+    #: Standard uncertainty (1-sigma) of ``pressure_offset`` [Pa].
     pressure_offset_std: float = math.nan
     #: 'discharge' (the tank emptied through the component) or 'charge' (it filled
     #: through it from a supply: ``p_atm`` is then the room's, NaN when not given).

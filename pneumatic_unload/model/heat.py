@@ -169,7 +169,7 @@ def thermal_time_constant(cfg: RigConfig, p: float, t_gas: float) -> float:
     p : float
         Gas pressure [Pa absolute].
     t_gas : float
-        Gas temperature [K]; hA of the natural law is taken at |T_w - T| = 10 K when the
+        Gas temperature [K]; hA of the natural law is taken at \\|T_w - T\\| = 10 K when the
         two are equal.
     """
     q = heat_flow_function(cfg)

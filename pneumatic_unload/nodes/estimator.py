@@ -26,8 +26,9 @@ Start-time mode
     arrived for ``end_timeout`` s (the stream ended; also at shutdown). Later samples are
     ignored: a new start_time (a parameter change) analyses the next unload.
 Action
-    ~/measure (pneumatic_unload_msgs/action/Measure): arm, optionally open the valve through a
-        std_srvs/Trigger service, report progress, return the estimate or fail clearly.
+    ~/measure (pneumatic_unload_msgs/action/Measure)
+        arm, optionally open the valve through a std_srvs/Trigger service, report progress,
+        return the estimate or fail clearly.
 
 A PressureBlock is fed to the core's
 :class:`~pneumatic_unload.estimation.StreamingEstimator` by the subscription callback at

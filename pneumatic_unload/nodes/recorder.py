@@ -9,31 +9,32 @@ they came, through :class:`pneumatic_unload.io.bag.BagRecorder`: no per-message
 deserialisation.
 
 Parameters:
-    output (string): bag directory (``split:=run``) or parent directory of the bags
-        (``split:=unload``); default ``runs/rec-<UTC time>`` relative to the working directory.
-        Must not exist yet.
-    split (string): ``run`` = one bag for the whole recording; ``unload`` = one bag per unload
-        in ``<output>/unload-000``, ``unload-001``, ...: after an estimate arrives on
-        ``/estimator/estimate`` the next bag starts with the first message received while
-        the valve is closed (usually the ``/tank/valve`` close message; right away if the
-        valve was already closed or never reported). The previous bag stays open until the
-        valve opens again (or an estimate of another unload arrives), and receives the later
-        estimates with the same ``unload_index`` (the estimator's final, curve-fit
-        estimate follows its crossing estimate). Each bag thus holds the pre-unload
-        plateau, the discharge and its estimates; the rig configuration and the last
-        ``/estimator/settings`` are repeated at the start of every bag. In both modes a
-        *different* rig
-        configuration on ``/rig/config`` starts a new bag (``run``: ``<output>-001``, ...).
-    flush_interval (double, s): maximal age of data not yet handed to the operating system
-        (default 0.5, range (0, 10]). After ``kill -9`` at most about this much is lost;
-        ``pneumatic-unload recover BAG`` makes what is on disk readable again.
-    log_time (string): bag log time of each message: ``receive`` (default: the recorder's
-        wall-clock receive time [ns], as ``ros2 bag record``) or ``header`` (the header stamp
-        for messages that start with a ``std_msgs/Header`` and have a positive stamp; receive
-        time otherwise). The header stamps, which analysis uses, are in the payloads either
-        way (``read_pressure`` etc. return them).
-    topics (string array): extra topics to record (default none).
-    fsync (bool): also ``fsync`` at each flush (survives power loss; default false).
+
+    * output (string): bag directory (``split:=run``) or parent directory of the bags
+      (``split:=unload``); default ``runs/rec-<UTC time>`` relative to the working directory.
+      Must not exist yet.
+    * split (string): ``run`` = one bag for the whole recording; ``unload`` = one bag per unload
+      in ``<output>/unload-000``, ``unload-001``, ...: after an estimate arrives on
+      ``/estimator/estimate`` the next bag starts with the first message received while
+      the valve is closed (usually the ``/tank/valve`` close message; right away if the
+      valve was already closed or never reported). The previous bag stays open until the
+      valve opens again (or an estimate of another unload arrives), and receives the later
+      estimates with the same ``unload_index`` (the estimator's final, curve-fit
+      estimate follows its crossing estimate). Each bag thus holds the pre-unload
+      plateau, the discharge and its estimates; the rig configuration and the last
+      ``/estimator/settings`` are repeated at the start of every bag. In both modes a
+      *different* rig
+      configuration on ``/rig/config`` starts a new bag (``run``: ``<output>-001``, ...).
+    * flush_interval (double, s): maximal age of data not yet handed to the operating system
+      (default 0.5, range (0, 10]). After ``kill -9`` at most about this much is lost;
+      ``pneumatic-unload recover BAG`` makes what is on disk readable again.
+    * log_time (string): bag log time of each message: ``receive`` (default: the recorder's
+      wall-clock receive time [ns], as ``ros2 bag record``) or ``header`` (the header stamp
+      for messages that start with a ``std_msgs/Header`` and have a positive stamp; receive
+      time otherwise). The header stamps, which analysis uses, are in the payloads either
+      way (``read_pressure`` etc. return them).
+    * topics (string array): extra topics to record (default none).
+    * fsync (bool): also ``fsync`` at each flush (survives power loss; default false).
 
 The rig configuration (``/rig/config``, std_msgs/String JSON, latched) is stored in every
 bag (first ``/rig/config`` message and metadata ``custom_data``), so that

@@ -6,19 +6,20 @@ published unchanged (``publish(bytes)``): header stamps are the original ones. P
 the bag's log times on ``time.monotonic`` in a plain loop (an rclpy timer cannot hold 1 kHz).
 
 Parameters:
-    bag (string, required): bag directory or ``.mcap`` file.
-    rate (double, -): time scale factor: 1.0 = original timing (default), 2.0 = twice as
-        fast, 0 = as fast as the subscribers acknowledge (flow control: at most
-        ``FLOW_WINDOW`` unacknowledged messages per topic; reliable QoS, no loss).
-    topics (string array): topics to replay (default: all in the bag). An unknown topic is
-        an error.
-    loop (bool): start again at the end until SIGINT (default false).
-    wait_for_subscribers (bool): before publishing, wait until ``min_subscribers``
-        subscribers are matched on ``/tank/pressure`` (or, if it is not replayed, on every
-        replayed topic) so that no sample is lost (default true).
-    min_subscribers (int): how many subscribers to wait for (default 1).
-    wait_timeout (double, s): give up waiting after this long and start anyway with a
-        warning (default 10.0).
+
+    * bag (string, required): bag directory or ``.mcap`` file.
+    * rate (double, -): time scale factor: 1.0 = original timing (default), 2.0 = twice as
+      fast, 0 = as fast as the subscribers acknowledge (flow control: at most
+      ``FLOW_WINDOW`` unacknowledged messages per topic; reliable QoS, no loss).
+    * topics (string array): topics to replay (default: all in the bag). An unknown topic is
+      an error.
+    * loop (bool): start again at the end until SIGINT (default false).
+    * wait_for_subscribers (bool): before publishing, wait until ``min_subscribers``
+      subscribers are matched on ``/tank/pressure`` (or, if it is not replayed, on every
+      replayed topic) so that no sample is lost (default true).
+    * min_subscribers (int): how many subscribers to wait for (default 1).
+    * wait_timeout (double, s): give up waiting after this long and start anyway with a
+      warning (default 10.0).
 
 QoS: reliable; ``/rig/config`` transient local depth 1, ``/estimator/estimate`` transient
 local depth 10, everything else volatile depth 1000. The rig configuration (first

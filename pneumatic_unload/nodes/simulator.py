@@ -5,12 +5,17 @@ Publishes
         at ``rate`` from a paced loop on the monotonic clock (an rclpy timer cannot hold
         1 kHz); optionally also blocks of samples on /tank/pressure_block
         (pneumatic_unload_msgs/PressureBlock) when ``block_size`` > 0.
-    /tank/temperature (sensor_msgs/Temperature, degrees C) at ``temperature_rate``.
-    /tank/valve (pneumatic_unload_msgs/ValveState) on every change (latched).
-    /rig/config (std_msgs/String, JSON of the RigConfig; latched) so a recorder stores it.
+    /tank/temperature (sensor_msgs/Temperature, degrees C)
+        at ``temperature_rate``.
+    /tank/valve (pneumatic_unload_msgs/ValveState)
+        on every change (latched).
+    /rig/config (std_msgs/String, JSON of the RigConfig; latched)
+        so a recorder stores it.
 Services
-    ~/start_unload (std_srvs/Trigger): open the valve (the tank must be charged).
-    ~/charge (std_srvs/Trigger): recharge to p10 after an unload.
+    ~/start_unload (std_srvs/Trigger)
+        open the valve (the tank must be charged).
+    ~/charge (std_srvs/Trigger)
+        recharge to p10 after an unload.
 Parameters
     Every RigConfig field (tank, component, effects, sensor; see ``RigConfig.describe()``),
     with ranges (``direction`` 'charge': the tank filled through the component from
