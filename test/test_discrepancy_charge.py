@@ -141,6 +141,13 @@ def test_the_direction_is_asked_for_and_refused_clearly(tmp_path: Path) -> None:
         find_discrepancy(t, p, DiscrepancySettings(volume=5e-3, atmosphere=101325.0))
     with pytest.raises(DiscrepancyError, match="a charge's"):
         DiscrepancySettings(volume=5e-3, supply_pressure=6e5)
+    # a charge's own bad inputs: each says why, in the estimator's words
+    with pytest.raises(DiscrepancyError, match=r"supply \(50000 Pa\) is not above p10"):
+        find_discrepancy(t, p, _settings(supply_pressure=5e4))
+    with pytest.raises(DiscrepancyError, match="a discharge\\? \\(--direction discharge\\)"):
+        find_discrepancy(t, p[::-1].copy(), _settings())
+    with pytest.raises(DiscrepancyError, match="while the pressure must rise"):
+        find_discrepancy(t, np.where(t < 1.0, p, p[1000]), _settings())  # a stuck sensor
     csv = tmp_path / "fill.csv"
     np.savetxt(csv, np.c_[t, p], delimiter=",", header="time_s,pressure_pa", comments="")
     cmd = [sys.executable, "-m", "pneumatic_unload.cli", "discrepancy", str(csv),

@@ -24,7 +24,7 @@ from pneumatic_unload.estimation import (
     StreamingEstimator,
     UnloadResult,
 )
-from pneumatic_unload.estimation.batch import charge_reason
+from pneumatic_unload.estimation.batch import charge_reason, explain_no_unload
 from pneumatic_unload.estimation.refine import CHARGE_SECOND_START
 from pneumatic_unload.fit.noise import estimate_noise
 from pneumatic_unload.fit.trace import TemperatureChannel, Trace
@@ -82,8 +82,8 @@ class Problem:
                     "the pressure rises and never falls: a charge; give the direction "
                     "(--direction charge; the supply with --supply-pressure, else fitted)")
             if est.charge:
-                raise DiscrepancyError("no complete charge found in the trace (the "
-                                       "pressure must rise from a plateau through p*)")
+                raise DiscrepancyError(f"no complete charge found in the trace: "
+                                       f"{explain_no_unload(t, y, est)}")
             raise DiscrepancyError("no complete unload found in the trace (the pressure "
                                    "must fall from a plateau through p*)")
         r = results[0]

@@ -285,11 +285,11 @@ def stalled_at(st: EstimatorState, k: int | np.ndarray) -> np.bool_ | np.ndarray
 
 
 def on_stuck(st: EstimatorState, i: int) -> list[UnloadResult]:
-    """The sensor stuck while the pressure must fall (index i): one 'bad_data' result, and
-    the rest of the unload is skipped."""
+    """The sensor stuck while the pressure must fall (a charge's: rise) (index i): one
+    'bad_data' result, and the rest of the unload is skipped."""
     return st.bad(i, f"{STUCK_TEXT} {st.to_pa(float(st.buf.p[i])):.0f} Pa during the "
                      f"unload ({STUCK_RUN} identical samples, no noise, while the pressure "
-                     f"must fall): no estimate")
+                     f"must {'rise' if st.settings.charge else 'fall'}): no estimate")
 
 
 def step_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
