@@ -1,12 +1,14 @@
 """The documentation site: it builds with warnings as errors, a headless Chromium opens its
 index, no internal link is broken, and it names every CLI command and option, every node and
-every node parameter, and every key of ``analyze --json``."""
+every node parameter, and every key of ``analyze --json``; the hand-written pages are in it; the
+README is short and its relative links resolve."""
 
 import argparse
 import contextlib
 import dataclasses
 import io
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -23,6 +25,16 @@ from pneumatic_unload.estimation import UnloadResult
 
 REPO = Path(__file__).resolve().parents[1]
 BUILD_TIMEOUT_S = 300
+README_MAX_LINES = 150
+#: the hand-written pages (issue #28): tutorials, how-to guides, explanation
+HAND_PAGES = (
+    "tutorials/index", "tutorials/first_measurement", "tutorials/live_bench",
+    "tutorials/test_line",
+    "howto/index", "howto/analyze", "howto/transducers", "howto/start_time",
+    "howto/temperature", "howto/charge", "howto/discrepancy", "howto/cell",
+    "explanation/index", "explanation/method", "explanation/budget",
+    "explanation/validation", "explanation/architecture",
+)
 
 
 class _Page(HTMLParser):
@@ -212,3 +224,30 @@ def test_site_documents_every_key_of_analyze_json(pages, site, tmp_path, monkeyp
     from generated_reference import unload_fields
 
     assert [n for n, _, meaning in unload_fields() if not meaning] == []
+
+
+def test_readme_is_short_and_its_relative_links_resolve():
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= README_MAX_LINES
+    # [text](target) and ![alt](target): every target that is not a URL or an anchor
+    targets = re.findall(r"\]\(([^)\s]+)\)", text)
+    assert targets
+    relative = [t for t in targets if not urlsplit(t).scheme and not t.startswith("#")]
+    missing = [t for t in relative if not (REPO / unquote(urlsplit(t).path)).exists()]
+    assert missing == []
+    # the hand pages the README links to are the site's
+    for page in HAND_PAGES:
+        if not page.endswith("index"):
+            assert f"docs/{page}.rst" in relative, page
+
+
+def test_site_has_the_hand_pages_reached_from_the_index(pages, site):
+    index = pages[site / "index.html"]
+    links = {urlsplit(h).path for h in index.hrefs}
+    for page in HAND_PAGES:
+        assert (site / f"{page}.html").is_file(), page
+        assert (REPO / "docs" / f"{page}.rst").is_file(), page
+    for part in ("tutorials", "howto", "explanation"):
+        assert f"{part}/index.html" in links, part
+    # the README's picture is on the first tutorial
+    assert any(p.name == "measurement.png" for p in (site / "_images").iterdir())
