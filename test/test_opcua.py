@@ -200,7 +200,9 @@ def test_measure_over_opc_ua_gives_the_rigs_c(bench: Bench) -> None:
                 assert client.uaclient.state == UaClientState.CONNECTED
             assert await n1.read("Conductance") == c
             assert await n1.read("Verdict") == "pass"
-            assert await n2.read("State") == "done"
+            # State is the bridge's now: 'done', or under load 'no estimator' already (a
+            # late estimator report); the measurement's outcome is Message
+            assert await n2.read("State") in ("done", "no estimator")
             assert await n2.read("MeasureDone") is True
             assert await n2.read("Message") == "ok"
             assert await n1.read("PartId") == ("part-A" if ok[0] is results[0] else "part-B")
@@ -228,9 +230,13 @@ def test_start_and_poll(bench: Bench) -> None:
                 while not await n.read("MeasureDone"):
                     await asyncio.sleep(0.2)
                 assert await n.read("PartId") == "odd-C"
-                if await n.read("State") == "done":
+                # the measurement's outcome is its Message ('ok' or why it failed); State is
+                # the bridge's now (under load a late estimator report may already have
+                # turned it to 'no estimator': seen once in CI)
+                message = await n.read("Message")
+                if message == "ok":
                     break
-                assert "not charged" in await n.read("Message")  # the rig recharging
+                assert "not charged" in message  # the rig recharging
                 assert time.monotonic() < deadline
                 await asyncio.sleep(0.5)
             assert await n.read("Conductance") == pytest.approx(TRUE_C, rel=0.02)
@@ -304,7 +310,8 @@ def test_bad_clients_leave_the_bridge_serving(bench: Bench, tmp_path: Path) -> N
                 assert time.monotonic() < deadline
                 await asyncio.sleep(0.2)
             assert await n.read("PartId") == "part-D"
-            assert await n.read("State") == "done", await n.read("Message")
+            assert await n.read("Message") == "ok"
+            assert await n.read("State") in ("done", "no estimator")  # the bridge's now
             c, _b, _v = await _measure(n, "part-E")
             assert c == pytest.approx(TRUE_C, rel=0.02)
 
