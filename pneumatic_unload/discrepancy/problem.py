@@ -25,6 +25,7 @@ from pneumatic_unload.estimation import (
     UnloadResult,
 )
 from pneumatic_unload.estimation.batch import charge_reason, explain_no_unload
+from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.refine import CHARGE_SECOND_START
 from pneumatic_unload.fit.noise import estimate_noise
 from pneumatic_unload.fit.trace import TemperatureChannel, Trace
@@ -116,7 +117,7 @@ class Problem:
         #: adiabatic C alone, as the estimator's curve fit did (refine's second start).
         self.conductances = [float(c0)]
         if est.charge:
-            for c1 in (_correlation_conductance(t, y, est, r), settings.gas.gamma * c0):
+            for c1 in (_correlation_conductance(est, r), settings.gas.gamma * c0):
                 if math.isfinite(c1) and c1 > 0 and all(
                         abs(c1 / c - 1.0) > CHARGE_SECOND_START for c in self.conductances):
                     self.conductances.append(float(c1))
@@ -218,20 +219,18 @@ def _unloads(t: FloatArray, y: FloatArray, est: EstimatorSettings) -> list[Unloa
     return out
 
 
-def _correlation_conductance(t: FloatArray, y: FloatArray, est: EstimatorSettings,
-                             r: UnloadResult) -> float:
-    """The model C of the crossing with the estimator's heat correlation [m^3/(s Pa)] of
-    the unload ``r`` located in (t [s], y [Pa]) with the adiabatic ``est`` (NaN when
-    that crossing finds none)."""
+def _correlation_conductance(est: EstimatorSettings, r: UnloadResult) -> float:
+    """The model C of the crossing of ``r`` (located with the adiabatic ``est``) with the
+    estimator's heat correlation [m^3/(s Pa)]: the streaming core's crossing estimate
+    (:func:`~pneumatic_unload.estimation.crossing.crossing_estimate`) at its tau_exp (NaN
+    where it gives none)."""
     with_heat = dataclasses.replace(est, heat_model=EstimatorSettings().heat_model)
     try:
-        se = StreamingEstimator(with_heat)
-        out = se.push_block(t, y) + se.finish()
-    except EstimationError:
+        plan = plan_crossing(with_heat, p10=r.p10, p_atm=r.end_pressure, p_star=r.p_star,
+                             tau_ref=r.tau_exp)
+        return float(crossing_estimate(plan, r.tau_exp, r.tau_exp_std).conductance_model)
+    except (EstimationError, ValueError, ArithmeticError):
         return math.nan
-    near = [q.conductance_model for q in out
-            if q.status == "ok" and abs(q.t_start - r.t_start) < 0.5 * r.tau_exp]
-    return float(near[0]) if near else math.nan
 
 
 def _refuse_bad_data(results: list[UnloadResult], t_cut: float) -> None:
