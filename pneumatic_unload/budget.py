@@ -46,6 +46,8 @@ from pneumatic_unload.config.estimator import (
     CHARGE_MODEL_UNCERTAINTY,
     MODEL_UNCERTAINTY,
     EstimatorSettings,
+    probe_uncertainty,
+    t10_uncertainty,
     wall_uncertainty,
 )
 from pneumatic_unload.config.tank import wall_pair
@@ -276,13 +278,15 @@ def input_uncertainties(settings: EstimatorSettings, p10: float) -> dict[str, fl
     Returns
     -------
     dict
-        volume [m^3], temperature [K], pressure [Pa], atmosphere [Pa].
+        volume [m^3], temperature [K] (a probe's), initial_temperature [K] (T10's:
+        ``t10_uncertainty``), pressure [Pa], atmosphere [Pa].
     """
     s = settings
     return {
         "volume": s.volume_uncertainty if s.volume_uncertainty is not None
         else VOLUME_REL_DEFAULT * s.volume,
-        "temperature": s.temperature_uncertainty,
+        "temperature": probe_uncertainty(s),
+        "initial_temperature": t10_uncertainty(s)[0],
         "pressure": s.pressure_uncertainty if s.pressure_uncertainty is not None
         else PRESSURE_REL_DEFAULT * p10,
         "atmosphere": s.atmosphere_uncertainty,
@@ -331,9 +335,9 @@ def input_terms(settings: EstimatorSettings, c: float, *, tau: float, p10: float
                         "stated" if s.volume_uncertainty is not None
                         else f"default {100 * VOLUME_REL_DEFAULT:g} % of V"),
              BudgetTerm("initial temperature T10", "B", s.initial_temperature,
-                        u["temperature"], "K",
-                        abs(c) * 0.5 * u["temperature"] / s.initial_temperature,
-                        "temperature_uncertainty")]
+                        u["initial_temperature"], "K",
+                        abs(c) * 0.5 * u["initial_temperature"] / s.initial_temperature,
+                        t10_uncertainty(s)[1])]
     d = u["pressure"]
     if eq39:
         def c39(dp10: float, datm: float) -> float:

@@ -69,8 +69,8 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
                         "b does not depend on V (the discharge depends on t C/V)")]
     gap_moves = wall is not None and s.wall_temperature is not None and not wall_fitted
     terms.append(BudgetTerm(
-        "initial temperature T10", "B", s.initial_temperature, u["temperature"], "K",
-        wall[0] * u["temperature"] / wall[1] if gap_moves and wall[1] > 0 else 0.0,
+        "initial temperature T10", "B", s.initial_temperature, u["initial_temperature"], "K",
+        wall[0] * u["initial_temperature"] / wall[1] if gap_moves and wall[1] > 0 else 0.0,
         "moves the gas-wall gap as the given wall's uncertainty does" if gap_moves else
         "the wall moves with T10 (or is fitted); the time scale does not move b"))
     d = u["pressure"]

@@ -32,7 +32,7 @@ import numpy as np
 
 from pneumatic_unload import batch_cli
 from pneumatic_unload.config import TANK_FIELDS, ConfigError, RigConfig, TankSpec, adapters
-from pneumatic_unload.config.estimator import wall_uncertainty
+from pneumatic_unload.config.estimator import t10_uncertainty, wall_uncertainty
 from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySettings
 from pneumatic_unload.estimation import (
     EstimationError,
@@ -162,7 +162,7 @@ def input_sources(args: argparse.Namespace, cfg: dict[str, Any], settings: Estim
         "gas": {"gas_constant": s.gas_constant, "gamma": s.gamma},
         "heat_model": s.heat_model,
         "uncertainties": {"volume_m3": s.volume_uncertainty, "temperature_K":
-                          s.temperature_uncertainty, "wall_temperature_K":
+                          t10_uncertainty(s)[0], "wall_temperature_K":
                           s.wall_temperature_uncertainty, "pressure_Pa": s.pressure_uncertainty,
                           "atmosphere_Pa": s.atmosphere_uncertainty,
                           "defaults": "volume 0.5 % of V, pressure 0.1 % of p10, an assumed "

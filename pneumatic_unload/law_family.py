@@ -30,6 +30,8 @@ from pneumatic_unload.config.estimator import (
     AMBIENT_TEMPERATURE,
     WALL_ASSUMED_STD,
     EstimatorSettings,
+    probe_uncertainty,
+    t10_measured,
 )
 from pneumatic_unload.curve_fit_result import CurveFit, CurveSpan
 from pneumatic_unload.heat_law_offer import (
@@ -73,6 +75,12 @@ SECOND_PARAMETER: dict[str, tuple[str, Callable[[CurveFit], dict[str, float]]]] 
 }
 #: Evaluation budget of a fit started from its seed (:attr:`Family.seeds`) [-].
 SEEDED_NFEV = 80
+#: Evaluation budget (half as many iterations) of the next laws' fits where the first law
+#: leaves the heat exchange undetermined (its multiplier within 2 sigma of none) [-]: the
+#: constant-hA law then walks a valley as flat (chi^2 within about 1 residual variance of
+#: the natural law's along it, C within 0.03 %: an adiabatic rig's charges), and its full
+#: budget of 32 cost 42-108 evaluations, the tail of the live final fit's time.
+FLAT_EXCHANGE_NFEV = 12
 FloatArray = NDArray[np.float64]
 #: One fit of the table: (result, chi^2 [Pa^2], free parameters [-]).
 Fit = tuple[CurveFit, float, int]
@@ -140,9 +148,7 @@ class Family:
         room's temperature: C goes as 1/sqrt(T) along that valley), not as a wall away from
         a room's T10 (C +4.6 % to +5.7 % on 20-30 K hot starts:
         bench/bench_temperature_records.py)."""
-        s = self.settings
-        return (s.initial_temperature == AMBIENT_TEMPERATURE and s.wall_temperature is None
-                and not self.t10_logged)
+        return not t10_measured(self.settings, self.t10_logged)
 
     @property
     def natural(self) -> bool:
@@ -259,11 +265,13 @@ class Family:
         if first is not None and first[0].inflation < 2.0 \
                 and math.isfinite(first[0].conductance):
             start = next_law_start(first[0], self.settings, self.span.t_ref)
+        flat = first is not None and _exchange_undetermined(first[0])
         for law in laws:
             key = law + sfx
             if key in self.fits or key in self.not_offered:
                 continue
-            law_start, nfev = start, (200 if not self.fits else 32)
+            law_start, nfev = start, (200 if not self.fits else
+                                      FLAT_EXCHANGE_NFEV if flat else 32)
             if law in SECOND_PARAMETER:
                 # offered where the one-parameter law it extends shows what it needs,
                 # started from that law's fit
@@ -283,6 +291,7 @@ class Family:
                 self.not_offered[key] = why
                 continue
             self.fits[key] = got
+            flat = flat or (law == laws[0] and _exchange_undetermined(got[0]))
             if start is None and got[0].inflation < 2.0 and math.isfinite(got[0].conductance):
                 # the next law starts from this fit when it is close (white residuals);
                 # otherwise from the neutral values, with a second start screened
@@ -388,9 +397,16 @@ class Family:
                     self.not_offered[key] = (f"T10 not measured: a gas {gap:.1f} K from the "
                                              f"room's is within its spread (3 x "
                                              f"{WALL_ASSUMED_STD:g} K)")
-            elif gap > 3.0 * max(s.temperature_uncertainty, 1.0) or \
+            elif gap > 3.0 * max(probe_uncertainty(s), 1.0) or \
                     least > HOT_START_INFLATION >= hot[0].inflation:
                 self.fits[key] = hot
+
+
+def _exchange_undetermined(fit: CurveFit) -> bool:
+    """The natural law's fit leaves the heat exchange undetermined: its multiplier within
+    2 of its standard deviations of none (:data:`FLAT_EXCHANGE_NFEV`)."""
+    return fit.heat_law == "natural" and math.isfinite(fit.heat_scale_std) \
+        and fit.heat_scale <= 2.0 * fit.heat_scale_std
 
 
 def _second_parameter_problem(law: str, fit: CurveFit) -> str | None:

@@ -28,6 +28,17 @@ AMBIENT_TEMPERATURE = 293.15
 #: carries no evidence of a gap [K]: a tank left to settle after charging, its gas within a
 #: few kelvin of the wall.
 WALL_ASSUMED_STD = 2.0
+#: Standard uncertainty of a temperature probe's reading [K]: T10 given or logged, a given
+#: wall (``temperature_uncertainty`` when not stated).
+PROBE_STD = 1.0
+#: Standard uncertainty of T10 where it was not measured [K] (at its default, a room's
+#: :data:`AMBIENT_TEMPERATURE`, with no wall given and no logged temperature): the gas may
+#: lie anywhere within the hot-start claim's threshold, 3 x :data:`WALL_ASSUMED_STD` either
+#: side of the room's temperature (a gas warm from its charge, a room not at 20 C), without
+#: the record claiming it (:mod:`pneumatic_unload.law_family`): uniformly, its RMS distance
+#: is 6 K / sqrt(3) (GUM 4.3.7). A 5 K warm gas then reads C +0.87 % at z 1.5, not 2.6
+#: (bench/bench_temperature_records.py).
+T10_UNMEASURED_STD = 3.0 * WALL_ASSUMED_STD / math.sqrt(3.0)
 
 
 class EstimationError(ValueError):
@@ -79,8 +90,11 @@ class EstimatorSettings(TankSpec):
         Run the full-curve least-squares fit (C, b) when the unload ends.
     volume_uncertainty : float or None
         Standard uncertainty of V [m^3] (None: 0.5 % of V) for the budget of C.
-    temperature_uncertainty : float
-        Standard uncertainty of T10 and of a given wall temperature [K].
+    temperature_uncertainty : float or None
+        Standard uncertainty of T10 and of a given wall temperature [K] (None:
+        :data:`PROBE_STD`, 1 K, for a measured one; T10 not measured - at its default, no
+        wall given, no logged temperature - :data:`T10_UNMEASURED_STD`, 3.5 K:
+        :func:`t10_uncertainty`).
     wall_temperature_uncertainty : float or None
         Standard uncertainty of the wall temperature when it is not given (assumed = T10)
         [K]: how far the wall may be from the gas at the start. None: from the record
@@ -149,8 +163,9 @@ class EstimatorSettings(TankSpec):
     curve_fit: bool = flag(True, "full-curve fit (C, b) once the unload's tail is recorded")
     volume_uncertainty: float | None = optional(
         None, "m^3", 0.0, 10.0, "standard uncertainty of V", "0.5 % of V")
-    temperature_uncertainty: float = number(
-        1.0, "K", 0.0, 100.0, "standard uncertainty of T10 and of a given wall temperature")
+    temperature_uncertainty: float | None = optional(
+        None, "K", 0.0, 100.0, "standard uncertainty of T10 and of a given wall temperature",
+        "1 K where measured (given or logged); T10 not measured: 3.5 K")
     wall_temperature_uncertainty: float | None = optional(
         None, "K", 0.0, 100.0, "standard uncertainty of the wall temperature when it is not "
         "given (assumed = T10)", "from the record: 2 K, more when T10 is far from 20 C or a "
@@ -262,6 +277,36 @@ def supply_gas_temperature(supply: float | None, wall: float | None) -> float:
     return AMBIENT_TEMPERATURE if wall is None else wall
 
 
+def t10_measured(settings: EstimatorSettings, logged: bool = False) -> bool:
+    """Whether T10 was measured [-]: given away from its default (a room's
+    :data:`AMBIENT_TEMPERATURE`), a wall given beside it, or a logged gas temperature
+    (``logged``). A T10 given as exactly 293.15 K with no wall and no log reads as not
+    measured (its line then the wider :data:`T10_UNMEASURED_STD`: on the safe side)."""
+    return logged or settings.wall_temperature is not None \
+        or settings.initial_temperature != AMBIENT_TEMPERATURE
+
+
+def probe_uncertainty(settings: EstimatorSettings) -> float:
+    """Standard uncertainty of a temperature probe's reading [K]: the stated
+    ``temperature_uncertainty``, else :data:`PROBE_STD`."""
+    u = settings.temperature_uncertainty
+    return PROBE_STD if u is None else u
+
+
+def t10_uncertainty(settings: EstimatorSettings, logged: bool = False) -> tuple[float, str]:
+    """Standard uncertainty of T10 [K] and where it comes from: the stated
+    ``temperature_uncertainty``; else measured (:func:`t10_measured`) :data:`PROBE_STD`, not
+    measured :data:`T10_UNMEASURED_STD`."""
+    s = settings
+    if s.temperature_uncertainty is not None:
+        return s.temperature_uncertainty, "temperature_uncertainty"
+    if t10_measured(s, logged):
+        return PROBE_STD, f"measured; default {PROBE_STD:g} K (a probe)"
+    return T10_UNMEASURED_STD, (f"not measured: a room's {AMBIENT_TEMPERATURE:g} K assumed, "
+                                f"+- 3 x {WALL_ASSUMED_STD:g} K (a gas warm from its charge "
+                                "that the record does not show, a room not at 20 C)/sqrt(3)")
+
+
 def wall_uncertainty(settings: EstimatorSettings,
                      hot_walls: Iterable[float] = ()) -> tuple[float, str]:
     """Standard uncertainty of the wall temperature used by the model [K], and where it
@@ -278,7 +323,7 @@ def wall_uncertainty(settings: EstimatorSettings,
     """
     s = settings
     if s.wall_temperature is not None:
-        return s.temperature_uncertainty, "given; temperature_uncertainty"
+        return probe_uncertainty(s), "given; temperature_uncertainty"
     if s.wall_temperature_uncertainty is not None:
         return s.wall_temperature_uncertainty, "assumed = T10; wall_temperature_uncertainty"
     t10 = s.initial_temperature

@@ -34,6 +34,7 @@ from pneumatic_unload.budget_b import ratio_budget
 from pneumatic_unload.config.estimator import (
     WALL_ASSUMED_STD,
     EstimatorSettings,
+    probe_uncertainty,
     wall_uncertainty,
 )
 from pneumatic_unload.config.rig import RigConfig
@@ -449,9 +450,8 @@ def refine_with_curve_fit(
         # T10 fitted with the logged temperature (its statistical part in the fit's line,
         # the probe's accuracy the T10 line), or by a hot start beside a wall at a room's
         # temperature (that room's uncertainty the T10 line: law_family.Family.t10_assumed)
-        settings = dataclasses.replace(settings, initial_temperature=t10, **(
-            {} if "rms" in fit.gas_temperature else
-            {"temperature_uncertainty": WALL_ASSUMED_STD}))
+        settings = dataclasses.replace(settings, initial_temperature=t10, temperature_uncertainty=(
+            probe_uncertainty(settings) if "rms" in fit.gas_temperature else WALL_ASSUMED_STD))
     tau_model = fitted_tau_exp(fit.config(settings), res.tau_exp)
     if not (math.isfinite(tau_model) and tau_model > 0):
         tau_model = math.nan
