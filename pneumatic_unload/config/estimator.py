@@ -64,7 +64,8 @@ class EstimatorSettings(TankSpec):
         'natural' (natural-convection wall heat transfer) or 'adiabatic' for the model-based C.
     critical_ratio : float
         b [-] assumed at the crossing (the prior mean; its 1-sigma is
-        :data:`pneumatic_unload.inversion.CRITICAL_RATIO_PRIOR_STD`); the curve fit measures b.
+        :data:`pneumatic_unload.model.inversion.CRITICAL_RATIO_PRIOR_STD`); the curve fit
+        measures b.
     signal_gain : float
         Pressure per unit of input signal [Pa per unit] (1 for an input in Pa).
     signal_offset : float
