@@ -9,7 +9,7 @@ setup:
 	@bash scripts/setup_venv.sh
 
 demo: setup
-	@$(PY) -m pneumatic_unload.demo
+	@$(PY) -m pneumatic_unload.app.demo
 
 test: setup
 	@$(VENV)/bin/ruff check .

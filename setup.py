@@ -39,7 +39,7 @@ setup(
             f"recorder = {PACKAGE}.nodes.recorder:main",
             f"replay = {PACKAGE}.nodes.replay:main",
             f"opcua = {PACKAGE}.nodes.opcua:main",
-            f"pneumatic-unload = {PACKAGE}.cli:main",
+            f"pneumatic-unload = {PACKAGE}.app.cli:main",
         ],
     },
 )

@@ -1,6 +1,6 @@
 """Regenerate the committed reference bags of ``bags/`` and their README (``make bags``).
 
-Each bag is a simulated run written by the package itself (``pneumatic_unload.runs``, the
+Each bag is a simulated run written by the package itself (``pneumatic_unload.analysis.runs``, the
 same path as ``pneumatic-unload simulate``): rosbag2 directory, MCAP storage, the rig
 configuration and the estimator settings stored in it, and the streaming estimator's
 results on ``/estimator/estimate`` as the live node publishes them. Seeds are fixed, so a
@@ -13,10 +13,10 @@ import shutil
 import sys
 from pathlib import Path
 
+from pneumatic_unload.analysis.runs import write_simulated_bag
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.io.bag import bag_summary
 from pneumatic_unload.physics import orifice_conductance
-from pneumatic_unload.runs import write_simulated_bag
 
 HERE = Path(__file__).resolve().parent
 SENSOR = {"noise_std": 1000.0, "quantization": 10.0, "full_scale": 1.1e6}

@@ -21,11 +21,11 @@ import time
 
 import numpy as np
 
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import EstimatorSettings, analyze, merge_final
 from pneumatic_unload.model import Simulation, default_duration, simulate
 from pneumatic_unload.physics import orifice_conductance
-from pneumatic_unload.runs import settings_for
 
 FS = 1e6  # transducer full scale [Pa]
 #: Integrator tolerance of the simulated "truth" [-] (env SIM_RTOL; the default of
@@ -58,10 +58,10 @@ def ideal_z(sim: Simulation, settings: EstimatorSettings, t_end: float, t_start:
     draw [-]: the Gauss-Newton solution with the true Jacobian, the true sigma and the same
     bins and window as the production fit. Exactly N(0, 1) over noise draws, so it tells a
     defect of the fit from an unlucky set of seeds (the controlled experiment of issue 3)."""
+    from pneumatic_unload.curvefit.fitting import curve_fit_bins
     from pneumatic_unload.fit.uncertainty import covariance
-    from pneumatic_unload.fitting import curve_fit_bins
-    from pneumatic_unload.inversion import rig_from_settings
     from pneumatic_unload.model import discharge
+    from pneumatic_unload.model.inversion import rig_from_settings
 
     cfg = sim.config
     n = int(np.searchsorted(sim.t, t_end)) + 1
@@ -206,8 +206,8 @@ def crlb(cfg: RigConfig, t: np.ndarray) -> tuple[float, float]:
 def start(n: int, seed: int = 300, pre_times: tuple[float, ...] = (0.2, 5.0)) -> None:
     """Start-time and tau_exp errors against their Cramer-Rao bounds; the start from the
     hinge fit (streaming estimator) and from a full-curve fit of the discharge model."""
-    from pneumatic_unload.fitting import fit_curve
-    from pneumatic_unload.inversion import fitted_tau_exp
+    from pneumatic_unload.curvefit.fitting import fit_curve
+    from pneumatic_unload.model.inversion import fitted_tau_exp
 
     for pre in pre_times:
         rng = np.random.default_rng(seed)

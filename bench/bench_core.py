@@ -32,6 +32,7 @@ from collections.abc import Callable  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from pneumatic_unload.analysis.runs import settings_for  # noqa: E402
 from pneumatic_unload.config import RigConfig  # noqa: E402
 from pneumatic_unload.estimation import (  # noqa: E402
     EstimatorSettings,
@@ -41,7 +42,6 @@ from pneumatic_unload.estimation import (  # noqa: E402
 )
 from pneumatic_unload.model import simulate  # noqa: E402
 from pneumatic_unload.physics import orifice_conductance  # noqa: E402
-from pneumatic_unload.runs import settings_for  # noqa: E402
 
 NOISE = 1000.0  # 0.1 % of a 1 MPa full-scale transducer [Pa]
 

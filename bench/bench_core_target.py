@@ -48,12 +48,12 @@ import time
 import numpy as np
 from bench_accuracy import NOISE, crlb
 
-from pneumatic_unload.budget import EXACT_INPUTS
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import analyze, merge_final
 from pneumatic_unload.model import default_duration, discharge, simulate
 from pneumatic_unload.physics import P_STAR_FRACTION, orifice_conductance
-from pneumatic_unload.runs import settings_for
+from pneumatic_unload.uncertainty.budget import EXACT_INPUTS
 
 
 def true_tau_exp(cfg: RigConfig) -> float:

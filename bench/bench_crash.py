@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pneumatic_unload.launch import NodeProcess, free_domain_id
+from pneumatic_unload.app.launch import NodeProcess, free_domain_id
 
 RIG = {"volume": 2e-4, "conductance": 8e-9, "noise_std": 1000.0, "quantization": 10.0,
        "seed": 1}
@@ -57,7 +57,7 @@ def crash_once(rate: float, seconds: float, block: int, tmp: Path, k: int
     if not alive:
         return {"rate [Hz]": f"{rate:g}", "run": k, "lost [s]": "recorder died before the kill"}
     t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "recover", str(bag)],
+    out = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "recover", str(bag)],
                          capture_output=True, text=True, timeout=300)
     t_recover = time.perf_counter() - t0
     if out.returncode != 0:

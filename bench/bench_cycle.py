@@ -40,7 +40,7 @@ def main() -> int:
     ap.add_argument("--settle", type=float, default=1.5, help="plateau before a step [s]")
     args = ap.parse_args()
     os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
-    from pneumatic_unload.launch import NodeProcess, free_domain_id
+    from pneumatic_unload.app.launch import NodeProcess, free_domain_id
 
     os.environ.setdefault("ROS_DOMAIN_ID", str(free_domain_id()))
     import rclpy

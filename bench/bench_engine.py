@@ -4,7 +4,7 @@
    at 10 kHz (a 100 s simulated discharge) against a process that only iterates the bag's
    raw messages with rosbags (no deserialising); both subprocesses, process start included,
    median of 3 interleaved runs. Target: analyze / raw iteration <= 0.5.
-2. ``fit``: the final curve fit (:func:`pneumatic_unload.fitting.fit_curve`, started from
+2. ``fit``: the final curve fit (:func:`pneumatic_unload.curvefit.fitting.fit_curve`, started from
    the crossing estimate of :func:`pneumatic_unload.estimation.analyze`) of the same
    discharge sampled at 10 kHz (1 M samples) and at 100 Hz (10 k samples), in-process,
    median of 3 interleaved after one untimed call. Target: t(1 M) / t(10 k) <= 2. Works
@@ -23,7 +23,7 @@ Run (the code measured is the one on PYTHONPATH; the commit is printed at the to
 
 ``--quick`` takes one run per timing instead of three and 10 unloads in the live part.
 A full run takes about 5-8 minutes on 2 cores. Prints Markdown tables. The live part uses
-its own ROS_DOMAIN_ID (:func:`pneumatic_unload.launch.free_domain_id`) unless one is set.
+its own ROS_DOMAIN_ID (:func:`pneumatic_unload.app.launch.free_domain_id`) unless one is set.
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ print(n)
 """
 
 #: ``pneumatic-unload`` as a subprocess (the cli module has a __main__ guard).
-_CLI = [sys.executable, "-m", "pneumatic_unload.cli"]
+_CLI = [sys.executable, "-m", "pneumatic_unload.app.cli"]
 
 
 def _table(rows: list[dict[str, object]]) -> str:
@@ -144,7 +144,7 @@ def _discharge(rate: float) -> tuple[np.ndarray, np.ndarray, Any]:
 
 def _fit_call() -> tuple[Callable[..., Any], str]:
     """fit_curve and a note on its signature (old code: ``max_points`` decimation)."""
-    from pneumatic_unload.fitting import fit_curve
+    from pneumatic_unload.curvefit.fitting import fit_curve
 
     params = inspect.signature(fit_curve).parameters
     if "max_points" in params:
@@ -220,7 +220,7 @@ def bench_live(tmp: Path, unloads: int, block: int = 0, rate: float = RATE_BIG,
     """
     from bench_nodes import RIG
 
-    from pneumatic_unload.launch import NodeProcess
+    from pneumatic_unload.app.launch import NodeProcess
 
     cycle = {"settle_time": 0.6, "vent_time": 0.3, "charge_time": 0.3, "duration": 1.2}
     charge = CHARGE if direction == "charge" else {}
@@ -335,7 +335,7 @@ def main() -> int:
         if args.part in ("live", "all"):
             os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
             if "ROS_DOMAIN_ID" not in os.environ:
-                from pneumatic_unload.launch import free_domain_id
+                from pneumatic_unload.app.launch import free_domain_id
 
                 os.environ["ROS_DOMAIN_ID"] = str(free_domain_id())
             rows = []

@@ -2,7 +2,7 @@
 measured in-process and deterministically.
 
 The traces are those of the live benchmark (``bench/bench_engine.py --part live``): the
-simulator's cycle mode (:func:`pneumatic_unload.rig.run_cycles`) with ``bench_nodes.RIG``
+simulator's cycle mode (:func:`pneumatic_unload.model.rig.run_cycles`) with ``bench_nodes.RIG``
 (0.2 L, C 8e-9 m^3/(s Pa), 7 bar, no heat transfer simulated, 1 kPa noise, 10 kHz) and the
 bench's cycle timing, fed in blocks of 100 to a live
 :class:`~pneumatic_unload.estimation.StreamingEstimator` with the node's settings and
@@ -44,11 +44,11 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from pneumatic_unload import fitting, law_family, law_fit  # noqa: E402
 from pneumatic_unload.config import RigConfig  # noqa: E402
+from pneumatic_unload.curvefit import fitting, law_family, law_fit  # noqa: E402
 from pneumatic_unload.estimation import EstimatorSettings, StreamingEstimator  # noqa: E402
 from pneumatic_unload.fit.likelihood import BinnedLikelihood  # noqa: E402
-from pneumatic_unload.rig import run_cycles  # noqa: E402
+from pneumatic_unload.model.rig import run_cycles  # noqa: E402
 
 #: bench_engine's live cycle timing [s].
 CYCLE = {"settle_time": 0.6, "vent_time": 0.3, "charge_time": 0.3}

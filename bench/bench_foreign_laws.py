@@ -51,7 +51,7 @@ traces):
 * Series, 5 pairs: C within 0.3 % on three, +5.9 % (downstream-chokes, m 0.59 effective)
   and -4.3 % (b005-first); b within 0.03 of the choking end on 3/5, of the free fit on 4/5.
 
-With m in the curve fit's family (``pneumatic_unload.subsonic_offer``; 18 s):
+With m in the curve fit's family (``pneumatic_unload.curvefit.subsonic_offer``; 18 s):
 
 * ISO law, 20 cases: C within 1 % 20/20 (max 0.18 %), b within 0.03 19/20 (m 0.25, b 0.45:
   b 0.368, the natural and constant-hA laws 2 apart in BIC with b 0.368 and 0.442; z_b
@@ -173,10 +173,10 @@ def run(job: tuple[Case, bool | str]) -> dict:
     t, y = record(case)
     given = {}
     if exact == "record":
-        from pneumatic_unload.budget import EXACT_INPUTS
+        from pneumatic_unload.uncertainty.budget import EXACT_INPUTS
         given = dict(EXACT_INPUTS)
     elif exact:
-        from pneumatic_unload.budget import EXACT_INPUTS_FOREIGN_MODEL
+        from pneumatic_unload.uncertainty.budget import EXACT_INPUTS_FOREIGN_MODEL
         given = dict(EXACT_INPUTS_FOREIGN_MODEL)
     start = time.process_time()
     try:

@@ -124,8 +124,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 from foreign.hyddown_data import DATA_DIR, Trace, record, traces
 
-from pneumatic_unload.budget import EXACT_INPUTS_FOREIGN_MODEL
 from pneumatic_unload.estimation import EstimatorSettings, analyze, merge_final
+from pneumatic_unload.uncertainty.budget import EXACT_INPUTS_FOREIGN_MODEL
 
 DM3_PER_S_BAR = 1e-3 / 1e5  # 1 dm^3/(s bar) in m^3/(s Pa)
 P_ATM = 101325.0  # HydDown's back pressure [Pa abs]

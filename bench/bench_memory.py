@@ -31,7 +31,7 @@ Cases (``--case``, default all):
 The files are written under a temporary directory (``--dir`` keeps them, and re-uses files
 already there).
 
-For each file, ``python -m pneumatic_unload.cli analyze FILE --json`` runs as a subprocess;
+For each file, ``python -m pneumatic_unload.app.cli analyze FILE --json`` runs as a subprocess;
 wall time, rows per second and the child's peak RSS (``ru_maxrss`` of
 ``resource.getrusage(RUSAGE_CHILDREN)``, one child per measurement process) are printed as a
 Markdown table. ``--code DIR`` analyses with another checkout of the package (e.g. the code
@@ -77,7 +77,7 @@ def rig_for(case: str, rows: int, seed: int = 1) -> RigConfig:
     90 % of ``rows`` samples (its conductance scaled down) [-]."""
     cfg = RigConfig(rate=RATE, pre_time=1.0, seed=seed)
     if case == "long":
-        from pneumatic_unload.rig import default_duration
+        from pneumatic_unload.model.rig import default_duration
 
         want = 0.9 * rows / RATE - cfg.pre_time  # [s]
         cfg = dataclasses.replace(cfg, conductance=cfg.conductance
@@ -154,7 +154,7 @@ import numpy as np
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import EstimatorSettings, StreamingEstimator
 from pneumatic_unload.model import simulate
-from pneumatic_unload.rig import default_duration
+from pneumatic_unload.model.rig import default_duration
 rows, rate, noise = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
 if len(sys.argv) > 4:  # --reduce-from: the reduction's thresholds (code that has them)
     from pneumatic_unload.estimation import reduction
@@ -207,7 +207,7 @@ def stream_row(rows: int, code: Path, noise: float = 20.0,
 
 def measure(path: Path, cfg: RigConfig, code: Path) -> dict[str, object]:
     """Run the CLI on one file in a fresh measuring process: wall [s], peak RSS [B]."""
-    cmd = [sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path), "--json",
+    cmd = [sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(path), "--json",
            "--volume", repr(cfg.volume), "--atmosphere", repr(cfg.atmosphere)]
     env = dict(os.environ, PYTHONPATH=str(code), OPENBLAS_NUM_THREADS="1",
                OMP_NUM_THREADS="1")

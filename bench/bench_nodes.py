@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pneumatic_unload.launch import NodeProcess, free_domain_id
+from pneumatic_unload.app.launch import NodeProcess, free_domain_id
 
 RIG = {"volume": 2e-4, "conductance": 8e-9, "noise_std": 1000.0, "quantization": 10.0,
        "seed": 1}
@@ -146,8 +146,8 @@ def bench_estimator(rate: float, seconds: float, block: int, tmp: Path) -> dict[
 
 def bench_simulate_cli(tmp: Path) -> dict[str, object]:
     """``pneumatic-unload simulate``: a 60 s run at 1 kHz with heat transfer into a bag."""
+    from pneumatic_unload.analysis.runs import write_simulated_bag
     from pneumatic_unload.config import RigConfig
-    from pneumatic_unload.runs import write_simulated_bag
 
     cfg = RigConfig(volume=5e-3, effects=("heat_transfer",), pre_time=1.0, duration=59.0,
                     noise_std=1000.0, seed=2)

@@ -46,11 +46,11 @@ def configs(n: int, seed: int) -> list[dict[str, object]]:
 
 def run(cases: list[dict[str, object]], perturb: float) -> list[dict[str, float]]:
     """Analyse each case [C m^3/(s Pa), b -, stated reproducibility -]."""
+    from pneumatic_unload.analysis.runs import settings_for
     from pneumatic_unload.config import RigConfig
     from pneumatic_unload.estimation.batch import analyze
     from pneumatic_unload.model.simulate import simulate
     from pneumatic_unload.physics import orifice_conductance
-    from pneumatic_unload.runs import settings_for
 
     out = []
     rng = np.random.default_rng(3)

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pneumatic_unload.launch import NodeProcess, free_domain_id
+from pneumatic_unload.app.launch import NodeProcess, free_domain_id
 
 RIG = {"volume": 2e-4, "conductance": 8e-9, "noise_std": 1000.0, "quantization": 10.0,
        "seed": 1}

@@ -42,8 +42,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 from foreign.newton_tank import discharge
 
-from pneumatic_unload.budget import EXACT_INPUTS
 from pneumatic_unload.estimation import EstimatorSettings, analyze, merge_final
+from pneumatic_unload.uncertainty.budget import EXACT_INPUTS
 
 P_ATM = 101325.0
 #: The wall not given: its default uncertainty stays; V, T10 and p exact.

@@ -231,7 +231,7 @@ PROBE_EXACT = ["--temperature-uncertainty", "0"]
 def _analyze(path: Path, volume: float, atmosphere: bool, record_only: bool = False,
              with_t: bool = False) -> dict:
     """``analyze --json`` on the file; the final unload (or ``error``) and the CPU s."""
-    from pneumatic_unload.cli import main
+    from pneumatic_unload.app.cli import main
 
     argv = ["analyze", str(path), "--volume", repr(volume), "--json",
             *(RECORD_ONLY if record_only else []),

@@ -36,9 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
+from pneumatic_unload.analysis.runs import write_simulated_bag
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.physics import tau_exp_eq38
-from pneumatic_unload.runs import write_simulated_bag
 from pneumatic_unload.testline import (
     BatchResult,
     InputOptions,

@@ -12,7 +12,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from pneumatic_unload.cli import main
+from pneumatic_unload.app.cli import main
 
 OUT = Path(__file__).resolve().parent / "_static" / "measurement.png"
 

@@ -1,6 +1,6 @@
 """pneumatic_unload: sonic conductance of pneumatic components from a tank discharge.
 
-The ROS-free core (``physics``, ``model``, ``detection``, ``estimation``, ``fitting``,
+The ROS-free core (``physics``, ``model``, ``detection``, ``estimation``, ``curvefit``,
 ``discrepancy``, ``io``) never imports rclpy; the ROS 2 nodes live in
 ``pneumatic_unload.nodes``. SI units everywhere: pressures in Pa absolute, temperatures in
 K, volumes in m^3, times in s, sonic conductance C in m^3/(s Pa)

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from pgserver import pg_server, pg_url  # noqa: F401  (one PostgreSQL per session)
 
-from pneumatic_unload.launch import free_domain_id
+from pneumatic_unload.app.launch import free_domain_id
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 

@@ -34,7 +34,7 @@ from pneumatic_unload.estimation import EstimatorSettings
 def run_cli(argv: list[str]) -> tuple[int, str, str]:
     """``pneumatic-unload ARGV`` in-process: (exit status, stdout, stderr). Exit statuses
     0, 1 and 2 are answers; a traceback is a failure (raised as is)."""
-    from pneumatic_unload.cli import main
+    from pneumatic_unload.app.cli import main
 
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):

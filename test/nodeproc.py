@@ -1,4 +1,4 @@
-"""Helpers of the multi-process node tests (nodes run via :mod:`pneumatic_unload.launch`)."""
+"""Helpers of the multi-process node tests (nodes run via :mod:`pneumatic_unload.app.launch`)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from pneumatic_unload.launch import NodeProcess
+from pneumatic_unload.app.launch import NodeProcess
 
 __all__ = ["NodeProcess", "spin_until"]
 

@@ -9,12 +9,12 @@ import math
 import numpy as np
 import pytest
 
-from pneumatic_unload.budget import EXACT_INPUTS
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import analyze, merge_final
 from pneumatic_unload.model import default_duration, discharge, simulate
 from pneumatic_unload.physics import P_STAR_FRACTION, orifice_conductance
-from pneumatic_unload.runs import settings_for
+from pneumatic_unload.uncertainty.budget import EXACT_INPUTS
 
 
 def exact(settings):
@@ -143,8 +143,8 @@ def test_curve_fit_reaches_the_least_squares_minimum():
     (C off by ~0.4 sigma from the least-squares solution). After the fit, a Gauss-Newton
     step with a fresh Jacobian must predict essentially no further chi^2 drop, and the
     estimate must agree with the ideal linearised estimator (true Jacobian, same bins)."""
-    from pneumatic_unload.fitting import curve_fit_bins, fit_curve
-    from pneumatic_unload.inversion import rig_from_settings
+    from pneumatic_unload.curvefit.fitting import curve_fit_bins, fit_curve
+    from pneumatic_unload.model.inversion import rig_from_settings
 
     cfg = RigConfig(volume=12e-3, conductance=orifice_conductance(1.5e-3),
                     initial_pressure=7.5e5, critical_ratio=0.31, noise_std=NOISE,

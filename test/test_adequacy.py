@@ -8,14 +8,14 @@ import json
 
 import numpy as np
 
-from pneumatic_unload.budget import EXACT_INPUTS
+from pneumatic_unload.analysis.output import format_result, json_default, unload_json
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import analyze, merge_final
 from pneumatic_unload.estimation.types import estimate_fields
 from pneumatic_unload.model import simulate
-from pneumatic_unload.output import format_result, json_default, unload_json
 from pneumatic_unload.physics import orifice_conductance
-from pneumatic_unload.runs import settings_for
+from pneumatic_unload.uncertainty.budget import EXACT_INPUTS
 
 
 def _rig(**kw) -> RigConfig:

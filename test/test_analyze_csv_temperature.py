@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from pneumatic_unload.cli import main
+from pneumatic_unload.app.cli import main
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.model import simulate
 from pneumatic_unload.physics import orifice_conductance

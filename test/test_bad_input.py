@@ -6,11 +6,11 @@ import math
 import numpy as np
 import pytest
 
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import STATUSES, StreamingEstimator, analyze
 from pneumatic_unload.model import simulate
 from pneumatic_unload.physics import orifice_conductance
-from pneumatic_unload.runs import settings_for
 
 FS_NOISE = 1000.0  # 0.1 % of a 1 MPa full-scale transducer [Pa]
 
@@ -253,7 +253,7 @@ def test_cli_bag_whose_clock_steps_back_mid_unload_is_bad_data(tmp_path, log_tim
     cfg, path, stamps = _clock_step_bag(tmp_path, log_time_is_stamp)
     # the write order keeps the step; the log order sorts it away when log time = stamp
     assert np.array_equal(read_pressure(path, order="write").t_ns, stamps)
-    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path),
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(path),
                            "--volume", str(cfg.volume), "--json"], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 1, proc.stderr  # no estimate: not a success
@@ -280,7 +280,7 @@ def test_cli_bag_with_one_stamp_10ms_back_mid_unload_gives_c(tmp_path):
     path = tmp_path / "one_back"
     with BagRecorder(path) as rec:
         rec.write_pressures(stamps, sim.measured, log_time_ns=t_ns)
-    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path),
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(path),
                            "--volume", str(cfg.volume), "--json"], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
@@ -312,7 +312,7 @@ def test_cli_record_with_only_bad_data_exits_1_with_the_reason(tmp_path, json_ou
     codes = {}
     for path in (bad, good):
         proc = subprocess.run(
-            [sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(path), "--volume",
+            [sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(path), "--volume",
              str(cfg.volume), "--no-curve-fit", *(["--json"] if json_out else [])],
             capture_output=True, text=True, timeout=120)
         assert "Traceback" not in proc.stderr, proc.stderr
@@ -336,7 +336,7 @@ def test_every_command_help_exits_0(command):
     import subprocess
     import sys
 
-    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", command, "--help"],
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", command, "--help"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
     assert "usage:" in proc.stdout
@@ -346,7 +346,7 @@ def test_analyze_help_documents_the_exit_statuses():
     import subprocess
     import sys
 
-    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", "--help"],
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", "--help"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
     assert "0.5 % of V" in proc.stdout

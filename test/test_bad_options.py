@@ -11,18 +11,18 @@ import sys
 import numpy as np
 import pytest
 
-from pneumatic_unload.cli import main
+from pneumatic_unload.analysis.runs import settings_for
+from pneumatic_unload.app.cli import main
 from pneumatic_unload.config import RigConfig, TankSpec, adapters
 from pneumatic_unload.estimation import analyze, merge_final
 from pneumatic_unload.estimation.batch import explain_no_unload, gauge_suspicion
 from pneumatic_unload.model import simulate
-from pneumatic_unload.runs import settings_for
 
 P_ATM = 101325.0  # [Pa]
 
 
 def _cli(*argv: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", *argv],
+    return subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", *argv],
                           capture_output=True, text=True, timeout=120)
 
 

@@ -539,7 +539,7 @@ def test_metadata_with_a_bad_topic_entry_is_named_in_words(full_bag):
 @pytest.mark.parametrize(("text", "problem"), BAD_METADATA[:4])
 def test_cli_metadata_that_is_not_a_mapping_is_one_line_exit_2(tmp_path, capsys, text,
                                                                problem):
-    from pneumatic_unload.cli import main
+    from pneumatic_unload.app.cli import main
 
     bag = tmp_path / "clean_unload"
     shutil.copytree(REPO_ROOT / "bags" / "clean_unload", bag)
@@ -689,7 +689,7 @@ def test_cli_recover_run_inside_the_bag_directory(tmp_path, arg):
     (bag / "metadata.yaml").unlink()
     (bag / f"{name}.mcap").write_bytes(data[: len(data) * 2 // 3])
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
-    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "recover",
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "recover",
                            arg.format(name=name)], cwd=bag, capture_output=True, text=True,
                           timeout=120, env=env)
     assert proc.returncode == 0, proc.stderr
@@ -701,7 +701,7 @@ def test_cli_recover_run_inside_the_bag_directory(tmp_path, arg):
 def test_cli_recover_errors_are_one_line(tmp_path):
     (tmp_path / "bad.mcap").write_bytes(b"not an mcap")
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
-    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "recover",
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "recover",
                            "bad.mcap"], cwd=tmp_path, capture_output=True, text=True,
                           timeout=120, env=env)
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1

@@ -19,12 +19,12 @@ from typing import Any
 
 import pytest
 
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import StreamingEstimator, reduction, sse
 from pneumatic_unload.estimation.decisions import PLATEAU
 from pneumatic_unload.model import default_duration, simulate
 from pneumatic_unload.physics import orifice_conductance
-from pneumatic_unload.runs import settings_for
 
 #: Lowered bound [-] (production: 4 M samples).
 CAP = 8000

@@ -18,7 +18,7 @@ from pneumatic_unload.estimation import (
     decisions,
     history,
 )
-from pneumatic_unload.rig import run_cycles
+from pneumatic_unload.model.rig import run_cycles
 
 RATE = 10_000.0
 CYCLE_S = 2.4  # unload 1.2 s, vented 0.3 s, charge 0.3 s, plateau 0.6 s

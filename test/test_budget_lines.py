@@ -12,12 +12,12 @@ import math
 
 import pytest
 
-from pneumatic_unload.budget import PRESSURE_REL_DEFAULT, VOLUME_REL_DEFAULT
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.config.estimator import MODEL_UNCERTAINTY
 from pneumatic_unload.estimation import analyze
 from pneumatic_unload.model import simulate
-from pneumatic_unload.runs import settings_for
+from pneumatic_unload.uncertainty.budget import PRESSURE_REL_DEFAULT, VOLUME_REL_DEFAULT
 
 
 @pytest.fixture(scope="module")

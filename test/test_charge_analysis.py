@@ -237,7 +237,7 @@ def test_the_real_vacuum_fill_through_a_2_71_mm_orifice(tmp_path: Path,
     merged.write_text("time [s],pressure [bar],gas temperature [K]\n" + "".join(
         f"{t},{a},{b}\n" for t, (a, b) in sorted(rows.items())))
     out = subprocess.run(
-        [str(venv_python), "-m", "pneumatic_unload.cli", "analyze", str(merged), "--json",
+        [str(venv_python), "-m", "pneumatic_unload.app.cli", "analyze", str(merged), "--json",
          "--direction", "charge", "--start-time", "0", "--initial-pressure", "3700",
          "--volume", "16.2L", "--length-diameter-ratio", "2.6",
          "--initial-temperature", "295", "--wall-temperature", "295"],

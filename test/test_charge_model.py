@@ -114,8 +114,8 @@ def test_the_cli_simulates_a_charge_from_below_the_atmosphere(tmp_path, capsys):
     the bag rising to the supply's."""
     import json
 
-    from pneumatic_unload.cli import main
-    from pneumatic_unload.records import open_record
+    from pneumatic_unload.analysis.records import open_record
+    from pneumatic_unload.app.cli import main
 
     out = tmp_path / "charge"
     assert main(["simulate", "--direction", "charge", "--initial-pressure", "3000",

@@ -7,7 +7,7 @@ import sys
 import pytest
 from realdata import real_file
 
-from pneumatic_unload.cli import main
+from pneumatic_unload.app.cli import main
 from pneumatic_unload.io.bag import read_estimates
 
 RULE_OF_THUMB = {"orifice_0.094in.csv": 0.73e-8, "orifice_0.125in.csv": 1.29e-8}
@@ -64,12 +64,12 @@ def test_simulate_then_analyze_reproduces_recorded_estimates(tmp_path, capsys):
 def test_unreadable_input_exits_nonzero_with_one_line(tmp_path):
     bad = tmp_path / "junk.mcap"
     bad.write_bytes(b"not a bag at all")
-    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(bad),
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(bad),
                            "--volume", "0.001"], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1
     assert "error" in proc.stderr
-    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze",
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "analyze",
                            str(tmp_path / "missing.csv"), "--volume", "0.001"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "no such file" in proc.stderr
@@ -79,8 +79,8 @@ def test_analyze_text_says_an_unknown_uncertainty_in_words():
     # issue "Words, not numbers": a NaN or infinite sigma was printed as '+- nan' / '+- inf'
     import math
 
+    from pneumatic_unload.analysis.output import format_result
     from pneumatic_unload.estimation import UnloadResult
-    from pneumatic_unload.output import format_result
 
     r = UnloadResult(index=0, status="ok", status_text="ok", t_start=0.0, t_cross=0.5,
                      tau_exp=0.5, tau_exp_std=math.nan, p10=7e5, p_atm=101325.0,

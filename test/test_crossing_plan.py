@@ -13,13 +13,6 @@ import numpy as np
 import pytest
 
 from pneumatic_unload import physics
-from pneumatic_unload.budget import (
-    MODEL_FORM_TERM,
-    WALL_TERM,
-    eq39_budget,
-    model_budget,
-    wall_term,
-)
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.config.estimator import wall_uncertainty
 from pneumatic_unload.estimation import EstimatorSettings, analyze
@@ -30,6 +23,13 @@ from pneumatic_unload.estimation.crossing import (
 )
 from pneumatic_unload.estimation.refine import crossing_inversion
 from pneumatic_unload.model import simulate
+from pneumatic_unload.uncertainty.budget import (
+    MODEL_FORM_TERM,
+    WALL_TERM,
+    eq39_budget,
+    model_budget,
+    wall_term,
+)
 
 
 def _cases() -> list[tuple[EstimatorSettings, float, float, float]]:

@@ -252,7 +252,7 @@ def test_a_multirate_log_gives_c_with_t10_from_its_temperature_column(tmp_path, 
     channel at the unload start (was refused: 'an empty cell in column ...')."""
     import json
 
-    from pneumatic_unload.cli import main
+    from pneumatic_unload.app.cli import main
 
     cfg, path = _multirate_csv(tmp_path)
     assert main(["analyze", str(path), "--volume", "0.005", "--atmosphere", "101325",

@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from pneumatic_unload.analysis.records import analyze_record, open_record
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import EstimatorSettings, analyze, analyze_chunks, decisions
 from pneumatic_unload.estimation.chunked import Overview
 from pneumatic_unload.io import CsvFormatError, read_csv_trace
 from pneumatic_unload.io.csvlog import CsvStream
 from pneumatic_unload.model import simulate
-from pneumatic_unload.records import analyze_record, open_record
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -28,7 +28,7 @@ def _write(tmp_path: Path, text: str, name: str = "log.csv") -> Path:
 
 
 def _cli(*argv: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", *argv],
+    return subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", *argv],
                           capture_output=True, text=True, cwd=REPO, timeout=300)
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pneumatic_unload.cli import main
+from pneumatic_unload.app.cli import main
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.discrepancy import (
     DiscrepancyError,
@@ -314,7 +314,7 @@ def test_cli_stuck_sensor_is_named_in_bounded_time(tmp_path):
     csv.write_text("Time [s],Pressure [kPa]\n" + "\n".join(
         f"{a:.4f},{b / 1e3:.4f}" for a, b in zip(t, p, strict=True)) + "\n")
     t0 = time.monotonic()
-    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "discrepancy",
+    proc = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "discrepancy",
                            str(csv), "--volume", str(V)], capture_output=True, text=True,
                           timeout=120)
     elapsed = time.monotonic() - t0

@@ -150,7 +150,7 @@ def test_the_direction_is_asked_for_and_refused_clearly(tmp_path: Path) -> None:
         find_discrepancy(t, np.where(t < 1.0, p, p[1000]), _settings())  # a stuck sensor
     csv = tmp_path / "fill.csv"
     np.savetxt(csv, np.c_[t, p], delimiter=",", header="time_s,pressure_pa", comments="")
-    cmd = [sys.executable, "-m", "pneumatic_unload.cli", "discrepancy", str(csv),
+    cmd = [sys.executable, "-m", "pneumatic_unload.app.cli", "discrepancy", str(csv),
            "--volume", "5e-3"]
     out = subprocess.run(cmd, capture_output=True, text=True, check=False)
     assert out.returncode == 2 and "--direction charge" in out.stderr

@@ -90,8 +90,8 @@ def test_a_further_effect_with_its_own_parameter_at_a_bound_is_refused():
 
 
 def test_the_c_range_carries_the_budget_model_limits_term():
-    from pneumatic_unload.budget import model_limits_term
     from pneumatic_unload.discrepancy.ambiguity import K_RANGE, conductance_ambiguity
+    from pneumatic_unload.uncertainty.budget import model_limits_term
 
     assert model_limits_term(2e-8, 0.003).std == pytest.approx(6e-11)
     assert model_limits_term(2e-8, 0.0).std == 0.0

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from pneumatic_unload.cli import main
+from pneumatic_unload.app.cli import main
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.discrepancy import DiscrepancyError, DiscrepancySettings, find_discrepancy
 from pneumatic_unload.discrepancy.html import markdown_to_html

@@ -18,8 +18,8 @@ from urllib.parse import unquote, urlsplit
 
 import pytest
 
-from pneumatic_unload import output
-from pneumatic_unload.cli import build_parser, main
+from pneumatic_unload.analysis import output
+from pneumatic_unload.app.cli import build_parser, main
 from pneumatic_unload.config import nodes
 from pneumatic_unload.estimation import UnloadResult
 

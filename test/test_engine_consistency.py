@@ -14,13 +14,13 @@ import math
 import numpy as np
 import pytest
 
-from pneumatic_unload.budget import EXACT_INPUTS
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.discrepancy import DiscrepancySettings, find_discrepancy
 from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.estimation import analyze
 from pneumatic_unload.model import simulate
-from pneumatic_unload.runs import settings_for
+from pneumatic_unload.uncertainty.budget import EXACT_INPUTS
 
 
 def exact(settings):

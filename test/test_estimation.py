@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import (
     EstimationError,
@@ -16,7 +17,6 @@ from pneumatic_unload.estimation import (
 )
 from pneumatic_unload.model import default_duration, simulate
 from pneumatic_unload.physics import orifice_conductance, tau_exp_eq38
-from pneumatic_unload.runs import settings_for
 
 FS_NOISE = 1000.0  # 0.1 % of a 0-10 bar (1 MPa) transducer [Pa]
 

@@ -8,14 +8,14 @@ import math
 import numpy as np
 import pytest
 
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import StreamingEstimator, analyze
 from pneumatic_unload.estimation import decisions as dec
 from pneumatic_unload.estimation.buffer import SampleBuffer
 from pneumatic_unload.model import default_duration, simulate
+from pneumatic_unload.model.rig import run_cycles
 from pneumatic_unload.physics import orifice_conductance
-from pneumatic_unload.rig import run_cycles
-from pneumatic_unload.runs import settings_for
 
 FS_NOISE = 1000.0  # 0.1 % of a 1 MPa full-scale transducer [Pa]
 KINDS = ("clean", "heat", "aborted", "two_unloads", "auto_atm", "volts", "bad_stamps",

@@ -10,7 +10,7 @@ import pytest
 
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import EstimatorSettings, StreamingEstimator, analyze
-from pneumatic_unload.rig import run_cycles
+from pneumatic_unload.model.rig import run_cycles
 
 C_TRUE = 8e-9  # [m^3/(s Pa)]
 RIG = {"volume": 2e-4, "conductance": C_TRUE, "noise_std": 1000.0, "quantization": 10.0}
@@ -96,7 +96,7 @@ def test_offline_record_starting_at_the_opening_is_analysed_with_a_warning():
 def _cycling_with_abort(rate: float, abort_at: int, unloads: int):
     """A cycling rig with heat transfer whose unload ``abort_at`` is stopped 30 ms after
     the opening (valve closed), then cycles on: (t [s], p [Pa])."""
-    from pneumatic_unload.rig import RigStream
+    from pneumatic_unload.model.rig import RigStream
 
     cfg = RigConfig(rate=rate, seed=1, effects=("heat_transfer",), **RIG)
     rs = RigStream(cfg, charge_time=CYCLE["charge_time"])
@@ -146,8 +146,8 @@ def test_live_joined_in_a_slow_tail_publishes_no_bogus_estimate(volume, join):
     dozen samples before it "drops" on; it was taken for an opening and published C
     20-50 % off ('not_choked'). A plateau too short to tell a fall under way from a flat one
     is no plateau: the unload is skipped with the reason."""
+    from pneumatic_unload.analysis.runs import settings_for
     from pneumatic_unload.model import simulate
-    from pneumatic_unload.runs import settings_for
 
     cfg = RigConfig(volume=volume, conductance=C_TRUE, critical_ratio=0.4,
                     effects=("heat_transfer",), noise_std=1000.0, quantization=10.0,
@@ -164,8 +164,8 @@ def test_live_joined_in_a_slow_tail_publishes_no_bogus_estimate(volume, join):
 def test_live_start_shortly_before_an_opening_is_still_measured():
     """A node up 0.2 s before the valve opens: its plateau resolves the fall rate, and the
     unload is measured."""
+    from pneumatic_unload.analysis.runs import settings_for
     from pneumatic_unload.model import simulate
-    from pneumatic_unload.runs import settings_for
 
     cfg = RigConfig(volume=2e-3, conductance=C_TRUE, noise_std=1000.0, quantization=10.0,
                     seed=6, pre_time=1.0, duration=8.0)

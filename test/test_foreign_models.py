@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from foreign.newton_tank import discharge
 
+from pneumatic_unload.curvefit.fitting import LAW_BIC_THRESHOLD
 from pneumatic_unload.estimation import EstimatorSettings, analyze, merge_final
-from pneumatic_unload.fitting import LAW_BIC_THRESHOLD
 
 
 @pytest.mark.parametrize("tau_heat,volume,conductance,b,seed", [

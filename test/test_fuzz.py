@@ -27,8 +27,8 @@ from pneumatic_unload.estimation import (
     explain_no_unload,
 )
 from pneumatic_unload.estimation.regression import crossing_fit
-from pneumatic_unload.inversion import invert_crossing
 from pneumatic_unload.model import simulate
+from pneumatic_unload.model.inversion import invert_crossing
 from pneumatic_unload.physics import (
     conductance_isentropic_inversion,
     conductance_sse,
@@ -320,7 +320,7 @@ def test_a_wall_move_beyond_float_range_is_refitted_not_an_overflow(tmp_path, mo
     # wall assumed: the first-order wall move of the curve fit stepped a log coordinate
     # past exp's range (OverflowError out of `analyze`). The step is refused there and the
     # wall's effect refitted; the CLI answers with JSON.
-    from pneumatic_unload import fitting
+    from pneumatic_unload.curvefit import fitting
 
     d = _fuzz_data("fuzz_bag_wall_step_overflow")
     case = {"t_ns": d["t_ns"], "p": d["p"], "config": None, "settings": None, "damage": [],
@@ -393,8 +393,8 @@ def test_the_fitted_models_crossing_within_the_integrators_budget(tmp_path, monk
     # `analyze`). The coarse crossing is kept then (tau_exp_model is information only).
     import json
 
-    from pneumatic_unload import inversion
     from pneumatic_unload.estimation import refine
+    from pneumatic_unload.model import inversion
     from pneumatic_unload.physics import P_STAR_FRACTION
 
     d = _fuzz_data("fuzz_bag_fitted_tau_budget")

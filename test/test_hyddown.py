@@ -41,9 +41,9 @@ from functools import cache
 import pytest
 from foreign.hyddown_data import DATA_DIR, load, record
 
-from pneumatic_unload.budget import EXACT_INPUTS_FOREIGN_MODEL
 from pneumatic_unload.config.estimator import MODEL_UNCERTAINTY
 from pneumatic_unload.estimation import EstimatorSettings, UnloadResult, analyze, merge_final
+from pneumatic_unload.uncertainty.budget import EXACT_INPUTS_FOREIGN_MODEL
 
 CASES = ["v1l_ld1_d1_calc", "v2l_ld4_d2_h2", "v50l_ld3_d3_calc", "v10l_ld6_d2p5_h50",
          "v20l_ld2_d3_h10", "v5l_ld1p5_d1p5_calc_t303"]

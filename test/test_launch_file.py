@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from pneumatic_unload.launch import LaunchError, free_domain_id, load_launch, package_share
+from pneumatic_unload.app.launch import LaunchError, free_domain_id, load_launch, package_share
 
 LAUNCH = Path(__file__).resolve().parent.parent / "launch" / "bench.launch.yaml"
 
@@ -79,7 +79,7 @@ def test_env_substitution_with_a_default(tmp_path: Path,
 
 def test_the_launcher_runs_the_bench_and_stops_cleanly(tmp_path: Path,
                                                        venv_python: Path) -> None:
-    """``python -m pneumatic_unload.launch launch/bench.launch.yaml name:=value``: the
+    """``python -m pneumatic_unload.app.launch launch/bench.launch.yaml name:=value``: the
     simulator opens the valve, the estimator publishes the final C (within 1 % of the
     rig's 8e-9), the recorder writes the bag; Ctrl-C stops all four (the OPC UA bridge on
     a free port), exit code 0. The valve opens 5 s after the simulator's start: the
@@ -89,7 +89,7 @@ def test_the_launcher_runs_the_bench_and_stops_cleanly(tmp_path: Path,
            "PNEUMATIC_UNLOAD_LOG_DIR": str(tmp_path / "logs")}
     bag = tmp_path / "bag"
     proc = subprocess.Popen(
-        [str(venv_python), "-m", "pneumatic_unload.launch", str(LAUNCH), "volume:=0.001",
+        [str(venv_python), "-m", "pneumatic_unload.app.launch", str(LAUNCH), "volume:=0.001",
          "start_delay:=5.0", f"output:={bag}", f"opcua_port:={_free_port()}"], env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT, text=True)

@@ -316,39 +316,21 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
 #: Layer of each top-level part of the core (lower layers never import higher ones; a part
 #: may import its own layer). Read top to bottom as the architecture.
 LAYERS: dict[str, int] = {
-    "physics": 0,
+    "physics": 0,  # the flow law and the paper's closed forms (eq 38-40, the isentropic C)
     "charge": 0,  # the charge test's closed forms (the method mirrored, its bias)
-    "config": 1,
+    "config": 1,  # settings declared once: units, ranges, meanings
     "io": 2,  # bags and CSV files: data, no physics
-    "launch": 2,  # starts node processes (ROS-free)
     "fit": 2,  # the fitting engine: parameters, likelihood, least squares, uncertainty
-    "model": 3,  # the discharge model (ODE, heat law, sensor, effects)
-    "rig": 4,  # the simulator's sample stream
-    "inversion": 4,  # model-based C at the crossing (and its table)
-    "fitting": 4,  # model-based C: the curve fit, its heat-law choice
-    "curve_fit_result": 4,  # the curve fit's result (fitted values, laws compared)
-    "heat_law_offer": 4,  # which heat laws a record can carry (offered to the fit's choice)
-    "law_fit": 4,  # one heat law's fit of the curve fit
-    "law_family": 4,  # the laws compared (hot starts, m held or fitted) and the criterion
-    "subsonic_offer": 4,  # whether a record carries m, and the budget line of holding it
-    "linear_twin": 4,  # a fit's twin with one parameter more, to first order
-    "temperature_evidence": 4,  # the logged gas temperature against the fitted model
-    "recovery": 4,  # SSE: the re-heating after an aborted unload
-    "budget": 4,  # the uncertainty budget of a C (GUM: type A, type B, model form)
-    "budget_b": 4,  # the budget of b, with C's lines
-    "wall_moves": 4,  # the wall's and the heat laws' moves of the fitted C and b
-    "estimation": 5,  # the streaming estimator and batch analysis
-    "discrepancy": 6,
-    "runs": 6,
-    "plotting": 6,
-    "records": 6,  # input records of the offline analysis: CSV in chunks, bags
-    "output": 6,  # text and JSON output of the analysis (results, inputs, budget)
-    "testline": 6,  # batch on Dask, the results database, part specifications
-    "cli": 7,
-    "batch_cli": 7,  # the test-line commands of the CLI (batch, results)
-    "demo": 7,
-    "plc": 7,  # the OPC UA server of the cell's PLC (asyncua; the opcua node's core)
-    "nodes": 8,
+    "model": 3,  # the discharge model (ODE, heat law, sensor, effects), its stream, its inversion
+    "uncertainty": 4,  # the uncertainty budget of C and b (GUM: type A, type B, model form)
+    "curvefit": 5,  # model-based C and b: the final curve fit, its budget lines; the SSE fit
+    "estimation": 6,  # the streaming estimator and batch analysis
+    "discrepancy": 7,  # where model and measurement disagree: the missing effect named
+    "analysis": 7,  # the offline analysis: records in, text, JSON and plots out; simulated runs
+    "testline": 7,  # batch on Dask, the results database, part specifications
+    "app": 8,  # the command line, the demo, the process launcher
+    "plc": 8,  # the OPC UA server of the cell's PLC (asyncua; the opcua node's core)
+    "nodes": 9,  # the ROS 2 nodes (thin: parameters, messages, core calls)
 }
 #: Largest core module [lines] ("about 500").
 MAX_CORE_LINES = 520

@@ -9,7 +9,7 @@ import json
 
 import pytest
 
-from pneumatic_unload.cli import main
+from pneumatic_unload.app.cli import main
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.config.estimator import MODEL_UNCERTAINTY
 from pneumatic_unload.discrepancy import DiscrepancySettings, find_discrepancy

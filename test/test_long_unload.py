@@ -28,7 +28,7 @@ from pneumatic_unload.fit.likelihood import BinnedLikelihood, bin_stats, make_bi
 from pneumatic_unload.fit.noise import NoiseModel
 from pneumatic_unload.fit.reduced import Reducer
 from pneumatic_unload.model import simulate
-from pneumatic_unload.rig import default_duration
+from pneumatic_unload.model.rig import default_duration
 
 #: Lowered thresholds [-]: above every decision's look-back (the test below checks it).
 REDUCE_FROM, KEEP_RAW = 1 << 16, 50_000

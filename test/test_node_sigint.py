@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pneumatic_unload.launch import free_domain_id, ros_args
+from pneumatic_unload.app.launch import free_domain_id, ros_args
 
 NODES = ("simulator", "estimator", "recorder", "replay", "opcua")
 #: The start line of each node (printed when it is built; the replay prints none).
@@ -125,7 +125,7 @@ def _due(run: Run, now: float) -> bool:
 
 def _domains(n: int) -> list[int]:
     """``n`` distinct ROS domain ids that no participant on this host uses, none the test
-    run's own (best effort: :func:`pneumatic_unload.launch.free_domain_id`)."""
+    run's own (best effort: :func:`pneumatic_unload.app.launch.free_domain_id`)."""
     used = {int(os.environ.get("ROS_DOMAIN_ID", "0"))}
     out: list[int] = []
     for _ in range(50 * n):

@@ -107,7 +107,7 @@ def _bag(path: Path, t: np.ndarray, p: np.ndarray) -> Path:
 
 
 def _offline(venv_python: Path, bag: Path, start: float) -> list[dict[str, Any]]:
-    cli = [str(venv_python), "-m", "pneumatic_unload.cli", "analyze", str(bag), "--json",
+    cli = [str(venv_python), "-m", "pneumatic_unload.app.cli", "analyze", str(bag), "--json",
            "--volume", "1e-3", "--atmosphere", str(P_ATM), "--start-time", repr(start),
            "--initial-pressure", "7e5"]
     out = subprocess.run(cli, capture_output=True, text=True, timeout=120)

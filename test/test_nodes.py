@@ -136,7 +136,7 @@ def test_simulator_estimator_recorder_end_to_end(tmp_path: Path, ros_node: Any,
     recorded = read_estimates(bag)
     assert len(recorded) == len(got)
     # offline analysis of the recording reproduces the live estimates
-    out = subprocess.run([str(venv_python), "-m", "pneumatic_unload.cli", "analyze", str(bag),
+    out = subprocess.run([str(venv_python), "-m", "pneumatic_unload.app.cli", "analyze", str(bag),
                           "--json"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     offline = json.loads(out.stdout)["published"]
@@ -366,7 +366,7 @@ def test_replay_of_reference_bag_into_live_estimator(tmp_path: Path, ros_node: A
     got = _estimates(node)
     bag = repo_root / "bags" / "two_unloads"
     cfg = read_config(bag)
-    out = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(bag),
+    out = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(bag),
                           "--json"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     recorded = json.loads(out.stdout)["published"]

@@ -60,7 +60,7 @@ def test_a_live_cycle_of_charges_and_discharges(tmp_path: Path, ros_node: Any,  
     assert all(m.supply_pressure == pytest.approx(6e5, rel=3e-3) for m in fin
                if m.direction == "charge")
     # the bag re-analysed offline: the live numbers, bit for bit
-    out = subprocess.run([str(venv_python), "-m", "pneumatic_unload.cli", "analyze", str(bag),
+    out = subprocess.run([str(venv_python), "-m", "pneumatic_unload.app.cli", "analyze", str(bag),
                           "--json"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     offline = json.loads(out.stdout)["published"]

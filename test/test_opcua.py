@@ -32,7 +32,7 @@ from asyncua import Client, ua  # noqa: E402
 from asyncua.client.ua_client import UaClientState  # noqa: E402
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256  # noqa: E402
 
-from pneumatic_unload.launch import free_domain_id  # noqa: E402
+from pneumatic_unload.app.launch import free_domain_id  # noqa: E402
 from pneumatic_unload.plc import APPLICATION_URI, NAMESPACE, hash_password  # noqa: E402
 
 LAUNCH = Path(__file__).resolve().parent.parent / "launch" / "bench.launch.yaml"
@@ -58,7 +58,7 @@ class Bench:
         env = {**os.environ, "ROS_DOMAIN_ID": str(free_domain_id()),
                "PNEUMATIC_UNLOAD_LOG_DIR": str(self.logs)}
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "pneumatic_unload.launch", str(LAUNCH), "volume:=0.001",
+            [sys.executable, "-m", "pneumatic_unload.app.launch", str(LAUNCH), "volume:=0.001",
              f"conductance:={TRUE_C!r}", f"opcua_port:={self.port}",
              f"output:={tmp / 'bag'}", *args],
             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -398,7 +398,7 @@ def test_without_an_estimator_a_measurement_fails_cleanly_and_sigint_stops_a_cal
     """The bridge alone: State 'no estimator'; Measure waits estimator_wait s for the
     estimator's action server, then answers BadNoCommunication with the reason; SIGINT
     while a measurement waits stops the node cleanly (exit 0)."""
-    from pneumatic_unload.launch import NodeProcess
+    from pneumatic_unload.app.launch import NodeProcess
 
     port = _free_port()
     url = f"opc.tcp://127.0.0.1:{port}/pneumatic_unload/"

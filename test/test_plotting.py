@@ -6,12 +6,12 @@ import dataclasses
 import matplotlib
 import pytest
 
+from pneumatic_unload.analysis.output import format_result
+from pneumatic_unload.analysis.plotting import analysis_figure, figure_text, plot_analysis
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation import analyze, merge_final
 from pneumatic_unload.model import simulate
-from pneumatic_unload.output import format_result
-from pneumatic_unload.plotting import analysis_figure, figure_text, plot_analysis
-from pneumatic_unload.runs import settings_for
 
 matplotlib.use("Agg")
 

@@ -25,6 +25,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
+from pneumatic_unload.analysis.runs import write_simulated_bag
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.io.bag import (
     CONFIG_METADATA_KEY,
@@ -53,7 +54,6 @@ from pneumatic_unload.io.bag import (
 )
 from pneumatic_unload.nodes.recorder import RecorderParameterError, RecordingSession
 from pneumatic_unload.nodes.replay import ReplayParameterError, ReplayPlan, pace
-from pneumatic_unload.runs import write_simulated_bag
 
 NODE_DEADLINE_S = 30.0  # every process is killed after this
 CONFIG = {"volume": 0.005, "conductance": 4.2e-9, "rig": "test"}
@@ -440,7 +440,7 @@ def test_kill9_loses_at_most_about_one_second_and_recover_repairs(tool, tmp_path
     (mcap_file,) = bag.glob("*.mcap")
     chunks = _mcap_chunks(mcap_file)  # what the killed recorder left on disk
 
-    result = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "recover", str(bag)],
+    result = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "recover", str(bag)],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     t_ns, p = read_pressure(bag)

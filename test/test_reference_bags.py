@@ -19,7 +19,7 @@ BAGS = {"clean_unload": 1, "heat_transfer": 1, "two_unloads": 2}
 
 
 def _analyze(bag: Path) -> dict:
-    out = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(bag),
+    out = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(bag),
                           "--json"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     return json.loads(out.stdout)

@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pneumatic_unload.analysis.runs import settings_for
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation.batch import analyze
 from pneumatic_unload.model.simulate import simulate
 from pneumatic_unload.physics import orifice_conductance
-from pneumatic_unload.runs import settings_for
 
 #: The issue's target for C [-, relative].
 C_TARGET = 1e-10

@@ -21,8 +21,8 @@ import sqlalchemy as sa
 from dbwriters import open_at, record, write_rounds
 from pgserver import BENCH_PASSWORD, PgServer
 
+from pneumatic_unload.analysis.runs import write_simulated_bag
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.runs import write_simulated_bag
 from pneumatic_unload.testline import ResultsDBError, open_db, unload_rows
 from pneumatic_unload.testline.db import file_rows, write_files
 from pneumatic_unload.testline.schema import (
@@ -35,7 +35,7 @@ from pneumatic_unload.testline.schema import (
 )
 
 LEGACY = Path(__file__).parent / "data" / "results_db"
-RUN = [sys.executable, "-m", "pneumatic_unload.cli"]
+RUN = [sys.executable, "-m", "pneumatic_unload.app.cli"]
 #: Values a single-precision (REAL) column would change, and awkward doubles.
 DOUBLES = (8.001371402e-9, 0.1 + 0.2, 1.0 / 3.0, 1.7976931348623157e308, -2.2250738585072014e-308)
 

@@ -7,7 +7,7 @@ import json
 import pytest
 import yaml
 
-from pneumatic_unload.cli import build_parser, main
+from pneumatic_unload.app.cli import build_parser, main
 from pneumatic_unload.config import TANK_FIELDS, ConfigError, RigConfig, TankSpec, adapters
 from pneumatic_unload.discrepancy import DiscrepancyError, DiscrepancySettings
 from pneumatic_unload.estimation import EstimationError, EstimatorSettings

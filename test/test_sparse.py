@@ -50,7 +50,7 @@ def test_fifteen_digitised_points_from_the_opening_through_the_cli(tmp_path):
     csv = tmp_path / "digitised.csv"
     csv.write_text("time [s],pressure [kPa]\n"
                    + "".join(f"{a:.2f},{b / 1e3:.2f}\n" for a, b in zip(t, p, strict=True)))
-    base = [sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(csv),
+    base = [sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(csv),
             "--volume", "50L"]
     before = subprocess.run(base, capture_output=True, text=True, timeout=120)
     assert before.returncode != 0 and "--start-time" in before.stderr
@@ -115,8 +115,8 @@ def test_a_held_heat_law_on_few_points_is_a_line_of_the_budget():
     line for a heat exchange not seen stays in the final budget: 83 % and 97 % there."""
     from foreign.newton_tank import discharge
 
-    from pneumatic_unload.budget import EXACT_INPUTS
     from pneumatic_unload.estimation.sparse import HEAT_HELD
+    from pneumatic_unload.uncertainty.budget import EXACT_INPUTS
 
     volume, conductance, n = 0.0819, 4.46e-9, 15
     tau0 = volume / (1.4e5 * conductance)

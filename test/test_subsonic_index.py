@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 from foreign.newton_tank import IsoLaw, Nozzle, Series, discharge, truth
 
-from pneumatic_unload.budget import EXACT_INPUTS
+from pneumatic_unload.curvefit.subsonic_offer import SUBSONIC_INDEX_PRIOR_SD, SUBSONIC_TERM
 from pneumatic_unload.estimation import EstimatorSettings, UnloadResult, analyze, merge_final
-from pneumatic_unload.subsonic_offer import SUBSONIC_INDEX_PRIOR_SD, SUBSONIC_TERM
+from pneumatic_unload.uncertainty.budget import EXACT_INPUTS
 
 P_ATM, T10, NOISE = 101325.0, 293.15, 1000.0
 

@@ -14,7 +14,7 @@ import json
 import numpy as np
 from foreign.newton_tank import discharge
 
-from pneumatic_unload.cli import main
+from pneumatic_unload.app.cli import main
 from pneumatic_unload.model import first_order_lag
 
 V, C, P_ATM, T10 = 5e-3, 8e-9, 101325.0, 293.15

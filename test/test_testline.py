@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
+from pneumatic_unload.analysis.runs import write_simulated_bag
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.runs import write_simulated_bag
 from pneumatic_unload.testline import (
     FileRecord,
     InputOptions,
@@ -160,7 +160,7 @@ def test_a_killed_batch_resumes_without_duplicates(inputs: Path, tmp_path: Path)
     rest, and the database holds each input and each unload once."""
     db = tmp_path / "k.sqlite"
     paths = discover([inputs])
-    cmd = [sys.executable, "-m", "pneumatic_unload.cli", "batch", str(inputs), "--db",
+    cmd = [sys.executable, "-m", "pneumatic_unload.app.cli", "batch", str(inputs), "--db",
            str(db), "--workers", "1", "--part-regex", r"(V14-\d+)"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120
@@ -272,7 +272,7 @@ def test_batch_and_results_commands(inputs: Path, tmp_path: Path):
     spec.write_text("part_types:\n  g14:\n    match: '^V14-'\n"
                     "    conductance: [4.5e-9, 5.5e-9]\n")
     db = tmp_path / "c.sqlite"
-    run = [sys.executable, "-m", "pneumatic_unload.cli"]
+    run = [sys.executable, "-m", "pneumatic_unload.app.cli"]
     out = subprocess.run([*run, "batch", str(inputs / "V14-001_run0"),
                                 str(inputs / "V14-001_run1"), "--db", str(db), "--spec",
                                 str(spec), "--part-regex", r"(V14-\d+)", "--workers", "1",

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from foreign.newton_tank import IsoLaw, discharge, thermocouple
 
-from pneumatic_unload.cli import main
+from pneumatic_unload.app.cli import main
 
 V, C, WALL, LAG = 5e-3, 6e-9, 293.15, 1.5
 

@@ -1,6 +1,6 @@
 """Charges and discharges of one component in one stream (direction 'both', #26).
 
-The rig's alternate cycle (:func:`pneumatic_unload.rig.run_cycles` with ``alternate``: a
+The rig's alternate cycle (:func:`pneumatic_unload.model.rig.run_cycles` with ``alternate``: a
 charge through the component from a 6 bar supply, then its discharge to the room from
 where the charge left the tank, no recharge between) analysed by the two-way estimator.
 A discharge that follows a charge within seconds starts from a gas the charge warmed (a
@@ -24,7 +24,7 @@ from pneumatic_unload.estimation import (
     merge_final,
     stream_estimator,
 )
-from pneumatic_unload.rig import RigStream, run_cycles
+from pneumatic_unload.model.rig import RigStream, run_cycles
 
 C, B, V = 8e-9, 0.45, 1e-3
 

@@ -76,13 +76,13 @@ import numpy as np
 import pytest
 from foreign.newton_tank import discharge
 
-from pneumatic_unload.budget import EXACT_INPUTS, WALL_TERM
 from pneumatic_unload.config.estimator import (
     AMBIENT_TEMPERATURE,
     WALL_ASSUMED_STD,
     wall_uncertainty,
 )
 from pneumatic_unload.estimation import EstimatorSettings, analyze, merge_final
+from pneumatic_unload.uncertainty.budget import EXACT_INPUTS, WALL_TERM
 
 #: Inputs exact (V, T10, p), the model's limits 0 (the Newton model is ideal gas, uniform
 #: state, a heat law of the family): the wall, not given, keeps its default.

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from foreign.newton_tank import IsoLaw, discharge
 
-from pneumatic_unload.cli import main
+from pneumatic_unload.app.cli import main
 from pneumatic_unload.estimation import EstimatorSettings, analyze, merge_final
 
 C, V, P_ATM = 5e-9, 3e-3, 101325.0

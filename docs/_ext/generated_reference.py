@@ -2,8 +2,8 @@
 
 On ``builder-inited`` it writes ``docs/_generated/*.rst`` (not kept in git) from:
 
-* ``cli.rst``: :func:`pneumatic_unload.cli.build_parser` (every sub-command, the batch
-  ones of :mod:`pneumatic_unload.batch_cli` included, and every option with its help,
+* ``cli.rst``: :func:`pneumatic_unload.app.cli.build_parser` (every sub-command, the batch
+  ones of :mod:`pneumatic_unload.app.batch_cli` included, and every option with its help,
   default and choices);
 * ``nodes.rst``: :data:`pneumatic_unload.config.nodes.NODES` and
   :func:`~pneumatic_unload.config.nodes.node_parameters` (every parameter of every node, from
@@ -13,10 +13,10 @@ On ``builder-inited`` it writes ``docs/_generated/*.rst`` (not kept in git) from
   (:data:`pneumatic_unload.nodes.recorder.PACKAGE_TOPICS`) and the ``.msg``/``.action``
   files under ``msg_defs/``, included verbatim;
 * ``json.rst``: the document ``analyze --json`` prints
-  (:data:`pneumatic_unload.output.ANALYZE_JSON_KEYS`), the fields of
+  (:data:`pneumatic_unload.analysis.output.ANALYZE_JSON_KEYS`), the fields of
   :class:`pneumatic_unload.estimation.UnloadResult` with their ``#:`` comments, and the keys
-  :func:`pneumatic_unload.output.unload_json` adds
-  (:data:`~pneumatic_unload.output.UNLOAD_JSON_KEYS`);
+  :func:`pneumatic_unload.analysis.output.unload_json` adds
+  (:data:`~pneumatic_unload.analysis.output.UNLOAD_JSON_KEYS`);
 * ``api.rst``: ``automodule`` of the library's public modules (:data:`API_MODULES`);
 * ``architecture.rst``: the layers of ``test/test_layout.py`` (``LAYERS``, with its comments)
   and the modules of each part.
@@ -121,7 +121,7 @@ def _subcommand_help(parser: argparse.ArgumentParser) -> dict[str, str]:
 def cli_commands() -> dict[str, argparse.ArgumentParser]:
     """Every command of ``pneumatic-unload`` by its full name ('analyze', ...), nested
     sub-commands as 'a b'."""
-    from pneumatic_unload.cli import build_parser
+    from pneumatic_unload.app.cli import build_parser
 
     out: dict[str, argparse.ArgumentParser] = {}
 
@@ -177,12 +177,12 @@ def _option_lines(parser: argparse.ArgumentParser, action: argparse.Action) -> l
 
 def cli_page() -> str:
     """The command-line reference, from the argument parser."""
-    from pneumatic_unload.cli import build_parser
+    from pneumatic_unload.app.cli import build_parser
 
     top = build_parser()
     helps = _subcommand_help(top)
     lines = [".. _cli:", "", *heading("Command line: pneumatic-unload", "="),
-             "Generated from :func:`pneumatic_unload.cli.build_parser` at each build of this "
+             "Generated from :func:`pneumatic_unload.app.cli.build_parser` at each build of this "
              "site: what ``pneumatic-unload COMMAND --help`` prints, in full.", "",
              esc(top.description or ""), "", *code_block(_usage(top)),
              *heading("Commands", "-")]
@@ -288,8 +288,8 @@ def attribute_docs(cls: type) -> dict[str, str]:
 
 def unload_fields() -> list[tuple[str, str, str]]:
     """(name, type, meaning) of each field of :class:`UnloadResult` in the JSON output."""
+    from pneumatic_unload.analysis.output import UNLOAD_JSON_DROPPED
     from pneumatic_unload.estimation import UnloadResult
-    from pneumatic_unload.output import UNLOAD_JSON_DROPPED
 
     docs = attribute_docs(UnloadResult)
     return [(f.name, str(f.type), docs.get(f.name, "")) for f in dataclasses.fields(UnloadResult)
@@ -298,14 +298,14 @@ def unload_fields() -> list[tuple[str, str, str]]:
 
 def json_page() -> str:
     """The ``analyze --json`` document, key by key."""
-    from pneumatic_unload import output
+    from pneumatic_unload.analysis import output
 
     lines = [".. _json:", "", *heading("JSON output of analyze", "="),
              "``pneumatic-unload analyze --json`` prints one JSON object. Generated from "
-             ":data:`pneumatic_unload.output.ANALYZE_JSON_KEYS`, the fields of "
+             ":data:`pneumatic_unload.analysis.output.ANALYZE_JSON_KEYS`, the fields of "
              ":class:`pneumatic_unload.estimation.UnloadResult` (their ``#:`` comments) and "
-             ":data:`pneumatic_unload.output.UNLOAD_JSON_KEYS`. SI units; a number that is "
-             "not known (NaN) is ``null``.", "", *heading("The document", "-")]
+             ":data:`pneumatic_unload.analysis.output.UNLOAD_JSON_KEYS`. SI units; a number "
+             "that is not known (NaN) is ``null``.", "", *heading("The document", "-")]
     rows = [[literal(k), esc(v)] for k, v in output.ANALYZE_JSON_KEYS.items()]
     lines += list_table(["Key", "Meaning"], rows, "25 75")
     lines += [".. _json-unload:", "", *heading("One unload", "-"),

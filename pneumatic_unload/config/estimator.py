@@ -35,7 +35,7 @@ PROBE_STD = 1.0
 #: :data:`AMBIENT_TEMPERATURE`, with no wall given and no logged temperature): the gas may
 #: lie anywhere within the hot-start claim's threshold, 3 x :data:`WALL_ASSUMED_STD` either
 #: side of the room's temperature (a gas warm from its charge, a room not at 20 C), without
-#: the record claiming it (:mod:`pneumatic_unload.law_family`): uniformly, its RMS distance
+#: the record claiming it (:mod:`pneumatic_unload.curvefit.law_family`): uniformly, its RMS distance
 #: is 6 K / sqrt(3) (GUM 4.3.7). A 5 K warm gas then reads C +0.87 % at z 1.5, not 2.6
 #: (bench/bench_temperature_records.py).
 T10_UNMEASURED_STD = 3.0 * WALL_ASSUMED_STD / math.sqrt(3.0)
@@ -75,7 +75,8 @@ class EstimatorSettings(TankSpec):
         'natural' (natural-convection wall heat transfer) or 'adiabatic' for the model-based C.
     critical_ratio : float
         b [-] assumed at the crossing (the prior mean; its 1-sigma is
-        :data:`pneumatic_unload.inversion.CRITICAL_RATIO_PRIOR_STD`); the curve fit measures b.
+        :data:`pneumatic_unload.model.inversion.CRITICAL_RATIO_PRIOR_STD`); the curve fit
+        measures b.
     signal_gain : float
         Pressure per unit of input signal [Pa per unit] (1 for an input in Pa).
     signal_offset : float

@@ -40,7 +40,7 @@ end of the range.
 The range states what the data allow: it spans the C values of the final model and of the
 members (the models that fit about equally) with their 3-sigma intervals (C +- 3 sigma,
 clipped at zero; sigma the noise's and the model limits' combined, the budget's term
-:func:`~pneumatic_unload.budget.model_limits_term`).
+:func:`~pneumatic_unload.uncertainty.budget.model_limits_term`).
 """
 
 from __future__ import annotations
@@ -50,7 +50,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from pneumatic_unload.budget import model_limits_term
 from pneumatic_unload.discrepancy.types import NRMS_LIMIT, Diagnostics, Fit, Round
 from pneumatic_unload.model.effects import (
     DOWNSTREAM_LEAKS,
@@ -58,6 +57,7 @@ from pneumatic_unload.model.effects import (
     PLUGGED_RUN,
     separating_data,
 )
+from pneumatic_unload.uncertainty.budget import model_limits_term
 
 #: Pairs of candidates that are the same physics in another law or place, neither nested
 #: in the other: the runner-up of such a pair is a C-ambiguity member however far behind.

@@ -13,13 +13,13 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from pneumatic_unload.curvefit.heat_law_offer import both_regimes, exchange_determined
 from pneumatic_unload.discrepancy.ambiguity import VARIANTS, at_bounds, same_physics
 from pneumatic_unload.discrepancy.laws import HEAT_EFFECTS
 from pneumatic_unload.discrepancy.problem import Problem
 from pneumatic_unload.discrepancy.types import NRMS_LIMIT, WHITE_P, Diagnostics, Fit
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box, normalised_rms
 from pneumatic_unload.fit.trace import Trace
-from pneumatic_unload.heat_law_offer import both_regimes, exchange_determined
 from pneumatic_unload.model.effects import HEAT_VARIANTS, HOT_START
 from pneumatic_unload.model.heat import RA_TURBULENT, rayleigh
 from pneumatic_unload.model.parametric import ParametricModel
@@ -206,11 +206,11 @@ def refit_contenders(prob: Problem, base: Fit, neutral: list[Values],
 def extension_offered(prob: Problem, fit: Fit, law: str) -> bool:
     """Whether the record carries the second parameter of the two-parameter heat law
     ``law``, judged on ``fit`` (the fit of the one-parameter law it extends), by the
-    curve fit's own rules (:mod:`pneumatic_unload.heat_law_offer`): the natural law's
+    curve fit's own rules (:mod:`pneumatic_unload.curvefit.heat_law_offer`): the natural law's
     turbulent branch only when the fitted gas spends at least
-    :data:`~pneumatic_unload.heat_law_offer.TURBULENT_MIN_SHARE` of the record after the
+    :data:`~pneumatic_unload.curvefit.heat_law_offer.TURBULENT_MIN_SHARE` of the record after the
     opening on each side of Ra = 1e9; the density law only when the constant-hA fit
-    determines tau_heat to :data:`~pneumatic_unload.heat_law_offer.
+    determines tau_heat to :data:`~pneumatic_unload.curvefit.heat_law_offer.
     DENSITY_LAW_MIN_TAU_REL_SD` (1-sigma, relative)."""
     th = fit.theta
     if law == "natural+turbulent":

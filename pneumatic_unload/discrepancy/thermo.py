@@ -4,10 +4,10 @@ The search names effects on the pressure alone; where the record carries the gas
 temperature, each model the verdict weighs (the final one and the members of C's
 ambiguity, :mod:`~pneumatic_unload.discrepancy.ambiguity`) is fitted once more with the
 log beside the pressure, by the engine's joint fit and the estimator's rule
-(:mod:`pneumatic_unload.temperature_evidence`): T10 and the thermometer's first-order lag
+(:mod:`pneumatic_unload.curvefit.temperature_evidence`): T10 and the thermometer's first-order lag
 fitted, the readings weighted by the larger of their noise and their misfit (iterated
 until the two agree), and the model *follows* the log when the readings' rms is within
-:data:`~pneumatic_unload.temperature_evidence.FOLLOW_FACTOR` of the channel's noise.
+:data:`~pneumatic_unload.curvefit.temperature_evidence.FOLLOW_FACTOR` of the channel's noise.
 
 Where some of the models follow the log and others do not, those that do not are ruled
 out by it: they leave C's range, and a final model the log rules out while another
@@ -24,11 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.discrepancy.ambiguity import ConductanceAmbiguity, conductance_std
-from pneumatic_unload.discrepancy.problem import Problem
-from pneumatic_unload.discrepancy.types import Fit
-from pneumatic_unload.model.parametric import ParametricModel
-from pneumatic_unload.temperature_evidence import (
+from pneumatic_unload.curvefit.temperature_evidence import (
     CHANNEL_MIN_SAMPLES,
     FOLLOW_FACTOR,
     channel,
@@ -37,6 +33,10 @@ from pneumatic_unload.temperature_evidence import (
     temperature_evidence,
     weighted_passes,
 )
+from pneumatic_unload.discrepancy.ambiguity import ConductanceAmbiguity, conductance_std
+from pneumatic_unload.discrepancy.problem import Problem
+from pneumatic_unload.discrepancy.types import Fit
+from pneumatic_unload.model.parametric import ParametricModel
 
 FloatArray = NDArray[np.float64]
 

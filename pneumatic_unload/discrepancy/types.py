@@ -84,7 +84,7 @@ class DiscrepancySettings(TankSpec):
         of the model C against the HydDown peer simulator; 0 only for data made by the
         package's own model): in
         :meth:`DiscrepancyResult.conductance_std` and the C range, through the budget's
-        model-limits term (:func:`pneumatic_unload.budget.model_limits_term`).
+        model-limits term (:func:`pneumatic_unload.uncertainty.budget.model_limits_term`).
     length_diameter_known : bool
         The tank's L/D (``length_diameter_ratio``) is stated. False (the command line
         without ``--length-diameter-ratio``): the default L/D is a guess, and the natural
@@ -409,7 +409,7 @@ class DiscrepancyResult:
         """1-sigma of C of the final model [m^3/(s Pa)]: the noise's (from the Jacobian,
         :meth:`conductance_std_noise`) and the model limits' (the budget's term,
         ``settings.model_uncertainty`` times C) combined."""
-        from pneumatic_unload.budget import model_limits_term  # the settings stay light
+        from pneumatic_unload.uncertainty.budget import model_limits_term  # the settings stay light
 
         u = self.settings.model_uncertainty if self.settings is not None else 0.0
         return math.hypot(self.conductance_std_noise(),

@@ -29,7 +29,7 @@ results kept), :mod:`.decisions` (each per-sample decision, once,
 vectorised over check indices), :mod:`.state` (detector and per-unload state),
 :mod:`.detector` (plateau, trigger, confirmation), :mod:`.unloading` (start fit, stall,
 crossing), :mod:`.tail` (final plateau, curve fit), :mod:`.sse` (aborted unload, recovery,
-eq 23), :mod:`.refine` (every call into :mod:`pneumatic_unload.fitting`),
+eq 23), :mod:`.refine` (every call into :mod:`pneumatic_unload.curvefit.fitting`),
 :mod:`.regression` (hinge, crossing and corner fits), :mod:`.streaming`
 (:class:`StreamingEstimator`), :mod:`.batch` (:func:`analyze`, :func:`merge_final`) and
 :mod:`.chunked` (:func:`analyze_chunks`: a record of any length, read in pieces) and

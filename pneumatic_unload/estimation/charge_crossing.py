@@ -12,7 +12,7 @@ tau_exp after the opening (:func:`~pneumatic_unload.charge.charge_p_star`). From
 * **the model-based C**: the one model in the charge direction (the settings' heat law,
   the incoming jet's convection with it) inverted at the crossing from a table of its
   crossing times, prepared half way (:class:`ChargePlan`), or by the discharge's secant
-  (:func:`~pneumatic_unload.inversion.model_conductance`); its budget states
+  (:func:`~pneumatic_unload.model.inversion.model_conductance`); its budget states
   the crossing time, the prior of b (one sigma either side), the heat correlation (+-30 %),
   the heat not yet seen (uniform between none and the correlation's), V, T_s, the
   transducer's offset and a given supply. The curve fit that follows the charge's end
@@ -31,7 +31,17 @@ from typing import Any
 import numpy as np
 
 from pneumatic_unload import physics
-from pneumatic_unload.budget import (
+from pneumatic_unload.charge import charge_conductance_adiabatic
+from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.estimation.types import CrossingEstimate
+from pneumatic_unload.model.inversion import (
+    CRITICAL_RATIO_PRIOR_STD,
+    HEAT_CORRELATION_REL_STD,
+    model_conductance,
+    model_crossing_time,
+    rig_from_settings,
+)
+from pneumatic_unload.uncertainty.budget import (
     VOLUME_REL_DEFAULT,
     Budget,
     BudgetTerm,
@@ -40,16 +50,6 @@ from pneumatic_unload.budget import (
     model_limits_term,
     record_term,
     tau_term,
-)
-from pneumatic_unload.charge import charge_conductance_adiabatic
-from pneumatic_unload.config.estimator import EstimatorSettings
-from pneumatic_unload.estimation.types import CrossingEstimate
-from pneumatic_unload.inversion import (
-    CRITICAL_RATIO_PRIOR_STD,
-    HEAT_CORRELATION_REL_STD,
-    model_conductance,
-    model_crossing_time,
-    rig_from_settings,
 )
 
 #: The type A line of a charge's crossing model C.

@@ -3,7 +3,7 @@
 Everything of the crossing estimate but the crossing time tau_exp is known once p10, p_atm
 and p* are: the check of the pressures, whether the flow may turn subsonic before p*, the
 model inversion's table t(C) (a few model integrations) and the budgets' lines, which are
-proportional to C at fixed pressures (:class:`~pneumatic_unload.budget.ScaledBudget`).
+proportional to C at fixed pressures (:class:`~pneumatic_unload.uncertainty.budget.ScaledBudget`).
 :func:`plan_crossing` prepares all of it when the pressure is half way to p*;
 :func:`crossing_estimate` turns (tau_exp, its 1-sigma) into the numbers at the sample that
 completes the crossing: eq 39 and the isentropic inversion (closed forms), a table lookup
@@ -22,18 +22,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from pneumatic_unload import physics
-from pneumatic_unload.budget import (
-    MODEL_FORM_TERM,
-    WALL_TERM,
-    BudgetTerm,
-    ScaledBudget,
-    eq39_budget,
-    model_budget,
-    model_form_term,
-    record_term,
-    tau_term,
-    wall_term,
-)
 from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
 from pneumatic_unload.estimation.charge_crossing import (
     ChargePlan,
@@ -46,7 +34,19 @@ from pneumatic_unload.estimation.refine import (
     pressure_problem,
 )
 from pneumatic_unload.estimation.types import CrossingEstimate
-from pneumatic_unload.inversion import may_turn_subsonic
+from pneumatic_unload.model.inversion import may_turn_subsonic
+from pneumatic_unload.uncertainty.budget import (
+    MODEL_FORM_TERM,
+    WALL_TERM,
+    BudgetTerm,
+    ScaledBudget,
+    eq39_budget,
+    model_budget,
+    model_form_term,
+    record_term,
+    tau_term,
+    wall_term,
+)
 
 #: The type A line of the crossing's model-based C.
 MODEL_TYPE_A = "crossing time (noise), b prior, heat correlation"

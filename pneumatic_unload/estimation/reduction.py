@@ -5,8 +5,8 @@ its tail; the decisions need only the last few tens of thousands. Once an unload
 holds more than :data:`REDUCE_FROM` samples in the buffer, all but the last
 :data:`KEEP_RAW` of them are reduced to micro-bins (:class:`~pneumatic_unload.fit.reduced.
 Reducer`) and dropped from the buffer; the final fit then runs on the bins
-(:func:`~pneumatic_unload.fitting.fit_curve` with ``reduced``), whose cost and memory do not
-grow with the unload. A shorter unload keeps every sample and is fitted exactly as before.
+(:func:`~pneumatic_unload.curvefit.fitting.fit_curve` with ``reduced``), whose cost and memory do
+not grow with the unload. A shorter unload keeps every sample and is fitted exactly as before.
 
 Before the p* crossing (p_atm given) the reduction stops once the pressure comes within
 :data:`APPROACH` crossing half-widths of p*: the crossing fit needs the samples of its window
@@ -25,11 +25,11 @@ from typing import Any
 
 import numpy as np
 
+from pneumatic_unload.curvefit.fitting import CURVE_FIT_RESOLUTION
 from pneumatic_unload.estimation.decisions import PLATEAU, block_mean
 from pneumatic_unload.estimation.state import UNLOADING, EstimatorState
 from pneumatic_unload.estimation.types import FloatArray
 from pneumatic_unload.fit.reduced import Reducer
-from pneumatic_unload.fitting import CURVE_FIT_RESOLUTION
 
 #: Fit-window samples held in the buffer above which the older ones are reduced [-]
 #: (32 B each in the buffer: 128 MiB).

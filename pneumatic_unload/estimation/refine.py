@@ -1,9 +1,9 @@
 """Refinement: model inversion at the crossing, final curve fit, SSE recovery fit.
 
-The only module of the estimator that calls :mod:`pneumatic_unload.fitting`,
-:mod:`pneumatic_unload.inversion` and :mod:`pneumatic_unload.recovery` (imported at load: the
-compiled model imports in milliseconds, and a first unload must not pay the import inside its
-latency budget), so those calls can be re-pointed in one place. SI units: s, Pa
+The only module of the estimator that calls :mod:`pneumatic_unload.curvefit.fitting`,
+:mod:`pneumatic_unload.model.inversion` and :mod:`pneumatic_unload.curvefit.recovery` (imported at
+load: the compiled model imports in milliseconds, and a first unload must not pay the import
+inside its latency budget), so those calls can be re-pointed in one place. SI units: s, Pa
 absolute, m^3/(s Pa); the recovery fit works in the input's signal units.
 """
 
@@ -16,7 +16,27 @@ from typing import Any
 import numpy as np
 
 from pneumatic_unload import physics
-from pneumatic_unload.budget import (
+from pneumatic_unload.config.estimator import (
+    WALL_ASSUMED_STD,
+    EstimatorSettings,
+    probe_uncertainty,
+    wall_uncertainty,
+)
+from pneumatic_unload.config.rig import RigConfig
+from pneumatic_unload.config.tank import ATMOSPHERE_RANGE
+from pneumatic_unload.curvefit.fitting import CurveFit, fit_curve
+from pneumatic_unload.curvefit.recovery import fit_recovery
+from pneumatic_unload.curvefit.subsonic_offer import m_budget, offset_terms, subsonic_term
+from pneumatic_unload.curvefit.temperature_evidence import temperature_terms
+from pneumatic_unload.estimation.types import FloatArray, UnloadResult
+from pneumatic_unload.fit.uncertainty import inadequacy
+from pneumatic_unload.model.inversion import (
+    fitted_tau_exp,
+    inversion_table,
+    invert_crossing,
+    may_turn_subsonic,
+)
+from pneumatic_unload.uncertainty.budget import (
     WALL_TERM,
     Budget,
     BudgetTerm,
@@ -30,27 +50,7 @@ from pneumatic_unload.budget import (
     wall_sensitivity,
     wall_term,
 )
-from pneumatic_unload.budget_b import ratio_budget
-from pneumatic_unload.config.estimator import (
-    WALL_ASSUMED_STD,
-    EstimatorSettings,
-    probe_uncertainty,
-    wall_uncertainty,
-)
-from pneumatic_unload.config.rig import RigConfig
-from pneumatic_unload.config.tank import ATMOSPHERE_RANGE
-from pneumatic_unload.estimation.types import FloatArray, UnloadResult
-from pneumatic_unload.fit.uncertainty import inadequacy
-from pneumatic_unload.fitting import CurveFit, fit_curve
-from pneumatic_unload.inversion import (
-    fitted_tau_exp,
-    inversion_table,
-    invert_crossing,
-    may_turn_subsonic,
-)
-from pneumatic_unload.recovery import fit_recovery
-from pneumatic_unload.subsonic_offer import m_budget, offset_terms, subsonic_term
-from pneumatic_unload.temperature_evidence import temperature_terms
+from pneumatic_unload.uncertainty.budget_b import ratio_budget
 
 #: Quality figure [0, 1] at most of a result whose model does not describe the record at
 #: its noise level ("model inadequate" in its status text).
@@ -200,8 +200,9 @@ def charge_final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: fl
 
 def b_budget(fit: CurveFit, settings: EstimatorSettings,
              res: UnloadResult) -> dict[str, Any]:
-    """The budget of the curve fit's b [-] (:func:`~pneumatic_unload.budget_b.ratio_budget`)
-    as :meth:`~pneumatic_unload.budget.Budget.to_dict`: the fit's type A, the inputs'
+    """The budget of the curve fit's b [-]
+    (:func:`~pneumatic_unload.uncertainty.budget_b.ratio_budget`) as
+    :meth:`~pneumatic_unload.uncertainty.budget.Budget.to_dict`: the fit's type A, the inputs'
     lines, the wall's (assumed or given: ``fit.wall_std_b``) and the heat laws' spread."""
     law = fit.heat_law
     wall = None
@@ -381,7 +382,7 @@ def refine_with_curve_fit(
 ) -> UnloadResult | None:
     """Final result of an unload: the crossing result refined by :func:`fit_curve`
     (``hold``: values held, and ``fit_heat``, see there; ``extra_terms``: further lines of
-    the budget, :class:`~pneumatic_unload.budget.BudgetTerm`, e.g. a given p10's).
+    the budget, :class:`~pneumatic_unload.uncertainty.budget.BudgetTerm`, e.g. a given p10's).
 
     Parameters
     ----------

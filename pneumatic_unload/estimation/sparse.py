@@ -37,12 +37,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pneumatic_unload import physics
-from pneumatic_unload.budget import MODEL_FORM_TERM, BudgetTerm, with_terms
 from pneumatic_unload.charge import charge_conductance_adiabatic, charge_p_star
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.crossing import HEAT_NOT_SEEN, crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.refine import refine_with_curve_fit
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult, end_fields
+from pneumatic_unload.uncertainty.budget import MODEL_FORM_TERM, BudgetTerm, with_terms
 
 #: Fewest samples from the opening on [-].
 MIN_POINTS = 10

@@ -105,7 +105,7 @@ class UnloadState:
     rec_span : int
         Samples covered by the last recovery fit [-].
     rec_fit : Any
-        Last recovery fit (:func:`pneumatic_unload.recovery.fit_recovery`), or None.
+        Last recovery fit (:func:`pneumatic_unload.curvefit.recovery.fit_recovery`), or None.
     mid_pending : bool
         The inversion table is still to be built, when the pressure is half way to p*.
     plan : Any

@@ -267,8 +267,8 @@ class CrossingEstimate:
     method : str
         How the model-based C was computed.
     extra : dict
-        The budgets ('budget', 'budget_eq39'), as :meth:`~pneumatic_unload.budget.Budget.
-        to_dict`.
+        The budgets ('budget', 'budget_eq39'), as
+        :meth:`~pneumatic_unload.uncertainty.budget.Budget.to_dict`.
     """
 
     problem: str | None

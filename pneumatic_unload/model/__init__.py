@@ -9,7 +9,12 @@ Modules, each of one role (SI units throughout):
   segmented integration;
 * :mod:`~pneumatic_unload.model.sensor` - the sensor chain, batch and stateful;
 * :mod:`~pneumatic_unload.model.effects` - the registry of real-rig effects;
-* :mod:`~pneumatic_unload.model.simulate` - a simulated record on the sample grid.
+* :mod:`~pneumatic_unload.model.simulate` - a simulated record on the sample grid;
+* :mod:`~pneumatic_unload.model.rig` - the simulator's endless, stateful sample stream (what
+  the simulator node publishes);
+* :mod:`~pneumatic_unload.model.inversion` - the model inverted at the p* crossing: the C
+  that reaches p* at the measured tau_exp (directly, or from a table), and the estimator's
+  model built from its settings.
 
 The model's bin means for the likelihood are computed by :mod:`pneumatic_unload.fit.likelihood`
 from the model evaluated at its quadrature nodes.

@@ -21,7 +21,7 @@ Parameters
     with ranges (``direction`` 'charge': the tank filled through the component from
     ``supply_pressure``); plus ``mode`` ('service', 'cycle', or 'alternate': a cycle whose
     steps go in turn the other way, a charge then a discharge of the same component from
-    where the last left the tank, :meth:`~pneumatic_unload.rig.RigStream.reverse`),
+    where the last left the tank, :meth:`~pneumatic_unload.model.rig.RigStream.reverse`),
     ``start_delay`` [s] (open once by
     itself after this delay; < 0: never), ``settle_time`` [s], ``vent_time`` [s],
     ``charge_time`` [s], ``cycles`` (0: forever), ``auto_charge``, ``temperature_rate`` [Hz],
@@ -49,8 +49,8 @@ from std_srvs.srv import Trigger
 
 from pneumatic_unload.config import ConfigError, RigConfig
 from pneumatic_unload.config import nodes as config_nodes
+from pneumatic_unload.model.rig import RigStream
 from pneumatic_unload.nodes import common
-from pneumatic_unload.rig import RigStream
 
 MODES = ("service", "cycle", "alternate")
 

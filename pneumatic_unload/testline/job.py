@@ -19,10 +19,10 @@ from pathlib import Path
 from typing import Any
 
 from pneumatic_unload import __version__
+from pneumatic_unload.analysis.output import finite_or_none, unload_json
+from pneumatic_unload.analysis.records import RecordError, analyze_input, open_record
 from pneumatic_unload.config import ConfigError
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.output import finite_or_none, unload_json
-from pneumatic_unload.records import RecordError, analyze_input, open_record
 from pneumatic_unload.testline.db import FileRecord
 from pneumatic_unload.testline.spec import Spec
 
@@ -42,7 +42,7 @@ class InputOptions:
         needs at least ``volume``).
     csv : dict
         CSV reading options (columns, units, gauge, atmosphere [Pa]) of
-        :func:`~pneumatic_unload.records.open_record`.
+        :func:`~pneumatic_unload.analysis.records.open_record`.
     topic : str
         Pressure topic of a bag.
     part_regex : str

@@ -46,7 +46,7 @@ SCHEMA_LOCK_KEY = 0x706E_756E_6C6F_6164  # "pnunload"
 POSTGRES_SCHEMES = ("postgresql", "postgresql+psycopg", "postgres")
 
 #: Columns of ``unloads`` of schema version 1, taken from a result's JSON
-#: (:func:`~pneumatic_unload.output.unload_json`), with their types; units SI.
+#: (:func:`~pneumatic_unload.analysis.output.unload_json`), with their types; units SI.
 V1_COLUMNS: tuple[tuple[str, Any], ...] = (
     ("status", sa.Text), ("status_text", sa.Text), ("final", sa.Integer),
     ("t_start", sa.Double), ("tau_exp", sa.Double), ("tau_exp_std", sa.Double),

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pneumatic_unload.output import finite_or_none
+from pneumatic_unload.analysis.output import finite_or_none
 
 DM3_PER_S_BAR = 1e-8  # 1 dm^3/(s bar) in m^3/(s Pa)
 

@@ -21,16 +21,16 @@ import numpy as np
 
 from pneumatic_unload.config import ConfigError, TankSpec, adapters
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.curve_fit_result import CurveFit
-from pneumatic_unload.estimation.batch import merge_final
-from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
-from pneumatic_unload.estimation.types import FloatArray
-from pneumatic_unload.io.csvlog import CHUNK_BYTES, CsvError, CsvStream
-from pneumatic_unload.temperature_evidence import (
+from pneumatic_unload.curvefit.curve_fit_result import CurveFit
+from pneumatic_unload.curvefit.temperature_evidence import (
     channel_evidence,
     departure_text,
     temperature_evidence,
 )
+from pneumatic_unload.estimation.batch import merge_final
+from pneumatic_unload.estimation.chunked import ChunkedAnalysis, analyze_chunks
+from pneumatic_unload.estimation.types import FloatArray
+from pneumatic_unload.io.csvlog import CHUNK_BYTES, CsvError, CsvStream
 
 
 class RecordError(Exception):
@@ -328,7 +328,7 @@ def analyze_input(record: Record, given: dict[str, Any]) -> InputAnalysis:
 def with_temperature_evidence(record: Record, settings: EstimatorSettings,
                               unloads: list[Any]) -> list[Any]:
     """The final results with the record's gas temperature as evidence
-    (:func:`~pneumatic_unload.temperature_evidence.temperature_evidence`: ``extra
+    (:func:`~pneumatic_unload.curvefit.temperature_evidence.temperature_evidence`: ``extra
     ['gas_temperature']``, and the status text when the model's gas does not follow it);
     ``gas_temperature`` says so where the record carries none."""
     if not any(r.final and "curve_fit" in r.extra for r in unloads):

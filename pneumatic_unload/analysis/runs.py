@@ -50,7 +50,7 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
         Wall-clock time of the first sample [s since the epoch].
     unloads : int
         Number of unloads in the run [-]; more than one runs the simulator node's cycle
-        (:func:`pneumatic_unload.rig.run_cycles`: unload, vent 1 s, recharge 1 s, settle).
+        (:func:`pneumatic_unload.model.rig.run_cycles`: unload, vent 1 s, recharge 1 s, settle).
     settle_time : float
         Plateau before each further unload [s].
 
@@ -67,7 +67,7 @@ def write_simulated_bag(cfg: RigConfig, out: Path, *, analyze_live: bool = True,
         sim = simulate(cfg)
         t, measured, temperature, opening = sim.t, sim.measured, sim.temperature, sim.opening
     else:
-        from pneumatic_unload.rig import run_cycles
+        from pneumatic_unload.model.rig import run_cycles
 
         run = run_cycles(cfg, unloads, settle_time=settle_time)
         t, measured, temperature, opening = run.t, run.measured, run.temperature, run.opening

@@ -22,13 +22,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.budget import BudgetTerm
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.curve_fit_result import CurveSpan
+from pneumatic_unload.curvefit.curve_fit_result import CurveSpan
 from pneumatic_unload.fit.scalar import interval_minimum
 from pneumatic_unload.fit.trace import TemperatureChannel
 from pneumatic_unload.model import discharge, first_order_lag
 from pneumatic_unload.model.parametric import THERMOMETER_TAU_RANGE
+from pneumatic_unload.uncertainty.budget import BudgetTerm
 
 FloatArray = NDArray[np.float64]
 
@@ -237,7 +237,7 @@ def channel_evidence(summary: dict[str, float]) -> dict[str, Any]:
 
 def temperature_terms(fit: Any) -> tuple[BudgetTerm, ...]:
     """The line of C's budget where a logged gas temperature departs from every heat law
-    (a :class:`~pneumatic_unload.curve_fit_result.CurveFit` whose ``gas_temperature`` has
+    (a :class:`~pneumatic_unload.curvefit.curve_fit_result.CurveFit` whose ``gas_temperature`` has
     the pressure fit's ``departure_rms`` [K] from the log, its thermometer's lag and
     offset fitted): the gas temperature the model assumes is uncertain by that much, and
     C from a pressure curve goes as 1/sqrt(T) (the flow C rho_N p sqrt(T_N/T) empties the

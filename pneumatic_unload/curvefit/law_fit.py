@@ -1,5 +1,5 @@
 """One heat law's fit of the final curve fit (:func:`fit_law`), for
-:func:`pneumatic_unload.fitting.fit_curve`, which compares the laws.
+:func:`pneumatic_unload.curvefit.fitting.fit_curve`, which compares the laws.
 
 The estimator's parametric model (:class:`pneumatic_unload.model.parametric.ParametricModel`)
 with one heat law (its wall temperature and the subsonic index m fitted or held) is fitted
@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config.estimator import EstimatorSettings
-from pneumatic_unload.curve_fit_result import CurveFit, CurveSpan
+from pneumatic_unload.curvefit.curve_fit_result import CurveFit, CurveSpan
 from pneumatic_unload.fit.likelihood import make_bins
 from pneumatic_unload.fit.noise import NoiseModel, ljung_box
 from pneumatic_unload.fit.profile import valley_std
@@ -31,8 +31,8 @@ from pneumatic_unload.fit.uncertainty import (
     residual_inflation,
     structure_inflation,
 )
-from pneumatic_unload.inversion import estimator_model
 from pneumatic_unload.model.effects import Start, exchange_extremes
+from pneumatic_unload.model.inversion import estimator_model
 from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
 from pneumatic_unload.physics import tau_exp_eq38
 
@@ -99,7 +99,7 @@ def fit_law(
     fit_offset: bool = False, fit_t10: bool = False,
     keep: dict[str, Any] | None = None,
 ) -> tuple[CurveFit, float, int]:
-    """One law's fit for :func:`~pneumatic_unload.fitting.fit_curve`; returns (fit,
+    """One law's fit for :func:`~pneumatic_unload.curvefit.fitting.fit_curve`; returns (fit,
     chi^2 [Pa^2: residuals are bin sums over sqrt(count)], free parameters [-]).
 
     Parameters
@@ -142,7 +142,7 @@ def fit_law(
         Fit T10 too (a hot start whose T10 was not measured: the wall as in ``settings``).
     keep : dict, optional
         Receives the fit's :class:`~pneumatic_unload.fit.lsq.FitResult` ('result') and
-        model ('model'), for :func:`~pneumatic_unload.wall_moves.wall_linear`.
+        model ('model'), for :func:`~pneumatic_unload.curvefit.wall_moves.wall_linear`.
     """
     t_ref = span.t_ref  # relative times: absolute stamps (~1.7e9 s) ruin finite differences
     t_start = t_start - t_ref

@@ -1,7 +1,7 @@
 """Which heat laws of the curve fit's family a record can carry: the laws with a second
 parameter (the density law's exponent, the natural law's turbulent branch) are offered to
 the information criterion only where the record determines that parameter; elsewhere they
-are not offered, with the reason (:func:`pneumatic_unload.fitting.fit_curve` reports it).
+are not offered, with the reason (:func:`pneumatic_unload.curvefit.fitting.fit_curve` reports it).
 And where the next law's fit starts from the first law's (:func:`next_law_start`).
 
 SI units: s, Pa absolute, K.
@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config.estimator import EstimatorSettings
-from pneumatic_unload.curve_fit_result import CurveFit
+from pneumatic_unload.curvefit.curve_fit_result import CurveFit
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import HEAT_FIXED, HEAT_NATURAL
 from pneumatic_unload.model.heat import RA_TURBULENT, rayleigh, thermal_time_constant

@@ -1,11 +1,11 @@
 """The wall temperature's and the heat laws' moves of the curve fit's C and b, for the
-lines of their budgets (:mod:`pneumatic_unload.budget`).
+lines of their budgets (:mod:`pneumatic_unload.uncertainty.budget`).
 
 A wall temperature assumed (= T10) or given has a standard uncertainty; the fitted C and b
 move with it. :func:`wall_linear` takes the move to first order from the fit's Jacobian (two
-model evaluations); the full refit is :func:`pneumatic_unload.fitting.fit_curve`'s.
+model evaluations); the full refit is :func:`pneumatic_unload.curvefit.fitting.fit_curve`'s.
 :func:`spread_b` is b's model-form spread over the heat laws that fit about equally well
-(C's is computed beside the BIC table in :mod:`pneumatic_unload.fitting`).
+(C's is computed beside the BIC table in :mod:`pneumatic_unload.curvefit.fitting`).
 
 SI units: K, m^3/(s Pa); b is a pressure ratio [-].
 """
@@ -20,9 +20,9 @@ import numpy as np
 
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.config.tank import WALL_RANGE
-from pneumatic_unload.curve_fit_result import CurveFit
+from pneumatic_unload.curvefit.curve_fit_result import CurveFit
 from pneumatic_unload.fit.trace import Trace
-from pneumatic_unload.inversion import estimator_model
+from pneumatic_unload.model.inversion import estimator_model
 
 
 def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,

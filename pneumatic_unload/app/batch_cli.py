@@ -22,9 +22,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from pneumatic_unload.analysis.output import json_default
 from pneumatic_unload.config import ConfigError, adapters
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.output import json_default
 from pneumatic_unload.testline import (
     BatchError,
     InputOptions,

@@ -2,13 +2,13 @@
 variants, each with the subsonic index m held at 0.5 or fitted; and the information
 criterion that chooses among them.
 
-:class:`Family` fits the laws in turn (:func:`~pneumatic_unload.law_fit.fit_law`), each
+:class:`Family` fits the laws in turn (:func:`~pneumatic_unload.curvefit.law_fit.fit_law`), each
 starting from the first law's fit, offers a law with a second parameter only where the
-record determines it (:mod:`pneumatic_unload.heat_law_offer`), explores strong and weak
+record determines it (:mod:`pneumatic_unload.curvefit.heat_law_offer`), explores strong and weak
 exchange when every law leaves structure, and adds the hot-start variants where the wall
 assumed at T10 leaves structure or T10 is far from a room's temperature. :func:`offer_m`
 adds a law's variant with m fitted (or held) where the record determines m
-(:mod:`pneumatic_unload.subsonic_offer`). :func:`criterion` is the BIC of every fit.
+(:mod:`pneumatic_unload.curvefit.subsonic_offer`). :func:`criterion` is the BIC of every fit.
 Keys of the table: the law ('natural', 'fixed', 'density', 'natural+turbulent'), '+wall'
 for a hot start, '|m' for m fitted.
 
@@ -33,20 +33,20 @@ from pneumatic_unload.config.estimator import (
     probe_uncertainty,
     t10_measured,
 )
-from pneumatic_unload.curve_fit_result import CurveFit, CurveSpan
-from pneumatic_unload.heat_law_offer import (
+from pneumatic_unload.curvefit.curve_fit_result import CurveFit, CurveSpan
+from pneumatic_unload.curvefit.heat_law_offer import (
     DENSITY_LAW_MAX_EXPONENT_SD,
     TURBULENT_MAX_LOG_SD,
     density_law_problem,
     next_law_start,
     turbulent_law_problem,
 )
-from pneumatic_unload.inversion import estimator_model
-from pneumatic_unload.law_fit import fit_law, heat_of, start_from
-from pneumatic_unload.linear_twin import Twin, linear_twin
+from pneumatic_unload.curvefit.law_fit import fit_law, heat_of, start_from
+from pneumatic_unload.curvefit.linear_twin import Twin, linear_twin
+from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX, split_key, subsonic_index_problem
 from pneumatic_unload.model.effects import WALL_TEMPERATURE
+from pneumatic_unload.model.inversion import estimator_model
 from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
-from pneumatic_unload.subsonic_offer import M_SUFFIX, split_key, subsonic_index_problem
 
 #: Residual inflation above which, with the wall assumed at T10, the hot-start variants
 #: (wall temperature fitted) are tried too [-] (they are also tried when T10 is more than
@@ -97,7 +97,7 @@ class Family:
     settings : EstimatorSettings
         Tank, gas and heat model.
     common : dict
-        Arguments of every :func:`~pneumatic_unload.law_fit.fit_law` call (trace, starting
+        Arguments of every :func:`~pneumatic_unload.curvefit.law_fit.fit_law` call (trace, starting
         values, hold, fit_heat).
     profile_heat : bool
         Profile the heat scale where its likelihood is not quadratic (the laws' first fits).
@@ -180,7 +180,7 @@ class Family:
 
     def twin(self, key: str, name: str) -> Twin | None:
         """The first-order twin of the fit ``key`` with ``name`` ('m' or 'offset') freed
-        (:func:`~pneumatic_unload.linear_twin.linear_twin`; None without it)."""
+        (:func:`~pneumatic_unload.curvefit.linear_twin.linear_twin`; None without it)."""
         kept = self.raw.get(key)
         if not kept or "model" not in kept:
             return None
@@ -435,7 +435,7 @@ def other(key: str) -> str:
 def offer_m(fam: Family, key: str) -> str | None:
     """Fit the law of ``key`` with m fitted if held there, held if fitted, from that fit;
     offer it to the criterion unless m is fitted and the record does not determine it
-    (:func:`~pneumatic_unload.subsonic_offer.subsonic_index_problem`: the reason goes to
+    (:func:`~pneumatic_unload.curvefit.subsonic_offer.subsonic_index_problem`: the reason goes to
     ``not_offered`` and is returned; None when offered)."""
     twin = other(key)
     base = fam.fits[key][0]

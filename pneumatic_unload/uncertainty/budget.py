@@ -29,7 +29,7 @@ carries the time scale V/(C sqrt(T10)) of every model of the package:
   |dC/dTw|. At the crossing: the model-based inversion with the natural law, the wall moved
   by its uncertainty (:func:`wall_sensitivity`); for the curve fit's C with an assumed wall,
   the chosen law refitted with the wall moved (the fitted heat exchange takes up part of
-  the move: :func:`pneumatic_unload.fitting.fit_curve`); a wall fitted by a hot-start law
+  the move: :func:`pneumatic_unload.curvefit.fitting.fit_curve`); a wall fitted by a hot-start law
   is in the fit's type A line (the wall line then shows it with 0).
 
 SI units: m^3/(s Pa) for C, m^3, K, Pa, s.
@@ -51,7 +51,7 @@ from pneumatic_unload.config.estimator import (
     wall_uncertainty,
 )
 from pneumatic_unload.config.tank import wall_pair
-from pneumatic_unload.inversion import invert_crossing
+from pneumatic_unload.model.inversion import invert_crossing
 from pneumatic_unload.physics import conductance_eq39, conductance_isentropic_inversion
 
 #: Name of the wall temperature's line in a budget.

@@ -168,7 +168,7 @@ def package_share(package: str = PACKAGE) -> Path:
         Another package, or none found."""
     if package != PACKAGE:
         raise LaunchError(f"$(find-pkg-share {package}): only {PACKAGE} is known here")
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     if (root / "config" / "estimator.yaml").is_file():
         return root
     for prefix in [*os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep), sys.prefix]:
@@ -311,11 +311,11 @@ def start_launch(nodes: list[dict[str, Any]], log_dir: Path,
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m pneumatic_unload.launch FILE [name:=value ...]``: run a launch file's
+    """``python -m pneumatic_unload.app.launch FILE [name:=value ...]``: run a launch file's
     nodes until Ctrl-C (or one of them exits); exit code 0 when all stopped cleanly."""
     argv = sys.argv[1:] if argv is None else argv
     if not argv or argv[0] in ("-h", "--help"):
-        print("usage: python -m pneumatic_unload.launch FILE.launch.yaml [name:=value ...]")
+        print("usage: python -m pneumatic_unload.app.launch FILE.launch.yaml [name:=value ...]")
         return 0 if argv else 2
     overrides = {}
     for a in argv[1:]:

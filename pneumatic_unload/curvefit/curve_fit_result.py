@@ -1,4 +1,4 @@
-"""The result of the final curve fit (:func:`pneumatic_unload.fitting.fit_curve`): the
+"""The result of the final curve fit (:func:`pneumatic_unload.curvefit.fitting.fit_curve`): the
 fitted values of the chosen heat law, their standard deviations, the laws compared, and the
 fitted model's configuration; and where the fitted samples lie (:class:`CurveSpan`).
 
@@ -16,7 +16,7 @@ import numpy as np
 
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.config.estimator import EstimatorSettings
-from pneumatic_unload.inversion import rig_from_settings
+from pneumatic_unload.model.inversion import rig_from_settings
 
 
 class CurveSpan(NamedTuple):
@@ -111,7 +111,7 @@ class CurveFit:
         m was fitted (True) or held (False).
     subsonic_std, subsonic_std_b : float
         With m held: C's [m^3/(s Pa)] and b's [-] standard uncertainty from holding it (the
-        budgets' 'subsonic index' line, :mod:`pneumatic_unload.subsonic_offer`); 0 when m
+        budgets' 'subsonic index' line, :mod:`pneumatic_unload.curvefit.subsonic_offer`); 0 when m
         was fitted (its uncertainty is in the fit's covariance).
     subsonic_source : str
         Why m was fitted or held, in words.

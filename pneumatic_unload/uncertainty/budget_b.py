@@ -1,6 +1,6 @@
 """Uncertainty budget of the critical pressure ratio b of the final curve fit, with the
-lines of C's (:mod:`pneumatic_unload.budget`: the same :class:`Budget`, type A, type B and
-model form), so that b's sigma carries what the inputs' stated uncertainties do to it.
+lines of C's (:mod:`pneumatic_unload.uncertainty.budget`: the same :class:`Budget`, type A, type
+B and model form), so that b's sigma carries what the inputs' stated uncertainties do to it.
 
 SI units: Pa, K, m^3; b is a pressure ratio [-].
 """
@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import math
 
-from pneumatic_unload.budget import (
+from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.uncertainty.budget import (
     WALL_TERM,
     Budget,
     BudgetTerm,
@@ -17,7 +18,6 @@ from pneumatic_unload.budget import (
     model_form_term,
     record_term,
 )
-from pneumatic_unload.config.estimator import EstimatorSettings
 
 
 def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
@@ -38,7 +38,8 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
     * p_atm given by a barometer: db = b u(p_atm) / p_atm;
     * the wall temperature (a heat law fitted, the wall assumed or given): the chosen law
       refitted with the wall moved by its uncertainty, to first order
-      (:func:`pneumatic_unload.wall_moves.wall_linear`); a fitted wall is in the type A line;
+      (:func:`pneumatic_unload.curvefit.wall_moves.wall_linear`); a fitted wall is in the type A
+      line;
     * model form: the spread of the b of the heat laws that fit about equally well.
 
     Parameters

@@ -6,7 +6,7 @@ analyze PATH     unloading-time analysis of a bag (directory or .mcap) or a CSV 
 simulate --out   write a simulated run as a rosbag2/MCAP bag, no ROS needed
 recover BAG      make a bag whose writer was killed readable again
 
-Exit status of ``analyze`` (:data:`pneumatic_unload.output.EXIT_STATUS`): 0 when at
+Exit status of ``analyze`` (:data:`pneumatic_unload.analysis.output.EXIT_STATUS`): 0 when at
 least one unload gives C (a finite recommended C and a status other than 'bad_data': 'ok',
 'aborted_sse', 'not_choked' with its curve-fit C; other unloads of the record may have
 failed, each says why); 1 when the record gives no estimate: no unload
@@ -30,16 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from pneumatic_unload import batch_cli
-from pneumatic_unload.config import TANK_FIELDS, ConfigError, RigConfig, TankSpec, adapters
-from pneumatic_unload.config.estimator import t10_uncertainty, wall_uncertainty
-from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySettings
-from pneumatic_unload.estimation import (
-    EstimationError,
-    EstimatorSettings,
-)
-from pneumatic_unload.io.csvheader import TEMPERATURE_UNITS, TIME_UNITS
-from pneumatic_unload.output import (
+from pneumatic_unload.analysis.output import (
     EXIT_STATUS,
     exit_status,
     format_inputs,
@@ -48,7 +39,7 @@ from pneumatic_unload.output import (
     no_estimate_reason,
     unload_json,
 )
-from pneumatic_unload.records import (
+from pneumatic_unload.analysis.records import (
     Record,
     RecordError,
     analyze_input,
@@ -56,6 +47,15 @@ from pneumatic_unload.records import (
     open_record,
     settings_for,
 )
+from pneumatic_unload.app import batch_cli
+from pneumatic_unload.config import TANK_FIELDS, ConfigError, RigConfig, TankSpec, adapters
+from pneumatic_unload.config.estimator import t10_uncertainty, wall_uncertainty
+from pneumatic_unload.discrepancy.types import DiscrepancyError, DiscrepancySettings
+from pneumatic_unload.estimation import (
+    EstimationError,
+    EstimatorSettings,
+)
+from pneumatic_unload.io.csvheader import TEMPERATURE_UNITS, TIME_UNITS
 
 PRESSURE_UNITS = {"Pa": 1.0, "kPa": 1e3, "bar": 1e5, "MPa": 1e6, "psi": 6894.757293168361}
 
@@ -195,8 +195,8 @@ def gauge_atmosphere(args: argparse.Namespace, given: dict[str, Any] | None = No
 
 
 def open_input(args: argparse.Namespace) -> Record:
-    """The input PATH of ``analyze`` as a :class:`~pneumatic_unload.records.Record` (a CSV is
-    read in chunks later); what was assumed about it is printed as warnings on stderr."""
+    """The input PATH of ``analyze`` as a :class:`~pneumatic_unload.analysis.records.Record` (a
+    CSV is read in chunks later); what was assumed about it is printed as warnings on stderr."""
     try:
         rec = open_record(args.path, topic=args.topic, **csv_options(args))
     except RecordError as exc:
@@ -248,7 +248,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     elif no_estimate is not None:
         print(f"pneumatic-unload: {no_estimate}", file=sys.stderr)
     if args.plot:
-        from pneumatic_unload.plotting import plot_analysis
+        from pneumatic_unload.analysis.plotting import plot_analysis
 
         t, p = run.overview.arrays()
         try:
@@ -262,8 +262,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Simulate a run and write it as a bag."""
+    from pneumatic_unload.analysis.runs import write_simulated_bag
     from pneumatic_unload.io.bag import BagError
-    from pneumatic_unload.runs import write_simulated_bag
 
     try:
         cfg = config_from_args(args)

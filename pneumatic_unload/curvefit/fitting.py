@@ -7,7 +7,7 @@ adiabatic) through the one engine (:mod:`pneumatic_unload.fit`) for C, b, the st
 instant, p10 (and p_atm when it is not given, and the heat exchange when the data carry
 it), with the binned likelihood (the model evaluated per bin, so the cost does not grow with
 the record), and standard deviations from the Jacobian scaled by the residual and inflated
-for structured residuals. The inversion at the crossing is :mod:`pneumatic_unload.inversion`.
+for structured residuals. The inversion at the crossing is :mod:`pneumatic_unload.model.inversion`.
 
 SI units: s, Pa absolute, K, m^3, m^3/(s Pa).
 """
@@ -26,11 +26,8 @@ from pneumatic_unload.config.estimator import (
     wall_uncertainty,
 )
 from pneumatic_unload.config.tank import WALL_RANGE
-from pneumatic_unload.curve_fit_result import CurveFit, CurveSpan
-from pneumatic_unload.fit.lsq import numerical_reproducibility
-from pneumatic_unload.fit.reduced import Reducer
-from pneumatic_unload.fit.trace import Trace
-from pneumatic_unload.law_family import (
+from pneumatic_unload.curvefit.curve_fit_result import CurveFit, CurveSpan
+from pneumatic_unload.curvefit.law_family import (
     HOT_START_INFLATION,
     LAW_BIC_THRESHOLD,
     TWIN_BIC_MARGIN,
@@ -42,7 +39,7 @@ from pneumatic_unload.law_family import (
     other,
     plateau_drift,
 )
-from pneumatic_unload.law_fit import (
+from pneumatic_unload.curvefit.law_fit import (
     CURVE_FIT_RESOLUTION,
     UNIT_NOISE,
     curve_fit_bins,
@@ -50,9 +47,8 @@ from pneumatic_unload.law_fit import (
     fit_law,
     start_from,
 )
-from pneumatic_unload.model.parametric import CHARGE_HEAT_LAWS
-from pneumatic_unload.subsonic_offer import M_SUFFIX, held_lines, split_key, twin_lines
-from pneumatic_unload.temperature_evidence import (
+from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX, held_lines, split_key, twin_lines
+from pneumatic_unload.curvefit.temperature_evidence import (
     FOLLOW_FACTOR,
     channel,
     channel_noise,
@@ -61,7 +57,11 @@ from pneumatic_unload.temperature_evidence import (
     temperature_evidence,
     weighted_passes,
 )
-from pneumatic_unload.wall_moves import law_spread, spread_b, wall_linear
+from pneumatic_unload.curvefit.wall_moves import law_spread, spread_b, wall_linear
+from pneumatic_unload.fit.lsq import numerical_reproducibility
+from pneumatic_unload.fit.reduced import Reducer
+from pneumatic_unload.fit.trace import Trace
+from pneumatic_unload.model.parametric import CHARGE_HEAT_LAWS
 
 FloatArray = NDArray[np.float64]
 

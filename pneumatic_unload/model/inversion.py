@@ -479,7 +479,7 @@ def fitted_tau_exp(cfg: RigConfig, t_guess: float) -> float:
     ----------
     cfg : RigConfig
         The fitted model (valve opening at t = 0), e.g.
-        :meth:`pneumatic_unload.fitting.CurveFit.config`.
+        :meth:`pneumatic_unload.curvefit.fitting.CurveFit.config`.
     t_guess : float
         Expected crossing time [s] (e.g. the measured tau_exp).
     """

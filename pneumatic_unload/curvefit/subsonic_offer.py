@@ -1,7 +1,7 @@
 """Whether a record carries the subsonic index m of ISO 6358-1:2013, and what holding it
 costs (and the line of a fitted transducer zero offset).
 
-The curve fit (:func:`pneumatic_unload.fitting.fit_curve`) fits its chosen heat law once
+The curve fit (:func:`pneumatic_unload.curvefit.fitting.fit_curve`) fits its chosen heat law once
 more with m free. That variant is offered to the information criterion (the rule the heat
 laws use: lowest BIC wins) only where the record determines m
 (:func:`subsonic_index_problem`: the subsonic tail recorded, m within
@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from pneumatic_unload.budget import Budget, BudgetTerm, model_form_term, record_term
-from pneumatic_unload.curve_fit_result import CurveFit
-from pneumatic_unload.linear_twin import Twin, valley_slopes
+from pneumatic_unload.curvefit.curve_fit_result import CurveFit
+from pneumatic_unload.curvefit.linear_twin import Twin, valley_slopes
 from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
+from pneumatic_unload.uncertainty.budget import Budget, BudgetTerm, model_form_term, record_term
 
 #: Name of m's line in the budgets of C and b.
 SUBSONIC_TERM = "subsonic index m"
@@ -89,7 +89,7 @@ def twin_lines(tw: Twin | None, *, determined: bool | None = None,
                how: str = "to first order, too close to 0.5 to be fitted"
                ) -> tuple[float, float, float, str]:
     """As :func:`held_lines`, from m's twin of the held fit (the first-order one of
-    :func:`~pneumatic_unload.linear_twin.linear_twin`, or the m-free fit's): where the
+    :func:`~pneumatic_unload.curvefit.linear_twin.linear_twin`, or the m-free fit's): where the
     record determines m (``determined``; default: within :data:`SUBSONIC_INDEX_MAX_SD`),
     m's uncertainty is max(its 1-sigma, its distance from 0.5), else
     :data:`SUBSONIC_INDEX_PRIOR_SD`; ``how``: why m is held all the same."""

@@ -14,16 +14,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pneumatic_unload.analysis.output import budget_lines, report_line
 from pneumatic_unload.estimation import EstimatorSettings, UnloadResult
-from pneumatic_unload.output import budget_lines, report_line
 
 
 def _model_curve(t: NDArray[np.float64], r: UnloadResult, settings: EstimatorSettings
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """Model pressure [Pa] over the unload of r (fitted values when the curve fit ran)."""
-    from pneumatic_unload.fitting import CurveFit
-    from pneumatic_unload.inversion import rig_from_settings
+    from pneumatic_unload.curvefit.fitting import CurveFit
     from pneumatic_unload.model import discharge
+    from pneumatic_unload.model.inversion import rig_from_settings
 
     if not math.isfinite(r.conductance_model) or r.conductance_model <= 0:
         return None

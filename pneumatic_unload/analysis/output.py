@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from pneumatic_unload.budget import format_budget
 from pneumatic_unload.estimation import UnloadResult, recommended
+from pneumatic_unload.uncertainty.budget import format_budget
 
 #: Exit statuses of ``analyze`` (also in its --help and the README).
 EXIT_STATUS = {0: "at least one unload gives C (a finite recommended C, status not bad_data)",
@@ -21,7 +21,7 @@ EXIT_STATUS = {0: "at least one unload gives C (a finite recommended C, status n
                   "or gauge readings taken as absolute; the reason on stderr and in --json",
                2: "unreadable input or bad options (one line on stderr)"}
 
-#: The object ``analyze --json`` prints (:func:`pneumatic_unload.cli.cmd_analyze`): each key
+#: The object ``analyze --json`` prints (:func:`pneumatic_unload.app.cli.cmd_analyze`): each key
 #: and its meaning (the documentation site's JSON reference is generated from this).
 ANALYZE_JSON_KEYS: dict[str, str] = {
     "source": "the input PATH as given",
@@ -52,7 +52,7 @@ UNLOAD_JSON_KEYS: dict[str, str] = {
     "budget": "when known: the uncertainty budget of conductance_model (GUM): value, "
               "combined_std, expanded (k = 2), type_a_std, type_b_std, model_form_std, the "
               "largest line and the terms, each with its standard uncertainty "
-              "[m^3/(s Pa)] (pneumatic_unload.budget)",
+              "[m^3/(s Pa)] (pneumatic_unload.uncertainty.budget)",
     "budget_eq39": "when known: the same budget for eq 39's conductance",
     "budget_b": "when known (final results): the budget of the critical ratio b [-], with "
                 "C's lines",

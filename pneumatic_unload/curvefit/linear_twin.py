@@ -6,7 +6,7 @@ fitted model's Jacobian, adds the new parameter's column (one more model evaluat
 forward difference), and solves the augmented Gauss-Newton problem at the fit's minimum:
 the chi^2 the twin would gain (the score test), the parameter's value and 1-sigma, and the
 slopes of C and b along it (the lines of holding it in their budgets). The full twin is
-fitted only where that gain is worth it (:mod:`pneumatic_unload.law_family`).
+fitted only where that gain is worth it (:mod:`pneumatic_unload.curvefit.law_family`).
 
 SI units: m^3/(s Pa); the new parameter's own (m [-], offset [Pa]).
 """

@@ -22,8 +22,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from pneumatic_unload.app.launch import free_domain_id, load_launch, package_share, start_launch
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.launch import free_domain_id, load_launch, package_share, start_launch
 from pneumatic_unload.physics import orifice_conductance
 
 #: The embedded default rig of the demo.
@@ -105,7 +105,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     n_pub = int(re.search(r"published (\d+) pressure samples", sim.output()).group(1))
     n_bag = len(read_pressure(out)[1])
-    offline = subprocess.run([sys.executable, "-m", "pneumatic_unload.cli", "analyze", str(out),
+    offline = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(out),
                               "--json"], capture_output=True, text=True, env=env)
     same = False
     if offline.returncode == 0:
