@@ -52,6 +52,8 @@ API_MODULES: tuple[str, ...] = (
     "pneumatic_unload.estimation",
     "pneumatic_unload.config",
     "pneumatic_unload.model",
+    "pneumatic_unload.curvefit.fitting",
+    "pneumatic_unload.uncertainty.budget",
     "pneumatic_unload.discrepancy",
     "pneumatic_unload.testline",
     "pneumatic_unload.fit",

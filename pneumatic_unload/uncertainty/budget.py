@@ -26,7 +26,7 @@ carries the time scale V/(C sqrt(T10)) of every model of the package:
   given, it is assumed = T10 with the uncertainty the record allows (a default, widened
   when T10 is far from a room's temperature or a hot start is fitted:
   :func:`~pneumatic_unload.config.estimator.wall_uncertainty`); the line states
-  |dC/dTw|. At the crossing: the model-based inversion with the natural law, the wall moved
+  ``|dC/dTw|``. At the crossing: the model-based inversion with the natural law, the wall moved
   by its uncertainty (:func:`wall_sensitivity`); for the curve fit's C with an assumed wall,
   the chosen law refitted with the wall moved (the fitted heat exchange takes up part of
   the move: :func:`pneumatic_unload.curvefit.fitting.fit_curve`); a wall fitted by a hot-start law
@@ -490,7 +490,7 @@ def model_limits_term(c: float, model_uncertainty: float) -> BudgetTerm:
     """The model-limits line of a model-based C: ``model_uncertainty`` [-] (relative
     standard uncertainty from the discharge model's own limits: ideal gas, uniform state,
     heat-law family; see :class:`~pneumatic_unload.config.estimator.EstimatorSettings`)
-    times |c| [m^3/(s Pa)]."""
+    times ``|c|`` [m^3/(s Pa)]."""
     return BudgetTerm("model limits (ideal gas, uniform state)", "model", math.nan,
                       math.nan, "", abs(c) * model_uncertainty,
                       f"model_uncertainty {100 * model_uncertainty:g} %")
