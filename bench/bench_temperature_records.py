@@ -97,6 +97,14 @@ dropping T10's line with the column:
   (88 %; 19/24 before): c13-hot20's second draw, whose drift is under 2 sigma, +5.71 %
   (z 17.9) -> -0.37 %; c23-hot5 (+0.87 %, z 2.6 and 2.1) and c15-hot5 remain, 5 K of
   warm gas within a room's spread.
+
+Measured after T10's line for a T10 not measured (main 817d0b3: 3.5 K, the hot-start
+claim's threshold 3 x 2 K either side of a room's over sqrt(3), where T10 is at its default
+with no wall and no log; 1 K where measured), ``--record-only --seeds 2`` (48 traces, 255 s
+wall on a loaded machine): with the temperature unchanged (45/48, T10 logged is measured);
+without it, not hot 24/24 (z_C SD 0.07: the grid's T10 is the room's exactly, which a real
+bench's is not), hot |z_C| <= 2 **24/24** (21/24 before: c23-hot5 +0.87 %, z 2.6 -> 1.3 and
+2.1 -> 1.2; z_C SD 0.72), C within 2 % 23/24 (c15-hot5 +2.05 %, z 1.7, unchanged).
 """
 
 from __future__ import annotations
