@@ -241,12 +241,18 @@ def main_discrepancy(folder: Path, ld_stated: bool = True) -> int:
 
 def main(argv: list[str]) -> int:
     """Print the table and the summary for the folder ``argv[0]`` (default: small grid);
-    with ``--discrepancy`` first, the discrepancy workflow's verdicts instead."""
+    with ``--discrepancy`` first, the discrepancy workflow's verdicts instead; ``--plot
+    PNG``: the errors with their 2-sigma bars drawn there too."""
     if argv and argv[0] == "--discrepancy":
         rest = [a for a in argv[1:] if a != "--no-ld"]
         return main_discrepancy(Path(rest[0]) if rest else DATA_DIR, "--no-ld" not in argv)
     wall_assumed = "--wall-assumed" in argv
     argv = [a for a in argv if a != "--wall-assumed"]
+    plot = None
+    if "--plot" in argv:
+        k = argv.index("--plot")
+        plot = Path(argv[k + 1])
+        argv = argv[:k] + argv[k + 2:]
     folder = Path(argv[0]) if argv else DATA_DIR
     items = traces(folder)
     if not items:
@@ -265,6 +271,12 @@ def main(argv: list[str]) -> int:
         print(line, flush=True)
         errors.append(error)
         zs.append(z)
+    if plot is not None:
+        from validation_plot import error_bars
+
+        error_bars(plot, f"HydDown discharges ({folder.name}), 1 kHz, 0.1 % FS noise",
+                   [t.name for t in items], errors,
+                   [e / z if z else math.nan for e, z in zip(errors, zs, strict=True)], 0.02)
     e = np.abs(np.asarray(errors))
     zz = np.abs(np.asarray(zs))
     n = len(items)

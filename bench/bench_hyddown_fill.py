@@ -321,6 +321,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", nargs="*", default=None,
                     help="analyse only these trace names (a subset of the folder)")
     ap.add_argument("--json", type=Path, default=None, help="write the rows and summary here")
+    ap.add_argument("--plot", type=Path, default=None,
+                    help="draw each analysis's C error with its 2-sigma bar to this PNG")
     args = ap.parse_args(argv)
     paths = sorted(args.traces.glob("*.npz"))
     if args.only:
@@ -354,6 +356,13 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\n{len(rows)} analyses in {wall:.0f} s wall ({args.jobs} job(s), "
           f"{sum(r.runtime for r in rows):.0f} s of analysis)")
     print("\n".join(lines))
+    if args.plot is not None:
+        from validation_plot import error_bars
+
+        error_bars(args.plot, f"HydDown fills ({args.traces.name}, blend "
+                   f"{meta0.get('blend', '?')}), mode {args.mode}, 1 kHz",
+                   [f"{r.name} #{r.seed}" for r in rows], [r.error for r in rows],
+                   [r.conductance_std / r.truth for r in rows], 0.02)
     if args.json is not None:
         args.json.write_text(json.dumps({
             "traces": str(args.traces), "mode": args.mode, "seeds": args.seeds,

@@ -170,7 +170,7 @@ def _guarded(residual: Residual, params: Parameters, n_out: list[int]
 def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
                         f: FloatArray, lo: FloatArray, hi: FloatArray, *, max_iter: int,
                         move: Callable[[FloatArray, FloatArray], FloatArray] | None = None,
-                        hold_outward: bool = False
+                        hold_outward: bool = False, jac0: FloatArray | None = None
                         ) -> tuple[FloatArray, FloatArray, FloatArray, bool, int]:
     """Bounded Levenberg-Marquardt to the exact minimum (scaled coordinates of order one).
 
@@ -186,7 +186,8 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
     each lowered chi^2 by less than that. ``move(x, d)`` takes a step d from x (default
     x + d; :meth:`~pneumatic_unload.fit.params.Parameters.step` for fading effects);
     ``hold_outward`` also holds a coordinate on a bound that the Gauss-Newton step pushes
-    outward (not only the gradient).
+    outward (not only the gradient). ``jac0``: the Jacobian of the first iteration, where
+    the caller has it for a point within rounding of x (a restart from a minimum).
 
     Returns
     -------
@@ -204,9 +205,12 @@ def levenberg_marquardt(fun: Callable[[FloatArray], FloatArray], x: FloatArray,
     lam = 1e-3
     stalls = 0
     jac = np.full((f.size, x.size), math.nan)
-    for _ in range(max_iter):
-        jac = forward_jacobian(fun, x, f, lo, hi)
-        nfev += x.size
+    for it in range(max_iter):
+        if it == 0 and jac0 is not None and jac0.shape == (f.size, x.size):
+            jac = jac0
+        else:
+            jac = forward_jacobian(fun, x, f, lo, hi)
+            nfev += x.size
         if not np.all(np.isfinite(jac)):
             return x, f, jac, False, nfev
         g = jac.T @ f
@@ -391,9 +395,11 @@ def restart_spread(residual: Residual, result: FitResult, *, fade: bool = False,
         fading = fade and any(p.fade and p.vary for p in params)
         signs = np.where(np.arange(result.x.size) % 2 == 0, 1.0, -1.0)
         x0 = np.clip(result.x + displacement * signs, lo, hi)
+        # the first iteration takes the minimum's Jacobian: the start is 1e-11 away in
+        # scaled coordinates, a thousandth of the forward difference's own step
         x, f, jac, _ok, _n = levenberg_marquardt(
             fun, x0, fun(x0), lo, hi, max_iter=max(2, max_nfev // 2),
-            move=params.step if fading else None, hold_outward=fading)
+            move=params.step if fading else None, hold_outward=fading, jac0=result.jac)
     failed = not (np.all(np.isfinite(f)) and np.all(np.isfinite(jac)))
     values = params.to_values(x)
     return {name: math.nan if failed else (abs(values[name] - result.values[name])
