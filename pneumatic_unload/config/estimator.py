@@ -278,6 +278,32 @@ def supply_gas_temperature(supply: float | None, wall: float | None) -> float:
     return AMBIENT_TEMPERATURE if wall is None else wall
 
 
+def with_wall(settings: EstimatorSettings, wall: float, **changes: object
+              ) -> EstimatorSettings:
+    """``settings`` with the wall temperature set to ``wall`` [K] (and ``changes``), a
+    charge's supply temperature kept where it was: T_s defaults to the wall's only where
+    the wall is given, so an assumed wall's move (a budget's wall line, a hot start's
+    room) is not the supply's (it moved C by T_s's 0.34 % for 2 K; T_s has its own
+    line)."""
+    if settings.charge and settings.supply_temperature is None \
+            and settings.wall_temperature is None:
+        changes = {"supply_temperature": settings.supply_gas_temperature, **changes}
+    return dataclasses.replace(settings, wall_temperature=wall, **changes)  # type: ignore[arg-type]
+
+
+def supply_temperature_uncertainty(settings: EstimatorSettings) -> tuple[float, str]:
+    """Standard uncertainty of a charge's supply temperature T_s [K] and where it comes
+    from: the stated ``temperature_uncertainty``; T_s given, or the wall's given,
+    :data:`PROBE_STD`; else (a room's 20 C assumed) a room's :data:`WALL_ASSUMED_STD`."""
+    s = settings
+    if s.temperature_uncertainty is not None:
+        return s.temperature_uncertainty, "temperature_uncertainty"
+    if s.supply_temperature is not None or s.wall_temperature is not None:
+        return PROBE_STD, f"measured; default {PROBE_STD:g} K (a probe)"
+    return WALL_ASSUMED_STD, (f"not measured: a room's {AMBIENT_TEMPERATURE:g} K assumed, "
+                              f"+- {WALL_ASSUMED_STD:g} K")
+
+
 def t10_measured(settings: EstimatorSettings, logged: bool = False) -> bool:
     """Whether T10 was measured [-]: given away from its default (a room's
     :data:`AMBIENT_TEMPERATURE`), a wall given beside it, or a logged gas temperature

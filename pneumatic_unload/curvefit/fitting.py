@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 from pneumatic_unload.config.estimator import (
     EstimatorSettings,
     wall_uncertainty,
+    with_wall,
 )
 from pneumatic_unload.config.tank import WALL_RANGE
 from pneumatic_unload.curvefit.curve_fit_result import CurveFit, CurveSpan
@@ -426,7 +427,7 @@ def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: flo
     out = []
     for sign in (1.0, -1.0):
         wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
-        moved = dataclasses.replace(settings, wall_temperature=wall)
+        moved = with_wall(settings, wall)
         start = start_from(fit, span.t_ref, heat_scale=fit.heat_scale,
                             tau_heat=fit.tau_heat, heat_exponent=fit.heat_exponent,
                             heat_turbulent=fit.heat_turbulent)

@@ -17,7 +17,6 @@ SI units: s, Pa absolute, K, m^3/(s Pa).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -32,6 +31,7 @@ from pneumatic_unload.config.estimator import (
     EstimatorSettings,
     probe_uncertainty,
     t10_measured,
+    with_wall,
 )
 from pneumatic_unload.curvefit.curve_fit_result import CurveFit, CurveSpan
 from pneumatic_unload.curvefit.heat_law_offer import (
@@ -165,7 +165,7 @@ class Family:
         self.raw[key] = kept
         settings, warm = self.settings, wall and self.t10_assumed
         if warm:  # a hot start read as a gas warm from its charge in a tank at the room's
-            settings = dataclasses.replace(settings, wall_temperature=AMBIENT_TEMPERATURE)
+            settings = with_wall(settings, AMBIENT_TEMPERATURE)
         out = fit_law(self.span, settings, profile_heat=profile_heat, law=law,
                       start=start, max_nfev=max_nfev, fit_wall=wall and not warm,
                       fit_m=fit_m, fit_offset=self.offset, fit_t10=warm,
@@ -210,7 +210,7 @@ class Family:
             return None
         law, _wall, fit_m = split_key(key)
         warm = self.t10_assumed
-        settings = dataclasses.replace(self.settings, wall_temperature=AMBIENT_TEMPERATURE) \
+        settings = with_wall(self.settings, AMBIENT_TEMPERATURE) \
             if warm else self.settings
         model = estimator_model(settings, kept["model"].start, heat_law=law, fit_m=fit_m,
                                 fit_offset=self.offset, fit_t10=warm, fit_wall=not warm,

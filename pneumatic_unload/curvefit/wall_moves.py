@@ -12,17 +12,23 @@ SI units: K, m^3/(s Pa); b is a pressure ratio [-].
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any
 
 import numpy as np
 
-from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.config.estimator import EstimatorSettings, with_wall
 from pneumatic_unload.config.tank import WALL_RANGE
 from pneumatic_unload.curvefit.curve_fit_result import CurveFit
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.model.inversion import estimator_model
+
+#: Singular values of the fit's Jacobian below this fraction of the largest are held in
+#: the first-order step where the full step leaves the float range [-]: a heat exchange
+#: near its faded end (no exchange) is a direction the record does not determine, and its
+#: step is undefined (the two refits it took instead walked the flat valley: 148 residual
+#: evaluations and C moved 0.3 % by the walk, not by the wall; an adiabatic rig's charge).
+NULL_RCOND = 1e-8
 
 
 def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
@@ -48,7 +54,7 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
         live = ~((fit.x - lo < 1e-3 * (hi - lo)) | (hi - fit.x < 1e-3 * (hi - lo)))
         for sign in (1.0, -1.0):
             wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
-            moved = estimator_model(dataclasses.replace(settings, wall_temperature=wall),
+            moved = estimator_model(with_wall(settings, wall),
                                     model.start, heat_law=law,
                                     fit_m=model.subsonic_index is None,
                                     fit_offset="sensor_offset" in model.effects,
@@ -63,10 +69,17 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
             # parameters on a bound of their range (a thermometer's lag at its floor) are
             # held: their flat column would take the step out of the float range
             dx = np.zeros(len(free))
-            dx[live], *_ = np.linalg.lstsq(jac[:, live], -dr, rcond=1e-12)
-            try:  # a step beyond float range (log coordinates): not to first order
-                v = fit.params.to_values(fit.x + dx)
-            except OverflowError:
+            v = None
+            for rcond in (1e-12, NULL_RCOND):
+                dx[live], *_ = np.linalg.lstsq(jac[:, live], -dr, rcond=rcond)
+                try:  # a step beyond float range (log coordinates): not to first order
+                    v = fit.params.to_values(fit.x + dx)
+                    break
+                except OverflowError:
+                    # along a direction the record does not determine (a heat exchange
+                    # near its faded end: no exchange) the step is undefined: held
+                    continue
+            if v is None:
                 return math.nan, math.nan
             moves.append(v["C"] - fit.values["C"])
             b_moves.append(v["b"] - fit.values["b"] if "b" in free else math.nan)

@@ -32,7 +32,7 @@ import numpy as np
 
 from pneumatic_unload import physics
 from pneumatic_unload.charge import charge_conductance_adiabatic
-from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.config.estimator import EstimatorSettings, supply_temperature_uncertainty
 from pneumatic_unload.estimation.types import CrossingEstimate
 from pneumatic_unload.model.inversion import (
     CRITICAL_RATIO_PRIOR_STD,
@@ -138,6 +138,7 @@ def plan_charge(settings: EstimatorSettings, *, p10: float, p_s: float, p_star: 
     c39 = physics.conductance_eq39(tau_ref, p_s, p10, s.volume, t_s, gas)
     c_adi = adiabatic(tau_ref)
     u = input_uncertainties(s, max(p_s, p10))
+    u_ts, ts_why = supply_temperature_uncertainty(s)
     d = u["pressure"]
     ds = d if supply_measured else 0.0
 
@@ -148,9 +149,8 @@ def plan_charge(settings: EstimatorSettings, *, p10: float, p_s: float, p_star: 
                           abs(c) * u["volume"] / s.volume,
                           "stated" if s.volume_uncertainty is not None
                           else f"default {100 * VOLUME_REL_DEFAULT:g} % of V"),
-               BudgetTerm("supply temperature T_s", "B", t_s, u["temperature"], "K",
-                          abs(c) * 0.5 * u["temperature"] / t_s,
-                          "temperature_uncertainty")]
+               BudgetTerm("supply temperature T_s", "B", t_s, u_ts, "K",
+                          abs(c) * 0.5 * u_ts / t_s, ts_why)]
         # an offset moves every reading: p10, the crossing and a measured supply
         moved = [closed(p10 + e, p_s + e * (ds / d if d else 0.0), p_star + e)
                  for e in (d, -d)]

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty
+from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertainty, with_wall
 from pneumatic_unload.config.tank import wall_pair
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import Start
@@ -456,7 +456,7 @@ def inversion_table(settings: EstimatorSettings, *, p10: float, p_atm: float, p_
         walls = wall_pair(settings.wall, u)
         tw = []
         for wall in walls:
-            moved = dataclasses.replace(settings, wall_temperature=wall)
+            moved = with_wall(settings, wall)
             cfg = rig_from_settings(moved, conductance=math.exp(log_c[TABLE_POINTS // 2]),
                                     p10=p10, p_atm=p_atm)
             tw.append(model_crossing_time(cfg, p_star, t_mid, rtol=INVERSION_ODE_RTOL))

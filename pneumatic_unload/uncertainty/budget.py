@@ -37,7 +37,6 @@ SI units: m^3/(s Pa) for C, m^3, K, Pa, s.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -49,6 +48,7 @@ from pneumatic_unload.config.estimator import (
     probe_uncertainty,
     t10_uncertainty,
     wall_uncertainty,
+    with_wall,
 )
 from pneumatic_unload.config.tank import wall_pair
 from pneumatic_unload.model.inversion import invert_crossing
@@ -422,7 +422,7 @@ def wall_sensitivity(settings: EstimatorSettings, tau: float, *, p10: float, p_a
         return 0.0
     out = []
     for wall in walls:
-        moved = dataclasses.replace(settings, wall_temperature=wall, heat_model="natural")
+        moved = with_wall(settings, wall, heat_model="natural")
         try:
             c, _sd = invert_crossing(tau, 0.0, p10=p10, p_atm=p_atm, p_star=p_star,
                                      settings=moved, c_start=c_start)
