@@ -22,6 +22,19 @@ Run::
 
     PYTHONPATH=. .venv/bin/python bench/bench_final_fit.py [--unloads 60] [--slow N]
         [--charge N] [--repeat 3] [--json out.json] [--compare before.json]
+
+Measured (2 cores, session 17), residual evaluations per final fit, p50 / max, ``--charge``:
+
+* main fa421fb, 20 charges: 1 kHz 92 / 146, 10 kHz 69.5 / 163 (the constant-hA law up to
+  100-108 walking the flat valley of an exchange the record does not show);
+* the constant-hA law's budget 12 where the natural law leaves the exchange undetermined
+  (``law_family.FLAT_EXCHANGE_NFEV``): 89.5 / 127, 69.5 / 132; C within 6e-4 relative, no
+  law changed (a budget of 6: chi^2 up to 3.6 residual variances worse, 3 laws changed);
+* the reproducibility restart on the minimum's Jacobian: 73.5 / 117, 64.5 / 127, every C,
+  sigma and chi^2 identical;
+* 80 charges: 10 kHz max 277 (two wall refits that walked the valley, and moved T_s with
+  the wall) -> 137 with ``config.estimator.with_wall`` and ``wall_moves.NULL_RCOND``;
+  CPU p99 32.8 -> 26.8 ms; C identical, sigma -13 % median (T_s no longer counted twice).
 """
 
 from __future__ import annotations
