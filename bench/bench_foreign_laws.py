@@ -228,8 +228,10 @@ def row(res: dict) -> tuple[str, dict]:
     stats = {"family": case.family, "ok": True, "c_err": ce,
              "c_z": _z(res["c"] - tr.conductance, res["c_std"]), "b_err": be,
              "b_z": _z(be, res["b_std"]), "b_err_free": be_free, "m_err": me,
-             "m_err_free": me_free,
+             "m_err_free": me_free, "b_z_free": _z(be_free, res["b_std"]),
              "m_z": _z(me, res["m_std"]) if res["m_fitted"] or res["m_reported"] else math.nan,
+             "m_z_free": _z(me_free, res["m_std"]) if res["m_fitted"] or res["m_reported"]
+             else math.nan,
              "m_held": not res["m_fitted"]}
     m_text = f"{res['m']:.3f}" + ("" if res["m_fitted"] else " held")
     m_z = f"{stats['m_z']:+.2f}" if math.isfinite(stats["m_z"]) else "-"
@@ -260,19 +262,20 @@ def summary(stats: list[dict]) -> list[str]:
     lines = ["| family | n | C err mean [%] | max abs C err [%] | z_C mean | z_C SD | "
              "abs z_C <= 2 | C within 1 % | b err mean | max abs b err | abs z_b <= 2 | "
              "b within 0.03 | b within 0.03 (free) | m err mean | max abs m err | "
-             "abs z_m <= 2 | m within 0.05 | m within 0.05 (free) |",
-             "|---" * 18 + "|"]
+             "abs z_m <= 2 | m within 0.05 | m within 0.05 (free) | abs z_b <= 2 (free) | "
+             "abs z_m <= 2 (free) |",
+             "|---" * 20 + "|"]
     families = sorted({s["family"] for s in stats}, key=["iso", "nozzle", "series"].index)
     for fam in [*families, "all"]:
         group = [s for s in stats if s["ok"] and fam in ("all", s["family"])]
         failed = sum(1 for s in stats if not s["ok"] and fam in ("all", s["family"]))
         if not group:
-            lines.append(f"| {fam} | 0 (+{failed} no result) |" + " - |" * 16)
+            lines.append(f"| {fam} | 0 (+{failed} no result) |" + " - |" * 18)
             continue
-        c, cz, b, bz, bf, m, mz, mf = (
+        c, cz, b, bz, bf, m, mz, mf, bzf, mzf = (
             np.array([s[k] for s in group], dtype=float)
             for k in ("c_err", "c_z", "b_err", "b_z", "b_err_free", "m_err", "m_z",
-                      "m_err_free"))
+                      "m_err_free", "b_z_free", "m_z_free"))
         held = all(s["m_held"] for s in group)
         lines.append(
             f"| {fam} | {len(group)}{f' (+{failed} no result)' if failed else ''} | "
@@ -281,7 +284,8 @@ def summary(stats: list[dict]) -> list[str]:
             f"{_share(c, C_TOL)} | {np.nanmean(b):+.4f} | {_max_abs(b, 4)} | "
             f"{_share(bz, 2.0)} | {_share(b, B_TOL)} | {_share(bf, B_TOL)} | "
             f"{np.mean(m):+.3f}{' (held)' if held else ''} | {_max_abs(m, 3)} | "
-            f"{_share(mz, 2.0)} | {_share(m, M_TOL)} | {_share(mf, M_TOL)} |")
+            f"{_share(mz, 2.0)} | {_share(m, M_TOL)} | {_share(mf, M_TOL)} | "
+            f"{_share(bzf, 2.0)} | {_share(mzf, 2.0)} |")
     return lines
 
 

@@ -143,7 +143,11 @@ def test_simulator_estimator_recorder_end_to_end(tmp_path: Path, ros_node: Any,
     assert len(offline) == len(recorded)
     for live, off in zip(recorded, offline, strict=True):
         for key in ("conductance", "conductance_model", "tau_exp", "p10", "p_star"):
-            assert off[key] == live[key], key  # the same machine: bit for bit
+            # the same machine: bit for bit (said in full when not: which estimate, and
+            # what the estimator reported, e.g. a temperature log short of its span)
+            assert off[key] == live[key], (
+                f"{key} of {live.get('method')}: offline {off[key]!r}, live {live[key]!r}; "
+                f"estimator said:\n{est.output()[-3000:]}")
 
 
 def test_measure_action(tmp_path: Path, ros_node: Any) -> None:
