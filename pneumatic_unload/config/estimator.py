@@ -35,8 +35,8 @@ PROBE_STD = 1.0
 #: :data:`AMBIENT_TEMPERATURE`, with no wall given and no logged temperature): the gas may
 #: lie anywhere within the hot-start claim's threshold, 3 x :data:`WALL_ASSUMED_STD` either
 #: side of the room's temperature (a gas warm from its charge, a room not at 20 C), without
-#: the record claiming it (:mod:`pneumatic_unload.curvefit.law_family`): uniformly, its RMS distance
-#: is 6 K / sqrt(3) (GUM 4.3.7). A 5 K warm gas then reads C +0.87 % at z 1.5, not 2.6
+#: the record claiming it (:mod:`pneumatic_unload.curvefit.law_family`): uniformly, its RMS
+#: distance is 6 K / sqrt(3) (GUM 4.3.7). A 5 K warm gas then reads C +0.87 % at z 1.5, not 2.6
 #: (bench/bench_temperature_records.py).
 T10_UNMEASURED_STD = 3.0 * WALL_ASSUMED_STD / math.sqrt(3.0)
 
@@ -296,12 +296,9 @@ def supply_temperature_uncertainty(settings: EstimatorSettings) -> tuple[float, 
     from: the stated ``temperature_uncertainty``; T_s given, or the wall's given,
     :data:`PROBE_STD`; else (a room's 20 C assumed) a room's :data:`WALL_ASSUMED_STD`."""
     s = settings
-    if s.temperature_uncertainty is not None:
-        return s.temperature_uncertainty, "temperature_uncertainty"
-    if s.supply_temperature is not None or s.wall_temperature is not None:
-        return PROBE_STD, f"measured; default {PROBE_STD:g} K (a probe)"
-    return WALL_ASSUMED_STD, (f"not measured: a room's {AMBIENT_TEMPERATURE:g} K assumed, "
-                              f"+- {WALL_ASSUMED_STD:g} K")
+    return _temperature_std(s, s.supply_temperature is not None
+                            or s.wall_temperature is not None, WALL_ASSUMED_STD,
+                            f"+- {WALL_ASSUMED_STD:g} K")
 
 
 def t10_measured(settings: EstimatorSettings, logged: bool = False) -> bool:
@@ -320,18 +317,25 @@ def probe_uncertainty(settings: EstimatorSettings) -> float:
     return PROBE_STD if u is None else u
 
 
-def t10_uncertainty(settings: EstimatorSettings, logged: bool = False) -> tuple[float, str]:
+def t10_uncertainty(settings: EstimatorSettings) -> tuple[float, str]:
     """Standard uncertainty of T10 [K] and where it comes from: the stated
     ``temperature_uncertainty``; else measured (:func:`t10_measured`) :data:`PROBE_STD`, not
     measured :data:`T10_UNMEASURED_STD`."""
-    s = settings
+    return _temperature_std(settings, t10_measured(settings), T10_UNMEASURED_STD,
+                            f"+- 3 x {WALL_ASSUMED_STD:g} K (a gas warm from its charge that "
+                            "the record does not show, a room not at 20 C)/sqrt(3)")
+
+
+def _temperature_std(s: EstimatorSettings, measured: bool, unmeasured: float,
+                     spread: str) -> tuple[float, str]:
+    """A temperature's standard uncertainty [K] and its source: the stated
+    ``temperature_uncertainty``; else a probe's :data:`PROBE_STD` where ``measured``; else
+    ``unmeasured`` [K], a room's temperature assumed with that ``spread`` (in words)."""
     if s.temperature_uncertainty is not None:
         return s.temperature_uncertainty, "temperature_uncertainty"
-    if t10_measured(s, logged):
+    if measured:
         return PROBE_STD, f"measured; default {PROBE_STD:g} K (a probe)"
-    return T10_UNMEASURED_STD, (f"not measured: a room's {AMBIENT_TEMPERATURE:g} K assumed, "
-                                f"+- 3 x {WALL_ASSUMED_STD:g} K (a gas warm from its charge "
-                                "that the record does not show, a room not at 20 C)/sqrt(3)")
+    return unmeasured, f"not measured: a room's {AMBIENT_TEMPERATURE:g} K assumed, {spread}"
 
 
 def wall_uncertainty(settings: EstimatorSettings,
