@@ -3,17 +3,25 @@
 At import time (before any test module can import rclpy) every test run gets its own
 ROS_DOMAIN_ID, exported in os.environ so that spawned node processes inherit it: two test
 runs on one machine otherwise see each other's topics. Set PNEUMATIC_UNLOAD_KEEP_DOMAIN to
-keep the ROS_DOMAIN_ID of the environment. Keep this file small and generic.
+keep the ROS_DOMAIN_ID of the environment. numpy's BLAS runs on one thread here as in the
+package's programs (:func:`pneumatic_unload.single_threaded_blas`, before numpy is first
+imported), so that what a test computes in process is what a node computes. Keep this file
+small and generic.
 """
 
 import os
 import sys
 from pathlib import Path
 
-import pytest
-from pgserver import pg_server, pg_url  # noqa: F401  (one PostgreSQL per session)
+from pneumatic_unload import single_threaded_blas
 
-from pneumatic_unload.app.launch import free_domain_id
+single_threaded_blas()
+assert "numpy" not in sys.modules, "numpy's BLAS threads are set before numpy is imported"
+
+import pytest  # noqa: E402
+from pgserver import pg_server, pg_url  # noqa: E402, F401  (one PostgreSQL per session)
+
+from pneumatic_unload.app.launch import free_domain_id  # noqa: E402
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 

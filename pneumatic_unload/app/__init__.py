@@ -9,3 +9,7 @@ launcher, each run as a program (no other part of the package imports them).
 * :mod:`~pneumatic_unload.app.launch` - a minimal process launcher for the nodes
   (``python -m pneumatic_unload.app.launch launch/bench.launch.yaml``; ROS-free).
 """
+
+from pneumatic_unload import single_threaded_blas
+
+single_threaded_blas()  # before numpy: every program here (and its Dask workers)

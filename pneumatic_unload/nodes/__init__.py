@@ -35,6 +35,8 @@ import threading
 from pathlib import Path
 from types import FrameType
 
+from pneumatic_unload import single_threaded_blas
+
 #: Signals a node holds (see the module docstring).
 HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -76,3 +78,4 @@ def node_program() -> str | None:
 
 if node_program() is not None:
     hold_signals()
+    single_threaded_blas()  # before numpy (see pneumatic_unload.single_threaded_blas)
