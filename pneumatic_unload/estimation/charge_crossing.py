@@ -23,7 +23,6 @@ SI units: s, Pa absolute, K, m^3, m^3/(s Pa).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -45,6 +44,7 @@ from pneumatic_unload.uncertainty.budget import (
     VOLUME_REL_DEFAULT,
     Budget,
     BudgetTerm,
+    ScaledBudget,
     input_uncertainties,
     model_form_term,
     model_limits_term,
@@ -87,8 +87,10 @@ class ChargePlan:
         The reference crossing time [s].
     c39_ref, c_adi_ref : float
         eq 39 mirrored and the adiabatic closed form at tau_ref [m^3/(s Pa)].
-    lines39, lines_adi : tuple of BudgetTerm
-        Their stated inputs' lines at the reference (proportional to C).
+    eq39, adiabatic : ScaledBudget or None
+        Their budgets at the reference, the stated inputs' lines proportional to C, scaled
+        at the crossing; free: eq 39's crossing-time line, the model C's type A, model
+        form and model-limits lines (None with a ``problem``).
     b_rel : float
         The b prior's line relative to C [-].
     table : tuple of float or None
@@ -105,8 +107,8 @@ class ChargePlan:
     tau_ref: float = math.nan
     c39_ref: float = math.nan
     c_adi_ref: float = math.nan
-    lines39: tuple[BudgetTerm, ...] = ()
-    lines_adi: tuple[BudgetTerm, ...] = ()
+    eq39: ScaledBudget | None = None
+    adiabatic: ScaledBudget | None = None
     b_rel: float = math.nan
     table: tuple[float, float, float, float, float] | None = None
 
@@ -187,13 +189,14 @@ def plan_charge(settings: EstimatorSettings, *, p10: float, p_s: float, p_star: 
             coef = np.polyfit(x, np.array([v[1] for v in logs]), 2)
             table = (float(coef[2]), float(coef[1]), float(coef[0]),
                      float(math.exp(x.min())), float(math.exp(x.max())))
+    eq39 = ScaledBudget(Budget(c39, (tau_term(c39, tau_ref, 0.0), *lines39)),
+                        free=(tau_term(c39, tau_ref, 0.0).name,))
+    free = (record_term(CHARGE_TYPE_A, 0.0), model_form_term(0.0, ""),
+            model_limits_term(c_adi, s.model_limits))
+    model = ScaledBudget(Budget(c_adi, (free[0], *lines_adi, *free[1:])),
+                         free=tuple(t.name for t in free))
     return ChargePlan(s, p10, p_s, p_star, supply_measured, None, tau_ref, c39, c_adi,
-                      lines39, lines_adi, b_rel, table)
-
-
-def _scaled(lines: tuple[BudgetTerm, ...], k: float) -> tuple[BudgetTerm, ...]:
-    """Budget lines with their contributions times k [-]."""
-    return tuple(dataclasses.replace(t, std=t.std * k) for t in lines)
+                      eq39, model, b_rel, table)
 
 
 def charge_crossing_estimate(plan: ChargePlan, tau: float, tau_std: float
@@ -217,8 +220,9 @@ def charge_crossing_estimate(plan: ChargePlan, tau: float, tau_std: float
                                 "eq39-charge", {})
     k = plan.tau_ref / tau  # both closed forms are C ~ 1/tau at fixed pressures
     c39, c_adi = plan.c39_ref * k, plan.c_adi_ref * k
-    budget39 = Budget(c39, (tau_term(c39, tau, tau_std), *_scaled(plan.lines39, k)))
-    extra: dict[str, Any] = {"budget_eq39": budget39.to_dict(), "direction": "charge"}
+    a = tau_term(c39, tau, tau_std)
+    budget39 = plan.eq39.dict_at(c39, {a.name: a})  # type: ignore[union-attr]
+    extra: dict[str, Any] = {"budget_eq39": budget39, "direction": "charge"}
     c_model, method = c_adi, "adiabatic-charge"
     form = model_form_term(0.0, "no heat law")
     heat_std = 0.0
@@ -238,9 +242,15 @@ def charge_crossing_estimate(plan: ChargePlan, tau: float, tau_std: float
             heat_std = HEAT_CORRELATION_REL_STD * abs(c_heat - c_adi)
     b_std = plan.b_rel * c_model
     type_a = math.sqrt((c_model * tau_std / tau) ** 2 + b_std**2 + heat_std**2)
-    bm = Budget(c_model, (record_term(CHARGE_TYPE_A, type_a),
-                          *_scaled(plan.lines_adi, c_model / plan.c_adi_ref), form,
-                          model_limits_term(c_model, s.model_limits)))
-    extra["budget"] = bm.to_dict()
-    return CrossingEstimate(None, c39, budget39.combined_std, c_adi, c_model,
-                            bm.combined_std, method, extra)
+    given = [record_term(CHARGE_TYPE_A, type_a), form,
+             model_limits_term(c_model, s.model_limits)]
+    bm = plan.adiabatic.dict_at(c_model, {t.name: t for t in given})  # type: ignore[union-attr]
+    extra["budget"] = bm
+    return CrossingEstimate(None, c39, _std(budget39), c_adi, c_model, _std(bm), method,
+                            extra)
+
+
+def _std(budget: dict[str, Any]) -> float:
+    """The combined standard uncertainty [m^3/(s Pa)] of a budget dict (NaN for None)."""
+    v = budget["combined_std"]
+    return math.nan if v is None else v
