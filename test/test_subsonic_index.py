@@ -145,3 +145,28 @@ def test_results_database_of_schema_1_gains_the_m_columns(tmp_path):
     assert {"subsonic_index", "subsonic_index_std", "pressure_offset",
             "pressure_offset_std", "direction", "supply_pressure"} <= cols
     assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3
+
+
+def test_a_held_m_carries_the_heat_laws_spread_of_m():
+    """m held at 0.5 where the laws fitted with m disagree about it: the pair whose upstream
+    element chokes (ISO-shaped only roughly: the free least-squares ISO law of its flow
+    curve has m 0.491) was held at 0.500 +- 0.0024 (the constant-hA law's m-free fit alone;
+    the density law fitted with m, 4 in BIC from it, put m at 0.523): 3.8 sigma from the
+    free fit's m. Now m's uncertainty is the root mean square of holding 0.5 with the laws'
+    spread of m (its budget's model-form line), and C's and b's m lines grow with it."""
+    pair = Series(IsoLaw(6e-9, 0.45, 0.5), IsoLaw(1.5e-8, 0.2, 0.5))
+    r = _run(pair, 3e-3, 6e5, 5.0, "series-upstream-chokes")
+    tr = truth(pair)
+    fit = r.extra["curve_fit"]
+    assert not fit["subsonic_index_fitted"] and r.subsonic_index == 0.5, fit["subsonic_source"]
+    laws = fit["laws"]
+    free = laws[fit["heat_law"] + "|m"]
+    rms = math.hypot(free["subsonic_index_std"], free["subsonic_index"] - 0.5)
+    assert r.subsonic_index_std > 1.5 * rms  # the laws' spread, beyond the chosen law's own
+    terms = {x["name"]: x for x in r.extra["budget_m"]["terms"]}
+    assert terms["m held"]["std"] == pytest.approx(rms)
+    assert terms["model form (heat laws)"]["std"] > rms
+    assert abs(r.subsonic_index - tr.fit_m) <= 2.0 * r.subsonic_index_std
+    (line,) = [x for x in r.extra["budget"]["terms"] if x["name"] == SUBSONIC_TERM]
+    assert line["input_std"] == pytest.approx(r.subsonic_index_std)
+    assert abs(r.conductance_model / tr.conductance - 1.0) < 0.01

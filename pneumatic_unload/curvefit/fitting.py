@@ -48,7 +48,13 @@ from pneumatic_unload.curvefit.law_fit import (
     fit_law,
     start_from,
 )
-from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX, held_lines, split_key, twin_lines
+from pneumatic_unload.curvefit.subsonic_offer import (
+    M_SUFFIX,
+    held_lines,
+    held_spread,
+    split_key,
+    twin_lines,
+)
 from pneumatic_unload.curvefit.temperature_evidence import (
     FOLLOW_FACTOR,
     channel,
@@ -194,8 +200,14 @@ def fit_curve(
     pool = same if len(same) > 1 else held
     mf = law_spread(pool, bic, ref_law, LAW_BIC_THRESHOLD, "conductance", empty=0.0)
     mf_b = spread_b(pool, bic, ref_law, LAW_BIC_THRESHOLD)
-    mf_m = law_spread(same, bic, best, LAW_BIC_THRESHOLD, "subsonic_index") \
-        if best.endswith(M_SUFFIX) else math.nan
+    if best.endswith(M_SUFFIX):
+        mf_m = law_spread(same, bic, best, LAW_BIC_THRESHOLD, "subsonic_index")
+    elif best + M_SUFFIX in fits:  # m held, the laws fitted with m too: their spread of m
+        mf_m = law_spread({k: f for k, f in fits.items() if k.endswith(M_SUFFIX)}, bic,
+                          best + M_SUFFIX, LAW_BIC_THRESHOLD, "subsonic_index")
+        m_c, m_b, m_u = held_spread(m_c, m_b, m_u, mf_m)
+    else:
+        mf_m = math.nan
     if ref_law != best:  # relative spreads carried over to the chosen law's values
         mf *= cf.conductance / fits[ref_law][0].conductance
     table = {law: {"conductance": f[0].conductance, "critical_ratio": f[0].critical_ratio,

@@ -66,8 +66,9 @@ def held_lines(kept: dict[str, Any] | None, free: CurveFit | None, offered: bool
     """C's [m^3/(s Pa)] and b's [-] standard uncertainty from m held at 0.5, m's standard
     uncertainty [-] and the reason in words: the slopes dC/dm and db/dm along the m-free
     fit's valley (``kept``: its FitResult 'result' and covariance scale 's2'; ``free``: its
-    CurveFit) times m's uncertainty: max(its 1-sigma, its distance from 0.5) where the
-    record determines m (``offered``), else :data:`SUBSONIC_INDEX_PRIOR_SD`. NaN when
+    CurveFit) times m's uncertainty: the root mean square of holding 0.5, sqrt(sigma^2 +
+    (m - 0.5)^2) of the m-free fit's m and 1-sigma, where the record determines m
+    (``offered``), else :data:`SUBSONIC_INDEX_PRIOR_SD`. NaN when
     there is no m-free fit to take the slopes from."""
     if kept is None or free is None or "result" not in kept:
         return math.nan, math.nan, SUBSONIC_INDEX_PRIOR_SD, FAILED
@@ -91,14 +92,15 @@ def twin_lines(tw: Twin | None, *, determined: bool | None = None,
     """As :func:`held_lines`, from m's twin of the held fit (the first-order one of
     :func:`~pneumatic_unload.curvefit.linear_twin.linear_twin`, or the m-free fit's): where the
     record determines m (``determined``; default: within :data:`SUBSONIC_INDEX_MAX_SD`),
-    m's uncertainty is max(its 1-sigma, its distance from 0.5), else
+    m's uncertainty is the root mean square of holding 0.5, sqrt(sigma^2 + (m - 0.5)^2)
+    (it was max(sigma, |m - 0.5|): a held m 0.009 from the truth stated +- 0.0024), else
     :data:`SUBSONIC_INDEX_PRIOR_SD`; ``how``: why m is held all the same."""
     if tw is None:
         return math.nan, math.nan, SUBSONIC_INDEX_PRIOR_SD, FAILED
     if determined is None:
         determined = tw.std <= SUBSONIC_INDEX_MAX_SD
     if determined:
-        u = max(tw.std, abs(tw.value - SUBSONIC_INDEX_START))
+        u = math.hypot(tw.std, tw.value - SUBSONIC_INDEX_START)
         why = f"m held at 0.5: the record determines m = {tw.value:.3f} +- {tw.std:.3f}, {how}"
     else:
         u = SUBSONIC_INDEX_PRIOR_SD
@@ -122,16 +124,32 @@ def subsonic_term(fit: CurveFit, quantity: str) -> BudgetTerm:
 def m_budget(fit: CurveFit) -> Budget:
     """The budget of m [-]: fitted, the curve fit's line and the heat laws' spread of the
     laws fitted with m (``fit.model_form_std_m``); held, the held value's uncertainty
-    (:func:`held_lines`). The wall temperature's move of m is not evaluated (as b's, it is
-    of second order where the wall is assumed at T10)."""
+    (:func:`held_lines`) and, where the laws were fitted with m too, their spread of m
+    (``fit.model_form_std_m``, folded into ``fit.subsonic_index_std``). The wall
+    temperature's move of m is not evaluated (as b's, it is of second order where the wall
+    is assumed at T10)."""
     if fit.subsonic_index_fitted:
         mf = fit.model_form_std_m if math.isfinite(fit.model_form_std_m) else 0.0
         return Budget(fit.subsonic_index, (
             record_term("curve fit (noise, AR(1), residual structure)",
                         fit.subsonic_index_std), model_form_term(mf)))
+    mf = fit.model_form_std_m if math.isfinite(fit.model_form_std_m) else 0.0
+    held = math.sqrt(max(fit.subsonic_index_std**2 - mf**2, 0.0))
     return Budget(fit.subsonic_index, (
-        BudgetTerm("m held", "B", fit.subsonic_index, fit.subsonic_index_std, "-",
-                   fit.subsonic_index_std, fit.subsonic_source),))
+        BudgetTerm("m held", "B", fit.subsonic_index, held, "-", held, fit.subsonic_source),
+        *((model_form_term(mf),) if mf > 0.0 else ())))
+
+
+def held_spread(m_c: float, m_b: float, m_u: float, spread: float
+                ) -> tuple[float, float, float]:
+    """A held m's lines of C [m^3/(s Pa)] and b [-] and its uncertainty [-] (those of
+    :func:`held_lines`) widened by the heat laws' spread of m among the laws fitted with m
+    (``spread`` [-], NaN or 0: none): m's uncertainty sqrt(m_u^2 + spread^2), the lines
+    along the same slopes."""
+    if not (math.isfinite(spread) and spread > 0.0 and m_u > 0.0):
+        return m_c, m_b, m_u
+    u = math.hypot(m_u, spread)
+    return m_c * u / m_u, m_b * u / m_u, u
 
 
 def offset_terms(fit: CurveFit) -> tuple[BudgetTerm, ...]:
