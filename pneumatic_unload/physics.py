@@ -163,6 +163,22 @@ def orifice_conductance(diameter: float) -> float:
     return 0.128 * d_mm * d_mm * 1e-8
 
 
+def ideal_nozzle_conductance(area: float, gas: Gas = AIR) -> float:
+    """Sonic conductance of an ideal convergent nozzle of throat area ``area`` [m^2]: its
+    choked mass flow A p1 sqrt(gamma / (R T1)) (2 / (gamma + 1))^((gamma + 1) / (2 (gamma -
+    1))) written as ISO 6358's C rho_N p1 sqrt(T_N / T1) [m^3/(s Pa)]. A component's
+    discharge coefficient is C / ideal_nozzle_conductance(A) [-] (a sharp orifice's: about
+    0.6-0.85).
+
+    >>> round(ideal_nozzle_conductance(1e-6) / 1e-9, 4)  # 1 mm^2
+    1.9919
+    """
+    g = gas.gamma
+    choked = math.sqrt(g / (gas.gas_constant * T_N)) * (2.0 / (g + 1.0)) ** (
+        (g + 1.0) / (2.0 * (g - 1.0)))
+    return area * choked / RHO_N
+
+
 def p_star(p10: float, p_atm: float, fraction: float = P_STAR_FRACTION) -> float:
     """Threshold pressure of the unloading time, p* = p_atm + 0.368 (p10 - p_atm) (eq 40).
 

@@ -1,6 +1,7 @@
 """The ``pneumatic-unload`` command line: analyze (bags, CSV, real data), simulate, errors."""
 
 import json
+import math
 import subprocess
 import sys
 
@@ -9,6 +10,7 @@ from realdata import real_file
 
 from pneumatic_unload.app.cli import main
 from pneumatic_unload.io.bag import read_estimates
+from pneumatic_unload.physics import ideal_nozzle_conductance
 
 RULE_OF_THUMB = {"orifice_0.094in.csv": 0.73e-8, "orifice_0.125in.csv": 1.29e-8}
 
@@ -43,6 +45,30 @@ def test_analyze_real_aerolab_csv_within_30_percent(capsys, name):
     else:
         assert "assumed = T10" in wall["note"] and "dC/dTw" in wall["note"]
         assert wall["input_std"] >= (u["initial_temperature"] - 293.15) / 3**0.5 - 1e-9
+
+
+#: The AeroLab orifices' diameters [m] (0.094 in and 0.125 in).
+DIAMETER = {"orifice_0.094in.csv": 0.094 * 0.0254, "orifice_0.125in.csv": 0.125 * 0.0254}
+
+
+def test_real_aerolab_orifices_have_one_discharge_coefficient(capsys):
+    """Two sharp orifices of one rig (0.094 in, 0.125 in): their discharge coefficients C /
+    C_ideal(area) agree within their combined sigma (issue "The component as ISO 6358-1:2013
+    describes it"). Measured: 0.958 +- 0.017 and 1.024 +- 0.099 (0.66 combined sigma apart):
+    both above a sharp orifice's 0.6-0.85, so the rig's stated 0.125 m^3 (the authors'
+    figure) is likely high, which moves both alike (C ~ V)."""
+    cd = {}
+    for name, d in DIAMETER.items():
+        path = real_file(f"aerolab/{name}")
+        code, out, _ = _run(capsys, "analyze", str(path), "--volume", "0.125", "--gauge",
+                            "--atmosphere", "101500", "--pressure-unit", "kPa", "--json")
+        assert code == 0
+        (u,) = [x for x in json.loads(out)["unloads"] if x["final"]]
+        ideal = ideal_nozzle_conductance(math.pi * d * d / 4.0)
+        cd[name] = (u["conductance_model"] / ideal, u["conductance_model_std"] / ideal)
+    (a, sa), (b, sb) = cd.values()
+    assert 0.5 < a < 1.2 and 0.5 < b < 1.2, cd
+    assert abs(a - b) <= math.hypot(sa, sb), cd
 
 
 def test_simulate_then_analyze_reproduces_recorded_estimates(tmp_path, capsys):
