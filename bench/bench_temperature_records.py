@@ -105,6 +105,13 @@ wall on a loaded machine): with the temperature unchanged (45/48, T10 logged is 
 without it, not hot 24/24 (z_C SD 0.07: the grid's T10 is the room's exactly, which a real
 bench's is not), hot |z_C| <= 2 **24/24** (21/24 before: c23-hot5 +0.87 %, z 2.6 -> 1.3 and
 2.1 -> 1.2; z_C SD 0.72), C within 2 % 23/24 (c15-hot5 +2.05 %, z 1.7, unchanged).
+
+Session 18 (a hot start claimed with m free no longer put b on its bound: c07-hot5 without
+T had b 0.010 +- 0.036 for 0.3 and m 0.428 +- 0.007 for 0.5; now the constant-hA law, b
+0.288 +- 0.039, m held 0.5 +- 0.044, C +0.35 % -> +1.7 %, z 1.45): without T, hot, b
+within 0.03 19/24 -> 21/24 (max |error| 0.290 -> 0.033), |z_b| <= 2 21/24 -> 23/24; C
+unchanged (within 2 % 23/24, |z_C| <= 2 24/24); with T, and the foreign flow laws, every
+figure identical.
 """
 
 from __future__ import annotations

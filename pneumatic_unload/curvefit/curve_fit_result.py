@@ -40,6 +40,9 @@ class CurveFit:
         C and its 1-sigma [m^3/(s Pa)].
     critical_ratio, critical_ratio_std : float
         b and its 1-sigma [-] (NaN when the subsonic tail does not identify it).
+    critical_ratio_on_bound : bool
+        The fit put b on the bound of its range (b = 0 is a component's, so b stays
+        reported; a hot start is not claimed with m free where it puts b there).
     t_start : float
         Valve opening instant [s].
     p10, p_atm : float
@@ -176,6 +179,7 @@ class CurveFit:
     pressure_offset_std: float = math.nan
     offset_source: str = ""
     gas_temperature: dict[str, float] = dataclasses.field(default_factory=dict)
+    critical_ratio_on_bound: bool = False
 
     def config(self, settings: EstimatorSettings) -> RigConfig:
         """The fitted model's configuration (valve opening at t = 0) [SI]."""

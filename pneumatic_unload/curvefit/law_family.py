@@ -356,6 +356,13 @@ class Family:
                 self.not_offered[key] = why
                 continue
             hot = self.fit(key, start=self.start_of(base), max_nfev=120)
+            if sfx and hot[0].critical_ratio_on_bound:
+                # a warm gas claimed only with m free and b on its bound: the three trade
+                # (a 5 K warm gas not measured: b 0.010 for 0.3, m 0.428 +- 0.007 for 0.5)
+                self.not_offered[key] = ("with m free, the hot start put b on the bound "
+                                         "of its range: T10, b and m trade, the record "
+                                         "does not tell them apart")
+                continue
             # a hot start is a claim about the rig: a wall clearly away from T10 (3 of the
             # temperature's uncertainties, at least 3 K) makes it, or one nearer that turns
             # the structure every law with the wall at T10 leaves into white residuals; else

@@ -49,6 +49,10 @@ CURVE_FIT_RESOLUTION = 0.01
 UNIT_NOISE = NoiseModel(sigma=1.0, rho=0.0, n=0, source="unit")
 
 
+#: b within this share of its range from a bound is on the bound [-] (a hot start is not
+#: claimed with m's help where it puts b there: ``law_family``).
+B_BOUND_TOL = 1e-6
+
 def curve_fit_bins(t: FloatArray, t_start: float) -> NDArray[np.int64]:
     """Bin edges (sample indices) of the curve fit's likelihood for samples t [s]."""
     return make_bins(np.asarray(t, dtype=float), t_start, resolution=CURVE_FIT_RESOLUTION)
@@ -237,13 +241,16 @@ def fit_law(
     c = v["C"]
     b, b_std = v["b"], float(std["b"])
     m, m_std = v.get("m", SUBSONIC_INDEX_START), float(std.get("m", math.nan))
+    pb = fit.params["b"]
+    on_bound = min(b - pb.lo, pb.hi - b) <= B_BOUND_TOL * (pb.hi - pb.lo)
     if not math.isfinite(b_std) or b_std > 0.05 or b_std == 0.0:
         b, b_std = math.nan, math.nan  # (m may be determined without b: a flow never choked)
     h = v.get("heat_scale", 1.0)
     h_std = float(std["heat_scale"]) if "heat_scale" in free else math.nan
     cf = CurveFit(
         conductance=c, conductance_std=float(std["C"]), critical_ratio=b,
-        critical_ratio_std=b_std, t_start=v["t_open"] + t_ref, p10=v["p10"],
+        critical_ratio_std=b_std, critical_ratio_on_bound=bool(on_bound),
+        t_start=v["t_open"] + t_ref, p10=v["p10"],
         p_atm=v.get("p_atm", p_atm) if settings.end_pressure is None else p_atm,
         heat_scale=h, heat_scale_std=h_std, rms=math.sqrt(s2), n=span.n,
         success=bool(fit.success), inflation=inflation,
