@@ -473,14 +473,29 @@ def test_a_crossing_without_an_instant_still_ends_its_tail(tmp_path):
     assert not any("stuck" in x.message or "rising" in x.message for x in est.diagnostics)
 
 
-def test_a_fitted_p_atm_beyond_any_atmosphere_is_a_curve_fit_error_not_a_config_error():
+def test_a_fitted_p_atm_beyond_any_atmosphere_is_a_curve_fit_error_not_a_config_error(
+        monkeypatch):
     # helper search, session 11: an aborted-looking record with p_atm auto; the curve fit
     # moved p_atm to 853 Pa (ConfigError out of `analyze` when the fitted model was built).
-    # The crossing estimate stands; the final result says why the fit is not used.
+    # The crossing estimate stands; the final result says why the fit is not used. Where
+    # that fit lands depends on the machine's last bits (session 18's CPU: 5266 Pa, an
+    # atmosphere of a vacuum chamber, a valid fit): the record is checked as it comes out,
+    # and the branch with the fit's p_atm put at 853 Pa.
+    import dataclasses
     import json
+
+    import pneumatic_unload.estimation.refine as refine
 
     d = _fuzz_data("fuzz_fitted_patm_out_of_range")
     es = EstimatorSettings(**json.loads(str(d["settings_json"])))
+    res = fz.run_analyze(d["t"], d["p"], es)
+    fz.check_results(res)
+    real = refine.fit_curve
+
+    def off_range(*args, **kwargs):
+        return dataclasses.replace(real(*args, **kwargs), p_atm=853.0)
+
+    monkeypatch.setattr(refine, "fit_curve", off_range)
     res = fz.run_analyze(d["t"], d["p"], es)
     fz.check_results(res)
     (final,) = [r for r in res if r.final]
