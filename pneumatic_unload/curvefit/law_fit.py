@@ -53,6 +53,7 @@ UNIT_NOISE = NoiseModel(sigma=1.0, rho=0.0, n=0, source="unit")
 #: claimed with m's help where it puts b there: ``law_family``).
 B_BOUND_TOL = 1e-6
 
+
 def curve_fit_bins(t: FloatArray, t_start: float) -> NDArray[np.int64]:
     """Bin edges (sample indices) of the curve fit's likelihood for samples t [s]."""
     return make_bins(np.asarray(t, dtype=float), t_start, resolution=CURVE_FIT_RESOLUTION)

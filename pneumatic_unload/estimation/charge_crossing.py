@@ -45,6 +45,7 @@ from pneumatic_unload.uncertainty.budget import (
     Budget,
     BudgetTerm,
     ScaledBudget,
+    combined_std_of,
     input_uncertainties,
     model_form_term,
     model_limits_term,
@@ -189,8 +190,8 @@ def plan_charge(settings: EstimatorSettings, *, p10: float, p_s: float, p_star: 
             coef = np.polyfit(x, np.array([v[1] for v in logs]), 2)
             table = (float(coef[2]), float(coef[1]), float(coef[0]),
                      float(math.exp(x.min())), float(math.exp(x.max())))
-    eq39 = ScaledBudget(Budget(c39, (tau_term(c39, tau_ref, 0.0), *lines39)),
-                        free=(tau_term(c39, tau_ref, 0.0).name,))
+    tau_line = tau_term(c39, tau_ref, 0.0)
+    eq39 = ScaledBudget(Budget(c39, (tau_line, *lines39)), free=(tau_line.name,))
     free = (record_term(CHARGE_TYPE_A, 0.0), model_form_term(0.0, ""),
             model_limits_term(c_adi, s.model_limits))
     model = ScaledBudget(Budget(c_adi, (free[0], *lines_adi, *free[1:])),
@@ -246,11 +247,5 @@ def charge_crossing_estimate(plan: ChargePlan, tau: float, tau_std: float
              model_limits_term(c_model, s.model_limits)]
     bm = plan.adiabatic.dict_at(c_model, {t.name: t for t in given})  # type: ignore[union-attr]
     extra["budget"] = bm
-    return CrossingEstimate(None, c39, _std(budget39), c_adi, c_model, _std(bm), method,
-                            extra)
-
-
-def _std(budget: dict[str, Any]) -> float:
-    """The combined standard uncertainty [m^3/(s Pa)] of a budget dict (NaN for None)."""
-    v = budget["combined_std"]
-    return math.nan if v is None else v
+    return CrossingEstimate(None, c39, combined_std_of(budget39), c_adi, c_model,
+                            combined_std_of(bm), method, extra)

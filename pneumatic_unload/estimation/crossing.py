@@ -40,6 +40,7 @@ from pneumatic_unload.uncertainty.budget import (
     WALL_TERM,
     BudgetTerm,
     ScaledBudget,
+    combined_std_of,
     eq39_budget,
     model_budget,
     model_form_term,
@@ -236,7 +237,7 @@ def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> Crossin
             model_form_std=form.std, tau=tau, p10=p10, p_atm=p_atm, p_star=p_star,
             atmosphere_measured=s.atmosphere is None, wall_std=wall_std).to_dict()
         extra["budget"] = bm
-        c_model_std = _combined(bm)
+        c_model_std = combined_std_of(bm)
     return CrossingEstimate(None, c39, c39_std, c_isen, c_model, c_model_std, method, extra)
 
 
@@ -249,13 +250,7 @@ def _eq39(plan: CrossingPlan, c39: float, tau: float, tau_std: float,
         s, c39, tau=tau, tau_std=tau_std, p10=plan.p10, p_atm=plan.p_atm,
         p_star=plan.p_star, atmosphere_measured=s.atmosphere is None).to_dict()
     extra["budget_eq39"] = b
-    return _combined(b)
-
-
-def _combined(budget: dict[str, Any]) -> float:
-    """The combined standard uncertainty of a budget dict [m^3/(s Pa)] (None: NaN)."""
-    v = budget["combined_std"]
-    return math.nan if v is None else v
+    return combined_std_of(b)
 
 
 def _adiabatic(settings: EstimatorSettings) -> EstimatorSettings:
