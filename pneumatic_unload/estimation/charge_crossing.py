@@ -32,7 +32,7 @@ import numpy as np
 from pneumatic_unload import physics
 from pneumatic_unload.charge import charge_conductance_adiabatic
 from pneumatic_unload.config.estimator import EstimatorSettings, supply_temperature_uncertainty
-from pneumatic_unload.estimation.types import CrossingEstimate
+from pneumatic_unload.estimation.types import CrossingEstimate, combined_std_of
 from pneumatic_unload.model.inversion import (
     CRITICAL_RATIO_PRIOR_STD,
     HEAT_CORRELATION_REL_STD,
@@ -45,7 +45,6 @@ from pneumatic_unload.uncertainty.budget import (
     Budget,
     BudgetTerm,
     ScaledBudget,
-    combined_std_of,
     input_uncertainties,
     model_form_term,
     model_limits_term,

@@ -33,14 +33,13 @@ from pneumatic_unload.estimation.refine import (
     prepare_inversion,
     pressure_problem,
 )
-from pneumatic_unload.estimation.types import CrossingEstimate
+from pneumatic_unload.estimation.types import CrossingEstimate, combined_std_of
 from pneumatic_unload.model.inversion import may_turn_subsonic
 from pneumatic_unload.uncertainty.budget import (
     MODEL_FORM_TERM,
     WALL_TERM,
     BudgetTerm,
     ScaledBudget,
-    combined_std_of,
     eq39_budget,
     model_budget,
     model_form_term,

@@ -250,6 +250,13 @@ def recommended(r: UnloadResult) -> dict[str, Any]:
             "source": source}
 
 
+def combined_std_of(d: dict[str, Any]) -> float:
+    """The combined standard uncertainty [m^3/(s Pa)] of a budget given as
+    :meth:`~pneumatic_unload.uncertainty.budget.Budget.to_dict` (its None, not finite, as NaN)."""
+    v = d["combined_std"]
+    return math.nan if v is None else v
+
+
 @dataclass(frozen=True)
 class CrossingEstimate:
     """The numbers of a crossing estimate (see :func:`crossing_estimate`).

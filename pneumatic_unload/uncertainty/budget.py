@@ -242,13 +242,6 @@ class ScaledBudget:
         return _budget_dict(c, rows)
 
 
-def combined_std_of(d: dict[str, Any]) -> float:
-    """The combined standard uncertainty [m^3/(s Pa)] of a budget given as
-    :meth:`Budget.to_dict` (its None, not finite, as NaN)."""
-    v = d["combined_std"]
-    return math.nan if v is None else v
-
-
 def with_terms(d: dict[str, Any], terms: list[BudgetTerm]) -> dict[str, Any]:
     """A budget given as :meth:`Budget.to_dict` with further lines (e.g. one known only
     after the fit that produced it), its combined values recomputed."""
