@@ -108,6 +108,22 @@ def test_isentropic_nozzle_and_two_restrictions_in_series():
     assert abs(r.subsonic_index - tr.fit_m) < 0.05
 
 
+def test_an_elliptic_component_has_b_0_not_a_bound_above_it():
+    """A component that is never choked in the ISO sense (b = 0: two elliptic elements in
+    series, the exact law q = C p1 sqrt(1 - r^2)): b reaches 0 inside its range. With b
+    bounded at 0.01 (main 8e5d52d) this record read b 0.010 +- 0.011 and C -0.14 % (the
+    five draws of the bench: -0.14 to -0.26 %; with the noise at 10 Pa, -0.15 % at
+    z -3); with the range from 0: b 0.001, C -0.05 %."""
+    pair = Series(IsoLaw(1e-8, 0.0, 0.5), IsoLaw(1.2e-8, 0.0, 0.5))
+    r = _run(pair, 6e-3, 6e5, 10.0, "series-elliptic-b0", exact=True)
+    tr = truth(pair)
+    err = r.conductance_model / tr.conductance - 1.0
+    assert abs(err) < 1e-3
+    assert abs(err) <= 2.0 * r.conductance_model_std / r.conductance_model
+    assert 0.0 <= r.critical_ratio < 0.005
+    assert abs(r.critical_ratio - tr.critical_ratio) <= 2.0 * r.critical_ratio_std
+
+
 def test_coverage_of_c_b_and_m_over_an_iso_grid():
     """The record's own sigma (inputs exact, no model-limits line) covers C, b and m on
     the ISO family: 12 cases, m 0.25-0.75, b 0.3-0.6 (bench: 95-97 % within 2 sigma on
