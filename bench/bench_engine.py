@@ -19,9 +19,11 @@
 Run (the code measured is the one on PYTHONPATH; the commit is printed at the top)::
 
     PYTHONPATH=. .venv/bin/python bench/bench_engine.py [--part analyze|fit|live|all]
-        [--quick] [--unloads N] [--input sample|block|both]
+        [--quick] [--unloads N] [--input sample|block|both] [--free-crossing]
 
-``--quick`` takes one run per timing instead of three and 10 unloads in the live part.
+``--free-crossing`` (live part) measures the node's floor: each crossing estimate is computed
+when its plan is made and handed out at the crossing, as if the crossing's numbers cost
+nothing (their values are then wrong). ``--quick`` takes one run per timing instead of three and 10 unloads in the live part.
 A full run takes about 5-8 minutes on 2 cores. Prints Markdown tables. The live part uses
 its own ROS_DOMAIN_ID (:func:`pneumatic_unload.app.launch.free_domain_id`) unless one is set.
 """
@@ -61,6 +63,37 @@ with Reader(sys.argv[1]) as r:
     for _c, _t, _raw in r.messages():
         n += 1
 print(n)
+"""
+
+#: ``--free-crossing``: a ``sitecustomize`` for the estimator's process that computes each
+#: unload's crossing estimate when its plan is made (half way to p*, at a stand-in tau) and
+#: returns it at the crossing: the latency the node would have if the crossing's numbers
+#: cost nothing (its published values are then wrong; a bound, not an estimator). The
+#: hits and misses are printed at exit.
+_FREE_CROSSING = """\
+import atexit, math, os, sys
+for _k in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS"):
+    os.environ.setdefault(_k, "1")
+from pneumatic_unload.estimation import unloading as _u
+_plan0, _est0 = _u.plan_crossing, _u.crossing_estimate
+_cache, _count = {}, [0, 0]
+def _plan(*a, **k):
+    plan = _plan0(*a, **k)
+    tau = k.get("t_mid", math.nan) * 2.0
+    if plan.problem is None and math.isfinite(tau) and tau > 0:
+        _cache.clear()
+        _cache[id(plan)] = (plan, _est0(plan, tau, 1e-3 * tau))
+    return plan
+def _est(plan, tau, tau_std):
+    hit = _cache.get(id(plan))
+    if hit is not None and hit[0] is plan:
+        _count[0] += 1
+        return hit[1]
+    _count[1] += 1
+    return _est0(plan, tau, tau_std)
+_u.plan_crossing, _u.crossing_estimate = _plan, _est
+atexit.register(lambda: print(f"free-crossing: {_count[0]} hits, {_count[1]} misses",
+                              file=sys.stderr, flush=True))
 """
 
 #: ``pneumatic-unload`` as a subprocess (the cli module has a __main__ guard).
@@ -208,7 +241,8 @@ CHARGE = {"direction": "charge", "initial_pressure": 101325.0, "supply_pressure"
 
 
 def bench_live(tmp: Path, unloads: int, block: int = 0, rate: float = RATE_BIG,
-               direction: str = "discharge") -> list[dict[str, object]]:
+               direction: str = "discharge", free_crossing: bool = False
+               ) -> list[dict[str, object]]:
     """Part 3: simulator (cycle mode, ``unloads`` cycles) -> estimator latencies.
 
     The setup of ``bench_nodes.bench_estimator`` (same rig, cycle timing and estimator
@@ -216,7 +250,8 @@ def bench_live(tmp: Path, unloads: int, block: int = 0, rate: float = RATE_BIG,
     run until ``unloads`` unloads got their final curve fit (or the time limit), the raw
     latency lists taken from the estimator's ``stats`` line. ``direction`` 'charge': the
     rig's tank filled through the component (:data:`CHARGE`; the cycle's recharge vents it
-    back to 1 bar), the estimator in the charge direction.
+    back to 1 bar), the estimator in the charge direction. ``free_crossing``: the
+    estimator's crossing estimates computed ahead (:data:`_FREE_CROSSING`), the floor.
     """
     from bench_nodes import RIG
 
@@ -229,7 +264,8 @@ def bench_live(tmp: Path, unloads: int, block: int = 0, rate: float = RATE_BIG,
                                     "qos": "reliable" if block else "sensor_data",
                                     "curve_fit": True, "direction": direction,
                                     **({"supply_pressure": CHARGE["supply_pressure"]}
-                                       if charge else {})}, tmp)
+                                       if charge else {})}, tmp,
+                      env=_free_crossing_env(tmp) if free_crossing else None)
     sim = NodeProcess("simulator", {**RIG, **charge, "rate": rate, "mode": "cycle", **cycle,
                                     "cycles": unloads, "wait_for_subscribers": 1,
                                     "temperature_rate": 0.0, "block_size": block,
@@ -251,6 +287,10 @@ def bench_live(tmp: Path, unloads: int, block: int = 0, rate: float = RATE_BIG,
         time.sleep(1.5)  # the estimator drains its queue
         est.stop()
     published = int(re.search(r"published (\d+) pressure samples", sim.output()).group(1))
+    if free_crossing:
+        hits = re.search(r"free-crossing: (\d+) hits, (\d+) misses", est.output())
+        print(f"\n(--free-crossing: {hits.group(1) if hits else '?'} crossing estimates "
+              f"computed ahead, {hits.group(2) if hits else '?'} at the crossing)")
     text = est.output()
     m = re.findall(r"stats (\{.*\})", text)
     stats = json.loads(m[-1]) if m else {}
@@ -290,6 +330,16 @@ def bench_live(tmp: Path, unloads: int, block: int = 0, rate: float = RATE_BIG,
              "": _verdict(f99 <= 50.0)}]
 
 
+def _free_crossing_env(tmp: Path) -> dict[str, str]:
+    """This environment with :data:`_FREE_CROSSING` as the first ``sitecustomize``."""
+    d = tmp / "free_crossing"
+    d.mkdir(exist_ok=True)
+    (d / "sitecustomize.py").write_text(_FREE_CROSSING)
+    env = os.environ.copy()
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(d), env.get("PYTHONPATH", "")) if p)
+    return env
+
+
 def _commit() -> str:
     import pneumatic_unload
 
@@ -315,6 +365,10 @@ def main() -> int:
     ap.add_argument("--direction", choices=("discharge", "charge"), default="discharge",
                     help="live part: the rig discharges (10 kHz), or charges (the issue's "
                          "targets: per-sample input at 1 kHz, blocks at 10 kHz)")
+    ap.add_argument("--free-crossing", action="store_true",
+                    help="live part: the crossing estimates computed ahead, so that the "
+                         "latency is the node's floor with the crossing's numbers free "
+                         "(their values are then wrong)")
     args = ap.parse_args()
     blocks = {"sample": [0], "block": [100], "both": [0, 100]}[args.input]
     repeats = 1 if args.quick else 3
@@ -341,7 +395,8 @@ def main() -> int:
             rows = []
             for block in blocks:
                 rate = RATE_BIG if args.direction == "discharge" or block else 1000.0
-                rows += bench_live(tmp, unloads, block, rate, args.direction)
+                rows += bench_live(tmp, unloads, block, rate, args.direction,
+                                   args.free_crossing)
             print(f"\n## 3. Live estimator latency at 10 kHz (ROS_DOMAIN_ID="
                   f"{os.environ['ROS_DOMAIN_ID']})\n")
             print(_table(rows))

@@ -394,7 +394,7 @@ def test_the_fitted_models_crossing_within_the_integrators_budget(tmp_path, monk
     import json
 
     from pneumatic_unload.estimation import refine
-    from pneumatic_unload.model import inversion
+    from pneumatic_unload.model import inversion, ode
     from pneumatic_unload.physics import P_STAR_FRACTION
 
     d = _fuzz_data("fuzz_bag_fitted_tau_budget")
@@ -409,12 +409,14 @@ def test_the_fitted_models_crossing_within_the_integrators_budget(tmp_path, monk
     real_discharge, real_tau = inversion.discharge, inversion.fitted_tau_exp
 
     def discharge(*a, **k):
-        try:
-            return real_discharge(*a, **k)
-        except ArithmeticError as err:
-            if k.get("rtol") == 1e-10:
-                fine_errors.append(err)
-            raise
+        # as found, the refinement at rtol 1e-10 ran out of the integrator's steps; since
+        # b's range reaches 0 (session 19) the fit of this bag lands where it does not (on
+        # another CPU it may again): the budget is run out here, so that the branch is
+        # tested on every machine
+        if k.get("rtol") == 1e-10:
+            fine_errors.append(ode.IntegrationError("the integrator's step budget is spent"))
+            raise fine_errors[-1]
+        return real_discharge(*a, **k)
 
     def fitted_tau_exp(cfg, t_guess):
         tau = real_tau(cfg, t_guess)
