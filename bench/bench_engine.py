@@ -21,9 +21,10 @@ Run (the code measured is the one on PYTHONPATH; the commit is printed at the to
     PYTHONPATH=. .venv/bin/python bench/bench_engine.py [--part analyze|fit|live|all]
         [--quick] [--unloads N] [--input sample|block|both] [--free-crossing]
 
-``--free-crossing`` (live part) measures the node's floor: each crossing estimate is computed
-when its plan is made and handed out at the crossing, as if the crossing's numbers cost
-nothing (their values are then wrong). ``--quick`` takes one run per timing instead of three and 10 unloads in the live part.
+``--free-crossing`` (live part) measures the node's floor: each crossing estimate is
+computed when its plan is made and handed out at the crossing, as if the crossing's numbers
+cost nothing (their values are then wrong). ``--quick`` takes one run per timing instead of
+three and 10 unloads in the live part.
 A full run takes about 5-8 minutes on 2 cores. Prints Markdown tables. The live part uses
 its own ROS_DOMAIN_ID (:func:`pneumatic_unload.app.launch.free_domain_id`) unless one is set.
 """
