@@ -20,30 +20,18 @@ import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pneumatic_unload.analysis.output import json_default
 from pneumatic_unload.config import ConfigError, adapters
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.testline import (
-    BatchError,
-    InputOptions,
-    ResultsDBError,
-    SpecError,
-    discover,
-    export,
-    load_spec,
-    open_db,
-    part_summary,
-    progress_bar,
-    run_batch,
-    unload_rows,
-    write_table,
-)
-from pneumatic_unload.testline.batch import PART_COLUMNS
-from pneumatic_unload.testline.db import EXPORT_COLUMNS, file_rows, hide_password
-from pneumatic_unload.testline.report import html_report
-from pneumatic_unload.testline.spec import DM3_PER_S_BAR, read_file_data
+
+if TYPE_CHECKING:
+    from pneumatic_unload.testline import InputOptions
+
+# The test line (pneumatic_unload.testline: Dask, SQLAlchemy, the report) is imported by the
+# commands that use it, not with this module: the CLI builds these parsers for every
+# command, and SQLAlchemy alone took 0.11 s of the 0.74 s of ``analyze BAG --json`` (bench
+# 1 of bench/bench_engine.py, whose target is half the time of a raw iteration of the bag).
 
 CSV_OPTIONS = ("time_column", "pressure_column", "temperature_column", "pressure_unit",
                "time_unit", "temperature_unit")
@@ -59,6 +47,8 @@ class BatchCliError(Exception):
 
 
 def _settings_file(path: str) -> dict[str, Any]:
+    from pneumatic_unload.testline.spec import SpecError, read_file_data
+
     try:
         data = read_file_data(path)
     except SpecError as exc:  # unreadable or not YAML/JSON: one line, no traceback
@@ -73,6 +63,8 @@ def _settings_file(path: str) -> dict[str, Any]:
 
 def options_from(args: argparse.Namespace) -> InputOptions:
     """The batch's :class:`InputOptions` from its command line."""
+    from pneumatic_unload.testline import InputOptions, SpecError, load_spec
+
     settings = _settings_file(args.settings) if args.settings else {}
     settings.update(adapters.given_options(args, EstimatorSettings))
     barometer = settings.get("atmosphere")
@@ -94,6 +86,8 @@ def options_from(args: argparse.Namespace) -> InputOptions:
 
 
 def _fmt_c(c: Any) -> str:
+    from pneumatic_unload.testline.spec import DM3_PER_S_BAR
+
     return "-" if c is None else f"{c / DM3_PER_S_BAR:.4f}"
 
 
@@ -112,6 +106,21 @@ def parts_text(parts: list[dict[str, Any]]) -> str:
 
 def cmd_batch(args: argparse.Namespace) -> int:
     """Run a batch (see the module doc); prints the parts table or JSON."""
+    from pneumatic_unload.analysis.output import json_default
+    from pneumatic_unload.testline import (
+        BatchError,
+        ResultsDBError,
+        discover,
+        open_db,
+        part_summary,
+        progress_bar,
+        run_batch,
+        unload_rows,
+        write_table,
+    )
+    from pneumatic_unload.testline.batch import PART_COLUMNS
+    from pneumatic_unload.testline.db import EXPORT_COLUMNS, file_rows, hide_password
+
     options = options_from(args)
     try:
         paths = discover(args.paths, args.glob or "")
@@ -177,6 +186,18 @@ def _existing_db(db: str) -> None:
 
 def cmd_results(args: argparse.Namespace) -> int:
     """``results export`` / ``results parts`` (see the module doc)."""
+    from pneumatic_unload.analysis.output import json_default
+    from pneumatic_unload.testline import (
+        ResultsDBError,
+        export,
+        open_db,
+        part_summary,
+        unload_rows,
+        write_table,
+    )
+    from pneumatic_unload.testline.batch import PART_COLUMNS
+    from pneumatic_unload.testline.db import file_rows
+
     _existing_db(args.db)
     if args.action == "export" and not args.out:
         raise BatchCliError("results export needs --out FILE (.csv or .parquet)")
@@ -207,6 +228,9 @@ def cmd_results(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """``report``: the database as one self-contained HTML page."""
+    from pneumatic_unload.testline import ResultsDBError
+    from pneumatic_unload.testline.report import html_report
+
     _existing_db(args.db)
     if not Path(args.out).parent.is_dir():
         raise BatchCliError(f"--out {args.out}: folder {Path(args.out).parent} does not exist")
