@@ -377,8 +377,12 @@ def main() -> int:
     print(f"# Engine speed targets (code at {_commit()}, python {sys.version.split()[0]}, "
           f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}"
           f"{', quick' if args.quick else ''})")
+    here = os.getcwd()
     with tempfile.TemporaryDirectory(prefix="bench_engine_") as d:
         tmp = Path(d)
+        # the subprocesses (``python -m``) put their working directory first on sys.path:
+        # run from a checkout, they would take its code whatever PYTHONPATH says
+        os.chdir(tmp)
         if args.part in ("analyze", "all"):
             rows = bench_analyze(tmp, repeats)
             print(f"\n## 1. analyze vs rosbags raw iteration (median of {repeats})\n")
@@ -401,6 +405,7 @@ def main() -> int:
             print(f"\n## 3. Live estimator latency at 10 kHz (ROS_DOMAIN_ID="
                   f"{os.environ['ROS_DOMAIN_ID']})\n")
             print(_table(rows))
+        os.chdir(here)
     return 0
 
 

@@ -185,3 +185,53 @@ def test_a_result_is_handed_over_before_the_rest_of_its_block() -> None:
     assert cross.i_complete // 1000 * 1000 == k_block  # handed over in its own block
     assert state == "tail"  # ...at the crossing
     assert scans_after[k_block // 1000] > n_scans  # ...before the rest of it was scanned
+
+
+@pytest.mark.parametrize("direction", ["discharge", "charge"])
+def test_the_live_rehearsal_changes_no_result_and_integrates_nothing(monkeypatch,
+                                                                     direction: str) -> None:
+    """A live estimator rehearses the crossing estimate after each block of an unload whose
+    crossing is prepared (:func:`~pneumatic_unload.estimation.crossing.rehearse_crossing`:
+    its code and data kept in the caches for the crossing). It runs, the results are
+    those of the same stream without it (bit for bit), and it integrates the model not once
+    more (its crossing time lies inside the inversion table)."""
+    from pneumatic_unload.estimation import StreamingEstimator, streaming
+    from pneumatic_unload.model import inversion
+
+    charge = direction == "charge"
+    kw = dict(direction="charge", supply_pressure=7e5, initial_pressure=101325.0) \
+        if charge else {}
+    cfg = RigConfig(volume=1e-3, conductance=2e-8, noise_std=1000.0, seed=4, rate=10000.0,
+                    pre_time=0.3, duration=1.5, effects=("heat_transfer",), **kw)
+    sim = simulate(cfg)
+    settings = EstimatorSettings(volume=1e-3, curve_fit=False, direction=direction,
+                                 **({"supply_pressure": 7e5} if charge else {}))
+    calls = {"integrations": 0, "rehearsals": 0}
+    real_discharge, real_rehearse = inversion.discharge, streaming.rehearse_crossing
+
+    def integrate(*a, **k):
+        calls["integrations"] += 1
+        return real_discharge(*a, **k)
+
+    def rehearse(plan):
+        calls["rehearsals"] += 1
+        real_rehearse(plan)
+
+    def run() -> list:
+        est = StreamingEstimator(settings, live=True)
+        out = []
+        for k in range(0, sim.t.size, 100):
+            out += est.push_block(sim.t[k:k + 100], sim.measured[k:k + 100])
+        return out + est.finish()
+
+    monkeypatch.setattr(inversion, "discharge", integrate)
+    monkeypatch.setattr(streaming, "rehearse_crossing", rehearse)
+    rehearsed = run()
+    integrations = calls["integrations"]
+    monkeypatch.setattr(streaming, "rehearse_crossing", lambda plan: None)
+    calls["integrations"] = 0
+    plain = run()
+    assert calls["rehearsals"] >= 10
+    assert calls["integrations"] == integrations
+    assert len(plain) >= 1 and math.isfinite(plain[0].conductance_model)
+    assert [r.to_dict() for r in rehearsed] == [r.to_dict() for r in plain]

@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation import decisions, detector, sse, tail, unloading
 from pneumatic_unload.estimation.buffer import ReadingLog, SampleBuffer
+from pneumatic_unload.estimation.crossing import rehearse_crossing
 from pneumatic_unload.estimation.decisions import SCAN_HORIZON
 from pneumatic_unload.estimation.history import DiagnosticLog, recent_results
 from pneumatic_unload.estimation.regression import block_steps, first_below_in
@@ -266,7 +267,11 @@ class StreamingEstimator:
             Results completed inside the block.
         """
         p = np.asarray(p, dtype=float).ravel()
-        return self._push_block(np.asarray(t, dtype=float).ravel(), -p if self._mirror else p)
+        out = self._push_block(np.asarray(t, dtype=float).ravel(), -p if self._mirror else p)
+        st = self._st
+        if st.live and st.mode == UNLOADING and not out:  # the crossing kept in the caches
+            rehearse_crossing(st.unload.plan)
+        return out
 
     def _push_block(self, t: FloatArray, p: FloatArray) -> list[UnloadResult]:
         """:meth:`push_block` of samples in the core's sign (a charge's mirrored)."""
