@@ -98,7 +98,7 @@ atexit.register(lambda: print(f"free-crossing: {_count[0]} hits, {_count[1]} mis
 """
 
 #: ``pneumatic-unload`` as a subprocess (the cli module has a __main__ guard).
-_CLI = [sys.executable, "-m", "pneumatic_unload.app.cli"]
+_CLI = [sys.executable, "-P", "-m", "pneumatic_unload.app.cli"]
 
 
 def _table(rows: list[dict[str, object]]) -> str:

@@ -111,3 +111,25 @@ def test_the_launcher_runs_the_bench_and_stops_cleanly(tmp_path: Path,
     c = float(final.split("model ")[1].split(",")[0])
     assert c == pytest.approx(8e-9, rel=0.01)
     assert (bag / "metadata.yaml").is_file()
+
+
+def test_a_node_started_beside_another_copy_of_the_package_runs_this_one(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A node process started from a folder that holds another ``pneumatic_unload`` (a
+    checkout, an old copy) runs the package of this Python, not that one: ``python -m``
+    would put the working directory first on sys.path (a bench comparing two versions
+    through PYTHONPATH measured the checkout's code both times)."""
+    from pneumatic_unload.app.launch import NodeProcess
+
+    decoy = tmp_path / "pneumatic_unload"
+    (decoy / "nodes").mkdir(parents=True)
+    (decoy / "__init__.py").write_text("raise SystemExit('the copy in the working folder')\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(free_domain_id()))
+    node = NodeProcess("simulator", {"rate": 100.0}, tmp_path / "logs")
+    try:
+        node.wait_output("streaming at", 60.0)
+    finally:
+        code = node.stop()
+    assert "the copy in the working folder" not in node.output()
+    assert code == 0, node.output()[-2000:]

@@ -90,7 +90,10 @@ class NodeProcess:
     def __init__(self, name: str, params: dict[str, Any] | None = None,
                  log_dir: Path | None = None, extra: list[str] | None = None,
                  env: dict[str, str] | None = None) -> None:
-        args = [sys.executable, "-m", f"pneumatic_unload.nodes.{name}", "--ros-args",
+        # -P: the working directory is not put first on sys.path (python -m would): a node
+        # started from a checkout, or from a folder holding an old copy, runs the package
+        # this Python has (PYTHONPATH's, else the installed one)
+        args = [sys.executable, "-P", "-m", f"pneumatic_unload.nodes.{name}", "--ros-args",
                 *ros_args(params or {}), *(extra or [])]
         if _env_resets_signals():
             # SIGINT and SIGTERM at their defaults in the node (a launcher run as a shell's
