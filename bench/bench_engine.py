@@ -67,7 +67,7 @@ print(n)
 """
 
 #: ``--free-crossing``: a ``sitecustomize`` for the estimator's process that computes each
-#: unload's crossing estimate when its plan is made (half way to p*, at a stand-in tau) and
+#: unload's crossing estimate when its plan is made (half way to p*, at its reference tau) and
 #: returns it at the crossing: the latency the node would have if the crossing's numbers
 #: cost nothing (its published values are then wrong; a bound, not an estimator). The
 #: hits and misses are printed at exit.
@@ -80,7 +80,7 @@ _plan0, _est0 = _u.plan_crossing, _u.crossing_estimate
 _cache, _count = {}, [0, 0]
 def _plan(*a, **k):
     plan = _plan0(*a, **k)
-    tau = k.get("t_mid", math.nan) * 2.0
+    tau = plan.tau_ref
     if plan.problem is None and math.isfinite(tau) and tau > 0:
         _cache.clear()
         _cache[id(plan)] = (plan, _est0(plan, tau, 1e-3 * tau))
@@ -97,7 +97,9 @@ atexit.register(lambda: print(f"free-crossing: {_count[0]} hits, {_count[1]} mis
                               file=sys.stderr, flush=True))
 """
 
-#: ``pneumatic-unload`` as a subprocess (the cli module has a __main__ guard).
+#: ``pneumatic-unload`` as a subprocess (the cli module has a __main__ guard; -P: not the
+#: working directory's code, which ``python -m`` would put first on sys.path, but
+#: PYTHONPATH's, as the nodes of :class:`~pneumatic_unload.app.launch.NodeProcess`).
 _CLI = [sys.executable, "-P", "-m", "pneumatic_unload.app.cli"]
 
 
@@ -377,12 +379,8 @@ def main() -> int:
     print(f"# Engine speed targets (code at {_commit()}, python {sys.version.split()[0]}, "
           f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}"
           f"{', quick' if args.quick else ''})")
-    here = os.getcwd()
     with tempfile.TemporaryDirectory(prefix="bench_engine_") as d:
         tmp = Path(d)
-        # the subprocesses (``python -m``) put their working directory first on sys.path:
-        # run from a checkout, they would take its code whatever PYTHONPATH says
-        os.chdir(tmp)
         if args.part in ("analyze", "all"):
             rows = bench_analyze(tmp, repeats)
             print(f"\n## 1. analyze vs rosbags raw iteration (median of {repeats})\n")
@@ -405,7 +403,6 @@ def main() -> int:
             print(f"\n## 3. Live estimator latency at 10 kHz (ROS_DOMAIN_ID="
                   f"{os.environ['ROS_DOMAIN_ID']})\n")
             print(_table(rows))
-        os.chdir(here)
     return 0
 
 

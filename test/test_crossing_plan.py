@@ -235,3 +235,22 @@ def test_the_live_rehearsal_changes_no_result_and_integrates_nothing(monkeypatch
     assert calls["integrations"] == integrations
     assert len(plain) >= 1 and math.isfinite(plain[0].conductance_model)
     assert [r.to_dict() for r in rehearsed] == [r.to_dict() for r in plain]
+
+
+def test_a_plan_without_its_table_is_not_rehearsed(monkeypatch) -> None:
+    """Where the crossing estimate would integrate the model (its inversion table could not
+    be built, or does not cover the reference time), the rehearsal is not made: it never
+    costs an integration per block."""
+    from pneumatic_unload.estimation import crossing
+
+    s = EstimatorSettings(volume=1e-3)
+    plan = plan_crossing(s, p10=7e5, p_atm=101325.0, p_star=0.368 * 7e5 + 0.632 * 101325.0,
+                         t_mid=0.15, p_mid=4.2e5)
+    assert plan.table is not None and plan.tau_ref > 0
+    calls = []
+    monkeypatch.setattr(crossing, "crossing_estimate", lambda *a: calls.append(a))
+    crossing.rehearse_crossing(plan)
+    assert len(calls) == 1
+    crossing.rehearse_crossing(dataclasses.replace(plan, table=None))
+    crossing.rehearse_crossing(dataclasses.replace(plan, adiabatic=None))
+    assert len(calls) == 1

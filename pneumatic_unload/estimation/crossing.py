@@ -244,22 +244,38 @@ def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> Crossin
     return CrossingEstimate(None, c39, c39_std, c_isen, c_model, c_model_std, method, extra)
 
 
+#: The relative 1-sigma of tau of a rehearsal (:func:`rehearse_crossing`) [-].
+REHEARSAL_STD = 1e-3
+
+
 def rehearse_crossing(plan: CrossingPlan | None) -> None:
     """The crossing estimate made at the plan's reference crossing time and discarded.
 
     The live estimator does this after each block of an unload whose crossing is
     prepared: the estimate runs once per unload, so without it its code and data have left
-    the CPU's caches by the time the crossing comes (after an idle wait of 10 ms per block
-    on a KVM guest, a cold estimate took 0.04-0.09 ms more than a warm one; with it, the
-    live crossing's latency p50 fell to that of the node with the estimate computed
-    ahead). Nothing is kept: the estimate is a function of the plan and tau alone. The
-    reference lies inside the plan's inversion table, so no integration is made."""
-    if plan is not None and plan.problem is None and plan.tau_ref > 0:
+    the CPU's caches by the time the crossing comes (after the idle wait of 10 ms per block
+    on a KVM guest: the core's push of the crossing's block p50 0.27 ms live without it,
+    0.21-0.24 ms with it; its p99 within the runs' spread). Nothing is kept: the estimate
+    is a function of the plan and tau alone. Made only where it is table lookups and
+    closed forms (:func:`_lookups_only`): never an integration per block."""
+    if plan is not None and plan.problem is None and plan.tau_ref > 0 \
+            and _lookups_only(plan, plan.tau_ref):
         crossing_estimate(plan, plan.tau_ref, REHEARSAL_STD * plan.tau_ref)
 
 
-#: The relative 1-sigma of tau of a rehearsal (:func:`rehearse_crossing`) [-].
-REHEARSAL_STD = 1e-3
+def _lookups_only(plan: CrossingPlan, tau: float) -> bool:
+    """Whether :func:`crossing_estimate` at the crossing time tau [s] is the plan's table
+    lookups and closed forms (no model integration: a table covers tau, or none is needed)."""
+    s = plan.settings
+    if plan.charge is not None:
+        t = plan.charge.table
+        return s.heat_model != "natural" or (t is not None and t[3] <= tau <= t[4])
+    closed = s.heat_model == "adiabatic" and not may_turn_subsonic(s, plan.p_atm,
+                                                                   plan.p_star)
+    if not (closed or (plan.table is not None and plan.table.covers(tau))):
+        return False
+    a = plan.adiabatic
+    return isinstance(a, str) or (a is not None and a.covers(tau))
 
 
 def _eq39(plan: CrossingPlan, c39: float, tau: float, tau_std: float,
