@@ -47,6 +47,29 @@ def test_analyze_real_aerolab_csv_within_30_percent(capsys, name):
         assert wall["input_std"] >= (u["initial_temperature"] - 293.15) / 3**0.5 - 1e-9
 
 
+def test_real_aerolab_text_and_json_tell_b_and_m_alike(capsys):
+    """The 0.094 in run fits m (0.31 +- 0.05) while b's 1-sigma is above what a b report
+    takes: the text gives m and the reason b is not given, with the fit's value, as the
+    JSON does (the text said "b, m = not identifiable" with m in the JSON)."""
+    path = str(real_file("aerolab/orifice_0.094in.csv"))
+    argv = ("analyze", path, "--volume", "0.125", "--gauge", "--atmosphere", "101500",
+            "--pressure-unit", "kPa")
+    code, out, _ = _run(capsys, *argv, "--json")
+    assert code == 0
+    (u,) = [x for x in json.loads(out)["unloads"] if x["final"]]
+    code, text, _ = _run(capsys, *argv)
+    assert code == 0
+    if u["critical_ratio"] is None:
+        assert u["critical_ratio_source"].startswith("not determined: the fit's ")
+        assert f"b              = {u['critical_ratio_source']}" in text
+    else:
+        assert u["critical_ratio_source"] == ""
+        assert f"b              = {u['critical_ratio']:.3f}" in text
+    assert u["subsonic_index"] is not None
+    assert f"m              = {u['subsonic_index']:.3f}" in text
+    assert "b, m" not in text
+
+
 #: The AeroLab orifices' diameters [m] (0.094 in and 0.125 in).
 DIAMETER = {"orifice_0.094in.csv": 0.094 * 0.0254, "orifice_0.125in.csv": 0.125 * 0.0254}
 

@@ -68,6 +68,8 @@ UNLOAD_JSON_KEYS: dict[str, str] = {
                        "may change; null when there is no curve fit",
     "subsonic_index_fitted": "the subsonic index m was fitted (true) or held at 0.5 (false)",
     "subsonic_source": "why m was fitted or held, in words ('' without a curve fit)",
+    "critical_ratio_source": "final results: why b is not reported (null), with the fit's "
+                             "value and 1-sigma, in words; '' when it is",
     "offset_source": "why the transducer's zero offset was fitted or not, in words",
     "gas_temperature": "final results in 'unloads': the evidence of the record's gas "
                        "temperature: 'used' (false, with 'why', when the record carries "
@@ -114,6 +116,7 @@ def unload_json(r: UnloadResult) -> dict[str, Any]:
         "critical_ratio": cf.get("critical_ratio_reproducibility")} if cf else None
     d["subsonic_index_fitted"] = bool(cf.get("subsonic_index_fitted", False))
     d["subsonic_source"] = cf.get("subsonic_source", "")
+    d["critical_ratio_source"] = cf.get("critical_ratio_source", "")
     d["offset_source"] = cf.get("offset_source", "")
     if "gas_temperature" in extra:
         d["gas_temperature"] = extra["gas_temperature"]
@@ -170,20 +173,23 @@ def format_result(r: UnloadResult) -> str:
                                "m^3/(s Pa)")
             + f" = {dm3(r.conductance_model)}  [{r.method}]")
         lines.append(f"  eq 39 - model  = {100 * r.bias:+.2f} %")
+    cf = r.extra.get("curve_fit", {})
     if math.isfinite(r.critical_ratio):
         lines.append("  b              = "
                      + with_uncertainty(f"{r.critical_ratio:.3f}", r.critical_ratio_std,
                                         fmt=".3f"))
-        if math.isfinite(r.subsonic_index):
-            cf = r.extra.get("curve_fit", {})
-            m_text = with_uncertainty(f"{r.subsonic_index:.3f}", r.subsonic_index_std,
-                                      fmt=".3f")
-            lines.append("  m              = " + (
-                f"{m_text} (fitted)" if cf.get("subsonic_index_fitted")
-                else f"{m_text} ({cf.get('subsonic_source') or 'held at 0.5'})"))
     elif r.final:
-        lines.append("  b, m           = not identifiable from this record (the flow stayed "
-                     "choked, or the subsonic tail is too short or too noisy)")
+        lines.append("  b              = " + (cf.get("critical_ratio_source") or (
+            "not identifiable from this record (the flow stayed choked, or the subsonic "
+            "tail is too short or too noisy)")))
+    if math.isfinite(r.subsonic_index):
+        m_text = with_uncertainty(f"{r.subsonic_index:.3f}", r.subsonic_index_std, fmt=".3f")
+        lines.append("  m              = " + (
+            f"{m_text} (fitted)" if cf.get("subsonic_index_fitted")
+            else f"{m_text} ({cf.get('subsonic_source') or 'held at 0.5'})"))
+    elif r.final:
+        lines.append("  m              = not determined (" + (
+            cf.get("subsonic_source") or "no subsonic tail to fit it from") + ")")
     lines += budget_lines(r)
     if math.isfinite(r.conductance_std):
         lines.append(f"  C (eq 39) u    = {r.conductance_std:.2g} m^3/(s Pa) (record and inputs;"

@@ -118,6 +118,9 @@ class CurveFit:
         was fitted (its uncertainty is in the fit's covariance).
     subsonic_source : str
         Why m was fitted or held, in words.
+    critical_ratio_source : str
+        Why b is not reported (NaN), with the fit's value and 1-sigma [-], in words; ''
+        when it is.
     pressure_offset, pressure_offset_std : float
         The transducer's zero offset fitted (a reading = pressure + offset) and its 1-sigma
         [Pa]; 0 and NaN when it was not fitted (the record settles at the given p_atm).
@@ -180,6 +183,7 @@ class CurveFit:
     offset_source: str = ""
     gas_temperature: dict[str, float] = dataclasses.field(default_factory=dict)
     critical_ratio_on_bound: bool = False
+    critical_ratio_source: str = ""
 
     def config(self, settings: EstimatorSettings) -> RigConfig:
         """The fitted model's configuration (valve opening at t = 0) [SI]."""

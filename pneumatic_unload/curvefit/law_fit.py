@@ -53,6 +53,10 @@ UNIT_NOISE = NoiseModel(sigma=1.0, rho=0.0, n=0, source="unit")
 #: claimed with m's help where it puts b there: ``law_family``).
 B_BOUND_TOL = 1e-6
 
+#: b is reported where the fit's 1-sigma of it is at most this [-]; a wider one is no
+#: measurement of b (its range is 0-1), and the fit's value is given with the reason.
+B_STD_MAX = 0.05
+
 
 def curve_fit_bins(t: FloatArray, t_start: float) -> NDArray[np.int64]:
     """Bin edges (sample indices) of the curve fit's likelihood for samples t [s]."""
@@ -244,13 +248,22 @@ def fit_law(
     m, m_std = v.get("m", SUBSONIC_INDEX_START), float(std.get("m", math.nan))
     pb = fit.params["b"]
     on_bound = min(b - pb.lo, pb.hi - b) <= B_BOUND_TOL * (pb.hi - pb.lo)
-    if not math.isfinite(b_std) or b_std > 0.05 or b_std == 0.0:
-        b, b_std = math.nan, math.nan  # (m may be determined without b: a flow never choked)
+    b_why = ""
+    if not math.isfinite(b_std) or b_std > B_STD_MAX or b_std == 0.0:
+        # (m may be determined without b: a flow never choked)
+        cause = ("m fitted beside it, the two trade" if fit_m else
+                 "the flow hardly choked, or the subsonic tail is short or noisy")
+        b_why = (f"not determined: the fit's {b:.3f} +- {b_std:.3f} (1-sigma above "
+                 f"{B_STD_MAX:g}: {cause})" if math.isfinite(b_std) and b_std > 0.0 else
+                 f"not determined: the fit's {b:.3f} has no 1-sigma (the record "
+                 "does not bound it)")
+        b, b_std = math.nan, math.nan
     h = v.get("heat_scale", 1.0)
     h_std = float(std["heat_scale"]) if "heat_scale" in free else math.nan
     cf = CurveFit(
         conductance=c, conductance_std=float(std["C"]), critical_ratio=b,
         critical_ratio_std=b_std, critical_ratio_on_bound=bool(on_bound),
+        critical_ratio_source=b_why,
         t_start=v["t_open"] + t_ref, p10=v["p10"],
         p_atm=v.get("p_atm", p_atm) if settings.end_pressure is None else p_atm,
         heat_scale=h, heat_scale_std=h_std, rms=math.sqrt(s2), n=span.n,
