@@ -62,6 +62,22 @@ def test_m_fitted_on_a_foreign_iso_law(m, b, volume, c, p10, tau_heat):
     assert len(line) == 1 and line[0]["std"] == 0.0 and "fitted" in line[0]["note"]
 
 
+def test_m_found_where_the_first_law_takes_up_the_shape_with_b():
+    """m 0.70, b 0.26 with Newton cooling (9.3 bar, 3.7 L; a random draw of the
+    acceptance's ranges): the natural law with m held took up the flow's shape with
+    b 0.04 and gained nothing from m (m 0.517), so m was held for every law: C +0.65 %,
+    b 0.040, m 0.5, residual 5 x the noise. Every law leaving structure with m held, the
+    family is fitted with m free: the constant hA law with m 0.703."""
+    r = _run(IsoLaw(1.4e-9, 0.2584, 0.7027), 3.675e-3, 9.343e5, 23.28, "m070-b026",
+             tail=8.2)
+    fit = r.extra["curve_fit"]
+    assert fit["subsonic_index_fitted"], fit["subsonic_source"]
+    assert not r.extra["model_inadequate"], r.status_text
+    assert abs(r.conductance_model / 1.4e-9 - 1.0) < 0.01
+    assert abs(r.critical_ratio - 0.2584) < 0.03
+    assert abs(r.subsonic_index - 0.7027) < 0.05
+
+
 def test_m_held_where_the_law_is_elliptic_and_its_line_is_small():
     """m = 0.5 made: the criterion holds it; the line of holding it is the record's own
     uncertainty of m times C's slope, far below C's sigma."""

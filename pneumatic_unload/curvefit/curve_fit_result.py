@@ -121,6 +121,10 @@ class CurveFit:
     critical_ratio_source : str
         Why b is not reported (NaN), with the fit's value and 1-sigma [-], in words; ''
         when it is.
+    misfit : float
+        The pressure residual's RMS over its white noise's [-]
+        (:func:`~pneumatic_unload.fit.uncertainty.misfit_ratio`): about 1 where the model
+        misses by less than the noise; NaN when not measured.
     pressure_offset, pressure_offset_std : float
         The transducer's zero offset fitted (a reading = pressure + offset) and its 1-sigma
         [Pa]; 0 and NaN when it was not fitted (the record settles at the given p_atm).
@@ -184,6 +188,7 @@ class CurveFit:
     gas_temperature: dict[str, float] = dataclasses.field(default_factory=dict)
     critical_ratio_on_bound: bool = False
     critical_ratio_source: str = ""
+    misfit: float = math.nan
 
     def config(self, settings: EstimatorSettings) -> RigConfig:
         """The fitted model's configuration (valve opening at t = 0) [SI]."""

@@ -28,6 +28,7 @@ from pneumatic_unload.fit.profile import valley_std
 from pneumatic_unload.fit.trace import TemperatureChannel, Trace
 from pneumatic_unload.fit.uncertainty import (
     WHITENESS_P,
+    misfit_ratio,
     residual_inflation,
     structure_inflation,
 )
@@ -263,7 +264,7 @@ def fit_law(
     cf = CurveFit(
         conductance=c, conductance_std=float(std["C"]), critical_ratio=b,
         critical_ratio_std=b_std, critical_ratio_on_bound=bool(on_bound),
-        critical_ratio_source=b_why,
+        critical_ratio_source=b_why, misfit=misfit_ratio(r_p),
         t_start=v["t_open"] + t_ref, p10=v["p10"],
         p_atm=v.get("p_atm", p_atm) if settings.end_pressure is None else p_atm,
         heat_scale=h, heat_scale_std=h_std, rms=math.sqrt(s2), n=span.n,

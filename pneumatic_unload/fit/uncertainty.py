@@ -84,6 +84,27 @@ def residual_inflation(r: FloatArray) -> float:
     return (1.0 + rho) / (1.0 - rho)
 
 
+def misfit_ratio(r: FloatArray) -> float:
+    """Residual RMS over the white noise's [-], the noise estimated from successive
+    differences (von Neumann: a misfit smooth on the scale of a sample hardly changes
+    them): about 1 for white residuals and for a model that misses by less than the
+    noise, whatever the structure's correlation; above 1.5 the model misses the record by
+    more than its noise (a wrong basin of the fit, not a model-form nuance). NaN for
+    fewer than 8 residuals.
+
+    Parameters
+    ----------
+    r : ndarray
+        Residuals in time order [any unit], already weighted to equal variance.
+    """
+    r = np.asarray(r, dtype=float)
+    if r.size < 8:
+        return math.nan
+    d = np.diff(r)
+    white = float(d @ d) / (2.0 * d.size)
+    return math.sqrt(float(r @ r) / r.size / white) if white > 0.0 else math.inf
+
+
 #: Ljung-Box p-value below which residuals count as structured (not white) [-]: white
 #: residuals fall below it once in a thousand records.
 WHITENESS_P = 1e-3
