@@ -146,13 +146,16 @@ def fit_curve(
         last = float(bins.t_last[-1])
         span = CurveSpan(reduced.t_ref, reduced.t_ref + last, last, bins.n, reduced.dt)
         settled = float(bins.y_sum[-1] / bins.count[-1])
+        settled_se = math.nan
     else:
         t = np.asarray(t, dtype=float)
         tr = t - t[0]
         trace = curve_fit_trace(tr, np.asarray(p, dtype=float), t_start - float(t[0]))
         dt = float(np.median(np.diff(tr[:100_001]))) if t.size > 1 else 1.0
         span = CurveSpan(float(t[0]), float(t[-1]), float(tr[-1]), int(t.size), dt)
-        settled = float(np.mean(np.asarray(p, dtype=float)[tr >= 0.98 * tr[-1]]))
+        tail = np.asarray(p, dtype=float)[tr >= 0.98 * tr[-1]]
+        settled = float(np.mean(tail))
+        settled_se = float(np.std(tail) / math.sqrt(tail.size)) if tail.size > 1 else math.nan
     common = dict(t_start=t_start, p10=p10, p_atm=p_atm, conductance=conductance,
                   fit_heat=bool(fit_heat and natural), trace=trace, hold=hold)
     drifts = plateau_drift(tr, np.asarray(p, dtype=float), t_start - float(t[0])) \
@@ -166,7 +169,7 @@ def fit_curve(
         # has the offset fitted, the family fitted again with it, where the criterion
         # clearly prefers it (by LAW_BIC_THRESHOLD; an offset it does not determine is not
         # offered); else it is said not to be
-        offset_why = _offer_offset(fam, best, settled - settings.end_pressure)
+        offset_why = _offer_offset(fam, best, settled - settings.end_pressure, settled_se)
         if offset_why is None:
             fam, best = _choose(Family(span, settings, common, profile_heat, offset=True,
                                        plateau_drift_z=drifts, t10_logged=logged), tried)
@@ -350,6 +353,9 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
 #: Largest zero offset fitted, as a fraction of the drop p10 - p_atm [-] (a transducer's
 #: zero is off by a few kPa; a record that sits tens of kPa away has not settled).
 OFFSET_MAX_FRACTION = 0.05
+#: A record whose last 2 % lie this many of their standard errors from the given p_atm is
+#: probed for a zero offset in full, whatever the chosen fit's first-order twin says [-].
+OFFSET_GAP_Z = 5.0
 #: The record's last 2 % must lie within this fraction of the drop of the given p_atm plus
 #: the fitted offset [-]: the record settles on its final plateau.
 SETTLED_FRACTION = 0.01
@@ -398,7 +404,7 @@ def _choose(fam: Family, tried: tuple[str, ...]) -> tuple[Family, str]:
     return fam, best
 
 
-def _offer_offset(fam: Family, best: str, gap: float) -> str | None:
+def _offer_offset(fam: Family, best: str, gap: float, gap_se: float = math.nan) -> str | None:
     """Fit the chosen law ``best`` once more with the transducer's zero offset (starting
     from ``gap`` [Pa], the record's last 2 % above the given p_atm); None when the criterion
     clearly prefers it (by LAW_BIC_THRESHOLD, the offset determined), else why not, in
@@ -410,20 +416,33 @@ def _offer_offset(fam: Family, best: str, gap: float) -> str | None:
     # alone gains little, both together thousands)
     held = fam.fits[best]
     tw = fam.twin(best, "offset")
-    if tw is not None and not fam.worth(tw):
+    if tw is not None and not fam.worth(tw) and not abs(gap) > OFFSET_GAP_Z * gap_se:
+        # (a record's end clearly away from p_atm is probed in full: a chosen fit with m
+        # free may have taken the offset up in b and m, its twin then gaining nothing:
+        # -2.0 kPa read as b 0.066 for 0.36 and m 0.61 for 0.5)
         return (f"not fitted: the record settles at the given p_atm (an offset of "
                 f"{tw.value:+.0f} +- {tw.std:.0f} Pa would not improve the criterion by "
                 f"{TWIN_BIC_MARGIN:g}, to first order)")
     key = best if best.endswith(M_SUFFIX) else best + M_SUFFIX
     probe = Family(fam.span, fam.settings, fam.common, offset=True,
                    plateau_drift_z=fam.plateau_drift_z, t10_logged=fam.t10_logged)
-    base = held[0]
-    start = fam.start_of(base)
-    if math.isfinite(gap):
-        start["offset"] = gap
-    try:
-        got = probe.fit(key, start=start, max_nfev=120)
-    except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+    # started from the chosen fit and, where it has m free, from its law's fit with m held
+    # too (whose b and m have not taken the offset up; m freed from 0.5 screens the far
+    # ends of b and m): the lower chi^2 of the two
+    bases = [held[0]] + [fam.fits[k][0] for k in (best.removesuffix(M_SUFFIX),)
+                         if k != best and k in fam.fits]
+    got = None
+    for base in bases:
+        start = fam.start_of(base)
+        if math.isfinite(gap):
+            start["offset"] = gap
+        try:
+            one = probe.fit(key, start=start, max_nfev=120)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            continue
+        if got is None or one[1] < got[1]:
+            got = one
+    if got is None:
         return "not fitted: the fit with an offset failed"
     off, sd = got[0].pressure_offset, got[0].pressure_offset_std
     drop = abs(got[0].p10 - fam.settings.end_pressure)  # type: ignore[operator]
