@@ -38,6 +38,7 @@ from pneumatic_unload.curvefit.law_family import (
     criterion_unit,
     offer_m,
     other,
+    plateau_bend,
     plateau_drift,
 )
 from pneumatic_unload.curvefit.law_fit import (
@@ -158,11 +159,13 @@ def fit_curve(
         settled_se = float(np.std(tail) / math.sqrt(tail.size)) if tail.size > 1 else math.nan
     common = dict(t_start=t_start, p10=p10, p_atm=p_atm, conductance=conductance,
                   fit_heat=bool(fit_heat and natural), trace=trace, hold=hold)
-    drifts = plateau_drift(tr, np.asarray(p, dtype=float), t_start - float(t[0])) \
-        if reduced is None else 0.0
+    drifts, bends = (plateau_drift(tr, np.asarray(p, dtype=float), t_start - float(t[0])),
+                     plateau_bend(tr, np.asarray(p, dtype=float), t_start - float(t[0]))) \
+        if reduced is None else (0.0, 0.0)
     logged = temperature is not None
     fam, best = _choose(Family(span, settings, common, profile_heat,
-                               plateau_drift_z=drifts, t10_logged=logged), tried)
+                               plateau_drift_z=drifts, t10_logged=logged,
+                               plateau_bend_z=bends), tried)
     offset_why = ""
     if settings.end_pressure is not None:
         # p_atm given: a record that settles away from it (a transducer's zero offset)
@@ -172,7 +175,8 @@ def fit_curve(
         offset_why = _offer_offset(fam, best, settled - settings.end_pressure, settled_se)
         if offset_why is None:
             fam, best = _choose(Family(span, settings, common, profile_heat, offset=True,
-                                       plateau_drift_z=drifts, t10_logged=logged), tried)
+                                       plateau_drift_z=drifts, t10_logged=logged,
+                               plateau_bend_z=bends), tried)
             cf0 = fam.fits[best][0]
             offset_why = (f"fitted: the record settles {cf0.pressure_offset:+.0f} +- "
                           f"{cf0.pressure_offset_std:.0f} Pa from the given p_atm")
@@ -325,7 +329,7 @@ def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArr
         j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
                                        fam.profile_heat, offset=fam.offset,
                                        seeds=starts, plateau_drift_z=fam.plateau_drift_z,
-                                       t10_logged=True),
+                                       t10_logged=True, plateau_bend_z=fam.plateau_bend_z),
                                 tried)
         summary = j_fam.fits[j_best][0].gas_temperature
         summary.update(noise=noise, passes=k + 1)
@@ -425,7 +429,8 @@ def _offer_offset(fam: Family, best: str, gap: float, gap_se: float = math.nan) 
                 f"{TWIN_BIC_MARGIN:g}, to first order)")
     key = best if best.endswith(M_SUFFIX) else best + M_SUFFIX
     probe = Family(fam.span, fam.settings, fam.common, offset=True,
-                   plateau_drift_z=fam.plateau_drift_z, t10_logged=fam.t10_logged)
+                   plateau_drift_z=fam.plateau_drift_z, t10_logged=fam.t10_logged,
+                   plateau_bend_z=fam.plateau_bend_z)
     # started from the chosen fit and, where it has m free, from its law's fit with m held
     # too (whose b and m have not taken the offset up; m freed from 0.5 screens the far
     # ends of b and m): the lower chi^2 of the two
