@@ -152,6 +152,12 @@ def fall_exponent(gamma: float) -> float:
 DRIFT_FALL_RATIO = 3.0
 
 
+#: A start's hinge whose residual RMS exceeds this many of the window's noise (from first
+#: differences) has missed the fall (the trigger fired on a drift): the drifting plateau's
+#: start is fitted as well [-].
+HINGE_MISFIT = 2.0
+
+
 def drifting_start(tv: FloatArray, pv: FloatArray, lo: int, i: int, min_plateau: int
                    ) -> tuple[tuple[float, ...] | None, int]:
     """The start of a fall after a plateau that drifts (:func:`sloped_hinge_fit`), found
@@ -209,10 +215,16 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
             t0, p10, slope, curv, rms = alt
     # fewer samples before the start than a plateau needs: no plateau was found before it
     at_first = int(np.searchsorted(tw, t0)) < 2 * st.settings.min_plateau
-    if trig < i and (not slope > 0.0 or at_first):
-        # still no fall, or a fall from the window's first samples (no plateau before it):
-        # a plateau that drifts (a gas hot from the charge cooling toward the wall: the
-        # trigger fired on the drift) has its slope fitted with the start
+    # the hinge misses the window by more than its noise: the trigger fired on a drift
+    # long before the fall, which the hinge's curvature cannot follow (a gas 10 K warm
+    # cooling over a 10 s plateau at 200 Hz: the trigger at 0.8 s, the start put at 0.5 s,
+    # the hinge 4.4 x the noise, C -10 %)
+    missed = rms > HINGE_MISFIT * rms_sigma(pw)
+    if trig < i and (not slope > 0.0 or at_first or missed):
+        # still no fall, or a fall from the window's first samples (no plateau before it),
+        # or a hinge that misses: a plateau that drifts (a gas hot from the charge cooling
+        # toward the wall: the trigger fired on the drift) has its slope fitted with the
+        # start
         hot, a = drifting_start(tv, pv, lo, i, st.settings.min_plateau)
         if hot is not None and (a > lo or hot[4] < rms):
             t0, p10, slope, curv, rms = hot[:5]
