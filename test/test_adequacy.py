@@ -60,3 +60,27 @@ def test_a_leak_the_model_lacks_is_reported_and_inflates_sigma():
     doc = json.loads(json.dumps(unload_json(r), default=json_default))
     assert "model inadequate: residual not white" in doc["status_text"]
     assert "model inadequate: residual not white" in estimate_fields(r)["status_text"]
+
+
+def test_a_full_curve_fit_that_fails_is_said_and_the_crossing_stands(monkeypatch):
+    """The final fit raising (a law family left empty raised "min() arg is an empty
+    sequence" on two random multi-rate records of the acceptance's ranges): the result was
+    labelled "model-based C, full-curve fit" with the crossing's C and nothing said. Now
+    the status text says there is no full-curve fit and why, the recommended C's source is
+    the crossing's inversion and the crossing's budget is kept."""
+    import pneumatic_unload.estimation.refine as refine
+
+    def fails(*_a, **_k):
+        raise ValueError("no heat law could be fitted to the record")
+
+    monkeypatch.setattr(refine, "fit_curve", fails)
+    cfg = _rig(effects=("heat_transfer",))
+    sim = simulate(cfg)
+    (r,) = merge_final(analyze(sim.t, sim.measured, settings_for(cfg)))
+    assert r.final
+    assert "no full-curve fit (no heat law could be fitted to the record)" in r.status_text
+    assert r.extra["curve_fit_error"] == "no heat law could be fitted to the record"
+    assert "budget" in r.extra
+    doc = json.loads(json.dumps(unload_json(r), default=json_default))
+    assert doc["recommended"]["source"] == "model-based C, inversion at the p* crossing"
+    assert "no full-curve fit" in format_result(r)

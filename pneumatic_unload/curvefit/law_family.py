@@ -495,7 +495,10 @@ def criterion(fits: dict[str, Fit], n: int) -> dict[str, float]:
 
 
 def criterion_unit(fits: dict[str, Fit]) -> float:
-    """The criterion's residual variance [Pa^2]: the lowest-chi^2 fit's, inflated."""
+    """The criterion's residual variance [Pa^2]: the lowest-chi^2 fit's, inflated (a
+    ValueError saying so where no law was fitted)."""
+    if not fits:
+        raise ValueError("no heat law could be fitted to the record")
     ref = fits[min(fits, key=lambda k: fits[k][1])][0]
     return max(ref.rms**2 * ref.inflation, 1e-300)
 

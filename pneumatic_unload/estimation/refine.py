@@ -375,6 +375,15 @@ def _residual(fit: CurveFit) -> float:
     return fit.rms if math.isfinite(fit.rms) else math.inf
 
 
+def crossing_stands(res: UnloadResult, why: str) -> UnloadResult:
+    """The final result where the full-curve fit gave none: the crossing's, its status
+    text saying so (never silent) and ``extra['curve_fit_error']`` why."""
+    return dataclasses.replace(
+        res, final=True, extra={**res.extra, "curve_fit_error": why},
+        status_text=f"{res.status_text}; no full-curve fit ({why}): C is the crossing's "
+                    "model inversion")
+
+
 def refine_with_curve_fit(
     res: UnloadResult, t: FloatArray, p: FloatArray, settings: EstimatorSettings,
     *, noise_std: float, hold: tuple[str, ...] = (), extra_terms: tuple[Any, ...] = (),
@@ -423,7 +432,7 @@ def refine_with_curve_fit(
             if _residual(low) < _residual(fit):
                 fit = low
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
-        return dataclasses.replace(res, final=True, extra={"curve_fit_error": str(exc)})
+        return crossing_stands(res, str(exc))
     mf = fit.model_form_std if math.isfinite(fit.model_form_std) else 0.0
     c_std = math.sqrt(max(fit.conductance_std**2 - mf**2, 0.0))  # the record's part
     if fit.heat_law == "natural" and not math.isfinite(fit.heat_scale_std):
@@ -431,21 +440,17 @@ def refine_with_curve_fit(
             "type_a_std", res.conductance_model_std))
     if not (math.isfinite(fit.conductance) and fit.conductance > 0 and math.isfinite(c_std)):
         # a fit that does not determine C (flat or degenerate trace): the crossing stands
-        return dataclasses.replace(res, final=True, extra={
-            **res.extra, "curve_fit_error": f"the fit did not determine C ({fit.conductance:.3g}"
-                                            f" +- {c_std:.3g} m^3/(s Pa))"})
+        return crossing_stands(res, f"the fit did not determine C ({fit.conductance:.3g}"
+                                    f" +- {c_std:.3g} m^3/(s Pa))")
     lo, hi = (res.p10, SUPPLY_RANGE[1]) if settings.charge else ATMOSPHERE_RANGE
     if settings.charge and not lo < fit.p_atm <= hi:
-        return dataclasses.replace(res, final=True, extra={
-            **res.extra, "curve_fit_error": f"the fit moved the supply to {fit.p_atm:.0f} "
-                                            f"Pa, not above p10 ({lo:.0f} Pa): give it "
-                                            "(--supply PA)"})
+        return crossing_stands(res, f"the fit moved the supply to {fit.p_atm:.0f} Pa, not "
+                                    f"above p10 ({lo:.0f} Pa): give it (--supply PA)")
     if not settings.charge and not lo <= fit.p_atm <= hi:
         # p_atm fitted (not given) beyond any atmosphere: the fit describes something else
-        return dataclasses.replace(res, final=True, extra={
-            **res.extra, "curve_fit_error": f"the fit moved p_atm to {fit.p_atm:.0f} Pa, not "
-                                            f"an atmosphere ({lo:.0f}-{hi:.0f} Pa): give it "
-                                            "(--atmosphere PA)"})
+        return crossing_stands(res, f"the fit moved p_atm to {fit.p_atm:.0f} Pa, not an "
+                                    f"atmosphere ({lo:.0f}-{hi:.0f} Pa): give it "
+                                    "(--atmosphere PA)")
     t10 = fit.gas_temperature.get("t10", math.nan)
     if math.isfinite(t10):
         # T10 fitted with the logged temperature (its statistical part in the fit's line,

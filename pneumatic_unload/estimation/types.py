@@ -240,7 +240,8 @@ def recommended(r: UnloadResult) -> dict[str, Any]:
     uncertainty [m^3/(s Pa)] and where it comes from: the model-based C (curve fit or
     crossing inversion) when known, else eq 39's (biased by design: said so)."""
     if math.isfinite(r.conductance_model):
-        source = "model-based C, full-curve fit" if r.final else \
+        source = "model-based C, full-curve fit" if r.final and not (
+            r.extra or {}).get("curve_fit_error") else \
             "model-based C, inversion at the p* crossing"
         c, sd = r.conductance_model, r.conductance_model_std
     else:
