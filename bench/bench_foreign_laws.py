@@ -122,7 +122,8 @@ TAU_HEAT = (5.0, 10.0, 20.0, 1e4)  # [s]; 1e4: adiabatic-like
 
 @dataclass(frozen=True)
 class Case:
-    """One discharge: name, family, law, V [m^3], p10 [Pa abs], tau_h [s], seed index."""
+    """One discharge: name, family, law, V [m^3], p10 [Pa abs], tau_h [s], seed index, the
+    record's length after the opening [tau0]."""
 
     name: str
     family: str
@@ -131,6 +132,7 @@ class Case:
     p10: float
     tau_heat: float
     seed: int = 0
+    tau0_recorded: float = TAU0_RECORDED  # the record's length after the opening [tau0]
 
 
 def cases(quick: bool = False, seeds: int = 1, family: str | None = None) -> list[Case]:
@@ -164,7 +166,7 @@ def cases(quick: bool = False, seeds: int = 1, family: str | None = None) -> lis
 def record(case: Case) -> tuple[np.ndarray, np.ndarray]:
     """The case's noisy record: t [s], p [Pa abs]."""
     tau0 = case.volume / (1.4e5 * case.law.conductance)
-    t = np.arange(0.0, PLATEAU + TAU0_RECORDED * tau0, 1.0 / RATE)
+    t = np.arange(0.0, PLATEAU + case.tau0_recorded * tau0, 1.0 / RATE)
     p = discharge(t, volume=case.volume, p10=case.p10, t10=T10, p_atm=P_ATM,
                   tau_heat=case.tau_heat, t_open=PLATEAU, flow_law=case.law)
     rng = np.random.default_rng([zlib.crc32(case.name.encode()), case.seed])

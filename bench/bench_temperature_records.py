@@ -179,6 +179,7 @@ class Case:
     t_noise: float
     tc_behind: float
     seed: int = 0
+    m: float = 0.5  # the component's subsonic index (the grid's: 0.5)
 
     @property
     def tau0(self) -> float:
@@ -209,7 +210,8 @@ def record(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     t10 = WALL + case.dt_hot
     p = discharge(t, volume=case.volume, p10=case.p10, t10=t10, p_atm=P_ATM,
                   tau_heat=case.tau_heat, t_open=case.plateau,
-                  flow_law=IsoLaw(case.conductance, case.b), t_wall=WALL, temperature_out=gas)
+                  flow_law=IsoLaw(case.conductance, case.b, case.m), t_wall=WALL,
+                  temperature_out=gas)
     rng = np.random.default_rng([zlib.crc32(case.name.encode()), case.seed])
     y = p + case.offset + rng.normal(0.0, NOISE, t.size)
     tc = thermocouple(t, gas, case.lag, gas[0] - (case.tc_behind if case.dt_hot else 0.0))
