@@ -1,9 +1,9 @@
 """Random draws of the acceptance's ranges, beyond the fixed grids: a script, not a test.
 
-``python bench/bench_random_draws.py foreign|temperature [--draws N] [--first K] [--jobs J]
-[--draw K]`` (project venv, ``PYTHONPATH`` at the repo root). The fixed grids of
-``bench/bench_foreign_laws.py`` and ``bench/bench_temperature_records.py`` cycle a few
-values of each factor; this draws every factor at random inside the issue's ranges, with
+``python bench/bench_random_draws.py [foreign|temperature] [--draws N] [--first K] [--jobs J]
+[--draw K]`` (both kinds without one; project venv, ``PYTHONPATH`` at the repo root). The
+fixed grids of ``bench/bench_foreign_laws.py`` and ``bench/bench_temperature_records.py``
+cycle a few values of each factor; this draws every factor at random inside the issue's ranges, with
 the records made and analysed by those benches' own ``record`` and ``run`` (the
 independent model ``test/foreign/newton_tank.py``, default settings, V given):
 
@@ -168,12 +168,14 @@ def summary(rows: list[dict]) -> list[str]:
 
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("kind", choices=("foreign", "temperature"))
+    ap.add_argument("kind", nargs="?", choices=("foreign", "temperature"))
     ap.add_argument("--draws", type=int, default=40)
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--draw", type=int, help="analyse this draw alone and print it")
     args = ap.parse_args(argv)
+    if args.kind is None:
+        return max(main([kind, *argv]) for kind in ("foreign", "temperature"))
     ks = [args.draw] if args.draw is not None else range(args.first, args.first + args.draws)
     jobs = [(args.kind, k) for k in ks]
     if args.jobs > 1:
