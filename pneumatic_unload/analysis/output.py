@@ -74,7 +74,9 @@ UNLOAD_JSON_KEYS: dict[str, str] = {
     "gas_temperature": "final results in 'unloads': the evidence of the record's gas "
                        "temperature: 'used' (false, with 'why', when the record carries "
                        "none); when used, the fitted readings' rms and the channel's noise "
-                       "[K], whether the model 'follows' the log, the thermometer's time "
+                       "[K], whether the model 'follows' the log (within its noise; "
+                       "'probe' [K] where used within the probe's accuracy only), the "
+                       "thermometer's time "
                        "constant [s] and offset [K] and t10 [K], each with its 1-sigma",
     "model_inadequate": "why the model does not describe the record, or '' when it does",
     "recommended": "the C to report: conductance, std, expanded (k = 2) [m^3/(s Pa)], "

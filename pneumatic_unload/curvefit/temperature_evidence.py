@@ -133,10 +133,16 @@ def temperature_evidence(cfg: RigConfig, t_open: float, t_log: FloatArray,
 
 
 def departure_text(ev: dict[str, Any]) -> str:
-    """The status text's words when the model's gas does not follow the log ('' when it
-    does or was not compared)."""
+    """The status text's words when the model's gas does not follow the log within its
+    noise, or follows it within the probe's accuracy only ('' when it follows within its
+    noise or was not compared)."""
     if "rms" not in ev or ev.get("follows", True):
         return ""
+    if ev.get("used") and "probe" in ev:
+        return (f"the logged gas temperature follows the model's within the probe's "
+                f"accuracy, not its noise ({ev['rms']:.2g} K rms against {ev['probe']:g} K"
+                f" and {ev['noise']:.2g} K; T10 and a thermometer lag of "
+                f"{ev['sensor_time_constant']:.3g} s fitted): used, weighted by its misfit")
     how = (f"T10 and a thermometer lag of {ev['sensor_time_constant']:.3g} s fitted"
            if ev.get("used") else
            f"a thermometer lag of {ev['sensor_time_constant']:.3g} s and an offset of "
@@ -218,13 +224,17 @@ def channel_evidence(summary: dict[str, float]) -> dict[str, Any]:
     """JSON ``gas_temperature`` of a joint fit (the curve fit's ``gas_temperature``
     summary): ``used`` true, the fitted readings' ``rms`` [K] against the channel's
     ``noise`` [K] and whether the model ``follows`` the log (within :data:`FOLLOW_FACTOR`
-    noises), the thermometer's ``sensor_time_constant`` [s] and ``sensor_offset`` [K] (0
+    noises; where not, the summary's ``probe`` [K] says it was used within the probe's
+    accuracy), the thermometer's ``sensor_time_constant`` [s] and ``sensor_offset`` [K] (0
     +- 0 where held: :func:`offset_identified`) and the fitted ``t10`` [K], each with its
     1-sigma."""
     rms, noise = summary["rms"], summary["noise"]
     follows = rms <= FOLLOW_FACTOR * noise
+    probe = summary.get("probe", math.nan)
     return {"used": True, "why": "fitted jointly with the pressure (the thermometer's lag "
             "fitted, T10 from the log)" + ("" if follows else
+            f"; within the probe's accuracy ({probe:g} K), not its noise, the pressure's "
+            "residual kept: weighted by its own misfit" if math.isfinite(probe) else
             "; weighted by its own misfit: no heat law follows it within its noise"),
             "samples": int(summary["samples"]), "rms": rms, "noise": noise,
             "follows": follows, "sensor_time_constant": summary["sensor_time_constant"],
@@ -232,7 +242,8 @@ def channel_evidence(summary: dict[str, float]) -> dict[str, Any]:
             "t10": summary["t10"], "t10_std": summary["t10_std"],
             "sensor_offset": summary.get("sensor_offset", 0.0),
             "sensor_offset_std": summary.get("sensor_offset_std", 0.0),
-            "passes": int(summary.get("passes", 1))}
+            "passes": int(summary.get("passes", 1)),
+            **({"probe": probe} if math.isfinite(probe) else {})}
 
 
 def temperature_terms(fit: Any) -> tuple[BudgetTerm, ...]:
