@@ -91,22 +91,24 @@ def test_a_small_warm_gas_not_measured_does_not_bend_b_and_m(seed):
     assert abs(r.conductance_model - c) <= 2.0 * r.conductance_model_std
 
 
-def test_a_warm_gas_is_judged_by_the_hot_start_that_fits_best():
+@pytest.mark.parametrize("seed", [1, 25])
+def test_a_warm_gas_is_judged_by_the_hot_start_that_fits_best(seed):
     """A 6 K warm gas, 3.2 K at the opening after a 9.5 s plateau (thermal time constant
     14.6 s, 450 Hz, 7.3 L, 2.36e-9 m^3/(s Pa), b 0.59, 4 bar, a -2.1 kPa zero; a random
     draw of the acceptance's ranges), T10 not given. The constant-hA hot start (the
     record's own law, 3.2 K) was not claimed, within a room's spread, while the natural
-    law's, which needs a larger gap for the same decay, was: C -2.7 % at z -3.6. Judged on
-    the hot start that fits best, none is claimed: C within the T10 line's sigma."""
+    law's, which needs a larger gap for the same decay, was: C -2.9 % at z -3.9 on both
+    draws. Judged on the hot start that fits best: none claimed where the plateau is
+    straight within 2 sigma (draw 1: C +1.9 %, z 1.4, T10's line), the constant-hA one
+    where it bends (draw 25: C +0.01 %)."""
     v, c = 7.2605e-3, 2.361e-9
     t = np.arange(0.0, 9.517 + 8.08 * v / (1.4e5 * c), 1.0 / 450.88)
     p = discharge(t, volume=v, p10=4.0118e5, t10=293.15 + 6.0, p_atm=101325.0,
                   tau_heat=14.61, t_open=9.517, flow_law=IsoLaw(c, 0.59, 0.5),
                   t_wall=293.15)
-    y = p - 2091.0 + np.random.default_rng(25).normal(0.0, 1000.0, t.size)
+    y = p - 2091.0 + np.random.default_rng(seed).normal(0.0, 1000.0, t.size)
     (r,) = merge_final(analyze(t, y, EstimatorSettings(volume=v)))
-    fit = r.extra["curve_fit"]
-    assert not fit["heat_law"].endswith("+wall"), fit["heat_law"]
+    assert r.extra["curve_fit"]["heat_law"] != "natural+wall"
     assert abs(r.conductance_model / c - 1.0) < 0.03
     assert abs(r.conductance_model - c) <= 2.0 * r.conductance_model_std, \
         (r.conductance_model / c - 1.0, r.conductance_model_std / c)
@@ -117,7 +119,7 @@ def test_a_plateau_bending_toward_the_wall_claims_a_small_warm_gas():
     100 Hz, 5 L, 3e-9 m^3/(s Pa), b 0.3, 6 bar), T10 not given: within a room's spread
     the warm gas was not claimed, C +1.9 %. The plateau bends toward a level as a gas
     reaching the wall's temperature does (a leak's decay is straight over it), by more
-    than PLATEAU_BEND_Z of its sigmas: the hot start is claimed, C -0.1 to +0.0 %."""
+    than PLATEAU_BEND_Z (2) of its sigmas: the hot start is claimed, C -0.1 to +0.0 %."""
     v, c = 5e-3, 3e-9
     t = np.arange(0.0, 10.0 + 8.0 * v / (1.4e5 * c), 1e-2)
     p = discharge(t, volume=v, p10=6e5, t10=301.15, p_atm=101325.0, tau_heat=10.0,
