@@ -39,8 +39,6 @@ from pneumatic_unload.curvefit.law_family import (
     criterion_unit,
     offer_m,
     other,
-    plateau_bend,
-    plateau_drift,
 )
 from pneumatic_unload.curvefit.law_fit import (
     CURVE_FIT_RESOLUTION,
@@ -50,6 +48,7 @@ from pneumatic_unload.curvefit.law_fit import (
     fit_law,
     start_from,
 )
+from pneumatic_unload.curvefit.plateau import plateau_bend, plateau_drift
 from pneumatic_unload.curvefit.subsonic_offer import (
     M_SUFFIX,
     held_lines,

@@ -43,6 +43,7 @@ from pneumatic_unload.curvefit.heat_law_offer import (
 )
 from pneumatic_unload.curvefit.law_fit import fit_law, heat_of, start_from
 from pneumatic_unload.curvefit.linear_twin import Twin, linear_twin
+from pneumatic_unload.curvefit.plateau import COLD_DRIFT_Z, PLATEAU_BEND_Z, PLATEAU_DRIFT_Z
 from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX, split_key, subsonic_index_problem
 from pneumatic_unload.model.effects import WALL_TEMPERATURE
 from pneumatic_unload.model.inversion import estimator_model
@@ -115,13 +116,16 @@ class Family:
         take (e.g. the same law's fit to the pressure alone, for the joint fit with the
         logged temperature).
     plateau_drift_z : float
-        The plateau's slope before the opening in its standard errors (:func:`plateau_drift`;
-        beyond :data:`PLATEAU_DRIFT_Z` either way the hot starts are fitted too, and its
-        sign says which: a cold gas makes it rise, a warm one fall) [-].
+        The plateau's slope before the opening in its standard errors
+        (:func:`~pneumatic_unload.curvefit.plateau.plateau_drift`; beyond
+        :data:`~pneumatic_unload.curvefit.plateau.PLATEAU_DRIFT_Z` either way the hot starts
+        are fitted too, and its sign says which: a cold gas makes it rise, a warm one
+        fall) [-].
     plateau_bend_z : float
         The plateau's bend toward a level before the opening in its standard errors
-        (:func:`plateau_bend`) [-]: a gas cooling (or warming) to the wall's temperature
-        approaches it exponentially; a leak's decay is straight over a plateau.
+        (:func:`~pneumatic_unload.curvefit.plateau.plateau_bend`) [-]: a gas cooling (or
+        warming) to the wall's temperature approaches it exponentially; a leak's decay is
+        straight over a plateau.
     t10_logged : bool
         The record carries the gas temperature (T10 measured, whatever its value).
     """
@@ -141,7 +145,8 @@ class Family:
 
     @property
     def plateau_drifts(self) -> bool:
-        """The plateau drifts by :data:`PLATEAU_DRIFT_Z` or more, either way."""
+        """The plateau drifts by :data:`~pneumatic_unload.curvefit.plateau.PLATEAU_DRIFT_Z`
+        or more, either way."""
         return abs(self.plateau_drift_z) >= PLATEAU_DRIFT_Z
 
     @property
@@ -200,8 +205,9 @@ class Family:
 
     def _plateau_shows(self, cold: bool) -> bool:
         """Whether the plateau's drift allows a gas colder (``cold``) or warmer than the
-        wall: a cold one warms on it, rising by :data:`COLD_DRIFT_Z`; a warm one cools,
-        and must not rise by :data:`PLATEAU_DRIFT_Z`."""
+        wall: a cold one warms on it, rising by
+        :data:`~pneumatic_unload.curvefit.plateau.COLD_DRIFT_Z`; a warm one cools, and must
+        not rise by :data:`~pneumatic_unload.curvefit.plateau.PLATEAU_DRIFT_Z`."""
         z = self.plateau_drift_z
         return z >= COLD_DRIFT_Z if cold else z < PLATEAU_DRIFT_Z
 
@@ -417,7 +423,8 @@ class Family:
         T10 not measured) where the one that fits best (its BIC among them) puts the gas
         beyond a room's spread (3 x :data:`WALL_ASSUMED_STD`), or nearer where the plateau
         bends toward a level as a gas reaching the wall's temperature does
-        (:data:`PLATEAU_BEND_Z`; a leak's decay is straight over a plateau); else none. Each
+        (:data:`~pneumatic_unload.curvefit.plateau.PLATEAU_BEND_Z`; a leak's decay is
+        straight over a plateau); else none. Each
         law judged by its own gap read a warm gas through the law that needs the largest
         one: a 6 K warm gas, 3.2 K at the opening, its constant-hA hot start (the record's
         own law) not claimed within the spread while the natural law's, with a gap beyond
@@ -507,80 +514,3 @@ def best_key(fits: dict[str, Fit], n: int) -> str:
     """The key of the lowest BIC (:func:`criterion`)."""
     bic = criterion(fits, n)
     return min(bic, key=lambda k: bic[k])
-
-
-#: A plateau drifts when its straight line's slope is at least this many of its
-#: standard errors (the residuals' lag-1 correlation counted) [-]: the hot starts are then
-#: fitted, and the criterion and the gap's gates decide (2, not 5: a 20 K warm gas on a
-#: 1 s plateau at 100 Hz drifts by 2-3 of them and read at T10 = the room's gave C +5.7 %
-#: at z 7.7, -1.1 % at z -0.5 with its hot start tried; a plateau of noise alone trips it
-#: about 1 time in 15: its hot starts are screened by their first-order twin,
-#: :meth:`Family._no_hot_start`, without which they widened C's heat-law line on 3 of 140
-#: foreign-law records, sigma 0.04 % -> 0.4-1.7 %, C unchanged).
-PLATEAU_DRIFT_Z = 2.0
-#: Where T10 was not measured, a gas colder than the room (a tank vented, then shut) is read
-#: only from a plateau that rises by this many of its standard errors [-]: a test line's
-#: charge makes a warm gas, which is read from the record's shape; a cold one needs the
-#: plateau's own evidence (a 2-sigma rise, 1 in 40 by chance, let a gauge's zero and a
-#: subsonic index 0.3 be read as a gas 14 K cold, C +4.8 %).
-COLD_DRIFT_Z = 5.0
-
-
-def _plateau(t: FloatArray, p: FloatArray, t_open: float) -> tuple[FloatArray, FloatArray]:
-    """The samples before the opening (two periods clear of it) [s], [Pa]."""
-    pre = t < t_open - 2.0 * float(np.median(np.diff(t[:1001]))) if t.size > 2 else t < t_open
-    return t[pre], p[pre]
-
-
-def plateau_drift(t: FloatArray, p: FloatArray, t_open: float) -> float:
-    """The slope of the samples before the opening (t [s] < t_open [s], p [Pa]; at least
-    32) along a straight line, in its standard errors (the residuals' lag-1 correlation
-    counted) [-]: negative where the plateau falls (a gas warmer than the wall cooling
-    before the opening, or a leak), positive where it rises (a cold gas warming); 0 where
-    the plateau is too short to tell."""
-    tt, pp = _plateau(t, p, t_open)
-    if tt.size < 32:
-        return 0.0
-    x = tt - tt.mean()
-    sxx = float(x @ x)
-    if sxx <= 0.0:
-        return 0.0
-    slope = float(x @ (pp - pp.mean())) / sxx
-    r = pp - pp.mean() - slope * x
-    s2 = float(r @ r) / (tt.size - 2)
-    rho = float(r[1:] @ r[:-1]) / float(r @ r) if float(r @ r) > 0 else 0.0
-    rho = min(max(rho, 0.0), 0.95)
-    se = math.sqrt(s2 / sxx * (1.0 + rho) / (1.0 - rho))
-    return slope / se if se > 0.0 else 0.0
-
-
-#: A plateau bending toward a level by this many of its standard errors is evidence of a
-#: gas reaching the wall's temperature (not a leak) [-] (:func:`plateau_bend`; 2, as
-#: :data:`PLATEAU_DRIFT_Z`: a 5 K warm gas, 3.3 K at the opening after a 2 s plateau at
-#: 1 kHz, bends 2.3 of them: C +2.05 % -> +0.01 %; a laminar leak's plateau -1.1 to -1.3).
-PLATEAU_BEND_Z = 2.0
-
-
-def plateau_bend(t: FloatArray, p: FloatArray, t_open: float) -> float:
-    """The bend of the samples before the opening (t [s] < t_open [s], p [Pa]; at least 64)
-    toward a level, in its standard errors (the residuals' lag-1 correlation counted) [-]:
-    the quadratic term of a parabola through them, positive where it opposes the slope (a
-    gas cooling or warming toward the wall's temperature approaches it exponentially, its
-    decay slowing), negative where the drift speeds up; 0 where the plateau is too short
-    to tell or does not drift (a leak's decay, its time constant far longer than a
-    plateau, is straight)."""
-    tt, pp = _plateau(t, p, t_open)
-    if tt.size < 64:
-        return 0.0
-    x = tt - tt.mean()
-    a = np.column_stack([np.ones_like(x), x, x * x])
-    coef, *_ = np.linalg.lstsq(a, pp, rcond=None)
-    r = pp - a @ coef
-    dof = tt.size - 3
-    rr = float(r @ r)
-    if rr <= 0.0 or coef[1] == 0.0:
-        return 0.0
-    rho = min(max(float(r[1:] @ r[:-1]) / rr, 0.0), 0.95)
-    cov = np.linalg.inv(a.T @ a) * rr / dof * (1.0 + rho) / (1.0 - rho)
-    se = math.sqrt(max(float(cov[2, 2]), 0.0))
-    return -math.copysign(1.0, float(coef[1])) * float(coef[2]) / se if se > 0.0 else 0.0
