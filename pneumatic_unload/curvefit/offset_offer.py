@@ -1,0 +1,96 @@
+"""The transducer's zero offset offered to the curve fit (SI units): a record that settles
+away from the given p_atm has the offset fitted where the criterion clearly prefers it
+(:func:`offer_offset`, :func:`offset_verdict`; used by
+:func:`~pneumatic_unload.curvefit.fitting.fit_curve`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pneumatic_unload.curvefit.law_family import (
+    LAW_BIC_THRESHOLD,
+    TWIN_BIC_MARGIN,
+    Family,
+    Fit,
+    criterion,
+)
+from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX
+
+#: Largest zero offset fitted, as a fraction of the drop p10 - p_atm [-] (a transducer's
+#: zero is off by a few kPa; a record that sits tens of kPa away has not settled).
+OFFSET_MAX_FRACTION = 0.05
+#: A record whose last 2 % lie this many of their standard errors from the given p_atm is
+#: probed for a zero offset in full, whatever the chosen fit's first-order twin says [-].
+OFFSET_GAP_Z = 5.0
+#: The record's last 2 % must lie within this fraction of the drop of the given p_atm plus
+#: the fitted offset [-]: the record settles on its final plateau.
+SETTLED_FRACTION = 0.01
+
+
+def offer_offset(fam: Family, best: str, gap: float, gap_se: float = math.nan) -> str | None:
+    """Fit the chosen law ``best`` once more with the transducer's zero offset (starting
+    from ``gap`` [Pa], the record's last 2 % above the given p_atm); None when the criterion
+    clearly prefers it (by LAW_BIC_THRESHOLD, the offset determined), else why not, in
+    words (the probe also frees m: the criterion then asks for the offset's family only
+    where the offset is also 3 of its sigmas from 0)."""
+    # the first-order twin of the chosen fit (m as it is there) screens; the probe frees m
+    # too: a flow law that is not the elliptic one leaves structure an offset alone cannot
+    # take up, and an offset hides the subsonic tail's shape (m 0.3 read 3 kPa high: each
+    # alone gains little, both together thousands)
+    held = fam.fits[best]
+    tw = fam.twin(best, "offset")
+    if tw is not None and not fam.worth(tw) and not abs(gap) > OFFSET_GAP_Z * gap_se:
+        # (a record's end clearly away from p_atm is probed in full: a chosen fit with m
+        # free may have taken the offset up in b and m, its twin then gaining nothing:
+        # -2.0 kPa read as b 0.066 for 0.36 and m 0.61 for 0.5)
+        return (f"not fitted: the record settles at the given p_atm (an offset of "
+                f"{tw.value:+.0f} +- {tw.std:.0f} Pa would not improve the criterion by "
+                f"{TWIN_BIC_MARGIN:g}, to first order)")
+    key = best if best.endswith(M_SUFFIX) else best + M_SUFFIX
+    probe = Family(fam.span, fam.settings, fam.common, offset=True,
+                   plateau_drift_z=fam.plateau_drift_z, t10_logged=fam.t10_logged,
+                   plateau_bend_z=fam.plateau_bend_z)
+    # started from the chosen fit and, where it has m free, from its law's fit with m held
+    # too (whose b and m have not taken the offset up; m freed from 0.5 screens the far
+    # ends of b and m): the lower chi^2 of the two
+    bases = [held[0]] + [fam.fits[k][0] for k in (best.removesuffix(M_SUFFIX),)
+                         if k != best and k in fam.fits]
+    got = None
+    for base in bases:
+        start = fam.start_of(base)
+        if math.isfinite(gap):
+            start["offset"] = gap
+        try:
+            one = probe.fit(key, start=start, max_nfev=120)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            continue
+        if got is None or one[1] < got[1]:
+            got = one
+    if got is None:
+        return "not fitted: the fit with an offset failed"
+    return offset_verdict(fam, held, got, gap)
+
+
+def offset_verdict(fam: Family, held: Fit, got: Fit, gap: float) -> str | None:
+    """None where the fit ``got`` with the zero offset is to be kept over ``held``
+    (:data:`Fit` entries; ``gap`` [Pa]: the record's end above the given p_atm): the
+    offset a small shift of a record that settles, the criterion clearly preferring it (by
+    LAW_BIC_THRESHOLD) and the offset 3 of its sigmas from 0; else why not, in words."""
+    off, sd = got[0].pressure_offset, got[0].pressure_offset_std
+    drop = abs(got[0].p10 - fam.settings.end_pressure)  # type: ignore[operator]
+    if not (abs(off) <= OFFSET_MAX_FRACTION * drop
+            and abs(gap - off) <= SETTLED_FRACTION * drop):
+        # a zero offset is a small shift of a record that settles: one that ends before
+        # its final plateau (or a large "offset") is something else
+        return (f"not fitted: the record does not settle on a plateau an offset explains "
+                f"(its end {gap:+.0f} Pa from the given p_atm, an offset would be "
+                f"{off:+.0f} Pa)")
+    pair = criterion({"held": held, "offset": got}, fam.span.n)
+    gain = pair["held"] - pair["offset"]
+    if math.isfinite(sd) and gain > LAW_BIC_THRESHOLD and abs(off) > 3.0 * sd:
+        return None
+    return (f"not fitted: the record settles at the given p_atm (an offset of {off:+.0f} "
+            f"+- {sd:.0f} Pa would improve the criterion by {gain:.1f} <= "
+            f"{LAW_BIC_THRESHOLD:g})")
