@@ -84,6 +84,9 @@ With m in the curve fit's family (``pneumatic_unload.curvefit.subsonic_offer``; 
   curve to the pair's, not a held m; its sigma is the default settings' model-limits line.
 * Not covered: b = 0.1 from 6-8 bar is never choked; there b, m and the heat exchange can
   trade (one record, adiabatic, m 0.35: b 0.23 +- 0.01, m 0.30, white residuals).
+
+Session 20 (main 8dc7f2b): every figure above unchanged, in all three modes; the random
+draws of the same ranges are ``bench/bench_random_draws.py``.
 """
 
 from __future__ import annotations

@@ -112,6 +112,14 @@ T had b 0.010 +- 0.036 for 0.3 and m 0.428 +- 0.007 for 0.5; now the constant-hA
 within 0.03 19/24 -> 21/24 (max |error| 0.290 -> 0.033), |z_b| <= 2 21/24 -> 23/24; C
 unchanged (within 2 % 23/24, |z_C| <= 2 24/24); with T, and the foreign flow laws, every
 figure identical.
+
+Session 20 (main 8dc7f2b; the whole family fitted with the offset where the record's end
+lies clearly away from p_atm, the warm gas judged on the best-fitting hot start, a plateau
+bending 2 sigma toward a level as its evidence): with the temperature unchanged (24/24 in
+every column); without it, hot starts C within 2 % 11/12 -> 12/12 (max 1.82 -> 1.70 %),
+b within 0.03 11/12 -> 12/12, offsets 11/12 -> 12/12: c15-hot5 +2.05 % -> +0.01 % (its
+plateau bends 2.3 sigma), c11-hot30 +1.82 % (b not determined, the -3 kPa zero missed,
+the warm gas's fit at the 600 K bound) -> +0.01 %, offset -2895 Pa.
 """
 
 from __future__ import annotations
