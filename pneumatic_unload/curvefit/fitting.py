@@ -47,7 +47,12 @@ from pneumatic_unload.curvefit.law_fit import (
     fit_law,
     start_from,
 )
-from pneumatic_unload.curvefit.offset_offer import OFFSET_GAP_Z, offer_offset, offset_verdict
+from pneumatic_unload.curvefit.offset_offer import (
+    OFFSET_GAP_NOISE,
+    OFFSET_GAP_Z,
+    offer_offset,
+    offset_verdict,
+)
 from pneumatic_unload.curvefit.plateau import plateau_bend, plateau_drift
 from pneumatic_unload.curvefit.subsonic_offer import (
     M_SUFFIX,
@@ -147,7 +152,7 @@ def fit_curve(
         last = float(bins.t_last[-1])
         span = CurveSpan(reduced.t_ref, reduced.t_ref + last, last, bins.n, reduced.dt)
         settled = float(bins.y_sum[-1] / bins.count[-1])
-        settled_se = math.nan
+        settled_se = settled_sd = math.nan
     else:
         t = np.asarray(t, dtype=float)
         tr = t - t[0]
@@ -156,7 +161,8 @@ def fit_curve(
         span = CurveSpan(float(t[0]), float(t[-1]), float(tr[-1]), int(t.size), dt)
         tail = np.asarray(p, dtype=float)[tr >= 0.98 * tr[-1]]
         settled = float(np.mean(tail))
-        settled_se = float(np.std(tail) / math.sqrt(tail.size)) if tail.size > 1 else math.nan
+        settled_sd = float(np.std(tail))
+        settled_se = settled_sd / math.sqrt(tail.size) if tail.size > 1 else math.nan
     common = dict(t_start=t_start, p10=p10, p_atm=p_atm, conductance=conductance,
                   fit_heat=bool(fit_heat and natural), trace=trace, hold=hold)
     drifts, bends = (plateau_drift(tr, np.asarray(p, dtype=float), t_start - float(t[0])),
@@ -173,8 +179,9 @@ def fit_curve(
         # clearly prefers it (by LAW_BIC_THRESHOLD; an offset it does not determine is not
         # offered); else it is said not to be
         gap = settled - settings.end_pressure
-        offset_why = offer_offset(fam, best, gap, settled_se)
-        if offset_why is None or abs(gap) > OFFSET_GAP_Z * settled_se:
+        clear = abs(gap) > max(OFFSET_GAP_Z * settled_se, OFFSET_GAP_NOISE * settled_sd)
+        offset_why = offer_offset(fam, best, gap, clear)
+        if offset_why is None or clear:
             alt = _choose(Family(span, settings, common, profile_heat, offset=True,
                                  plateau_drift_z=drifts, t10_logged=logged,
                                  plateau_bend_z=bends), tried)

@@ -21,17 +21,23 @@ from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX
 #: Largest zero offset fitted, as a fraction of the drop p10 - p_atm [-] (a transducer's
 #: zero is off by a few kPa; a record that sits tens of kPa away has not settled).
 OFFSET_MAX_FRACTION = 0.05
-#: A record whose last 2 % lie this many of their standard errors from the given p_atm is
-#: probed for a zero offset in full, whatever the chosen fit's first-order twin says [-].
+#: A record whose last 2 % lie this many of their standard errors from the given p_atm, and
+#: :data:`OFFSET_GAP_NOISE` of a reading's noise, is probed for a zero offset in full,
+#: whatever the chosen fit's first-order twin says [-].
 OFFSET_GAP_Z = 5.0
+#: ... and this share of a reading's noise [-] (the 1 M-sample record of
+#: ``bench/bench_engine.py`` ends 281 Pa above p_atm, 32 standard errors but 0.28 of its
+#: noise: probing it in full cost ``analyze`` 0.1 s, 0.42 -> 0.49 of a raw bag iteration).
+OFFSET_GAP_NOISE = 0.5
 #: The record's last 2 % must lie within this fraction of the drop of the given p_atm plus
 #: the fitted offset [-]: the record settles on its final plateau.
 SETTLED_FRACTION = 0.01
 
 
-def offer_offset(fam: Family, best: str, gap: float, gap_se: float = math.nan) -> str | None:
+def offer_offset(fam: Family, best: str, gap: float, clear: bool = False) -> str | None:
     """Fit the chosen law ``best`` once more with the transducer's zero offset (starting
-    from ``gap`` [Pa], the record's last 2 % above the given p_atm); None when the criterion
+    from ``gap`` [Pa], the record's last 2 % above the given p_atm; ``clear``: that end
+    clearly away from it, probed in full); None when the criterion
     clearly prefers it (by LAW_BIC_THRESHOLD, the offset determined), else why not, in
     words (the probe also frees m: the criterion then asks for the offset's family only
     where the offset is also 3 of its sigmas from 0)."""
@@ -41,7 +47,7 @@ def offer_offset(fam: Family, best: str, gap: float, gap_se: float = math.nan) -
     # alone gains little, both together thousands)
     held = fam.fits[best]
     tw = fam.twin(best, "offset")
-    if tw is not None and not fam.worth(tw) and not abs(gap) > OFFSET_GAP_Z * gap_se:
+    if tw is not None and not fam.worth(tw) and not clear:
         # (a record's end clearly away from p_atm is probed in full: a chosen fit with m
         # free may have taken the offset up in b and m, its twin then gaining nothing:
         # -2.0 kPa read as b 0.066 for 0.36 and m 0.61 for 0.5)
