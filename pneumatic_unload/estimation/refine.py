@@ -28,6 +28,7 @@ from pneumatic_unload.curvefit.fitting import CurveFit, fit_curve
 from pneumatic_unload.curvefit.recovery import fit_recovery
 from pneumatic_unload.curvefit.subsonic_offer import m_budget, offset_terms, subsonic_term
 from pneumatic_unload.curvefit.temperature_evidence import temperature_terms
+from pneumatic_unload.estimation.endstep import TAIL_STEP
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
 from pneumatic_unload.fit.uncertainty import inadequacy
 from pneumatic_unload.model.inversion import (
@@ -331,24 +332,10 @@ def crossing_inversion(settings: EstimatorSettings, tau: float, tau_std: float, 
 def final_curve_fit(res: UnloadResult, t: FloatArray | None, p: FloatArray | None,
                     settings: EstimatorSettings, *, noise_std: float,
                     reduced: Any = None, temperature: Any = None) -> UnloadResult | None:
-    """Final result of an unload from the full-curve fit (None when it fails).
-
-    Parameters
-    ----------
-    res : UnloadResult
-        The unload's crossing result.
-    t, p : ndarray
-        Samples of the unload and its tail [s], [Pa absolute].
-    settings : EstimatorSettings
-        Tank, gas and heat-model settings.
-    noise_std : float
-        Noise standard deviation [Pa].
-    reduced : Reducer, optional
-        The samples reduced to bins, used instead of t and p (None): a long unload, see
-        :mod:`pneumatic_unload.estimation.reduction`.
-    temperature : tuple of ndarray, optional
-        A logged gas temperature ([s], [K]) fitted beside the pressure.
-    """
+    """Final result of an unload from the full-curve fit (None when it fails): the
+    crossing result ``res``, the unload's samples t [s], p [Pa absolute] from its plateau
+    to its tail's end (or ``reduced`` to bins), the sample noise [Pa] and a logged gas
+    temperature ([s], [K]) fitted beside; see :func:`refine_with_curve_fit`."""
     return refine_with_curve_fit(res, t, p, settings, noise_std=noise_std, reduced=reduced,
                                  temperature=temperature)
 
@@ -356,7 +343,6 @@ def final_curve_fit(res: UnloadResult, t: FloatArray | None, p: FloatArray | Non
 def recovery_fit(t: FloatArray, p: FloatArray, t_close: float) -> Any:
     """Fit of the isochoric re-heating after the closing instant t_close [s] (samples t [s],
     p [signal units]); None when the fit fails."""
-
     try:
         return fit_recovery(t, p, t_close)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):
@@ -378,10 +364,10 @@ def _residual(fit: CurveFit) -> float:
 def crossing_stands(res: UnloadResult, why: str) -> UnloadResult:
     """The final result where the full-curve fit gave none: the crossing's, its status
     text saying so (never silent) and ``extra['curve_fit_error']`` why."""
-    return dataclasses.replace(
-        res, final=True, extra={**res.extra, "curve_fit_error": why},
-        status_text=f"{res.status_text}; no full-curve fit ({why}): C is the crossing's "
-                    "model inversion")
+    step = "".join(f"; {res.extra[k]}" for k in (TAIL_STEP,) if k in res.extra)
+    return dataclasses.replace(res, final=True, extra={**res.extra, "curve_fit_error": why},
+                               status_text=f"{res.status_text}; no full-curve fit ({why}): "
+                                           f"C is the crossing's model inversion{step}")
 
 
 def refine_with_curve_fit(
@@ -503,6 +489,8 @@ def refine_with_curve_fit(
                 f" Pa < p_atm/b = {limit:.0f} Pa): eq 39 assumes choked flow")
     if why is not None:  # never silent: the status text carries it to every output
         text = f"{text}; model inadequate: {why}"
+    if TAIL_STEP in res.extra:  # (the crossing's own text may have been replaced above)
+        text = f"{text}; {res.extra[TAIL_STEP]}"
 
     return dataclasses.replace(
         res, final=True, status=status, status_text=text, conductance_model=fit.conductance,

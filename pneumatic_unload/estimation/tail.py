@@ -28,6 +28,7 @@ from pneumatic_unload.estimation.decisions import (
     running_low,
     settled,
 )
+from pneumatic_unload.estimation.endstep import STEP_BACK, TAIL_STEP, settled_step
 from pneumatic_unload.estimation.reduction import fit_window, reduce_due, reduce_unload
 from pneumatic_unload.estimation.refine import final_curve_fit
 from pneumatic_unload.estimation.state import EstimatorState
@@ -213,7 +214,9 @@ def finish_tail(st: EstimatorState, i: int, ended: bool, decided: int | None = N
     res = u.pending
     u.pending = None
     out: list[UnloadResult] = []
+    last = i
     if res is not None:
+        i = _before_step(st, i, res)
         res.t_end = float(st.buf.t[i])
         s = st.settings
         if s.curve_fit:
@@ -228,8 +231,28 @@ def finish_tail(st: EstimatorState, i: int, ended: bool, decided: int | None = N
                 fin = job.run()
                 if fin is not None:
                     out.append(fin)
-    st.to_waiting(i + 1)
+    st.to_waiting(last + 1)
     return out
+
+
+def _before_step(st: EstimatorState, i: int, res: UnloadResult) -> int:
+    """The tail's last sample, index i, or the last before a step that follows its level
+    (:func:`~.endstep.settled_step`: not the discharge, e.g. a valve or the transducer
+    after the tank emptied), the crossing result ``res``'s ``extra[TAIL_STEP]`` then
+    saying so (the final status text carries it) [-]."""
+    u = st.unload
+    # the tail after the p* crossing (a stream index; the tail's level lies below p*)
+    lo = max(u.i0 + 1, res.i_cross - st.buf.shift + 1, i + 1 - STEP_BACK)
+    found = settled_step(st.buf.p[lo:i + 1])
+    if found is None:
+        return i
+    k = lo + found[0]
+    step = found[1] * st.settings.signal_gain  # [Pa]
+    text = (f"the record steps by {step:+.0f} Pa at t={float(st.buf.t[k + 1]):.6f} s, "
+            "after its tail had settled: not the discharge, the tail ends before it")
+    res.extra[TAIL_STEP] = text
+    st.diag("warn", text, float(st.buf.t[i]))
+    return k
 
 
 def _skip_drop(st: EstimatorState) -> float:
