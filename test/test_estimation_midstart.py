@@ -174,3 +174,25 @@ def test_live_start_shortly_before_an_opening_is_still_measured():
     out, _est = _live(settings_for(cfg), sim.t[k:], sim.measured[k:])
     assert out and out[0].status == "ok"
     assert out[0].conductance_model == pytest.approx(C_TRUE, rel=0.05)
+
+
+@pytest.mark.parametrize("join", [0.4, 1.8, 3.2])
+def test_live_joined_where_the_fall_looks_like_a_drifting_plateau(join):
+    """The node test's rig (5 L, heat exchange, 8e-9 m^3/(s Pa), 1 kHz): joined 0.4, 1.8 or
+    3.2 s into unload 0, the stream's first samples fell like a plateau drifting toward the
+    opening of a hot start, the start was fitted with that drift, and the partial unload
+    gave a result (main 968cd85: bad_data, bad_data, not_choked; CI's node test, joined
+    0.9 s in, 'not_choked' with a C). A live stream's first plateau that drifts is no
+    plateau: no result for it, the warning, and the next unloads right."""
+    cfg = RigConfig(volume=5e-3, conductance=C_TRUE, critical_ratio=0.4,
+                    effects="heat_transfer", noise_std=1000.0, quantization=10.0,
+                    full_scale=1.1e6, seed=3, pre_time=1.0, duration=8.0, rate=1000.0)
+    b = run_cycles(cfg, 3, settle_time=1.0, vent_time=0.3, charge_time=0.3)
+    opens = np.flatnonzero(np.diff((b.opening > 0).astype(int)) == 1) + 1
+    k = opens[0] + int(join * 1000)
+    got, est = _live(EstimatorSettings(volume=5e-3, curve_fit=False), b.t[k:], b.measured[k:])
+    assert [r.status for r in got] == ["ok", "ok"], [r.status_text for r in got]
+    assert [r.t_start for r in got] == pytest.approx([b.t[opens[1]], b.t[opens[2]]], abs=0.01)
+    warn = [d for d in est.diagnostics if d.level == "warn"]
+    assert warn and "no plateau before the drop" in warn[0].message
+    assert "mid-unload" in warn[0].message

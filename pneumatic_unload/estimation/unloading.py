@@ -80,14 +80,14 @@ def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
 PLATEAU_FALL_FRACTION = 0.25
 
 
-def no_plateau(t: FloatArray, p: FloatArray, min_plateau: int, slope0: float) -> str:
-    """Why the samples before a fitted start are no pre-step plateau, or '' when they are.
-
-    They are none when fewer than ``min_plateau`` [-] (p10 is not measured), when their
+def no_plateau(t: FloatArray, p: FloatArray, min_plateau: int, slope0: float,
+               fraction: float = PLATEAU_FALL_FRACTION) -> str:
+    """Why the samples before a fitted start are no pre-step plateau, or '' when they are:
+    they are none when fewer than ``min_plateau`` [-] (p10 is not measured), when their
     straight-line fall rate is both significant (more than 4 standard errors, the noise
-    from first differences) and more than PLATEAU_FALL_FRACTION of the initial fall rate
-    ``slope0`` [signal units/s] (the "step" continues a fall already under way), or when
-    they are too few to resolve such a fall (4 standard errors above that fraction). ``t`` [s]
+    from first differences) and more than ``fraction`` of the initial fall rate ``slope0``
+    [signal units/s] (the "step" continues a fall already under way), or when they are too
+    few to resolve such a fall (4 standard errors above that fraction, when not 0). ``t`` [s]
     and ``p`` [signal units]: the samples from the plateau's first one up to the start.
     """
     n = p.size
@@ -100,24 +100,26 @@ def no_plateau(t: FloatArray, p: FloatArray, min_plateau: int, slope0: float) ->
         return ""
     fall = -float(tc @ (p - p.mean())) / sxx
     se = rms_sigma(p) / math.sqrt(sxx)
-    if fall > 4.0 * se and fall > PLATEAU_FALL_FRACTION * slope0:
+    if fall > 4.0 * se and fall > fraction * slope0:
         return (f"no plateau before the drop (the {n} samples before the start fall at "
                 f"{fall:.4g} /s, {100.0 * fall / slope0:.0f} % of the initial fall rate)")
-    if 4.0 * se > PLATEAU_FALL_FRACTION * slope0:
+    if 0.0 < fraction and 4.0 * se > fraction * slope0:
         # too short to tell: a slow tail joined late looks flat over a few dozen samples
         # and then "drops" (a bogus unload, C tens of % off)
         return (f"no plateau before the drop that can be told from a fall under way (the "
                 f"{n} samples before the start resolve a fall rate of {4.0 * se:.4g} /s, "
-                f"more than {100 * PLATEAU_FALL_FRACTION:.0f} % of the initial "
+                f"more than {100 * fraction:.0f} % of the initial "
                 f"{slope0:.4g} /s)")
     return ""
 
 
 def first_unload_check(st: EstimatorState, i: int, t: FloatArray, p: FloatArray,
-                       slope0: float) -> bool:
+                       slope0: float, drift: float = 0.0) -> bool:
     """The first unload of a stream, whose plateau began with the stream's first sample:
     True when it is to be skipped (decided at index i [-]; t [s], p [signal units]: the
-    samples before its start; slope0: initial fall rate [signal units/s]).
+    samples before its start; slope0: initial fall rate [signal units/s]; ``drift``: the
+    plateau's fitted drift [signal units/s], 0 if none: then a live stream's first samples
+    falling at all are no plateau, e.g. a 5 L unload joined 1.2 s in).
 
     Without a pre-step plateau (:func:`no_plateau`) a live stream (``live``: a node that
     may start or restart at any time) joined an unload under way: no result for it, a
@@ -126,7 +128,8 @@ def first_unload_check(st: EstimatorState, i: int, t: FloatArray, p: FloatArray,
     a warning that p10 and its start come from its first samples.
     """
     st.stream_start = False
-    why = no_plateau(t, p, st.settings.min_plateau, slope0)
+    why = no_plateau(t, p, st.settings.min_plateau, slope0,
+                     0.0 if st.live and drift != 0.0 else PLATEAU_FALL_FRACTION)
     if not why:
         return False
     if st.live:
@@ -166,9 +169,9 @@ def drifting_start(tv: FloatArray, pv: FloatArray, lo: int, i: int, min_plateau:
     start to sample i) clearly steeper than the drift (:data:`DRIFT_FALL_RATIO`, against the fitted
     drift and the mean fall from sample ``lo`` to the start): a long drifting plateau is
     curved (the gas cools exponentially) and a straight drift over all of it misplaces the
-    start. Windows of
-    2, 4, 8 ... plateaus, the last from sample ``lo``. Returns the fit (t0 [s], p10, s, c,
-    rms, drift [signal units, /s, /s^2]) and its first sample [-], or (None, lo)."""
+    start. Windows of 2, 4, 8 ... plateaus, the last from sample ``lo``. Returns the fit
+    (t0 [s], p10, s, c, rms, drift [signal units, /s, /s^2]) and its first sample [-], or
+    (None, lo)."""
     n_w = 2 * min_plateau
     while True:
         a = max(lo, i + 1 - n_w)
@@ -204,6 +207,7 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     k = fall_exponent(st.settings.gamma)
     tw, pw = tv[lo:n], pv[lo:n]
     t0, p10, slope, curv, rms = hinge_fit(tw, pw, t_lo, t_hi, exponent=k)
+    drift = 0.0  # the plateau's drift [signal units/s], fitted where it drifts
     if trig < i and (t_hi - t0 < 0.01 * (t_hi - float(tv[trig - 1])) or not slope > 0.0):
         # the start pinned at the trigger (within 1 % of a sample) or no fall found before
         # it: the trigger came before the opening (a noise dip confirmed against a plateau
@@ -227,9 +231,9 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
         # start
         hot, a = drifting_start(tv, pv, lo, i, st.settings.min_plateau)
         if hot is not None and (a > lo or hot[4] < rms):
-            t0, p10, slope, curv, rms = hot[:5]
+            t0, p10, slope, curv, rms, drift = hot
             lo = a
-            st.diag("ok", f"the plateau before the opening drifts by {hot[5]:.4g} /s (a gas "
+            st.diag("ok", f"the plateau before the opening drifts by {drift:.4g} /s (a gas "
                     f"warmer or cooler than the wall): fitted with the start",
                     float(tv[i]))
     pre = pv[lo:int(np.searchsorted(tv, t0))]
@@ -247,7 +251,7 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     # the first unload of a stream: judged on its whole plateau since the stream began (a
     # slow tail joined late looks flat over the hinge's window, not over seconds)
     if st.stream_start and first_unload_check(st, i, tv[min(lo, st.arm_index):u.i0],
-                                              pv[min(lo, st.arm_index):u.i0], slope):
+                                              pv[min(lo, st.arm_index):u.i0], slope, drift):
         return []
     # the start's and p10's (co)variance from the hinge model's information (its curvature
     # and continuity included; p* moves with p10, see crossing_result)
