@@ -170,3 +170,29 @@ def test_a_warm_gas_far_from_the_room_is_found_from_the_pressure_alone():
     assert abs(r.critical_ratio - 0.4) < 0.03
     assert abs(r.pressure_offset + 3000.0) < 500.0
     assert 300.0 < r.initial_temperature < 310.0
+
+
+@pytest.mark.parametrize("dt,tau_heat,rate,plateau,offset,volume,c,b,p10", [
+    (6.8, 30.2, 862.0, 6.2, 748.0, 7.8e-3, 1.13e-9, 0.38, 8.1e5),
+    (5.4, 31.8, 631.0, 2.2, -2513.0, 40e-3, 1.66e-9, 0.45, 4.3e5)])
+def test_a_warm_gas_not_claimed_is_in_the_sigma(dt, tau_heat, rate, plateau, offset, volume,
+                                                c, b, p10):
+    """A gas 5-7 K warm in a large tank (random draws 67 and 159 of
+    ``bench/bench_random_draws.py temperature``), T10 not given, p_atm not given, no log:
+    within a room's spread and on a plateau that does not bend, the record cannot tell the
+    warm gas from none, and none is claimed. The hot start that fits best was dropped and
+    C read 2.9 and 3.8 % high at z 2.5 and 2.6 (main 968cd85). Its C is now a reading of
+    the model-form spread, as a heat law's is: z 0.9 on both (C unchanged: the record
+    does not say which)."""
+    t = np.arange(0.0, plateau + 6.0 * volume / (1.4e5 * c), 1.0 / rate)
+    p = discharge(t, volume=volume, p10=p10, t10=293.15 + dt, p_atm=101325.0,
+                  tau_heat=tau_heat, t_open=plateau, flow_law=IsoLaw(c, b, 0.5),
+                  t_wall=293.15)
+    y = p + offset + np.random.default_rng(1).normal(0.0, 1000.0, t.size)
+    (r,) = merge_final(analyze(t, y, EstimatorSettings(volume=volume)))
+    fit = r.extra["curve_fit"]
+    assert "+wall" not in fit["heat_law"]
+    assert any(k.startswith("T10 not measured") for k in fit["not_offered"].values())
+    assert abs(r.conductance_model / c - 1.0) < 0.05
+    assert abs(r.conductance_model - c) <= 2.0 * r.conductance_model_std, \
+        (r.conductance_model / c - 1.0, r.conductance_model_std / c)

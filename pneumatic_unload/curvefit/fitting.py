@@ -222,8 +222,16 @@ def fit_curve(
     held = {k: f for k, f in fits.items() if not k.endswith(M_SUFFIX)}
     ref_law = best if len(same) > 1 else min(held, key=lambda k: bic[k])
     pool = same if len(same) > 1 else held
-    mf = law_spread(pool, bic, ref_law, LAW_BIC_THRESHOLD, "conductance", empty=0.0)
-    mf_b = spread_b(pool, bic, ref_law, LAW_BIC_THRESHOLD)
+    spread_bic = bic
+    if fam.unclaimed:
+        # a warm gas the record neither claims (within a room's spread, its plateau
+        # straight) nor rules out: its hot start's C is a reading of the record all the
+        # same, counted by the criterion as the laws are (a 5-8 K warm gas in a large tank
+        # reads C 2-5 % high, z to 2.6, when left out)
+        pool = {**pool, **fam.unclaimed}
+        spread_bic = criterion({**fits, **fam.unclaimed}, span.n)
+    mf = law_spread(pool, spread_bic, ref_law, LAW_BIC_THRESHOLD, "conductance", empty=0.0)
+    mf_b = spread_b(pool, spread_bic, ref_law, LAW_BIC_THRESHOLD)
     if best.endswith(M_SUFFIX):
         mf_m = law_spread(same, bic, best, LAW_BIC_THRESHOLD, "subsonic_index")
     elif best + M_SUFFIX in fits:  # m held, the laws fitted with m too: their spread of m

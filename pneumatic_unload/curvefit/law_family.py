@@ -111,6 +111,10 @@ class Family:
         and :data:`Fit` ('entry', offered or not).
     not_offered : dict
         Key -> why a fit made is not offered (the record does not carry its parameter).
+    unclaimed : dict
+        The best-fitting hot start not claimed (T10 not measured, a gas within a room's
+        spread, its plateau straight): key -> :data:`Fit`, a reading of the record the
+        model-form spread counts where it fits as well as the laws offered.
     seeds : dict
         Key -> starting values [SI] of that key's fit, replacing the one the family would
         take (e.g. the same law's fit to the pressure alone, for the joint fit with the
@@ -138,6 +142,7 @@ class Family:
     fits: dict[str, Fit] = field(default_factory=dict)
     raw: dict[str, dict[str, Any]] = field(default_factory=dict)
     not_offered: dict[str, str] = field(default_factory=dict)
+    unclaimed: dict[str, Fit] = field(default_factory=dict)
     seeds: dict[str, dict[str, float]] = field(default_factory=dict)
     plateau_drift_z: float = 0.0
     t10_logged: bool = False
@@ -424,11 +429,9 @@ class Family:
         beyond a room's spread (3 x :data:`WALL_ASSUMED_STD`), or nearer where the plateau
         bends toward a level as a gas reaching the wall's temperature does
         (:data:`~pneumatic_unload.curvefit.plateau.PLATEAU_BEND_Z`; a leak's decay is
-        straight over a plateau); else none. Each
-        law judged by its own gap read a warm gas through the law that needs the largest
-        one: a 6 K warm gas, 3.2 K at the opening, its constant-hA hot start (the record's
-        own law) not claimed within the spread while the natural law's, with a gap beyond
-        it, was: C -2.7 % at z -3.6."""
+        straight over a plateau); else none, the best kept as :attr:`unclaimed`. Each law
+        judged by its own gap read a warm gas through the law that needs the largest one
+        (a 6 K warm gas, 3.2 K at the opening: C -2.7 % at z -3.6)."""
         fits = {k: f for k, (f, _gap) in warm.items()}
         bic = criterion(fits, self.span.n)
         best = min(bic, key=lambda k: bic[k])
@@ -436,6 +439,7 @@ class Family:
         if gap > 3.0 * WALL_ASSUMED_STD or self.plateau_bend_z >= PLATEAU_BEND_Z:
             self.fits.update(fits)
             return
+        self.unclaimed = {best: fits[best]}  # a reading of the record all the same
         for key in warm:
             self.not_offered[key] = (f"T10 not measured: a gas {gap:.1f} K from the room's "
                                      f"(the best-fitting hot start, {split_key(best)[0]}) is "

@@ -96,13 +96,15 @@ def law_spread(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, floa
     chosen law's value is not finite."""
     v0 = getattr(fits[best][0], attr)
     var, w_sum = 0.0, 0.0
-    for law, (other, _chi2, _k) in fits.items():
-        d = bic[law] - bic[best]
-        v = getattr(other, attr)
-        if d < threshold and math.isfinite(v):
-            w = math.exp(-0.5 * d)
-            w_sum += w
-            var += w * (v - v0) ** 2
+    near = {law: bic[law] - bic[best] for law, f in fits.items()
+            if bic[law] - bic[best] < threshold and math.isfinite(getattr(f[0], attr))}
+    # the weights relative to the lowest BIC among them (a reading that fits far better
+    # than ``best``, e.g. an unclaimed warm gas, must not overflow exp)
+    d_min = min(near.values(), default=0.0)
+    for law, d in near.items():
+        w = math.exp(-0.5 * (d - d_min))
+        w_sum += w
+        var += w * (getattr(fits[law][0], attr) - v0) ** 2
     if not w_sum > 0:
         return empty
     return math.sqrt(var / w_sum) if math.isfinite(v0) else math.nan
