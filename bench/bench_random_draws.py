@@ -30,7 +30,8 @@ within 1 % ISO 206 -> 209/209, nozzle 37/37, series 70 -> 73/74; |z_C| <= 2 ISO 
 209, series 71 -> 74; b within 0.03 ISO 197 -> 201; m within 0.05 ISO 203 -> 207.
 Temperature draws 0-169: with the log C within 1 % 161 -> 168/170, b 149 -> 160, rms 154
 -> 165, offsets 157 -> 167; without it, hot starts C within 2 % 94 -> 103/118, |z_C| <= 2
-105 -> 107. About 15 min for the foreign draws and 35 for the temperature ones, one
+105 -> 107; session 21 (7c5114f, a refused warm gas in the sigma) 107 -> 115/118, the rest
+unchanged. About 15 min for the foreign draws and 35 for the temperature ones, one
 process each on a busy 2-core machine.
 
 """
