@@ -50,6 +50,7 @@ from pneumatic_unload.curvefit.law_fit import (
 from pneumatic_unload.curvefit.offset_offer import (
     OFFSET_GAP_NOISE,
     OFFSET_GAP_Z,
+    keep_probe,
     offer_offset,
     offset_verdict,
 )
@@ -180,11 +181,14 @@ def fit_curve(
         # offered); else it is said not to be
         gap = settled - settings.end_pressure
         clear = abs(gap) > max(OFFSET_GAP_Z * settled_se, OFFSET_GAP_NOISE * settled_sd)
-        offset_why = offer_offset(fam, best, gap, clear)
+        probed: dict[str, Any] = {}
+        offset_why = offer_offset(fam, best, gap, clear, probed)
         if offset_why is None or clear:
             alt = _choose(Family(span, settings, common, profile_heat, offset=True,
                                  plateau_drift_z=drifts, t10_logged=logged,
                                  plateau_bend_z=bends), tried)
+            if keep_probe(alt[0], probed):
+                alt = alt[0], best_key(alt[0].fits, span.n)
             if offset_why is not None and offset_verdict(
                     fam, fam.fits[best], alt[0].fits[alt[1]], gap) is None:
                 # the end clearly away from p_atm, the chosen law's probe refusing it: the

@@ -1,11 +1,12 @@
 """The transducer's zero offset offered to the curve fit (SI units): a record that settles
 away from the given p_atm has the offset fitted where the criterion clearly prefers it
-(:func:`offer_offset`, :func:`offset_verdict`; used by
+(:func:`offer_offset`, :func:`offset_verdict`, :func:`keep_probe`; used by
 :func:`~pneumatic_unload.curvefit.fitting.fit_curve`)."""
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -16,7 +17,7 @@ from pneumatic_unload.curvefit.law_family import (
     Fit,
     criterion,
 )
-from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX
+from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX, subsonic_index_problem
 
 #: Largest zero offset fitted, as a fraction of the drop p10 - p_atm [-] (a transducer's
 #: zero is off by a few kPa; a record that sits tens of kPa away has not settled).
@@ -34,13 +35,16 @@ OFFSET_GAP_NOISE = 0.5
 SETTLED_FRACTION = 0.01
 
 
-def offer_offset(fam: Family, best: str, gap: float, clear: bool = False) -> str | None:
+def offer_offset(fam: Family, best: str, gap: float, clear: bool = False,
+                 kept: dict[str, Any] | None = None) -> str | None:
     """Fit the chosen law ``best`` once more with the transducer's zero offset (starting
     from ``gap`` [Pa], the record's last 2 % above the given p_atm; ``clear``: that end
     clearly away from it, probed in full); None when the criterion
     clearly prefers it (by LAW_BIC_THRESHOLD, the offset determined), else why not, in
     words (the probe also frees m: the criterion then asks for the offset's family only
-    where the offset is also 3 of its sigmas from 0)."""
+    where the offset is also 3 of its sigmas from 0). ``kept``, where given, receives the
+    probe's fit: 'key', 'entry' (its :data:`Fit`) and 'raw' (its FitResult and model), a
+    fit of the offset's family (:func:`keep_probe`)."""
     # the first-order twin of the chosen fit (m as it is there) screens; the probe frees m
     # too: a flow law that is not the elliptic one leaves structure an offset alone cannot
     # take up, and an offset hides the subsonic tail's shape (m 0.3 read 3 kPa high: each
@@ -74,9 +78,31 @@ def offer_offset(fam: Family, best: str, gap: float, clear: bool = False) -> str
             continue
         if got is None or one[1] < got[1]:
             got = one
+            if kept is not None:
+                kept.update(key=key, entry=one, raw=probe.raw[key])
     if got is None:
         return "not fitted: the fit with an offset failed"
     return offset_verdict(fam, held, got, gap)
+
+
+def keep_probe(fam: Family, kept: dict[str, Any]) -> bool:
+    """Put the offset probe's fit (``kept``, from :func:`offer_offset`) into ``fam``, the
+    family fitted with the offset, where that family lacks its key or fits it worse, its
+    m determined and its hot start (if one) offered there too: a fit made is a reading of
+    the record (a flow with m 0.40 and a -1.4 kPa zero: the probe's constant-hA hot start
+    with m free fitted to the noise, C +0.6 %, while the family, which fits m only
+    for its best law, chose the natural law's, 36 worse in BIC, and no heat law followed
+    the logged temperature). Returns whether it was put in."""
+    key, entry = kept.get("key"), kept.get("entry")
+    if key is None or entry is None or subsonic_index_problem(entry[0]) is not None:
+        return False
+    base = key.removesuffix(M_SUFFIX)
+    if key in fam.not_offered or ("+wall" in base and base not in fam.fits):
+        return False
+    if key in fam.fits and fam.fits[key][1] <= entry[1]:
+        return False
+    fam.fits[key], fam.raw[key] = entry, kept["raw"]
+    return True
 
 
 def offset_verdict(fam: Family, held: Fit, got: Fit, gap: float) -> str | None:
