@@ -77,3 +77,8 @@ def test_the_reading_that_fits_both_channels_is_found(name, tmp_path, capsys):
     assert abs(u["subsonic_index"] - m) < 0.03, u["subsonic_index"]
     assert abs(u["pressure_offset"] - offset) < 300.0, u["pressure_offset"]
     assert abs(u["conductance_model"] - c) <= 2.0 * u["conductance_model_std"]
+    if "draw 46" in name:
+        # the natural law's hot start is fitted and refused (1-2 K from the log, residuals
+        # not white): the record says why, as for every fit made and not offered
+        why = u["heat_laws"]["not_offered"].get("natural+wall", "")
+        assert "not claimed" in why and "logged T10" in why, u["heat_laws"]

@@ -258,7 +258,7 @@ def fit_curve(
         cf, conductance_std=math.hypot(cf.conductance_std, mf), model_form_std=mf,
         model_form_std_b=mf_b, laws=table,
         heat_law=best.removesuffix(M_SUFFIX) if natural else "none",
-        not_offered=fam.not_offered, subsonic_std=m_c, subsonic_std_b=m_b,
+        not_offered=_refusals(fam), subsonic_std=m_c, subsonic_std_b=m_b,
         subsonic_index_std=m_u, subsonic_source=m_why, model_form_std_m=mf_m,
         offset_source=offset_why,
         gas_temperature=cf.gas_temperature or temp_why)
@@ -297,6 +297,22 @@ def fit_curve(
         if settings.wall_temperature is None:
             out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why,
                                       wall_std=wall_std)
+    return out
+
+
+def _refusals(fam: Family) -> dict[str, str]:
+    """``fam.not_offered`` with the hot starts fitted with T10 logged and refused without a
+    reason there (the wall within 3 of its uncertainty of T10 [K] and the residuals not
+    white, with m held or free): every fit made and not offered says why."""
+    out = dict(fam.not_offered)
+    for key, kept in fam.raw.items() if fam.t10_logged else ():
+        got = kept.get("fit")
+        if "+wall" in key and key not in fam.fits and key not in out and got is not None:
+            gap = got.wall_temperature - got.gas_temperature.get(
+                "t10", fam.settings.initial_temperature)
+            out[key] = (f"not claimed: the wall {gap:+.1f} K from the logged T10 (within 3 "
+                        f"of its uncertainty) and no structure of the laws without it made "
+                        f"white")
     return out
 
 
