@@ -32,8 +32,10 @@ Temperature draws 0-169: with the log C within 1 % 161 -> 168/170, b 149 -> 160,
 -> 165, offsets 157 -> 167; without it, hot starts C within 2 % 94 -> 103/118, |z_C| <= 2
 105 -> 107; session 21 (7c5114f, a refused warm gas in the sigma) 107 -> 115/118, the rest
 unchanged; session 22 (d03e495, the offset probe's fit kept) 116/118, with T all within
-108 -> 110/118, no draw worse. About 15 min for the foreign draws and 35 for the
-temperature ones, one process each on a busy 2-core machine.
+108 -> 110/118, no draw worse; session 23 (1ed46a7, a hot start white with m free, T
+logged) with T, hot 110 -> 111/118, not hot 51 -> 52/52, without T unchanged, no draw
+worse. About 15 min for the foreign draws and 50 for the temperature ones, one process
+each on a busy 2-core machine.
 
 """
 
