@@ -13,7 +13,7 @@ demo: setup
 
 test: setup
 	@$(VENV)/bin/ruff check .
-	@$(PY) -m pytest -q test
+	@$(PY) -m pytest -q --durations=15 test
 
 lint: setup
 	@$(VENV)/bin/ruff check .
