@@ -21,13 +21,27 @@ def _run(capsys, *argv):
     return code, out.out, out.err
 
 
+#: How the AeroLab runs are read: the rig's tank [m^3], gauge kPa, the lab's p_atm [Pa].
+AEROLAB_ARGS = ("--volume", "0.125", "--gauge", "--atmosphere", "101500", "--pressure-unit",
+                "kPa")
+#: ``analyze --json``'s output per AeroLab run, made once for this module's tests (each
+#: asserts another property of one deterministic analysis; 11-16 s a run) [name -> text].
+_AEROLAB_JSON: dict[str, str] = {}
+
+
+def _aerolab(capsys, name: str) -> dict:
+    """``pneumatic-unload analyze --json`` of the AeroLab run ``name``, parsed."""
+    if name not in _AEROLAB_JSON:
+        code, out, _ = _run(capsys, "analyze", str(real_file(f"aerolab/{name}")),
+                            *AEROLAB_ARGS, "--json")
+        assert code == 0
+        _AEROLAB_JSON[name] = out
+    return json.loads(_AEROLAB_JSON[name])
+
+
 @pytest.mark.parametrize("name", sorted(RULE_OF_THUMB))
 def test_analyze_real_aerolab_csv_within_30_percent(capsys, name):
-    path = real_file(f"aerolab/{name}")
-    code, out, _ = _run(capsys, "analyze", str(path), "--volume", "0.125", "--gauge",
-                        "--atmosphere", "101500", "--pressure-unit", "kPa", "--json")
-    assert code == 0
-    data = json.loads(out)
+    data = _aerolab(capsys, name)
     u = data["unloads"][0]
     for key in ("conductance", "conductance_model", "conductance_model_std",
                 "critical_ratio", "tau_exp", "p10", "p_atm", "p_star", "t_start", "t_cross",
@@ -51,13 +65,9 @@ def test_real_aerolab_text_and_json_tell_b_and_m_alike(capsys):
     """The 0.094 in run fits m (0.31 +- 0.05) while b's 1-sigma is above what a b report
     takes: the text gives m and the reason b is not given, with the fit's value, as the
     JSON does (the text said "b, m = not identifiable" with m in the JSON)."""
-    path = str(real_file("aerolab/orifice_0.094in.csv"))
-    argv = ("analyze", path, "--volume", "0.125", "--gauge", "--atmosphere", "101500",
-            "--pressure-unit", "kPa")
-    code, out, _ = _run(capsys, *argv, "--json")
-    assert code == 0
-    (u,) = [x for x in json.loads(out)["unloads"] if x["final"]]
-    code, text, _ = _run(capsys, *argv)
+    (u,) = [x for x in _aerolab(capsys, "orifice_0.094in.csv")["unloads"] if x["final"]]
+    code, text, _ = _run(capsys, "analyze", str(real_file("aerolab/orifice_0.094in.csv")),
+                         *AEROLAB_ARGS)
     assert code == 0
     if u["critical_ratio"] is None:
         assert u["critical_ratio_source"].startswith("not determined: the fit's ")
@@ -76,11 +86,7 @@ def test_real_aerolab_log_used_within_the_probes_accuracy(capsys):
     the pressure's residual kept (652 Pa rms against 626 alone, Ljung-Box p 7e-11 against
     2.7e-12). It was refused as departing (9.7 K rms after a 53 s lag and a -24 K offset
     fitted to the pressure fit's gas); now it is used, and the status says how."""
-    path = str(real_file("aerolab/orifice_0.125in.csv"))
-    code, out, _ = _run(capsys, "analyze", path, "--volume", "0.125", "--gauge",
-                        "--atmosphere", "101500", "--pressure-unit", "kPa", "--json")
-    assert code == 0
-    (u,) = [x for x in json.loads(out)["unloads"] if x["final"]]
+    (u,) = [x for x in _aerolab(capsys, "orifice_0.125in.csv")["unloads"] if x["final"]]
     g = u["gas_temperature"]
     assert g["used"] and not g["follows"], g
     assert g["rms"] <= g["probe"] == 1.0
@@ -108,11 +114,7 @@ def test_real_aerolab_orifices_have_one_discharge_coefficient(capsys):
     (C ~ V)."""
     cd = {}
     for name, d in DIAMETER.items():
-        path = real_file(f"aerolab/{name}")
-        code, out, _ = _run(capsys, "analyze", str(path), "--volume", "0.125", "--gauge",
-                            "--atmosphere", "101500", "--pressure-unit", "kPa", "--json")
-        assert code == 0
-        (u,) = [x for x in json.loads(out)["unloads"] if x["final"]]
+        (u,) = [x for x in _aerolab(capsys, name)["unloads"] if x["final"]]
         ideal = ideal_nozzle_conductance(math.pi * d * d / 4.0)
         cd[name] = (u["conductance_model"] / ideal, u["conductance_model_std"] / ideal)
     (a, sa), (b, sb) = cd.values()
