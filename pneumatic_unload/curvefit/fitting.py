@@ -303,7 +303,10 @@ def fit_curve(
 def _refusals(fam: Family) -> dict[str, str]:
     """``fam.not_offered`` with the hot starts fitted with T10 logged and refused without a
     reason there (the wall within 3 of its uncertainty of T10 [K] and the residuals not
-    white, with m held or free): every fit made and not offered says why."""
+    white, with m held or free): every fit made and not offered says why. Named here, once
+    the choice is made, not where the family drops them: ``offset_offer.keep_probe`` reads
+    a key in ``not_offered`` as a refusal, and could then drop a probe's fit it is there to
+    keep (draw 48 of the temperature draws is of that kind)."""
     out = dict(fam.not_offered)
     for key, kept in fam.raw.items() if fam.t10_logged else ():
         got = kept.get("fit")
