@@ -159,7 +159,8 @@ def _temperature(k: int) -> list[dict]:
                 f"{case.p10 / 1e5:.1f} bar: C {100 * st['c_err']:+.2f} % (z {st['c_z']:+.1f}),"
                 f" b {st['b_err']:+.3f}; {st['status_text'][:160]}")
         out.append({"k": k, "group": group, "fail": fail, "text": text,
-                    "st": {"C": (st["c_err"], st["c_z"]), "b": (st["b_err"], st["b_z"])}})
+                    "st": {"C": (st["c_err"], st["c_z"]), "b": (st["b_err"], st["b_z"]),
+                           "m": (st["m_err"], st["m_z"])}})
     return out
 
 

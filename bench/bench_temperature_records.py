@@ -324,6 +324,7 @@ def row(res: dict) -> tuple[str, dict]:
     u = res["unload"]
     c, c_std = _num(u.get("conductance_model")), _num(u.get("conductance_model_std"))
     b, b_std = _num(u.get("critical_ratio")), _num(u.get("critical_ratio_std"))
+    m, m_std = _num(u.get("subsonic_index")), _num(u.get("subsonic_index_std"))
     off, off_std = _num(u.get("pressure_offset")), _num(u.get("pressure_offset_std"))
     ce = c / case.conductance - 1.0
     be = b - case.b
@@ -333,7 +334,8 @@ def row(res: dict) -> tuple[str, dict]:
     rms, noise = _num(ev.get("rms")), _num(ev.get("noise"))
     ratio = rms / noise if noise > 0 else math.nan
     stats.update(ok=True, c_err=ce, c_z=_z(c - case.conductance, c_std), b_err=be,
-                 b_z=_z(be, b_std), off_hit=off_hit, t_ratio=ratio,
+                 b_z=_z(be, b_std), m_err=m - case.m, m_z=_z(m - case.m, m_std),
+                 off_hit=off_hit, t_ratio=ratio,
                  status=u.get("status", "?"), status_text=u.get("status_text", ""))
     used = "used" if ev.get("used") else "not used"
     follows = {True: "follows", False: "departs"}.get(ev.get("follows"), "")

@@ -131,6 +131,10 @@ class CurveFit:
     offset_source : str
         Why the offset was fitted or not, in words ('' when p_atm is fitted: the plateau's
         level is then the atmosphere's).
+    unfitted_offset : dict
+        The zero offset not fitted with p_atm given: its stated uncertainty ``input_std``
+        [Pa] and what it does to ``b`` and ``m`` [-] along the fit's valley (NaN where not
+        fitted); empty otherwise (:func:`~.offset_offer.unfitted_offset_lines`).
     model_form_std_m : float
         m's model-form 1-sigma [-]: the spread of the m of the laws fitted with m that fit
         about as well, weighted as C's (not in ``subsonic_index_std``); NaN when m is held.
@@ -185,6 +189,7 @@ class CurveFit:
     pressure_offset: float = 0.0
     pressure_offset_std: float = math.nan
     offset_source: str = ""
+    unfitted_offset: dict[str, float] = dataclasses.field(default_factory=dict)
     gas_temperature: dict[str, float] = dataclasses.field(default_factory=dict)
     critical_ratio_on_bound: bool = False
     critical_ratio_source: str = ""

@@ -44,6 +44,8 @@ class Twin:
         twin's valley (NaN for b when b is not fitted).
     chi2, dof : float, int
         The fit's chi^2 [Pa^2] and the twin's degrees of freedom [-].
+    slope_m : float
+        dm/d(parameter) [- per unit] along the twin's valley (NaN when m is not fitted).
     """
 
     name: str
@@ -54,6 +56,7 @@ class Twin:
     slope_b: float
     chi2: float = math.nan
     dof: int = 1
+    slope_m: float = math.nan
 
 
 def linear_twin(trace: Trace, kept: dict[str, Any], twin: ParametricModel, name: str,
@@ -91,9 +94,11 @@ def linear_twin(trace: Trace, kept: dict[str, Any], twin: ParametricModel, name:
     slopes = valley_slopes(cov, names, fit.params, fit.values["C"], len(names), p.scale)
     if slopes is None:
         return None
+    slope_m = float(cov[names.index("m"), -1] / cov[-1, -1]) * fit.params["m"].scale \
+        / p.scale if "m" in names else math.nan
     return Twin(name, gain, start + float(dx[-1]) * p.scale,
                 math.sqrt(float(cov[-1, -1])) * p.scale, *slopes, float(r0 @ r0),
-                r0.size - fit.k - 1)
+                r0.size - fit.k - 1, slope_m)
 
 
 def valley_slopes(cov: np.ndarray, names: list[str], params: Parameters, conductance: float,

@@ -1,7 +1,8 @@
 """The transducer's zero offset offered to the curve fit (SI units): a record that settles
 away from the given p_atm has the offset fitted where the criterion clearly prefers it
 (:func:`offer_offset`, :func:`offset_verdict`, :func:`keep_probe`; used by
-:func:`~pneumatic_unload.curvefit.fitting.fit_curve`)."""
+:func:`~pneumatic_unload.curvefit.fitting.fit_curve`); one not fitted moves b and m by what
+its stated uncertainty does along the fit's valley (:func:`unfitted_offset_lines`)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from pneumatic_unload.curvefit.law_family import (
     criterion,
 )
 from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX, subsonic_index_problem
+from pneumatic_unload.uncertainty.budget import input_uncertainties
 
 #: Largest zero offset fitted, as a fraction of the drop p10 - p_atm [-] (a transducer's
 #: zero is off by a few kPa; a record that sits tens of kPa away has not settled).
@@ -126,3 +128,20 @@ def offset_verdict(fam: Family, held: Fit, got: Fit, gap: float) -> str | None:
     return (f"not fitted: the record settles at the given p_atm (an offset of {off:+.0f} "
             f"+- {sd:.0f} Pa would improve the criterion by {gain:.1f} <= "
             f"{LAW_BIC_THRESHOLD:g})")
+
+
+def unfitted_offset_lines(fam: Family, best: str) -> dict[str, float]:
+    """The transducer's zero not fitted (p_atm given): b's and m's standard uncertainty [-]
+    from its stated uncertainty d [Pa] (``pressure_uncertainty``, default 0.1 % of p10),
+    along the chosen fit ``best``'s valley with the offset freed (its first-order twin's
+    slopes: |db/dd| d, |dm/dd| d; m's NaN where m is held). An offset hides in the
+    subsonic tail's shape where the record ends before its final plateau, b and m taking it
+    up: the first-order line at the transition (b^2 d / p_atm) missed that (a +0.7 kPa zero
+    read m 0.591 +- 0.009 for 0.50). d is the stated input's, as C's line of the offset
+    (the record's own reading of the offset leans on the fit it is missing from). Returns
+    {'input_std', 'b', 'm'}; {} without the twin."""
+    tw = fam.twin(best, "offset")
+    if tw is None:
+        return {}
+    d = input_uncertainties(fam.settings, fam.fits[best][0].p10)["pressure"]
+    return {"input_std": d, "b": abs(tw.slope_b) * d, "m": abs(tw.slope_m) * d}

@@ -123,16 +123,23 @@ def subsonic_term(fit: CurveFit, quantity: str) -> BudgetTerm:
 
 def m_budget(fit: CurveFit) -> Budget:
     """The budget of m [-]: fitted, the curve fit's line and the heat laws' spread of the
-    laws fitted with m (``fit.model_form_std_m``); held, the held value's uncertainty
+    laws fitted with m (``fit.model_form_std_m``), and the transducer's zero where it was
+    not fitted (``fit.unfitted_offset``: its move along the fit's valley); held, the held
+    value's uncertainty
     (:func:`held_lines`) and, where the laws were fitted with m too, their spread of m
     (``fit.model_form_std_m``, folded into ``fit.subsonic_index_std``). The wall
     temperature's move of m is not evaluated (as b's, it is of second order where the wall
     is assumed at T10)."""
     if fit.subsonic_index_fitted:
         mf = fit.model_form_std_m if math.isfinite(fit.model_form_std_m) else 0.0
+        off = fit.unfitted_offset
+        zero = (BudgetTerm("pressure transducer (offset)", "B", fit.p10, off["input_std"],
+                           "Pa", off["m"], "not fitted: the fit's move along its valley with "
+                           "the zero freed, to first order"),) \
+            if math.isfinite(off.get("m", math.nan)) else ()
         return Budget(fit.subsonic_index, (
             record_term("curve fit (noise, AR(1), residual structure)",
-                        fit.subsonic_index_std), model_form_term(mf)))
+                        fit.subsonic_index_std), *zero, model_form_term(mf)))
     mf = fit.model_form_std_m if math.isfinite(fit.model_form_std_m) else 0.0
     held = math.sqrt(max(fit.subsonic_index_std**2 - mf**2, 0.0))
     return Budget(fit.subsonic_index, (

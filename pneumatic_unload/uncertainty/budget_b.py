@@ -23,7 +23,8 @@ from pneumatic_unload.uncertainty.budget import (
 def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
                  model_form_std: float, p10: float, p_atm: float, atmosphere_measured: bool,
                  wall: tuple[float, float, str] | None, wall_fitted: bool = False,
-                 extra_terms: tuple[BudgetTerm, ...] = ()) -> Budget:
+                 extra_terms: tuple[BudgetTerm, ...] = (), offset_valley: float = math.nan
+                 ) -> Budget:
     """The budget of the curve fit's critical pressure ratio b [-], line by line as C's.
 
     b is where the fitted flow turns subsonic, p_atm / p1 there; its sensitivities:
@@ -34,7 +35,9 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
       moves the gap as the wall's does (the wall line's move);
     * a transducer offset d: with p_atm measured by the same transducer, both ends of the
       ratio move, db = d b (1 - b) / p_atm; with p_atm given, db = b^2 d / p_atm (first
-      order at the transition);
+      order at the transition), or, where larger, the fit's own move along its valley with
+      the offset freed (``offset_valley`` [-]: b and m take up an offset the record's end
+      does not show);
     * p_atm given by a barometer: db = b u(p_atm) / p_atm;
     * the wall temperature (a heat law fitted, the wall assumed or given): the chosen law
       refitted with the wall moved by its uncertainty, to first order
@@ -62,6 +65,9 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
         The chosen law fitted the wall (a hot start).
     extra_terms : tuple of BudgetTerm
         Further lines (the subsonic index m's, [-]).
+    offset_valley : float
+        b's standard uncertainty from the unfitted offset along the fit's valley [-]
+        (:func:`~pneumatic_unload.curvefit.offset_offer.unfitted_offset_lines`; NaN: none).
     """
     s = settings
     u = input_uncertainties(s, p10)
@@ -81,12 +87,17 @@ def ratio_budget(settings: EstimatorSettings, b: float, *, type_a_std: float,
             abs(d * (1.0 - b) / p_atm) if atmosphere_measured else abs(d / p_atm),
             "first order at the transition: p2 " + ("and p_s move" if atmosphere_measured
                                                     else "moves, p_s given")))
-    else:
+    elif atmosphere_measured or not offset_valley > abs(d * b * b / p_atm):
         terms.append(BudgetTerm(
             "pressure transducer (offset)", "B", p10, d, "Pa",
             abs(d * b * (1.0 - b) / p_atm) if atmosphere_measured else abs(d * b * b / p_atm),
             "first order at the transition: p_atm " + ("and p1 move" if atmosphere_measured
                                                        else "given, p1 moves")))
+    else:
+        terms.append(BudgetTerm(
+            "pressure transducer (offset)", "B", p10, d, "Pa", offset_valley,
+            "not fitted: the fit's move along its valley with the zero freed, to first "
+            "order (b and m take up an offset the record's end does not show)"))
     if not atmosphere_measured:
         ua = s.end_uncertainty
         terms.append(BudgetTerm("supply p_s (given)" if s.charge else
