@@ -87,6 +87,12 @@ With m in the curve fit's family (``pneumatic_unload.curvefit.subsonic_offer``; 
 
 Session 20 (main 8dc7f2b): every figure above unchanged, in all three modes; the random
 draws of the same ranges are ``bench/bench_random_draws.py``.
+
+Session 24 (77a16b9, a zero offset not fitted in b's and m's sigma: the stated d along the
+fit's valley): default settings, 5 draws, every value unchanged; |z| <= 2 for b against
+the ISO truth 99 -> 100/100 and m 97 -> 100/100 (the default inputs' over-coverage, as
+C's), the series' b (the end of choking) 8 -> 21/25 and m 11 -> 18/25, against the free
+fit b 24 -> 25/25 and m 18 -> 21/25. Record only (d = 0) unchanged by construction.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """Random draws of the acceptance's ranges, beyond the fixed grids: a script, not a test.
 
 ``python bench/bench_random_draws.py [foreign|temperature] [--draws N] [--first K] [--jobs J]
-[--draw K]`` (both kinds without one; project venv, ``PYTHONPATH`` at the repo root). The
+[--draw K] [--with-log-only]`` (both kinds without one; project venv, ``PYTHONPATH`` at the
+repo root; ``--with-log-only``: the temperature draws with their log only). The
 fixed grids of ``bench/bench_foreign_laws.py`` and ``bench/bench_temperature_records.py``
 cycle a few values of each factor; this draws every factor at random inside the issue's ranges, with
 the records made and analysed by those benches' own ``record`` and ``run`` (the
@@ -135,10 +136,10 @@ def _foreign(k: int) -> dict:
             "st": {q: (checks[q][0], zs[q]) for q in checks}}
 
 
-def _temperature(k: int) -> list[dict]:
+def _temperature(k: int, kinds: tuple[bool, ...] = (True, False)) -> list[dict]:
     case = temperature_case(k)
     out = []
-    for res in btr.run((case, False, False)):
+    for res in btr.run((case, False, False), kinds):
         _, st = btr.row(res)
         group = f"{'with' if res['with_t'] else 'without'} T, {'hot' if case.dt_hot else 'not hot'}"
         if not st["ok"]:
@@ -164,9 +165,9 @@ def _temperature(k: int) -> list[dict]:
     return out
 
 
-def _one(job: tuple[str, int]) -> list[dict]:
-    kind, k = job
-    return [_foreign(k)] if kind == "foreign" else _temperature(k)
+def _one(job: tuple[str, int, tuple[bool, ...]]) -> list[dict]:
+    kind, k, kinds = job
+    return [_foreign(k)] if kind == "foreign" else _temperature(k, kinds)
 
 
 def summary(rows: list[dict]) -> list[str]:
@@ -193,11 +194,14 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--draw", type=int, help="analyse this draw alone and print it")
+    ap.add_argument("--with-log-only", action="store_true",
+                    help="temperature: each record with its log only (not without it)")
     args = ap.parse_args(argv)
     if args.kind is None:
         return max(main([kind, *argv]) for kind in ("foreign", "temperature"))
     ks = [args.draw] if args.draw is not None else range(args.first, args.first + args.draws)
-    jobs = [(args.kind, k) for k in ks]
+    kinds = (True,) if args.with_log_only else (True, False)
+    jobs = [(args.kind, k, kinds) for k in ks]
     if args.jobs > 1:
         with Pool(args.jobs) as pool:
             rows = [r for rs in pool.imap(_one, jobs) for r in rs]

@@ -282,13 +282,14 @@ def _analyze(path: Path, volume: float, atmosphere: bool, record_only: bool = Fa
     return {"unload": final[0], "cpu": cpu}
 
 
-def run(job: tuple[Case, bool, bool]) -> list[dict]:
-    """The case's record analysed with and without its temperature column."""
+def run(job: tuple[Case, bool, bool], kinds: tuple[bool, ...] = (True, False)) -> list[dict]:
+    """The case's record analysed with (``kinds`` True) and without (False) its temperature
+    column."""
     case, atmosphere, record_only = job
     t, y, temp = record(case)
     out = []
     with tempfile.TemporaryDirectory() as tmp:
-        for with_t in (True, False):
+        for with_t in kinds:
             path = Path(tmp) / f"{case.name}-{'T' if with_t else 'p'}.csv"
             write_csv(path, t, y, temp if with_t else None)
             out.append({"case": case, "with_t": with_t,

@@ -23,12 +23,12 @@ from numpy.typing import NDArray
 
 from pneumatic_unload.config.estimator import (
     EstimatorSettings,
-    probe_uncertainty,
     wall_uncertainty,
     with_wall,
 )
 from pneumatic_unload.config.tank import WALL_RANGE
 from pneumatic_unload.curvefit.curve_fit_result import CurveFit, CurveSpan
+from pneumatic_unload.curvefit.joint_family import with_temperature
 from pneumatic_unload.curvefit.law_family import (
     HOT_START_INFLATION,
     LAW_BIC_THRESHOLD,
@@ -36,8 +36,6 @@ from pneumatic_unload.curvefit.law_family import (
     best_key,
     criterion,
     criterion_unit,
-    offer_m,
-    other,
 )
 from pneumatic_unload.curvefit.law_fit import (
     CURVE_FIT_RESOLUTION,
@@ -47,6 +45,7 @@ from pneumatic_unload.curvefit.law_fit import (
     fit_law,
     start_from,
 )
+from pneumatic_unload.curvefit.law_search import choose_laws
 from pneumatic_unload.curvefit.offset_offer import (
     OFFSET_GAP_NOISE,
     OFFSET_GAP_Z,
@@ -63,15 +62,6 @@ from pneumatic_unload.curvefit.subsonic_offer import (
     split_key,
     subsonic_index_problem,
     twin_lines,
-)
-from pneumatic_unload.curvefit.temperature_evidence import (
-    FOLLOW_FACTOR,
-    channel,
-    channel_noise,
-    channel_samples,
-    offset_identified,
-    temperature_evidence,
-    weighted_passes,
 )
 from pneumatic_unload.curvefit.wall_moves import law_spread, spread_b, wall_linear
 from pneumatic_unload.fit.lsq import numerical_reproducibility
@@ -172,7 +162,7 @@ def fit_curve(
                      plateau_bend(tr, np.asarray(p, dtype=float), t_start - float(t[0]))) \
         if reduced is None else (0.0, 0.0)
     logged = temperature is not None
-    fam, best = _choose(Family(span, settings, common, profile_heat,
+    fam, best = choose_laws(Family(span, settings, common, profile_heat,
                                plateau_drift_z=drifts, t10_logged=logged,
                                plateau_bend_z=bends), tried)
     offset_why = ""
@@ -186,7 +176,7 @@ def fit_curve(
         probed: dict[str, Any] = {}
         offset_why = offer_offset(fam, best, gap, clear, probed)
         if offset_why is None or clear:
-            alt = _choose(Family(span, settings, common, profile_heat, offset=True,
+            alt = choose_laws(Family(span, settings, common, profile_heat, offset=True,
                                  plateau_drift_z=drifts, t10_logged=logged,
                                  plateau_bend_z=bends), tried)
             if keep_probe(alt[0], probed):
@@ -205,7 +195,7 @@ def fit_curve(
                           f"{cf0.pressure_offset_std:.0f} Pa from the given p_atm")
     temp_why: dict[str, Any] = {}
     if temperature is not None:
-        fam, best, trace, temp_why = _with_temperature(fam, best, temperature, tried)
+        fam, best, trace, temp_why = with_temperature(fam, best, temperature, tried)
         t10 = fam.fits[best][0].gas_temperature.get("t10", math.nan)
         if math.isfinite(t10):  # the wall's lines about the fitted T10
             settings = dataclasses.replace(settings, initial_temperature=t10)
@@ -324,163 +314,6 @@ def _refusals(fam: Family) -> dict[str, str]:
                         f"of its uncertainty) and " + (
                             m_why or "no structure of the laws without it made white"))
     return out
-
-
-def _with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArray],
-                      tried: tuple[str, ...]) -> tuple[Family, str, Trace, dict[str, Any]]:
-    """The family fitted again with the logged gas temperature beside the pressure: T10
-    and the thermometer's lag fitted, the readings' residuals weighted to the pressure's
-    (each channel's variance from its own residuals: first the larger of the channel's
-    noise and the misfit of the pressure fit's gas, then the joint fit's misfit, until
-    they agree within :data:`TEMPERATURE_WEIGHT_TOLERANCE`); the laws the pressure
-    rejects by more than the log's readings' count in the criterion are not refitted.
-
-    Returns the joint family, its chosen key, its trace and {} - or, where the joint fit's
-    readings do not follow the log within :data:`FOLLOW_FACTOR` of its noise (no heat law
-    of the model makes the gas the thermometer saw: it is no evidence of the heat law),
-    the pressure's family, key and trace and why not, with the pressure fit's departure
-    from the log [K] for the budget (:func:`~.temperature_evidence.temperature_terms`)."""
-    trace: Trace = fam.common["trace"]
-    got = channel_samples(series, fam.span)
-    if isinstance(got, str):
-        return fam, best, trace, {"why": f"not used: {got}"}
-    t_rel, temp = got
-    cf = fam.fits[best][0]
-    noise = channel_noise(temp)
-    lag_given = fam.settings.thermometer_time_constant
-    ev = temperature_evidence(cf.config(fam.settings), cf.t_start - fam.span.t_ref,
-                              t_rel, temp, sensor_tau=lag_given)
-    sigma = max(noise, ev.get("rms", noise))
-    if not (math.isfinite(cf.rms) and cf.rms > 0 and math.isfinite(sigma)):
-        return fam, best, trace, {"why": "not used: the pressure fit's residual is not "
-                                         "finite"}
-    # each law starts from its fit to the pressure alone, the thermometer from the
-    # comparison's lag and the gas's T10 (the later passes from the previous pass)
-    thermo = {"t10": fam.settings.initial_temperature,
-              "tau_thermo": ev.get("sensor_time_constant", math.nan)}
-    seeds = {k: {**fam.start_of(f[0]), **{n: x for n, x in thermo.items()
-                                          if math.isfinite(x)}}
-             for k, f in fam.fits.items()}
-    # a law the pressure rejects by more than the log can give back is not refitted: the
-    # log's chi^2 under the chosen law is about its readings' count (its misfit is the
-    # weight's sigma), and no law can gain more than that from it
-    bic = criterion(fam.fits, fam.span.n)
-    window = temp.size + 2.0 * LAW_BIC_THRESHOLD
-    behind: dict[str, float] = {}  # each law's best fit behind the chosen one's
-    for key, value in bic.items():
-        law = split_key(key)[0]
-        behind[law] = min(behind.get(law, math.inf), value - bic[best])
-    every, tried = tried, tuple(law for law in tried if behind.get(law, math.inf) <= window) \
-        or (split_key(best)[0],)
-    last: dict[str, Any] = {}
-
-    def attempt(sigma_t: float, k: int) -> float:
-        # the later passes start from the previous pass's fits
-        starts = seeds if k == 0 else {key: last["fam"].start_of(f[0])
-                                       for key, f in last["fam"].fits.items()}
-        # (a lag the comparison finds unresolved is held only where its model follows the
-        # log: one that departs misplaces the lag too - 1e-4 s for 1 s on a hot start)
-        joint = trace.with_channel(channel(
-            t_rel, temp, cf.rms, sigma_t,
-            ev.get("sensor_time_constant", math.nan) if ev.get("follows") else math.nan,
-            lag_given=lag_given,
-            offset=offset_identified(fam.settings.wall_temperature is not None)))
-        j_fam, j_best = _choose(Family(fam.span, fam.settings, {**fam.common, "trace": joint},
-                                       fam.profile_heat, offset=fam.offset,
-                                       seeds=starts, plateau_drift_z=fam.plateau_drift_z,
-                                       t10_logged=True, plateau_bend_z=fam.plateau_bend_z),
-                                tried)
-        summary = j_fam.fits[j_best][0].gas_temperature
-        summary.update(noise=noise, passes=k + 1)
-        last.update(fam=j_fam, best=j_best, joint=joint, summary=summary)
-        return float(summary["rms"])
-
-    weighted_passes(attempt, sigma, noise)
-    j_bic = criterion(last["fam"].fits, fam.span.n)
-    if best in j_bic:
-        # that premise holds where the pressure's choice follows the log; where the log
-        # puts it far behind the joint's best, a law left out nearer than that may lead
-        # (a constant hA with m 0.38 and a +1.9 kPa zero: the pressure's natural law with
-        # its wall at 277 K, 550 behind in the joint, left out the constant hA's 470
-        # behind; the natural law's m 0.424 +- 0.003 for 0.379 and b 0.321 for 0.272)
-        reach = j_bic[best] - j_bic[last["best"]] + window
-        more = tuple(law for law in every if law not in tried
-                     and behind.get(law, math.inf) <= reach)
-        if more:
-            tried = tuple(law for law in every if law in tried or law in more)
-            weighted_passes(attempt, sigma, noise)
-    j_fam, j_best, joint, summary = last["fam"], last["best"], last["joint"], last["summary"]
-    jc = j_fam.fits[j_best][0]
-    probe = probe_uncertainty(fam.settings)
-    if summary["rms"] <= FOLLOW_FACTOR * noise:
-        return j_fam, j_best, joint, {}
-    if summary["rms"] <= probe and jc.rms <= PRESSURE_KEPT * cf.rms:
-        # the model's gas within the probe's accuracy of the log (a point in the tank
-        # against the uniform gas), the pressure's residual kept: the log is evidence
-        # (AeroLab's 0.125 in run: 0.61 K, the pressure 652 Pa rms against 626 alone,
-        # Ljung-Box p 7e-11 against 2.7e-12; refused as departing, 9.7 K after the lag)
-        summary["probe"] = probe
-        return j_fam, j_best, joint, {}
-    return fam, best, trace, {
-        "why": f"not used: fitted jointly, the model's gas departs from it by "
-               f"{summary['rms']:.2g} K rms (noise {noise:.2g} K; the pressure's residual "
-               f"{jc.rms:.4g} Pa rms against {cf.rms:.4g} alone, Ljung-Box p "
-               f"{jc.whiteness_p:.2g} against {cf.whiteness_p:.2g}; C {jc.conductance:.4g} "
-               f"m^3/(s Pa) against {cf.conductance:.4g}): no heat law follows it, the "
-               f"pressure alone is fitted and the departure is a line of the budget",
-        "joint_rms": summary["rms"], "joint_pressure_rms": jc.rms,
-        "joint_conductance": jc.conductance,
-        "departure_rms": float(ev.get("rms", summary["rms"])),
-        "noise": noise, "t10_assumed": fam.settings.initial_temperature}
-
-
-#: A joint fit whose readings depart from the log by more than the channel's noise but
-#: within the probe's accuracy is used where the pressure's residual RMS grows by at most
-#: this factor over the pressure fit's alone [-].
-PRESSURE_KEPT = 1.05
-
-
-#: Where every law fitted with m held misses the record by more than this ratio of its
-#: residual's RMS to its white noise's [-] (:attr:`CurveFit.misfit`), the laws are all
-#: fitted with m free too (random draws of the ISO law with m 0.70, Newton cooling: every
-#: law 2.1-4.5 with m held, C +0.7 % and -7.2 %, b 0.04 for 0.26; two restrictions in
-#: series, 2.7: C -13.8 % through a hot start; 1.0 with m free). Structure within the
-#: noise stays with the first law's test (HydDown's Nusselt jump: 1.03-1.18, where the
-#: density law with m free read C +1.5 %).
-MISFIT_SEARCH = 1.5
-
-
-def _choose(fam: Family, tried: tuple[str, ...]) -> tuple[Family, str]:
-    """Fit the laws ``tried`` with m held, and with m free where the record asks for it;
-    returns the family and the key the criterion chooses.
-
-    The subsonic index: the first law once more with m free where its first-order twin
-    (:meth:`Family.twin`) says it is worth a fit; where the record determines m and the
-    criterion prefers it to the same law with m held, the laws are fitted again with m
-    free (m and the heat law trade: both families are offered); clearly (by
-    LAW_BIC_THRESHOLD: HydDown's 1 L vessel, 3.5 better with m free, then took the density
-    law with m = 0.527 and C +1.5 % over the hot start's -0.1 %). The chosen law's other
-    variant (m held for one fitted, m free for one held where its twin says it is worth a
-    fit) is fitted too, and the criterion decides between the two."""
-    fam.run(tried, "")  # m held at 0.5
-    fits, n = fam.fits, fam.span.n
-    first = tried[0]
-    if first in fits and fam.worth(fam.twin(first, "m")) and offer_m(fam, first) is None:
-        pair = criterion({k: fits[k] for k in (first, first + M_SUFFIX)}, n)
-        if pair[first] - pair[first + M_SUFFIX] > LAW_BIC_THRESHOLD:
-            fam.run(tried, M_SUFFIX)
-    if fits and min(f[0].misfit for f in fits.values()) > MISFIT_SEARCH:
-        # every law misses the record by more than its noise: m and the heat law trade,
-        # so the first law's gain from m alone does not speak for the others (a flow with
-        # m 0.70 and Newton cooling: the natural law took up the shape with b 0.04 and
-        # gained nothing from m, while the constant hA law with m fits to the noise)
-        fam.run(tried, M_SUFFIX)
-    best = best_key(fits, n)
-    if other(best) not in fam.raw and (best.endswith(M_SUFFIX)
-                                       or fam.worth(fam.twin(best, "m"))):
-        offer_m(fam, best)
-        best = best_key(fits, n)
-    return fam, best
 
 
 def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: float, *,
