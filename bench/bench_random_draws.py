@@ -35,8 +35,12 @@ Temperature draws 0-169: with the log C within 1 % 161 -> 168/170, b 149 -> 160,
 unchanged; session 22 (d03e495, the offset probe's fit kept) 116/118, with T all within
 108 -> 110/118, no draw worse; session 23 (1ed46a7, a hot start white with m free, T
 logged) with T, hot 110 -> 111/118, not hot 51 -> 52/52, without T unchanged, no draw
-worse. About 15 min for the foreign draws and 50 for the temperature ones, one process
-each on a busy 2-core machine.
+worse; session 24 (b468e62: an unfitted zero in b's and m's sigma, the joint family with
+the pressure's choice and the laws the log brings back; z_m now counted) with T, hot 111 ->
+113/118, z_b 109 -> 115, z_m 107 -> 113; without T z_b 107 -> 111 and z_m 103 -> 106
+(hot); C and its z unchanged, no draw worse. About 15 min for the foreign draws and 50
+for the temperature ones (25 with ``--with-log-only``), one process each on a busy 2-core
+machine.
 
 """
 
