@@ -144,4 +144,7 @@ def unfitted_offset_lines(fam: Family, best: str) -> dict[str, float]:
     if tw is None:
         return {}
     d = input_uncertainties(fam.settings, fam.fits[best][0].p10)["pressure"]
-    return {"input_std": d, "b": abs(tw.slope_b) * d, "m": abs(tw.slope_m) * d}
+    # (math.nan itself where a slope is not known: results are compared as dicts, and a
+    # NaN equals only itself)
+    return {"input_std": d, "b": abs(tw.slope_b) * d if math.isfinite(tw.slope_b) else math.nan,
+            "m": abs(tw.slope_m) * d if math.isfinite(tw.slope_m) else math.nan}
