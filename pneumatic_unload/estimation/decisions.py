@@ -253,6 +253,14 @@ def stalled(cs: FloatArray, tv: FloatArray, k: Index, *, i0: int, sigma: float,
 
 #: Widest window of the final-plateau test [-] (see :func:`flat_window`).
 FLAT_MAX = 16384
+#: Change between the final-plateau test's two windows, as a fraction of the drop from
+#: p10, below which the tail counts as level (beside 4 noise deviations) [-]. It sets how
+#: near its asymptote the final fit's span ends: about 2.5 x this fraction of the drop is
+#: left on an exponential tail. At 0.2 % (until session 25) a slow subsonic tail (b 0.18,
+#: m 0.5, 7.8 bar) ended 0.9 kPa above its plateau, so a -0.8 kPa transducer zero was not
+#: seen and was read as m 0.600 +- 0.010 (z 10) with a wall at 270 K, or, without the
+#: logged temperature, as C -4.2 % at z -3.9.
+FLAT_FRACTION = 0.0005
 
 
 def flat_window(tau: float, dt_nominal: float) -> int:
@@ -265,14 +273,15 @@ def flat(cs: FloatArray, k: Index, *, i0: int, tau: float, dt_nominal: float,
          p10: float, sigma: float) -> Flag:
     """The signal has settled on its final plateau at index k (tau: time scale [s]).
 
-    The means of the last two windows differ by less than 4 noise deviations or 0.2 % of
-    the drop from p10 [signal units]; the unload must be older than tau plus two windows.
-    When half of tau is longer than FLAT_MAX samples, the windows stay FLAT_MAX long and
-    their change is scaled to half tau (``tau / (2 dt FLAT_MAX)``, the slope projected
-    over the window the test is defined on) before the 0.2 % limit: the test does not
-    depend on the sample rate. Without the scaling a slow discharge (tau of 10^6 samples
-    and more) passed for level about tau after its start, and the rest of it gave a
-    phantom second unload (bench/bench_memory.py, stream case).
+    The means of the last two windows differ by less than 4 noise deviations or
+    FLAT_FRACTION (0.05 %) of the drop from p10 [signal units]; the unload must be older
+    than tau plus two windows. When half of tau is longer than FLAT_MAX samples, the
+    windows stay FLAT_MAX long and their change is scaled to half tau
+    (``tau / (2 dt FLAT_MAX)``, the slope projected over the window the test is defined
+    on) before the FLAT_FRACTION limit: the test does not depend on the sample rate.
+    Without the scaling a slow discharge (tau of 10^6 samples and more) passed for level
+    about tau after its start, and the rest of it gave a phantom second unload
+    (bench/bench_memory.py, stream case).
     """
     dt = dt_nominal if math.isfinite(dt_nominal) else DT_DEFAULT
     w = flat_window(tau, dt_nominal)
@@ -284,7 +293,7 @@ def flat(cs: FloatArray, k: Index, *, i0: int, tau: float, dt_nominal: float,
     se = sigma * math.sqrt(2.0 / w)
     half = 0.5 * tau / dt  # [-]
     scale = half / w if half > FLAT_MAX else 1.0
-    return ok & (change < np.maximum(4.0 * se, 0.002 * dp_total / scale))
+    return ok & (change < np.maximum(4.0 * se, FLAT_FRACTION * dp_total / scale))
 
 
 def settled_at_end(cs: FloatArray, i: int, *, i0: int, p10: float, dp_guess: float) -> bool:
