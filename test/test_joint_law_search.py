@@ -18,7 +18,8 @@ thermocouple at 4-7 Hz in 0.1 K steps, empty cells between. Draws 128 and 74 (th
 tests, each with the bench's noise draw): a law the joint fit left out brought back where
 the log refutes the pressure's choice, and a zero offset the fit does not determine
 carried in b's and m's sigma; draw 83: the pressure's choice kept in the joint family;
-draw 86: a slow subsonic tail followed to its plateau, where its zero offset shows."""
+draw 86: a slow subsonic tail followed to its plateau, where its zero offset shows;
+draw 153: where the chosen law has m free, every law is fitted with m free."""
 
 from __future__ import annotations
 
@@ -62,6 +63,10 @@ DRAWS = {
          821.5785694631275, 4.706564411252128, -803.4371627049168, 0.0035783572326132055,
          2.508532977845391e-08, 0.18379536478993477, 0.5, 784000.384439735,
          5.61317361486679, 0.4550769134370069, 2.0994283007176318),
+    153: (16.804237274987816, 59.48781127121068, 1.6746381122241902, 4.376641867950686,
+          594.1251136852741, 8.049486538464816, -438.6863805232488, 0.0037998413007628335,
+          1.6683381418003133e-08, 0.24444351472770723, 0.46207712100269704,
+          930694.1137976326, 11.161796186434113, 0.4846687687535798, 3.1638596963598515),
 }
 
 
@@ -189,6 +194,25 @@ def test_a_slow_subsonic_tail_is_followed_to_its_plateau(tmp_path, capsys, with_
     assert abs(u["pressure_offset"] - offset) < 500.0, u["pressure_offset"]
     assert abs(u["conductance_model"] - c) <= min((0.01 if with_t else 0.02) * c,
                                                   2.0 * u["conductance_model_std"])
+    assert abs(u["critical_ratio"] - b) <= min(0.03, 2.0 * u["critical_ratio_std"]), (
+        u["critical_ratio"], u["critical_ratio_std"])
+    assert abs(u["subsonic_index"] - m) <= min(0.05, 2.0 * u["subsonic_index_std"]), (
+        u["subsonic_index"], u["subsonic_index_std"])
+
+
+def test_where_the_chosen_law_has_m_free_every_law_is_tried_with_m_free(tmp_path, capsys):
+    """Draw 153 (constant hA, m 0.46, b 0.24, a -0.44 kPa zero, a 17 K warm gas, slow
+    heat exchange): the search freed m for its best law only, the natural hot start, 9
+    better in BIC with m free than held; the constant hA's hot start with m free, 14
+    better still, was never fitted. With its zero fitted, b's and m's sigma no longer
+    carried the offset's line: b 0.258 +- 0.004 (z 3.2) and m 0.485 +- 0.003 (z 6.6).
+    Where the chosen law has m free, the whole family is fitted with m free."""
+    u = _analyze(tmp_path, capsys, 153)
+    c, b, m, offset = DRAWS[153][8], DRAWS[153][9], DRAWS[153][10], DRAWS[153][6]
+    assert u["heat_law"] == "fixed+wall", u["heat_laws"]
+    assert u["pressure_offset"] is not None, u["offset_source"]
+    assert abs(u["pressure_offset"] - offset) < 500.0, u["pressure_offset"]
+    assert abs(u["conductance_model"] - c) <= min(0.01 * c, 2.0 * u["conductance_model_std"])
     assert abs(u["critical_ratio"] - b) <= min(0.03, 2.0 * u["critical_ratio_std"]), (
         u["critical_ratio"], u["critical_ratio_std"])
     assert abs(u["subsonic_index"] - m) <= min(0.05, 2.0 * u["subsonic_index_std"]), (
