@@ -296,6 +296,37 @@ def flat(cs: FloatArray, k: Index, *, i0: int, tau: float, dt_nominal: float,
     return ok & (change < np.maximum(4.0 * se, FLAT_FRACTION * dp_total / scale))
 
 
+#: A tail level to :func:`flat` whose last window lies more than this many of its standard
+#: errors from the given p_atm (a transducer's zero, or a tail not yet at its plateau) is
+#: followed on (:func:`zero_watch`) [-].
+ZERO_GAP_Z = 4.0
+#: ... until the settled samples since the flat window's start put the gap's mean to
+#: within 1 / ZERO_Z of itself [-]: a +0.7 kPa zero at 132 Hz (1 kPa noise) was level 12 s
+#: before its record ended, its flat window's 145 samples gave the offset +- 115 Pa, 8.2
+#: better in BIC than none (below the threshold of 10), so the zero was not fitted.
+ZERO_Z = 10.0
+#: ... at most this many flat windows past the flat decision (two time scales) [-].
+ZERO_EXTRA_MAX = 4
+
+
+def zero_watch(cs: FloatArray, k: int, *, tau: float, dt_nominal: float, atm: float,
+               sigma: float) -> tuple[int, float]:
+    """Samples to follow a tail on past index k, where :func:`flat` found it level, so
+    that its settled end determines the gap to the given p_atm ``atm`` [signal units]
+    (``sigma``: the sample noise [signal units]; ``tau`` [s] as for :func:`flat`): 0 where
+    the last flat window lies within ZERO_GAP_Z of its standard errors of ``atm`` or
+    already carries (ZERO_Z sigma / gap)^2 samples; else the rest of those, at most
+    ZERO_EXTRA_MAX windows [-]; and the gap, the last window's mean less ``atm`` [signal
+    units]."""
+    w = flat_window(tau, dt_nominal)
+    level = (cs[k + 1] - cs[max(k - w + 1, 0)]) / w
+    gap = abs(level - atm)
+    if not (math.isfinite(gap) and sigma > 0.0 and gap > ZERO_GAP_Z * sigma / math.sqrt(w)):
+        return 0, level - atm
+    need = (ZERO_Z * sigma / gap) ** 2
+    return int(min(math.ceil(need), ZERO_EXTRA_MAX * w)), level - atm
+
+
 def settled_at_end(cs: FloatArray, i: int, *, i0: int, p10: float, dp_guess: float) -> bool:
     """p_atm auto at the end of the stream: the last eighth of the unload (at least 8
     samples, up to index i) is level to 0.5 % of the drop, with the drop > 50 % of the

@@ -125,6 +125,9 @@ class UnloadState:
         The fit window's samples already reduced to bins and dropped from the buffer (a
         long unload, see :mod:`.reduction`; :class:`pneumatic_unload.fit.reduced.Reducer`),
         or None.
+    zero_until : int or None
+        Stream index up to which a level tail is followed on for its gap to the given
+        p_atm (:func:`~.decisions.zero_watch`), or None [-].
     """
 
     trigger: int
@@ -155,6 +158,7 @@ class UnloadState:
     skip_rise: float = math.nan
     rec_high: float = -math.inf
     reduced: Any = None
+    zero_until: int | None = None
 
 
 class EstimatorState:

@@ -27,6 +27,7 @@ from pneumatic_unload.estimation.decisions import (
     rose,
     running_low,
     settled,
+    zero_watch,
 )
 from pneumatic_unload.estimation.endstep import STEP_BACK, TAIL_STEP, settled_step
 from pneumatic_unload.estimation.reduction import fit_window, reduce_due, reduce_unload
@@ -104,20 +105,42 @@ class FinalFit:
         return fin
 
 
+def _tail_tau(st: EstimatorState, tau: float) -> float:
+    """The tail tests' time scale [s]: ``tau``, the crossing's tau_exp, or, when that is
+    not finite (a 'bad_data' crossing with no crossing instant), the time from the start to
+    the sample that closed the crossing window (0 when unknown)."""
+    if math.isfinite(tau):
+        return tau
+    u = st.unload
+    res = u.pending
+    tau = res.t_complete - u.t0 if res is not None else 0.0
+    return tau if math.isfinite(tau) and tau > 0.0 else 0.0
+
+
 def _flat_tail(st: EstimatorState, cs: np.ndarray, k: int | np.ndarray, tau: float
                ) -> np.bool_ | np.ndarray:
-    """:func:`~.decisions.flat` with the current unload's start, p10 and noise; ``tau``
-    [s] the crossing's tau_exp, or, when that is not finite (a 'bad_data' crossing with no
-    crossing instant), the time from the start to the sample that closed the crossing
-    window."""
+    """:func:`~.decisions.flat` with the current unload's start, p10 and noise, at the
+    time scale :func:`_tail_tau` [s]."""
     u = st.unload
-    if not math.isfinite(tau):
-        res = u.pending
-        tau = res.t_complete - u.t0 if res is not None else 0.0
-        if not (math.isfinite(tau) and tau > 0.0):
-            tau = 0.0
-    return flat(cs, k, i0=u.i0, tau=tau, dt_nominal=st.dt_nominal, p10=u.p10,
-                sigma=st.sigma)
+    return flat(cs, k, i0=u.i0, tau=_tail_tau(st, tau), dt_nominal=st.dt_nominal,
+                p10=u.p10, sigma=st.sigma)
+
+
+def _watch_zero(st: EstimatorState, cs: np.ndarray, i: int, tau: float) -> bool:
+    """A tail level at index i whose end lies clearly away from the given p_atm is followed
+    on (:func:`~.decisions.zero_watch`; not where p_atm is the plateau's own mean): sets
+    the unload's ``zero_until`` and says so; False where it ends here."""
+    u = st.unload
+    if u.atm_var != 0.0 or not math.isfinite(u.atm):
+        return False
+    extra, gap = zero_watch(cs, i, tau=_tail_tau(st, tau), dt_nominal=st.dt_nominal, atm=u.atm,
+                       sigma=st.sigma)
+    if extra <= 0:
+        return False
+    u.zero_until = i + st.buf.shift + extra
+    st.diag("ok", f"tail level {gap * st.settings.signal_gain:+.0f} Pa from the given p_atm:"
+            f" followed {extra} samples more for the gap", float(st.buf.t[i]))
+    return True
 
 
 def step_tail(st: EstimatorState, i: int) -> list[UnloadResult]:
@@ -144,9 +167,17 @@ def step_tail(st: EstimatorState, i: int) -> list[UnloadResult]:
         return out
     if st.stuck(i):
         return on_tail_stuck(st, i)
-    if res is not None and _flat_tail(st, np.frombuffer(cs, dtype=float), i, res.tau_exp):
-        # level to the flat test, maybe still falling slowly: a next unload needs a charge
-        # or a level plateau (the valve closed, then opened again), see step_waiting
+    if res is None:
+        return []
+    if u.zero_until is not None:
+        level = i + st.buf.shift >= u.zero_until
+    else:
+        level = bool(_flat_tail(st, np.frombuffer(cs, dtype=float), i, res.tau_exp)) and \
+            not _watch_zero(st, np.frombuffer(cs, dtype=float), i, res.tau_exp)
+    if level:
+        # level to the flat test (and followed on for the gap to a given p_atm), maybe
+        # still falling slowly: a next unload needs a charge or a level plateau (the valve
+        # closed, then opened again), see step_waiting
         floor = u.tail_low + rise_threshold(st.sigma, u.p10, u.atm)
         out = finish_tail(st, i, ended=False)
         st.rearm_floor, st.rearm_noted = floor, False
@@ -167,7 +198,8 @@ def scan_tail(st: EstimatorState, i: int, end: int) -> int:
     event = rose(m, low_prev, rise_threshold(st.sigma, u.p10, u.atm))
     event |= st.stuck(ks) | reduce_due(st, ks)
     if u.pending is not None:
-        event |= _flat_tail(st, cs, ks, u.pending.tau_exp)
+        event |= (ks + st.buf.shift >= u.zero_until) if u.zero_until is not None else \
+            _flat_tail(st, cs, ks, u.pending.tau_exp)
     hit = np.flatnonzero(event)
     k = int(hit[0]) if hit.size else ks.size
     if k > 0:
