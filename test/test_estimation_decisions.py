@@ -19,7 +19,8 @@ from pneumatic_unload.physics import orifice_conductance
 
 FS_NOISE = 1000.0  # 0.1 % of a 1 MPa full-scale transducer [Pa]
 KINDS = ("clean", "heat", "aborted", "two_unloads", "auto_atm", "volts", "bad_stamps",
-         "spike_and_stuck", "stuck_in_unload", "saturated", "clock_step", "mid_unload")
+         "spike_and_stuck", "stuck_in_unload", "saturated", "clock_step", "mid_unload",
+         "zero_offset")
 
 
 def _rig(rng, seed, **kw):
@@ -78,6 +79,17 @@ def _trace(kind, seed):
         k = int(np.flatnonzero(b.opening > 0)[0]) + int(rng.integers(5, 800))
         return dataclasses.replace(settings_for(cfg), curve_fit=seed % 2 == 0), b.t[k:], \
             b.measured[k:]
+    if kind == "zero_offset":
+        # a transducer zero 0.3-3 kPa either way, the record long past its tail: the level
+        # tail followed on for its gap to p_atm (decisions.zero_watch), then a new charge
+        cfg = _rig(rng, seed, effects=("sensor_offset",), pre_time=0.5,
+                   sensor_offset=float(rng.choice([-1.0, 1.0]) * rng.uniform(300.0, 3000.0)))
+        cfg = cfg.replace(duration=1.5 * default_duration(cfg))
+        a = simulate(cfg)
+        ramp = np.linspace(a.measured[-1], 6e5, 300) + rng.normal(0.0, FS_NOISE, 300)
+        t = np.concatenate([a.t, a.t[-1] + 1e-3 * np.arange(1, 301)])
+        return dataclasses.replace(settings_for(cfg), curve_fit=False), t, \
+            np.concatenate([a.measured, ramp])
     if kind == "saturated":
         cfg = _rig(rng, seed, full_scale=0.9 * rng.uniform(4e5, 8e5), initial_pressure=8e5)
         sim = simulate(cfg)

@@ -98,3 +98,31 @@ def test_a_tail_creeping_on_after_an_unconfirmed_trigger_gives_one_unload():
     seq += one.finish()
     assert [(r.index, r.status, r.t_end) for r in seq] == [
         (r.index, r.status, r.t_end) for r in out]
+
+
+def _watch(gap: float, sigma: float, w_target: int = 1000) -> int:
+    """:func:`decisions.zero_watch` on a level window ``gap`` [Pa] above p_atm 1e5 (the
+    window's samples all at its mean: only the mean enters), tau set for a flat window of
+    ``w_target`` samples at 1 kHz [-]."""
+    dt = 1e-3
+    tau = 2.0 * w_target * dt
+    w = decisions.flat_window(tau, dt)
+    assert w == w_target
+    cs = np.concatenate(([0.0], np.cumsum(np.full(2 * w, 1e5 + gap))))
+    extra, got = decisions.zero_watch(cs, 2 * w - 1, tau=tau, dt_nominal=dt, atm=1e5,
+                                      sigma=sigma)
+    assert abs(got - gap) < 1e-6 * max(abs(gap), 1.0)
+    return extra
+
+
+def test_a_level_tail_is_followed_on_only_where_its_gap_to_p_atm_is_clear():
+    """The gap must lie more than ZERO_GAP_Z (4) standard errors of the window's mean
+    from p_atm (1000 samples of 1 kPa noise: 126 Pa), either way; then (ZERO_Z sigma /
+    gap)^2 samples more, at most ZERO_EXTRA_MAX windows; no noise, no watch."""
+    se = 1000.0 / np.sqrt(1000)
+    assert _watch(0.9 * decisions.ZERO_GAP_Z * se, 1000.0) == 0
+    assert _watch(-0.9 * decisions.ZERO_GAP_Z * se, 1000.0) == 0
+    for gap in (200.0, -200.0):
+        assert _watch(gap, 1000.0) == int(np.ceil((decisions.ZERO_Z * 1000.0 / 200.0) ** 2))
+    assert _watch(1.1 * decisions.ZERO_GAP_Z * se, 1000.0) == decisions.ZERO_EXTRA_MAX * 1000
+    assert _watch(3000.0, 0.0) == 0
