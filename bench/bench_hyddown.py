@@ -109,6 +109,12 @@ needs it), or with ``--no-ld`` not given.
   L/D advice and a C range holding the truth; the full grid **24/24** within 2 % (worst
   +1.90 %, full02: heat transfer without L/D, hot start +0.39 % with it; median 0.34 %),
   each with the L/D advice and a C range holding the truth.
+
+Session 26 (a level tail followed on for its gap to p_atm, ``decisions.zero_watch``; full
+grid regenerated with hyddown 0.50.0): worst 0.83 -> 1.33 %, median 0.25 %, 24/24 within
+2 %, within 1 and 2 sigma 18 -> 17/24 and 23 -> 22/24. full04 was level at 4.79 s 352 Pa
+above p_atm and still falling; followed on 0.77 s, the density law took over from the
+natural law, C +0.33 -> +1.33 % (z 2.2); no other case moved by more than 0.02 %.
 """
 
 from __future__ import annotations

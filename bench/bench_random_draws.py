@@ -41,7 +41,10 @@ the pressure's choice and the laws the log brings back; z_m now counted) with T,
 (hot); C and its z unchanged, no draw worse; session 25 (40a187b, the tail followed to
 0.05 % of the drop, every law with m free from a misfit of 1.3) with T, hot all within
 113 -> 114/118, z_b 115 -> 114, z_m 113 -> 114; without T, hot all within 86 -> 91/118, z_b
-111 -> 113. About 15 min for the foreign draws and 50
+111 -> 113; session 26 (the level tail followed on for its gap to p_atm,
+decisions.zero_watch) with T all within 166 -> 167/170 (draw 74's zero fitted); without
+T, hot all within 91 -> 94/118, |z_C| <= 2 117 -> 118/118, not hot 51 -> 52/52. About 15
+min for the foreign draws and 50
 for the temperature ones (25 with ``--with-log-only``), one process each on a busy 2-core
 machine.
 
