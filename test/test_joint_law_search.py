@@ -127,6 +127,19 @@ def _analyze(tmp_path, capsys, k: int, with_t: bool = True) -> dict:
     return u
 
 
+def _assert_the_records(u: dict, k: int, c_tol: float = 0.01) -> None:
+    """Draw k's zero fitted within 500 Pa, C within ``c_tol`` and b and m within the
+    acceptance (0.03, 0.05), each also within 2 of its sigmas."""
+    c, b, m, offset = DRAWS[k][8], DRAWS[k][9], DRAWS[k][10], DRAWS[k][6]
+    assert u["pressure_offset"] is not None, u["offset_source"]
+    assert abs(u["pressure_offset"] - offset) < 500.0, u["pressure_offset"]
+    assert abs(u["conductance_model"] - c) <= min(c_tol * c, 2.0 * u["conductance_model_std"])
+    assert abs(u["critical_ratio"] - b) <= min(0.03, 2.0 * u["critical_ratio_std"]), (
+        u["critical_ratio"], u["critical_ratio_std"])
+    assert abs(u["subsonic_index"] - m) <= min(0.05, 2.0 * u["subsonic_index_std"]), (
+        u["subsonic_index"], u["subsonic_index_std"])
+
+
 def test_a_law_left_out_comes_back_where_the_log_refutes_the_pressures_choice(
         tmp_path, capsys):
     """Draw 128 (constant hA, m 0.38, a +1.9 kPa zero): the pressure alone chose the
@@ -174,15 +187,7 @@ def test_a_level_tail_away_from_p_atm_is_followed_until_its_zero_shows(tmp_path,
     for 0.50. A level tail clearly away from the given p_atm is now followed on until its
     gap is determined (decisions.zero_watch): the zero is fitted and C, b and m are the
     record's."""
-    u = _analyze(tmp_path, capsys, 74)
-    c, b, m, offset = DRAWS[74][8], DRAWS[74][9], DRAWS[74][10], DRAWS[74][6]
-    assert u["pressure_offset"] is not None, u["offset_source"]
-    assert abs(u["pressure_offset"] - offset) < 500.0, u["pressure_offset"]
-    assert abs(u["conductance_model"] - c) <= min(0.01 * c, 2.0 * u["conductance_model_std"])
-    assert abs(u["critical_ratio"] - b) <= min(0.03, 2.0 * u["critical_ratio_std"]), (
-        u["critical_ratio"], u["critical_ratio_std"])
-    assert abs(u["subsonic_index"] - m) <= min(0.05, 2.0 * u["subsonic_index_std"]), (
-        u["subsonic_index"], u["subsonic_index_std"])
+    _assert_the_records(_analyze(tmp_path, capsys, 74), 74)
 
 
 def test_the_pressures_choice_is_kept_in_the_joint_family(tmp_path, capsys):
@@ -212,16 +217,8 @@ def test_a_slow_subsonic_tail_is_followed_to_its_plateau(tmp_path, capsys, with_
     at 0.2 % of the drop per half tau, 0.9 kPa above its plateau, so the zero was not
     seen: with the log, m 0.600 +- 0.010 (z 10) and a wall at 270 K; without it, C -4.2 %
     at z -3.9. Followed to 0.05 %, the zero is fitted and C, b and m are the record's."""
-    u = _analyze(tmp_path, capsys, 86, with_t)
-    c, b, m, offset = DRAWS[86][8], DRAWS[86][9], DRAWS[86][10], DRAWS[86][6]
-    assert u["pressure_offset"] is not None, u["offset_source"]
-    assert abs(u["pressure_offset"] - offset) < 500.0, u["pressure_offset"]
-    assert abs(u["conductance_model"] - c) <= min((0.01 if with_t else 0.02) * c,
-                                                  2.0 * u["conductance_model_std"])
-    assert abs(u["critical_ratio"] - b) <= min(0.03, 2.0 * u["critical_ratio_std"]), (
-        u["critical_ratio"], u["critical_ratio_std"])
-    assert abs(u["subsonic_index"] - m) <= min(0.05, 2.0 * u["subsonic_index_std"]), (
-        u["subsonic_index"], u["subsonic_index_std"])
+    _assert_the_records(_analyze(tmp_path, capsys, 86, with_t), 86,
+                        0.01 if with_t else 0.02)
 
 
 def test_where_the_chosen_law_has_m_free_every_law_is_tried_with_m_free(tmp_path, capsys):
@@ -232,12 +229,5 @@ def test_where_the_chosen_law_has_m_free_every_law_is_tried_with_m_free(tmp_path
     carried the offset's line: b 0.258 +- 0.004 (z 3.2) and m 0.485 +- 0.003 (z 6.6).
     Where the chosen law has m free, the whole family is fitted with m free."""
     u = _analyze(tmp_path, capsys, 153)
-    c, b, m, offset = DRAWS[153][8], DRAWS[153][9], DRAWS[153][10], DRAWS[153][6]
     assert u["heat_law"] == "fixed+wall", u["heat_laws"]
-    assert u["pressure_offset"] is not None, u["offset_source"]
-    assert abs(u["pressure_offset"] - offset) < 500.0, u["pressure_offset"]
-    assert abs(u["conductance_model"] - c) <= min(0.01 * c, 2.0 * u["conductance_model_std"])
-    assert abs(u["critical_ratio"] - b) <= min(0.03, 2.0 * u["critical_ratio_std"]), (
-        u["critical_ratio"], u["critical_ratio_std"])
-    assert abs(u["subsonic_index"] - m) <= min(0.05, 2.0 * u["subsonic_index_std"]), (
-        u["subsonic_index"], u["subsonic_index_std"])
+    _assert_the_records(u, 153)

@@ -126,3 +126,13 @@ def test_a_level_tail_is_followed_on_only_where_its_gap_to_p_atm_is_clear():
         assert _watch(gap, 1000.0) == int(np.ceil((decisions.ZERO_Z * 1000.0 / 200.0) ** 2))
     assert _watch(1.1 * decisions.ZERO_GAP_Z * se, 1000.0) == decisions.ZERO_EXTRA_MAX * 1000
     assert _watch(3000.0, 0.0) == 0
+
+
+def test_a_level_farther_from_p_atm_than_a_zero_offset_is_not_followed_on():
+    """A level beyond ``max_gap`` (the tail's OFFSET_MAX_FRACTION of the drop: no zero
+    offset the fit would take) is something else, and ends the tail where it levels."""
+    dt, w = 1e-3, 1000
+    cs = np.concatenate(([0.0], np.cumsum(np.full(2 * w, 1e5 + 3000.0))))
+    kw = {"tau": 2.0 * w * dt, "dt_nominal": dt, "atm": 1e5, "sigma": 1000.0}
+    assert decisions.zero_watch(cs, 2 * w - 1, max_gap=3001.0, **kw)[0] > 0
+    assert decisions.zero_watch(cs, 2 * w - 1, max_gap=2999.0, **kw)[0] == 0

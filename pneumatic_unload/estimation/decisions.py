@@ -310,18 +310,19 @@ ZERO_EXTRA_MAX = 4
 
 
 def zero_watch(cs: FloatArray, k: int, *, tau: float, dt_nominal: float, atm: float,
-               sigma: float) -> tuple[int, float]:
+               sigma: float, max_gap: float = math.inf) -> tuple[int, float]:
     """Samples to follow a tail on past index k, where :func:`flat` found it level, so
     that its settled end determines the gap to the given p_atm ``atm`` [signal units]
     (``sigma``: the sample noise [signal units]; ``tau`` [s] as for :func:`flat`): 0 where
-    the last flat window lies within ZERO_GAP_Z of its standard errors of ``atm`` or
-    already carries (ZERO_Z sigma / gap)^2 samples; else the rest of those, at most
-    ZERO_EXTRA_MAX windows [-]; and the gap, the last window's mean less ``atm`` [signal
-    units]."""
+    the last flat window lies within ZERO_GAP_Z of its standard errors of ``atm``, or
+    farther than ``max_gap`` [signal units] (no zero offset: a level that far is something
+    else); else (ZERO_Z sigma / gap)^2 samples, at most ZERO_EXTRA_MAX windows [-]; and
+    the gap, the last window's mean less ``atm`` [signal units]."""
     w = flat_window(tau, dt_nominal)
     level = (cs[k + 1] - cs[max(k - w + 1, 0)]) / w
     gap = abs(level - atm)
-    if not (math.isfinite(gap) and sigma > 0.0 and gap > ZERO_GAP_Z * sigma / math.sqrt(w)):
+    if not (math.isfinite(gap) and sigma > 0.0 and ZERO_GAP_Z * sigma / math.sqrt(w) < gap
+            <= max_gap):
         return 0, level - atm
     need = (ZERO_Z * sigma / gap) ** 2
     return int(min(math.ceil(need), ZERO_EXTRA_MAX * w)), level - atm

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pneumatic_unload.config.estimator import EstimatorSettings
+from pneumatic_unload.curvefit.offset_offer import OFFSET_MAX_FRACTION
 from pneumatic_unload.estimation.buffer import ReadingLog
 from pneumatic_unload.estimation.decisions import (
     PERIOD,
@@ -127,14 +128,15 @@ def _flat_tail(st: EstimatorState, cs: np.ndarray, k: int | np.ndarray, tau: flo
 
 
 def _watch_zero(st: EstimatorState, cs: np.ndarray, i: int, tau: float) -> bool:
-    """A tail level at index i whose end lies clearly away from the given p_atm is followed
-    on (:func:`~.decisions.zero_watch`; not where p_atm is the plateau's own mean): sets
+    """A tail level at index i whose end lies clearly away from the given p_atm, by no more
+    than a zero offset fitted can be (OFFSET_MAX_FRACTION of the drop), is followed on
+    (:func:`~.decisions.zero_watch`; not where p_atm is the plateau's own mean): sets
     the unload's ``zero_until`` and says so; False where it ends here."""
     u = st.unload
     if u.atm_var != 0.0 or not math.isfinite(u.atm):
         return False
     extra, gap = zero_watch(cs, i, tau=_tail_tau(st, tau), dt_nominal=st.dt_nominal, atm=u.atm,
-                       sigma=st.sigma)
+                            sigma=st.sigma, max_gap=OFFSET_MAX_FRACTION * abs(u.p10 - u.atm))
     if extra <= 0:
         return False
     u.zero_until = i + st.buf.shift + extra
