@@ -122,8 +122,8 @@ def test_a_level_tail_is_followed_on_only_where_its_gap_to_p_atm_is_clear():
     se = 1000.0 / np.sqrt(1000)
     assert _watch(0.9 * decisions.ZERO_GAP_Z * se, 1000.0) == 0
     assert _watch(-0.9 * decisions.ZERO_GAP_Z * se, 1000.0) == 0
-    for gap in (200.0, -200.0):
-        assert _watch(gap, 1000.0) == int(np.ceil((decisions.ZERO_Z * 1000.0 / 200.0) ** 2))
+    for gap in (190.0, -190.0):  # (10 x 1000 / 190)^2 = 2770.08: off an integer's edge
+        assert _watch(gap, 1000.0) == int(np.ceil((decisions.ZERO_Z * 1000.0 / 190.0) ** 2))
     assert _watch(1.1 * decisions.ZERO_GAP_Z * se, 1000.0) == decisions.ZERO_EXTRA_MAX * 1000
     assert _watch(3000.0, 0.0) == 0
 

@@ -300,8 +300,8 @@ def flat(cs: FloatArray, k: Index, *, i0: int, tau: float, dt_nominal: float,
 #: errors from the given p_atm (a transducer's zero, or a tail not yet at its plateau) is
 #: followed on (:func:`zero_watch`) [-].
 ZERO_GAP_Z = 4.0
-#: ... until the settled samples since the flat window's start put the gap's mean to
-#: within 1 / ZERO_Z of itself [-]: a +0.7 kPa zero at 132 Hz (1 kPa noise) was level 12 s
+#: ... for (ZERO_Z sigma / gap)^2 samples past the flat decision, enough to put the gap's
+#: mean to within 1 / ZERO_Z of itself [-]: a +0.7 kPa zero at 132 Hz (1 kPa noise) was level 12 s
 #: before its record ended, its flat window's 145 samples gave the offset +- 115 Pa, 8.2
 #: better in BIC than none (below the threshold of 10), so the zero was not fitted.
 ZERO_Z = 10.0

@@ -174,8 +174,9 @@ def step_tail(st: EstimatorState, i: int) -> list[UnloadResult]:
     if u.zero_until is not None:
         level = i + st.buf.shift >= u.zero_until
     else:
-        level = bool(_flat_tail(st, np.frombuffer(cs, dtype=float), i, res.tau_exp)) and \
-            not _watch_zero(st, np.frombuffer(cs, dtype=float), i, res.tau_exp)
+        sums = np.frombuffer(cs, dtype=float)
+        level = bool(_flat_tail(st, sums, i, res.tau_exp)) and \
+            not _watch_zero(st, sums, i, res.tau_exp)
     if level:
         # level to the flat test (and followed on for the gap to a given p_atm), maybe
         # still falling slowly: a next unload needs a charge or a level plateau (the valve
