@@ -6,7 +6,11 @@ that is missing fails them (a renamed or lost file must not turn a test into a s
 
 from __future__ import annotations
 
+import contextlib
+import io
+import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -24,3 +28,26 @@ def real_file(relative: str) -> Path:
     if not path.is_file():
         pytest.fail(f"real-data file missing: {path} (the folder {REAL_DATA} is present)")
     return path
+
+
+#: How the AeroLab runs are read: the rig's tank [m^3], gauge kPa, the lab's p_atm [Pa].
+AEROLAB_ARGS = ("--volume", "0.125", "--gauge", "--atmosphere", "101500", "--pressure-unit",
+                "kPa")
+#: ``analyze --json``'s output per AeroLab run, made once for the session's tests (each
+#: asserts another property of one deterministic analysis; 5-10 s a run) [name -> text].
+_AEROLAB_JSON: dict[str, str] = {}
+
+
+def aerolab_json(name: str) -> dict[str, Any]:
+    """``pneumatic-unload analyze --json`` (with :data:`AEROLAB_ARGS`) of the AeroLab run
+    ``name`` (e.g. 'orifice_0.094in.csv'), parsed; the CLI runs in-process once per run."""
+    from pneumatic_unload.app.cli import main
+
+    if name not in _AEROLAB_JSON:
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            code = main(["analyze", str(real_file(f"aerolab/{name}")), *AEROLAB_ARGS,
+                         "--json"])
+        assert code == 0, f"analyze {name} exited {code}"
+        _AEROLAB_JSON[name] = out.getvalue()
+    return json.loads(_AEROLAB_JSON[name])

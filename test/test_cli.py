@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 import pytest
-from realdata import real_file
+from realdata import AEROLAB_ARGS, aerolab_json, real_file
 
 from pneumatic_unload.app.cli import main
 from pneumatic_unload.io.bag import read_estimates
@@ -21,27 +21,9 @@ def _run(capsys, *argv):
     return code, out.out, out.err
 
 
-#: How the AeroLab runs are read: the rig's tank [m^3], gauge kPa, the lab's p_atm [Pa].
-AEROLAB_ARGS = ("--volume", "0.125", "--gauge", "--atmosphere", "101500", "--pressure-unit",
-                "kPa")
-#: ``analyze --json``'s output per AeroLab run, made once for this module's tests (each
-#: asserts another property of one deterministic analysis; 11-16 s a run) [name -> text].
-_AEROLAB_JSON: dict[str, str] = {}
-
-
-def _aerolab(capsys, name: str) -> dict:
-    """``pneumatic-unload analyze --json`` of the AeroLab run ``name``, parsed."""
-    if name not in _AEROLAB_JSON:
-        code, out, _ = _run(capsys, "analyze", str(real_file(f"aerolab/{name}")),
-                            *AEROLAB_ARGS, "--json")
-        assert code == 0
-        _AEROLAB_JSON[name] = out
-    return json.loads(_AEROLAB_JSON[name])
-
-
 @pytest.mark.parametrize("name", sorted(RULE_OF_THUMB))
-def test_analyze_real_aerolab_csv_within_30_percent(capsys, name):
-    data = _aerolab(capsys, name)
+def test_analyze_real_aerolab_csv_within_30_percent(name):
+    data = aerolab_json(name)
     u = data["unloads"][0]
     for key in ("conductance", "conductance_model", "conductance_model_std",
                 "critical_ratio", "tau_exp", "p10", "p_atm", "p_star", "t_start", "t_cross",
@@ -65,7 +47,7 @@ def test_real_aerolab_text_and_json_tell_b_and_m_alike(capsys):
     """The 0.094 in run fits m (0.31 +- 0.05) while b's 1-sigma is above what a b report
     takes: the text gives m and the reason b is not given, with the fit's value, as the
     JSON does (the text said "b, m = not identifiable" with m in the JSON)."""
-    (u,) = [x for x in _aerolab(capsys, "orifice_0.094in.csv")["unloads"] if x["final"]]
+    (u,) = [x for x in aerolab_json("orifice_0.094in.csv")["unloads"] if x["final"]]
     code, text, _ = _run(capsys, "analyze", str(real_file("aerolab/orifice_0.094in.csv")),
                          *AEROLAB_ARGS)
     assert code == 0
@@ -80,13 +62,13 @@ def test_real_aerolab_text_and_json_tell_b_and_m_alike(capsys):
     assert "b, m" not in text
 
 
-def test_real_aerolab_log_used_within_the_probes_accuracy(capsys):
+def test_real_aerolab_log_used_within_the_probes_accuracy():
     """The 0.125 in run's log: fitted jointly, the model's gas is 0.61 K rms from it,
     more than twice the channel's noise (0.2 K) but within a probe's accuracy (1 K), with
     the pressure's residual kept (652 Pa rms against 626 alone, Ljung-Box p 7e-11 against
     2.7e-12). It was refused as departing (9.7 K rms after a 53 s lag and a -24 K offset
     fitted to the pressure fit's gas); now it is used, and the status says how."""
-    (u,) = [x for x in _aerolab(capsys, "orifice_0.125in.csv")["unloads"] if x["final"]]
+    (u,) = [x for x in aerolab_json("orifice_0.125in.csv")["unloads"] if x["final"]]
     g = u["gas_temperature"]
     assert g["used"] and not g["follows"], g
     assert g["rms"] <= g["probe"] == 1.0
@@ -97,7 +79,7 @@ def test_real_aerolab_log_used_within_the_probes_accuracy(capsys):
 DIAMETER = {"orifice_0.094in.csv": 0.094 * 0.0254, "orifice_0.125in.csv": 0.125 * 0.0254}
 
 
-def test_real_aerolab_orifices_have_one_discharge_coefficient(capsys):
+def test_real_aerolab_orifices_have_one_discharge_coefficient():
     """Two sharp orifices of one rig (0.094 in, 0.125 in): their discharge coefficients C /
     C_ideal(area) agree within twice their combined sigma (issue "The component as ISO
     6358-1:2013 describes it" asks whether they agree within it; two consistent estimates
@@ -114,7 +96,7 @@ def test_real_aerolab_orifices_have_one_discharge_coefficient(capsys):
     (C ~ V)."""
     cd = {}
     for name, d in DIAMETER.items():
-        (u,) = [x for x in _aerolab(capsys, name)["unloads"] if x["final"]]
+        (u,) = [x for x in aerolab_json(name)["unloads"] if x["final"]]
         ideal = ideal_nozzle_conductance(math.pi * d * d / 4.0)
         cd[name] = (u["conductance_model"] / ideal, u["conductance_model_std"] / ideal)
     (a, sa), (b, sb) = cd.values()
