@@ -13,7 +13,7 @@ independent model ``test/foreign/newton_tank.py``, default settings, V given):
   restrictions in series (25 %: the pair's C in the same range); p10 4-10 bar abs, V
   0.5-50 L and the heat exchange's time constant 5 s - 1e4 s log-uniform, the record 5-12
   tau0 after a 0.2 s plateau; 1 kHz, 1000 Pa noise. Acceptance: C within 1 %, b within
-  0.03, m within 0.05 (series: of the least-squares ISO fit), |z| <= 2 in 90-98 %.
+  0.03, m within 0.05 (nozzle and series: of the free least-squares ISO fit), |z| <= 2 in 90-98 %.
 * ``temperature``: T10 - wall 0 (30 %) or 0-30 K, thermal time constant 5-60 s, the
   thermocouple's lag 0.5-5 s, temperature at 1-10 Hz beside pressure at 100-1000 Hz,
   plateaus 1-10 s, zero offsets within +-3 kPa, V 0.5-50 L, C 1e-9 - 3e-8, b 0.1-0.6,
@@ -123,11 +123,16 @@ def _foreign(k: int) -> dict:
     if "error" in res:
         return {"k": k, "group": case.family, "fail": [res["error"]], "text": "", "st": {}}
     tr = res["truth"]
+    # a curve that is not ISO-shaped (nozzle, series) has the ISO (b, m) of its free
+    # least-squares fit, which the package's joint fit of b and m estimates (a nozzle:
+    # b 0.530, m 0.499; with b held at r* = 0.528, m 0.498, |z_m| <= 2 on 31/37 draws
+    # where the package reads m 0.500 +- 0.001 and b 0.530, against 37/37 with the free)
+    free = case.family != "iso"
     checks = {"C": (st["c_err"], 0.01), "b": (st["b_err_free"], 0.03),
-              "m": (st["m_err_free"], 0.05)} if case.family == "series" else {
+              "m": (st["m_err_free"], 0.05)} if free else {
         "C": (st["c_err"], 0.01), "b": (st["b_err"], 0.03), "m": (st["m_err"], 0.05)}
-    zs = {"C": st["c_z"], "b": st["b_z_free" if case.family == "series" else "b_z"],
-          "m": st["m_z_free" if case.family == "series" else "m_z"]}
+    zs = {"C": st["c_z"], "b": st["b_z_free" if free else "b_z"],
+          "m": st["m_z_free" if free else "m_z"]}
     fail = [f"{q} {err:+.3g}" for q, (err, tol) in checks.items()
             if not (math.isfinite(err) and abs(err) <= tol)]
     fail += [f"z_{q} {z:+.1f}" for q, z in zs.items() if math.isfinite(z) and abs(z) > 2.0]
