@@ -44,7 +44,9 @@ def choose_laws(fam: Family, tried: tuple[str, ...]) -> tuple[Family, str]:
     LAW_BIC_THRESHOLD: HydDown's 1 L vessel, 3.5 better with m free, then took the density
     law with m = 0.527 and C +1.5 % over the hot start's -0.1 %). The chosen law's other
     variant (m held for one fitted, m free for one held where its twin says it is worth a
-    fit) is fitted too, and the criterion decides between the two."""
+    fit) is fitted too, and the criterion decides between the two. A law refuted with m
+    held is tried with m free too (:func:`_refuted_with_m_free`); where the chosen law has
+    m free, every law is fitted with m free."""
     fam.run(tried, "")  # m held at 0.5
     fits, n = fam.fits, fam.span.n
     first = tried[0]
