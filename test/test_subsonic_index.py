@@ -102,6 +102,36 @@ def test_a_law_refuted_with_m_held_is_fitted_with_m_free():
         assert abs(got - true) <= min(tol, 2.0 * std), (got, std, true)
 
 
+def test_a_law_far_from_the_record_is_not_fitted_with_m_free(monkeypatch):
+    """bench_engine's record (7.5 L, natural heat exchange, 10 kHz, 100 s: 700 000 samples
+    fitted): the constant hA law misfits it 16 times its noise with m held, and its
+    first-order twin with m freed stays 54 times the best chi^2, beyond
+    M_PROBE_TWIN_RATIO: it is not fitted with m free (that fit, 2e5 worse in BIC than the
+    natural law, cost analyze 0.4 s of its 0.6 s)."""
+    import pneumatic_unload.curvefit.law_family as law_family
+    from pneumatic_unload.analysis.runs import settings_for
+    from pneumatic_unload.config import RigConfig
+    from pneumatic_unload.curvefit.law_search import MISFIT_SEARCH
+    from pneumatic_unload.model import simulate
+
+    made: dict[str, float] = {}
+    fit = law_family.Family.fit
+
+    def kept(self, key, **kw):
+        out = fit(self, key, **kw)
+        made[key] = out[0].misfit
+        return out
+
+    monkeypatch.setattr(law_family.Family, "fit", kept)
+    cfg = RigConfig(volume=0.0075, effects=("heat_transfer",), pre_time=0.2, duration=99.8,
+                    seed=1, rate=10000.0)
+    sim = simulate(cfg)
+    (r,) = merge_final(analyze(sim.t, sim.measured, settings_for(cfg)))
+    assert r.extra["curve_fit"]["heat_law"] == "natural"
+    assert made["fixed"] > MISFIT_SEARCH, made
+    assert "fixed|m" not in made, made
+
+
 def test_m_held_where_the_law_is_elliptic_and_its_line_is_small():
     """m = 0.5 made: the criterion holds it; the line of holding it is the record's own
     uncertainty of m times C's slope, far below C's sigma."""
