@@ -33,12 +33,12 @@ from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX, subsonic_index_pr
 MISFIT_SEARCH = 1.3
 #: A law refuted with m held is fitted with m free only where its first-order twin with m
 #: freed (:meth:`Family.twin`) leaves a chi^2 within this factor of the best fit's [-].
-#: The twin underestimates what freeing m gains where m and the heat law trade, and the
-#: full fit does not: the probes that beat every fit (foreign draws 0-319, three
-#: hundred temperature draws) had twins at 0.85-5.2 times the best chi^2 (draw 308, a
-#: constant hA with m 0.43: 5.2, its full fit 46 better in BIC than the best). None did
-#: above 5.2; those at 13-300 missed by 10^4 or more in BIC, and the 1 M-sample record of
-#: bench_engine (a wrong law at 54) cost analyze 0.4 s for nothing.
+#: The twin underestimates what freeing m gains where m and the heat law trade, the full
+#: fit does not: of 246 such fits (foreign draws 0-319 and the 170 temperature draws with
+#: T, bench_random_draws), the 11 that beat every fit had twins at 0.85-5.2 times the best
+#: chi^2 (foreign draw 308, a constant hA with m 0.43: 5.2, its fit 46 better in BIC than
+#: the best); the 76 at 10.3-650 missed by 2000 or more in BIC, or failed, and on
+#: bench_engine's 1 M-sample record (a wrong law at 54) cost analyze 0.4 s for nothing.
 M_PROBE_TWIN_RATIO = 10.0
 
 
