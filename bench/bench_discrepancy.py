@@ -24,6 +24,15 @@ white 0/300 (<= 1.0 %), AR(1) 0.5 and 0.9 0/160 each (<= 1.9 %); named right alo
 ambiguity whose C range holds the truth: every leak, the hot start and the pipe volume
 100 %; named exactly right alone: leak 17/20 and pipe_volume 7/19 (below 90 / 80 %: the
 rest are BIC-window ambiguities with the hot start / the downstream leak, truth in the set).
+
+Session 27 (main 561198a), the fixed seeds alone (``--per-effect 10``, 150 white, 80 per AR
+level), 430 trials in 357 s: confident wrong name 0/120, confident wrong C 0/430, claimed
+not simulated 0/430, claims on effect-free data 0/150 white and 0/80 at each AR level,
+detection 101/101; named exactly right alone: leak 8/10, pipe_volume 3/10. The C range
+misses the truth on 10 trials, every one a hidden orifice leak (9 downstream, misfit < 50):
+since b5af6a7 the range holds the total conductance and the parallel-leak bound, stated
+apart, the component's (which no pressure record can tell apart; the bench counted these
+against the range alone until session 27): missing both 0/430.
 """
 
 from __future__ import annotations
@@ -243,6 +252,15 @@ def score(rows: list[dict], sp_n: tuple[float, int] | None, workers: int, wall: 
     def c_in_range(r: dict) -> bool:
         return r["c_range"] is not None and r["c_range"][0] <= r["c_true"] <= r["c_range"][1]
 
+    def held_by_bound(r: dict) -> bool:
+        """The truth below the range, within the parallel-leak bound: the component's C
+        when a leak in parallel follows its flow law, which no pressure record can tell
+        from C (stated apart from the range since b5af6a7, with the leak test that bounds
+        it; the hidden downstream orifice leak)."""
+        low = r.get("c_parallel_low", math.nan)
+        return (r["c_range"] is not None and math.isfinite(low)
+                and low <= r["c_true"] <= r["c_range"][1])
+
     for e in (e for e in (*LEAKS, "pipe_volume") if e in EFFECTS):
         sel = [r for r in big if r["effect"] == e]
         line(f"named right alone, or ambiguity with C range holding the truth: {e}", sum(
@@ -253,12 +271,13 @@ def score(rows: list[dict], sp_n: tuple[float, int] | None, workers: int, wall: 
     line("confident wrong C (|C - truth| > 3 sigma, no ambiguity, no C range), all trials",
          sum(abs(r["c"] - r["c_true"]) > 3 * r["c_std"] and not r["amb"]
              and r["c_range"] is None for r in allr), len(allr), 0.02, geq=False)
-    line("C range reported but missing the truth, all trials",
-         sum(r["c_range"] is not None and not c_in_range(r) for r in allr), len(allr),
-         0.02, geq=False)
+    line("C range reported but missing the truth, the parallel-leak bound too, all trials",
+         sum(r["c_range"] is not None and not c_in_range(r) and not held_by_bound(r)
+             for r in allr), len(allr), 0.02, geq=False)
     off = [r for r in allr if abs(r["c"] - r["c_true"]) > 3 * r["c_std"]]
     line("C off by > 3 sigma, truth held only by the parallel-leak bound (no competing "
-         "model), all trials", sum(c_in_range(r) and not r.get("c_amb", False) for r in off),
+         "model), all trials", sum(held_by_bound(r) and not c_in_range(r)
+                                   and not r.get("c_amb", False) for r in off),
          len(allr), 1.0, geq=False)
     ranges = [(r["c_range"][1] - r["c_range"][0]) / r["c"] for r in allr
               if r["c_range"] is not None]
