@@ -29,7 +29,7 @@ Session 27 (main 561198a), the fixed seeds alone (``--per-effect 10``, 150 white
 level), 430 trials in 357 s: confident wrong name 0/120, confident wrong C 0/430, claimed
 not simulated 0/430, claims on effect-free data 0/150 white and 0/80 at each AR level,
 detection 101/101; named exactly right alone: leak 8/10, pipe_volume 3/10. The C range
-misses the truth on 10 trials, every one a hidden orifice leak (9 downstream, misfit < 50):
+misses the truth on 10 trials, every one a hidden orifice leak (9 downstream; misfit 0-4):
 since b5af6a7 the range holds the total conductance and the parallel-leak bound, stated
 apart, the component's (which no pressure record can tell apart; the bench counted these
 against the range alone until session 27): missing both 0/430.
