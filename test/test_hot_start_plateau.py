@@ -196,3 +196,49 @@ def test_a_warm_gas_not_claimed_is_in_the_sigma(dt, tau_heat, rate, plateau, off
     assert abs(r.conductance_model / c - 1.0) < 0.05
     assert abs(r.conductance_model - c) <= 2.0 * r.conductance_model_std, \
         (r.conductance_model / c - 1.0, r.conductance_model_std / c)
+
+
+def test_the_noise_a_hinge_is_judged_against_counts_its_correlation():
+    """correlated_noise_factor: rms_sigma (first differences) reads AR(1) noise of lag-1
+    correlation rho as sqrt(1 - rho) of its standard deviation; the factor gives it back
+    (rho 0.9: 3.16), and is 1 for white noise and for white noise on a cooling plateau."""
+    from pneumatic_unload.estimation.regression import correlated_noise_factor, rms_sigma
+
+    rng = np.random.default_rng(3)
+    n, rho = 20000, 0.9
+    e = rng.normal(0.0, 1.0, n)
+    x = np.empty(n)
+    x[0] = e[0]
+    for k in range(1, n):
+        x[k] = rho * x[k - 1] + np.sqrt(1.0 - rho**2) * e[k]
+    # rho's estimate from n samples (its SE about 0.005 here) moves the factor by 16 x as
+    # much at rho 0.9
+    assert correlated_noise_factor(x) == pytest.approx(1.0 / np.sqrt(1.0 - rho), rel=0.1)
+    assert rms_sigma(x) * correlated_noise_factor(x) == pytest.approx(np.std(x), rel=0.1)
+    white = rng.normal(0.0, 1.0, 2000)
+    assert correlated_noise_factor(white) == 1.0
+    cooling = 40.0 * np.exp(-np.arange(2000) / 800.0) + white
+    assert correlated_noise_factor(cooling) == 1.0
+    assert correlated_noise_factor(x[:15]) == 1.0
+
+
+def test_a_slow_unload_under_correlated_noise_is_not_read_as_a_drift():
+    """bench_discrepancy's effect-free trial 106076 (AR(1) noise, rho 0.9, 1 kPa; 3.7 L,
+    5.1 bar, tau0 24 s): the start's hinge missed its window by 3 times the noise of the
+    first differences, which AR(1) 0.9 noise is everywhere; the drifting plateau's start
+    put the opening wrong and every unload was aborted ('no complete unload', fe9b0c6 on).
+    Judged against the plateau's noise, correlation counted, the unload is found and C
+    holds."""
+    from pneumatic_unload.discrepancy.synthetic import draw_case
+
+    case = draw_case("none", 106076, rho=0.9)
+    cfg = case.config
+    sim = case.simulate()
+    res = analyze(sim.t, sim.measured, EstimatorSettings(
+        volume=cfg.volume, initial_temperature=cfg.initial_temperature,
+        atmosphere=cfg.atmosphere))
+    first = next(r for r in res if r.final)
+    assert first.status == "ok", first.status_text
+    assert first.t_start == pytest.approx(0.2, abs=0.02)
+    assert abs(first.conductance_model / cfg.conductance - 1.0) < 0.01
+    assert abs(first.conductance_model - cfg.conductance) < 2.0 * first.conductance_model_std

@@ -24,6 +24,26 @@ def rms_sigma(x: FloatArray) -> float:
     return float(np.std(np.diff(x))) / math.sqrt(2.0)
 
 
+def correlated_noise_factor(x: FloatArray) -> float:
+    """How much :func:`rms_sigma` understates the standard deviation of noise ``x`` whose
+    samples are correlated [-]: 1/sqrt(1 - rho) for AR(1) noise of lag-1 correlation rho,
+    rho from the first differences' own lag-1 correlation r (rho = 1 + 2 r; first
+    differences of white noise have r = -1/2); 1 unless rho exceeds three of its standard
+    errors for white noise (sqrt(2/n)) or fewer than 16 samples are given. A smooth drift
+    of ``x`` (a plateau cooling) hardly moves r."""
+    if x.size < 16:
+        return 1.0
+    d = np.diff(x)
+    d = d - float(np.mean(d))
+    den = float(np.dot(d, d))
+    if not den > 0.0:
+        return 1.0
+    rho = 1.0 + 2.0 * float(np.dot(d[1:], d[:-1])) / den
+    if not rho > 3.0 * math.sqrt(2.0 / d.size):
+        return 1.0
+    return 1.0 / math.sqrt(1.0 - min(rho, 0.99))
+
+
 def solve3(m: tuple[tuple[float, float, float], ...], r: tuple[float, float, float]
             ) -> tuple[float, float, float] | None:
     """Solve a 3x3 linear system by Cramer's rule (None when singular) [-]."""

@@ -28,6 +28,7 @@ from pneumatic_unload.estimation.decisions import (
 from pneumatic_unload.estimation.reduction import reduce_due, reduce_unload, window_start
 from pneumatic_unload.estimation.refine import end_level_problem, needs_model
 from pneumatic_unload.estimation.regression import (
+    correlated_noise_factor,
     crossing_window,
     first_below_in,
     hinge_cov,
@@ -219,11 +220,10 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
             t0, p10, slope, curv, rms = alt
     # fewer samples before the start than a plateau needs: no plateau was found before it
     at_first = int(np.searchsorted(tw, t0)) < 2 * st.settings.min_plateau
-    # the hinge misses the window by more than its noise: the trigger fired on a drift
-    # long before the fall, which the hinge's curvature cannot follow (a gas 10 K warm
-    # cooling over a 10 s plateau at 200 Hz: the trigger at 0.8 s, the start put at 0.5 s,
-    # the hinge 4.4 x the noise, C -10 %)
-    missed = rms > HINGE_MISFIT * rms_sigma(pw)
+    # the hinge misses the window by more than its noise (correlated too: AR(1) 0.9 read as
+    # a miss refused a slow unload): the trigger fired on a drift the hinge cannot follow (a
+    # gas 10 K warm cooling over a 10 s plateau at 200 Hz: the start 0.3 s early, C -10 %)
+    missed = rms > HINGE_MISFIT * rms_sigma(pw) * correlated_noise_factor(pv[lo:trig])
     if trig < i and (not slope > 0.0 or at_first or missed):
         # still no fall, or a fall from the window's first samples (no plateau before it),
         # or a hinge that misses: a plateau that drifts (a gas hot from the charge cooling
