@@ -240,5 +240,8 @@ def test_a_slow_unload_under_correlated_noise_is_not_read_as_a_drift():
     first = next(r for r in res if r.final)
     assert first.status == "ok", first.status_text
     assert first.t_start == pytest.approx(0.2, abs=0.02)
+    # the tail's noise at p_atm is no new unload (before decisions.noise_scales: eleven
+    # phantom starts after 70 s, each 'aborted')
+    assert {r.t_start for r in res} == {first.t_start}, [(r.t_start, r.status) for r in res]
     assert abs(first.conductance_model / cfg.conductance - 1.0) < 0.01
     assert abs(first.conductance_model - cfg.conductance) < 2.0 * first.conductance_model_std

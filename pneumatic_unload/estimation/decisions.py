@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pneumatic_unload.estimation.regression import noise_correlation, variance_correlation
 from pneumatic_unload.estimation.types import FloatArray
 
 #: Index argument: one check index (int) or many (int64 array) [-].
@@ -168,15 +169,44 @@ def creeping(cs: FloatArray, k: int, sigma: float) -> bool:
     return bool(first - second > 3.0 * sigma * math.sqrt(2.0 / h))
 
 
+def plateau_correlation(x: FloatArray) -> float:
+    """Lag-1 correlation of a plateau's noise x read as AR(1) noise [-]: the larger of
+    :func:`~.regression.noise_correlation` (precise for a short correlation time) and
+    :func:`~.regression.variance_correlation` (for a long one); 0 for white noise."""
+    return max(noise_correlation(x), variance_correlation(x))
+
+
+def noise_scales(rho: float, n: int) -> tuple[float, float]:
+    """How much the first differences' noise deviation (:func:`plateau_check`'s sigma)
+    understates the deviation of one sample and that of a PERIOD-sample mean tested
+    against the mean of an n-sample plateau [-], for AR(1) noise of lag-1 correlation rho
+    [-] (:func:`plateau_correlation`); both 1 for white noise.
+
+    1/sqrt(1 - rho) and sqrt(1 + rho)/(1 - rho), the latter at most sqrt(PERIOD) times the
+    former (a mean is never noisier than one sample) and times sqrt(1 + PERIOD / n) (the
+    plateau's mean is as uncertain on a short plateau). A transducer low-passed well below
+    the sampling rate gives such noise (100 Hz sampled at 10 kHz: rho 0.94): read as white,
+    an idle stream at rho 0.8-0.99 triggered dozens of phantom unloads a minute.
+    """
+    if rho == 0.0:
+        return 1.0, 1.0
+    one = 1.0 / math.sqrt(1.0 - rho)
+    block = min(math.sqrt(1.0 + rho) / (1.0 - rho), math.sqrt(PERIOD) * one)
+    return one, block * math.sqrt(1.0 + PERIOD / max(n, 1))
+
+
 def plateau_check(cs: FloatArray, cq: FloatArray, pv: FloatArray, k: Index, *, arm: int,
-                  min_plateau: int, trigger_sigma: float, stuck_reported: bool
-                  ) -> PlateauCheck:
+                  min_plateau: int, trigger_sigma: float, stuck_reported: bool,
+                  scales: tuple[float, float] = (1.0, 1.0)) -> PlateauCheck:
     """Periodic plateau update with a block-mean test at check index k.
 
     The reference level comes from a window that ends LAG samples ago, so a slow discharge
     cannot drag it along; the mean of the last PERIOD samples is tested against it
     (sensitive to slow drops), and the check sample against ``trigger_sigma`` noise
-    deviations. ``arm``: first sample of the current plateau [-].
+    deviations. ``arm``: first sample of the current plateau [-]. ``scales``: the noise
+    deviation's factors for one sample and for a block mean (:func:`noise_scales`; the
+    white noise's (1, 1) finds every candidate event, the detector then tests it with the
+    plateau's own).
     """
     n = k + 1
     lag = np.minimum(LAG, np.maximum(n - arm - min_plateau, 0))
@@ -186,10 +216,10 @@ def plateau_check(cs: FloatArray, cq: FloatArray, pv: FloatArray, k: Index, *, a
     plat = (cs[hi] - cs[lo]) / (hi - lo)
     sig = np.sqrt(np.maximum(cq[hi] - cq[lo + 1], 0.0) / (hi - lo - 1) / 2.0)
     sig_eff = effective_sigma(sig, plat)
-    level = plat - trigger_sigma * sig_eff
+    level = plat - trigger_sigma * sig_eff * scales[0]
     blo = np.maximum(arm, n - PERIOD)
     bmean = (cs[n] - cs[blo]) / (n - blo)
-    bthr = block_threshold(sig_eff)
+    bthr = block_threshold(sig_eff * scales[1])
     rise = (lag >= min_plateau) & (n - blo == PERIOD) & (bmean > plat + 2.0 * bthr)
     mean_low = (lag >= PERIOD) & (bmean < plat - bthr)
     trigger = mean_low | below(pv[k], level)
@@ -201,12 +231,14 @@ def plateau_check(cs: FloatArray, cq: FloatArray, pv: FloatArray, k: Index, *, a
                         event)
 
 
-def confirmed(cs: FloatArray, trigger: int, k: Index, plateau: float, sigma: float) -> Flag:
+def confirmed(cs: FloatArray, trigger: int, k: Index, plateau: float, sigma: float,
+              block_scale: float = 1.0) -> Flag:
     """The mean since the trigger (up to index k) stays a block threshold below the
-    plateau: the step is real, not a spike."""
+    plateau: the step is real, not a spike (``block_scale``: :func:`noise_scales`'s
+    second)."""
     n = k + 1
     mean = (cs[n] - cs[trigger + 1]) / (n - trigger - 1)
-    return mean < plateau - block_threshold(effective_sigma(sigma, plateau))
+    return mean < plateau - block_threshold(effective_sigma(sigma, plateau) * block_scale)
 
 
 def _imax(a: Index, b: Index) -> Index:

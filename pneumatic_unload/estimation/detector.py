@@ -19,8 +19,10 @@ from pneumatic_unload.estimation.decisions import (
     confirmed,
     creeping,
     first_below,
+    noise_scales,
     nominal_period,
     plateau_check,
+    plateau_correlation,
 )
 from pneumatic_unload.estimation.state import (
     CONFIRM,
@@ -45,6 +47,13 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
         c = plateau_check(buf.cs, buf.cq, buf.p, i, arm=st.arm_index,
                           min_plateau=s.min_plateau, trigger_sigma=s.trigger_sigma,
                           stuck_reported=st.stuck_reported)
+        st.plateau_window, st.scales, st.scaled = (int(c.lo), int(c.hi)), (1.0, 1.0), False
+        if c.rise or c.trigger:  # an event for white noise: tested with the plateau's own
+            st.scales, st.scaled = _scales(st, i), True
+            if st.scales != (1.0, 1.0):
+                c = plateau_check(buf.cs, buf.cq, buf.p, i, arm=st.arm_index,
+                                  min_plateau=s.min_plateau, trigger_sigma=s.trigger_sigma,
+                                  stuck_reported=st.stuck_reported, scales=st.scales)
         st.plateau_level = float(c.level)
         sig = float(c.sigma)
         if c.stuck:
@@ -68,10 +77,15 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
             return []
     elif st.level == -math.inf:
         return []
+    elif not st.scaled:  # below the white noise's level: tested against the plateau's own
+        st.scales, st.scaled = _scales(st, i), True
+        st.level = st.plateau_level - (st.plateau_level - st.level) * st.scales[0]
+        if not buf.p[i] < st.level:
+            return []
     # trigger
     if i - st.arm_index < s.min_plateau:
         return []
-    if st.plateau_level < st.rearm_floor and creeping(buf.cs, i, st.sigma):
+    if st.plateau_level < st.rearm_floor and creeping(buf.cs, i, st.sigma * st.scales[1]):
         # not charged since the last unload's tail ended on a level, and falling before
         # the trigger: the same slow discharge creeping on (its tail counted as level), not
         # a new unload (a valve opened again from a level plateau is one)
@@ -117,6 +131,8 @@ def scan_waiting(st: EstimatorState, i: int, end: int) -> int:
         if not event[k] or j != ks[k]:
             k += 1  # between-check hit: check k ran without a decision
     if k > 0:  # state after the last check that decided nothing
+        st.plateau_window = (int(c.lo[k - 1]), int(c.hi[k - 1]))
+        st.scales, st.scaled = (1.0, 1.0), False
         st.plateau_level = float(c.level[k - 1])
         st.sigma = float(c.sigma[k - 1])
         st.level = float(c.trigger_level[k - 1])
@@ -127,7 +143,7 @@ def scan_waiting(st: EstimatorState, i: int, end: int) -> int:
 def step_confirm(st: EstimatorState, i: int) -> list[UnloadResult]:
     """Confirmation PERIOD samples after the trigger: start the unload, or wait again."""
     u, t = st.unload, st.buf.t
-    if confirmed(st.buf.cs, u.trigger, i, st.plateau_level, st.sigma):
+    if confirmed(st.buf.cs, u.trigger, i, st.plateau_level, st.sigma, st.scales[1]):
         # a new unload: the floor of the last one's creeping tail goes (kept through an
         # unconfirmed trigger, which a creeping tail's noise gives; else the next one
         # would start a phantom unload)
@@ -141,3 +157,14 @@ def step_confirm(st: EstimatorState, i: int) -> list[UnloadResult]:
     st.level = -math.inf
     st.next_check = i + 1
     return []
+
+
+def _scales(st: EstimatorState, i: int) -> tuple[float, float]:
+    """:func:`~.decisions.noise_scales` on the last check's plateau window, for an event
+    at index i; white noise's where the window holds sample i (a plateau's first check:
+    its window holds the event, whose fall would read as the noise's correlation)."""
+    lo, hi = st.plateau_window
+    if hi > i:
+        return 1.0, 1.0
+    return noise_scales(plateau_correlation(np.frombuffer(st.buf.p, dtype=float)[lo:hi]),
+                        hi - lo)

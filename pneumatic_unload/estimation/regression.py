@@ -24,24 +24,53 @@ def rms_sigma(x: FloatArray) -> float:
     return float(np.std(np.diff(x))) / math.sqrt(2.0)
 
 
-def correlated_noise_factor(x: FloatArray) -> float:
-    """How much :func:`rms_sigma` understates the standard deviation of noise ``x`` whose
-    samples are correlated [-]: 1/sqrt(1 - rho) for AR(1) noise of lag-1 correlation rho,
-    rho from the first differences' own lag-1 correlation r (rho = 1 + 2 r; first
-    differences of white noise have r = -1/2); 1 unless rho exceeds three of its standard
-    errors for white noise (sqrt(2/n)) or fewer than 16 samples are given. A smooth drift
-    of ``x`` (a plateau cooling) hardly moves r."""
+def noise_correlation(x: FloatArray) -> float:
+    """Lag-1 correlation rho of noise ``x`` read as AR(1) noise, 0 where it is not
+    significant [-]: rho = 1 + 2 r, r the first differences' own lag-1 correlation (first
+    differences of white noise have r = -1/2); 0 unless rho exceeds three of its standard
+    errors for white noise (sqrt(2/n)) or fewer than 16 samples are given; at most 0.99.
+    A smooth drift of ``x`` (a plateau cooling) hardly moves r."""
     if x.size < 16:
-        return 1.0
+        return 0.0
     d = np.diff(x)
     d = d - float(np.mean(d))
     den = float(np.dot(d, d))
     if not den > 0.0:
-        return 1.0
+        return 0.0
     rho = 1.0 + 2.0 * float(np.dot(d[1:], d[:-1])) / den
     if not rho > 3.0 * math.sqrt(2.0 / d.size):
-        return 1.0
-    return 1.0 / math.sqrt(1.0 - min(rho, 0.99))
+        return 0.0
+    return min(rho, 0.99)
+
+
+def variance_correlation(x: FloatArray) -> float:
+    """Lag-1 correlation rho of noise ``x`` read as AR(1) noise from its variance, 0 where
+    it is not significant [-]: 1 - rho = (first differences' variance) / (2 x the
+    samples' variance about their straight line), the latter direct where
+    :func:`noise_correlation`'s r is not precise (rho near 1: a correlation time of more
+    than a few per cent of ``x``); 0 unless rho exceeds three of its standard errors for
+    white noise (sqrt(2/n)) or fewer than 16 samples are given; at most 0.999."""
+    n = x.size
+    if n < 16:
+        return 0.0
+    d = np.diff(x)
+    dd = float(np.dot(d, d)) / (2.0 * (n - 1))
+    u = np.arange(n, dtype=float) - 0.5 * (n - 1)
+    y = x - float(np.mean(x))
+    var = (float(np.dot(y, y)) - float(np.dot(y, u)) ** 2 / float(np.dot(u, u))) / (n - 2)
+    if not (var > 0.0 and dd > 0.0):
+        return 0.0
+    rho = 1.0 - dd / var
+    if not rho > 3.0 * math.sqrt(2.0 / n):
+        return 0.0
+    return min(rho, 0.999)
+
+
+def correlated_noise_factor(x: FloatArray) -> float:
+    """How much :func:`rms_sigma` understates the standard deviation of noise ``x`` whose
+    samples are correlated [-]: 1/sqrt(1 - rho) for AR(1) noise of lag-1 correlation rho
+    (:func:`noise_correlation`; 1 for white noise)."""
+    return 1.0 / math.sqrt(1.0 - noise_correlation(x))
 
 
 def solve3(m: tuple[tuple[float, float, float], ...], r: tuple[float, float, float]

@@ -219,6 +219,12 @@ class EstimatorState:
         self.gap_in_unload = False
         self.plateau_level = math.nan  # [signal units]
         self.sigma = math.nan  # noise standard deviation [signal units]
+        #: The last check's plateau window [lo, hi) [-], and the noise's factors on it for
+        #: one sample and a block mean (decisions.noise_scales), computed (``scaled``)
+        #: only where the white noise's thresholds see an event.
+        self.plateau_window = (0, 0)
+        self.scales = (1.0, 1.0)
+        self.scaled = False
 
     def set_pstar(self, atm: float) -> None:
         """Set p_atm (and so p* and the crossing window) [signal units]."""
@@ -238,6 +244,8 @@ class EstimatorState:
             self.buf.trim(keep)
             self.next_check -= keep
             self.arm_index = max(self.arm_index - keep, 0)
+            lo, hi = self.plateau_window
+            self.plateau_window = (max(lo - keep, 0), max(hi - keep, 0))
 
     # -------------------------------------------------------------- helpers
     def set_period(self, dt_nominal: float) -> None:
