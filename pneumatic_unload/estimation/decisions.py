@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.estimation.regression import noise_correlation, variance_correlation
 from pneumatic_unload.estimation.types import FloatArray
 
 #: Index argument: one check index (int) or many (int64 array) [-].
@@ -169,18 +168,11 @@ def creeping(cs: FloatArray, k: int, sigma: float) -> bool:
     return bool(first - second > 3.0 * sigma * math.sqrt(2.0 / h))
 
 
-def plateau_correlation(x: FloatArray) -> float:
-    """Lag-1 correlation of a plateau's noise x read as AR(1) noise [-]: the larger of
-    :func:`~.regression.noise_correlation` (precise for a short correlation time) and
-    :func:`~.regression.variance_correlation` (for a long one); 0 for white noise."""
-    return max(noise_correlation(x), variance_correlation(x))
-
-
 def noise_scales(rho: float, n: int) -> tuple[float, float]:
     """How much the first differences' noise deviation (:func:`plateau_check`'s sigma)
     understates the deviation of one sample and that of a PERIOD-sample mean tested
     against the mean of an n-sample plateau [-], for AR(1) noise of lag-1 correlation rho
-    [-] (:func:`plateau_correlation`); both 1 for white noise.
+    [-] (:func:`~.regression.noise_rho`); both 1 for white noise.
 
     1/sqrt(1 - rho) and sqrt(1 + rho)/(1 - rho), the latter at most sqrt(PERIOD) times the
     former (a mean is never noisier than one sample) and times sqrt(1 + PERIOD / n) (the

@@ -22,8 +22,8 @@ from pneumatic_unload.estimation.decisions import (
     noise_scales,
     nominal_period,
     plateau_check,
-    plateau_correlation,
 )
+from pneumatic_unload.estimation.regression import noise_rho
 from pneumatic_unload.estimation.state import (
     CONFIRM,
     UNLOADING,
@@ -166,5 +166,5 @@ def _scales(st: EstimatorState, i: int) -> tuple[float, float]:
     lo, hi = st.plateau_window
     if hi > i:
         return 1.0, 1.0
-    return noise_scales(plateau_correlation(np.frombuffer(st.buf.p, dtype=float)[lo:hi]),
+    return noise_scales(noise_rho(np.frombuffer(st.buf.p, dtype=float)[lo:hi]),
                         hi - lo)

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from pneumatic_unload.estimation.types import FloatArray
+from pneumatic_unload.fit.ar1 import plateau_ar1
 from pneumatic_unload.fit.scalar import golden_section
 from pneumatic_unload.model.kernel import build
 
@@ -64,6 +65,30 @@ def variance_correlation(x: FloatArray) -> float:
     if not rho > 3.0 * math.sqrt(2.0 / n):
         return 0.0
     return min(rho, 0.999)
+
+
+def noise_rho(x: FloatArray) -> float:
+    """Lag-1 correlation of noise x read as AR(1) noise [-]: the larger of
+    :func:`noise_correlation` (precise for a short correlation time) and
+    :func:`variance_correlation` (for a long one); 0 for white noise."""
+    return max(noise_correlation(x), variance_correlation(x))
+
+
+def variance_inflation(x: FloatArray) -> float:
+    """How many times a white-noise formula understates the variance of a mean or a fit
+    over many correlation times of noise x [-]: (1 + rho)/(1 - rho), rho its AR(1)
+    correlation matched on x about its straight line (:func:`pneumatic_unload.fit.ar1.plateau_ar1`:
+    the samples' own lag-1 products, precise near rho = 1 where the inflation is steep,
+    unlike :func:`noise_rho`); 1 unless rho exceeds three of its standard errors for white
+    noise (1/sqrt(n)) or fewer than 16 samples are given."""
+    n = x.size
+    if n < 16:
+        return 1.0
+    u = np.arange(n, dtype=float) - 0.5 * (n - 1)
+    y = x - float(np.mean(x))
+    e = y - u * (float(np.dot(y, u)) / float(np.dot(u, u)))
+    rho, _ = plateau_ar1([(e, 1)])
+    return (1.0 + rho) / (1.0 - rho) if rho > 3.0 / math.sqrt(n) else 1.0
 
 
 def correlated_noise_factor(x: FloatArray) -> float:

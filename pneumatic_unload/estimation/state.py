@@ -94,6 +94,11 @@ class UnloadState:
     atm_var : float
         Variance of p_atm when it is the final plateau's mean [signal units^2]; 0 when
         given.
+    inflation : float
+        Variance inflation of correlated noise, (1 + rho)/(1 - rho) of the pre-step
+        plateau's AR(1) rho (:func:`~.regression.variance_inflation`), by which the start,
+        the crossing and p_atm's white-noise variances are multiplied [-]; 1 for white
+        noise.
     pending : UnloadResult or None
         Crossing result waiting for the end of the tail (curve fit).
     tail_low : float
@@ -144,6 +149,7 @@ class UnloadState:
     pstar: float = math.nan
     half: float = math.nan
     atm_var: float = 0.0
+    inflation: float = 1.0
     pending: UnloadResult | None = None
     tail_low: float = math.inf
     t_close: float = math.nan
@@ -159,6 +165,27 @@ class UnloadState:
     rec_high: float = -math.inf
     reduced: Any = None
     zero_until: int | None = None
+
+
+def tau_sigma(u: UnloadState, t_std: float, slope: float) -> float:
+    """1-sigma of tau_exp = t_cross - t0 [s] from the crossing fit's t_std [s] and its
+    slope at p* [signal units/s], with the start fit's (co)variance of (t0, p10).
+
+    p* = p_atm + P_STAR_FRACTION (p10 - p_atm) is made from the fitted p10 (and p_atm
+    when it is the final plateau's mean), so the crossing moves by dp*/slope with them;
+    a plateau fitted low also starts the fall later (t0 and p10 are correlated), which
+    offsets part of that move: tau's variance is the gradient (-1, f/slope) through
+    the start fit's covariance, not the sum of the two sigmas in quadrature. The crossing
+    fit's variance (a white-noise formula) is times ``u.inflation`` (correlated noise; the
+    start's and p_atm's are already).
+    """
+    t_std = t_std * math.sqrt(u.inflation)
+    if not (slope != 0.0 and math.isfinite(slope)):
+        return math.hypot(t_std, u.t0_std)
+    a = P_STAR_FRACTION / slope
+    var = (t_std * t_std + u.t0_std * u.t0_std - 2.0 * a * u.t0_p10_cov
+           + a * a * u.p10_var + ((1.0 - P_STAR_FRACTION) / slope) ** 2 * u.atm_var)
+    return math.sqrt(var) if var >= 0.0 else math.hypot(t_std, u.t0_std)
 
 
 class EstimatorState:

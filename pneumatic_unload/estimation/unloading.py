@@ -35,9 +35,10 @@ from pneumatic_unload.estimation.regression import (
     hinge_fit,
     rms_sigma,
     sloped_hinge_fit,
+    variance_inflation,
 )
 from pneumatic_unload.estimation.sse import abort_result, on_abort
-from pneumatic_unload.estimation.state import TAIL, EstimatorState, UnloadState
+from pneumatic_unload.estimation.state import TAIL, EstimatorState, tau_sigma
 from pneumatic_unload.estimation.tail import finish_tail
 from pneumatic_unload.estimation.types import (
     STUCK_TEXT,
@@ -45,7 +46,6 @@ from pneumatic_unload.estimation.types import (
     UnloadResult,
     end_fields,
 )
-from pneumatic_unload.physics import P_STAR_FRACTION
 
 
 def start_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
@@ -255,8 +255,9 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
         return []
     # the start's and p10's (co)variance from the hinge model's information (its curvature
     # and continuity included; p* moves with p10, see crossing_result)
-    v_t0, u.t0_p10_cov, u.p10_var = hinge_cov(tv[lo:n], t0, slope, curv, rms, exponent=k) \
-        if slope > 0 else (math.inf, 0.0, math.inf)
+    u.inflation = variance_inflation(pre)  # correlated noise (tau_sigma and p_atm's too)
+    v_t0, u.t0_p10_cov, u.p10_var = [u.inflation * x for x in hinge_cov(
+        tv[lo:n], t0, slope, curv, rms, exponent=k)] if slope > 0 else (math.inf, 0.0, math.inf)
     u.t0_std = math.sqrt(v_t0)
     u.p10 = p10
     u.slope0 = slope
@@ -409,7 +410,7 @@ def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
                                      st.to_pa(st.unload.p10))) is not None:
             return st.bad(i, why)
         st.set_pstar(level)
-        u.atm_var = st.sigma**2 / w
+        u.atm_var = st.sigma**2 / w * u.inflation
         j = first_below(pv, u.i0, i + 1, st.level)
         if j > i:
             return []
@@ -426,7 +427,7 @@ def check_final_plateau_auto(st: EstimatorState, i: int, at_end: bool = False
                                  st.to_pa(st.unload.p10))) is not None:
         return st.bad(i, why)
     st.set_pstar(level)
-    u.atm_var = st.sigma**2 / w
+    u.atm_var = st.sigma**2 / w * u.inflation
     j = first_below(pv, u.i0, i + 1, st.level)
     if j > i:
         return on_abort(st, i)
@@ -455,24 +456,6 @@ def complete_crossing(st: EstimatorState, i: int, settle_index: int | None = Non
     if settle_index is not None:
         return [res, *finish_tail(st, k, ended=False)]
     return [res]
-
-
-def tau_sigma(u: UnloadState, t_std: float, slope: float) -> float:
-    """1-sigma of tau_exp = t_cross - t0 [s] from the crossing fit's t_std [s] and its
-    slope at p* [signal units/s], with the start fit's (co)variance of (t0, p10).
-
-    p* = p_atm + P_STAR_FRACTION (p10 - p_atm) is made from the fitted p10 (and p_atm
-    when it is the final plateau's mean), so the crossing moves by dp*/slope with them;
-    a plateau fitted low also starts the fall later (t0 and p10 are correlated), which
-    offsets part of that move: tau's variance is the gradient (-1, f/slope) through
-    the start fit's covariance, not the sum of the two sigmas in quadrature.
-    """
-    if not (slope != 0.0 and math.isfinite(slope)):
-        return math.hypot(t_std, u.t0_std)
-    a = P_STAR_FRACTION / slope
-    var = (t_std * t_std + u.t0_std * u.t0_std - 2.0 * a * u.t0_p10_cov
-           + a * a * u.p10_var + ((1.0 - P_STAR_FRACTION) / slope) ** 2 * u.atm_var)
-    return math.sqrt(var) if var >= 0.0 else math.hypot(t_std, u.t0_std)
 
 
 def crossing_result(st: EstimatorState, i: int, t_cross: float, tau_std: float,
