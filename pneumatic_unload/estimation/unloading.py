@@ -239,10 +239,11 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     pre = pv[lo:int(np.searchsorted(tv, t0))]
     sig_pre = rms_sigma(pre) if pre.size > 3 else rms
     if pre.size >= 8:
-        vmax = float(np.max(pre))
-        frac_at_max = float(np.mean(pre == vmax))
-        # clipped: most of the plateau at exactly its highest value, with no noise, or with
-        # only the few dips of the noise below the clipping level
+        # clipped: most of the plateau's second half (its first may hold the charge's end)
+        # at exactly its highest value, with no noise, or only the noise's few dips below
+        last = pre[pre.size // 2:]
+        vmax = float(np.max(last))
+        frac_at_max = float(np.mean(last == vmax))
         if frac_at_max > 0.5 and (sig_pre == 0.0 or frac_at_max > 0.9) and rms > 0.0:
             return st.bad(
                 i, f"sensor saturated on the pre-step plateau at {vmax!r}: p10 unknown")
