@@ -11,9 +11,12 @@ setup:
 demo: setup
 	@$(PY) -m pneumatic_unload.app.demo
 
+# the tests not marked serial on every core, then the serial ones (node processes in real
+# time, servers, a browser: test/conftest.py) alone
 test: setup
 	@$(VENV)/bin/ruff check .
-	@$(PY) -m pytest -q --durations=15 test
+	@$(PY) -m pytest -q -n auto --dist worksteal -m "not serial" --durations=10 test
+	@$(PY) -m pytest -q -m serial --durations=10 test
 
 lint: setup
 	@$(VENV)/bin/ruff check .

@@ -7,6 +7,12 @@ keep the ROS_DOMAIN_ID of the environment. numpy's BLAS runs on one thread here 
 package's programs (:func:`pneumatic_unload.single_threaded_blas`, before numpy is first
 imported), so that what a test computes in process is what a node computes. Keep this file
 small and generic.
+
+``make test`` runs the suite in two parts: the tests not marked ``serial`` on every core
+(pytest-xdist), then the ``serial`` ones alone: node processes over DDS in real time,
+servers on ports, a browser, kill -9 and latency bounds, which a parallel worker's load
+would slow or share the machine with. A module with any of these carries
+``pytestmark = pytest.mark.serial`` (``test_layout.py`` checks it).
 """
 
 import os
@@ -28,6 +34,12 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 if not os.environ.get("PNEUMATIC_UNLOAD_KEEP_DOMAIN"):
     os.environ["ROS_DOMAIN_ID"] = str(free_domain_id())
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers", "serial: run alone, after the parallel part of make test (real-time node "
+        "processes, servers, a browser, timings)")
 
 
 def pytest_report_header(config: pytest.Config) -> str:

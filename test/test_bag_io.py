@@ -52,6 +52,9 @@ from pneumatic_unload.io import (
 from pneumatic_unload.io.bag.cdr import encode_stamped_pair, encode_stamped_pairs
 from pneumatic_unload.io.bag.reader import fast_raw_pairs, read_stamped_pairs
 
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = pytest.mark.serial
+
 with warnings.catch_warnings():  # mcap_ros2.reader warns about mcap_ros1 on import
     warnings.simplefilter("ignore", DeprecationWarning)
     from mcap_ros2.reader import read_ros2_messages

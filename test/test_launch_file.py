@@ -15,6 +15,9 @@ import pytest
 
 from pneumatic_unload.app.launch import LaunchError, free_domain_id, load_launch, package_share
 
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = pytest.mark.serial
+
 LAUNCH = Path(__file__).resolve().parent.parent / "launch" / "bench.launch.yaml"
 
 

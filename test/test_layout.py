@@ -14,6 +14,9 @@ from pathlib import Path
 
 import pytest
 
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = pytest.mark.serial
+
 PKG = "pneumatic_unload"
 MSGS_PKG = "pneumatic_unload_msgs"
 NODES_PKG = f"{PKG}.nodes"
@@ -457,3 +460,21 @@ def test_core_modules_are_small(repo_root):
     big = {str(p.relative_to(repo_root)): n for p in _core_files(pkg_dir)
            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_CORE_LINES}
     assert big == {}
+
+
+#: what makes a test module run alone after the parallel part of ``make test``
+#: (conftest.py): node processes in real time over DDS, servers on ports, a browser, a
+#: Dask cluster's processes, kill -9 timings
+SERIAL_SIGNS = ("NodeProcess", "ros_node", "rclpy", "asyncua", "pg_url", "chromium",
+                "LocalCluster", "SIGKILL")
+
+
+def test_modules_with_nodes_servers_or_timings_run_alone(repo_root):
+    missing = []
+    for path in sorted((repo_root / "test").glob("test_*.py")):
+        text = path.read_text()
+        signs = [s for s in SERIAL_SIGNS if s in text]
+        if signs and "pytest.mark.serial" not in text:
+            missing.append(f"{path.name} ({', '.join(signs)})")
+    assert missing == [], ("mark these modules pytestmark = pytest.mark.serial: "
+                           + "; ".join(missing))

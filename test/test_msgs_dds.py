@@ -13,6 +13,11 @@ import textwrap
 import uuid
 from pathlib import Path
 
+import pytest
+
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = pytest.mark.serial
+
 PROCESS_TIMEOUT_S = 20.0  # each script gives up on its own after this
 WAIT_S = PROCESS_TIMEOUT_S + 20.0  # the test's own bound on waiting for a process
 

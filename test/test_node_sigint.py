@@ -259,8 +259,10 @@ def _problems(run: Run) -> list[str]:
 
 
 rclpy = pytest.importorskip("rclpy")
-pytestmark = pytest.mark.skipif(not Path("/proc/self/task").is_dir(),
-                                reason="the moments of a start are read from /proc")
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = [pytest.mark.serial,
+              pytest.mark.skipif(not Path("/proc/self/task").is_dir(),
+                                 reason="the moments of a start are read from /proc")]
 
 
 @pytest.mark.parametrize("node", NODES)

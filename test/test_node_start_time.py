@@ -26,6 +26,9 @@ from pneumatic_unload.estimation import (
 )
 from pneumatic_unload.model import simulate
 
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = pytest.mark.serial
+
 #: Keys that must agree to the last bits between live and offline results.
 KEYS = ("conductance", "conductance_model", "conductance_model_std", "tau_exp", "p10",
         "p_star", "critical_ratio", "critical_ratio_std")

@@ -23,6 +23,9 @@ from nodeproc import NodeProcess, spin_until
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.physics import orifice_conductance
 
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = pytest.mark.serial
+
 rclpy = pytest.importorskip("rclpy")
 
 C_TRUE = orifice_conductance(2.5e-3)  # 8.0e-9 m^3/(s Pa)

@@ -27,6 +27,9 @@ from typing import Any
 
 import pytest
 
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = pytest.mark.serial
+
 asyncua = pytest.importorskip("asyncua")
 from asyncua import Client, ua  # noqa: E402
 from asyncua.client.ua_client import UaClientState  # noqa: E402

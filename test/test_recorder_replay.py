@@ -55,6 +55,9 @@ from pneumatic_unload.io.bag import (
 from pneumatic_unload.nodes.recorder import RecorderParameterError, RecordingSession
 from pneumatic_unload.nodes.replay import ReplayParameterError, ReplayPlan, pace
 
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = pytest.mark.serial
+
 NODE_DEADLINE_S = 30.0  # every process is killed after this
 CONFIG = {"volume": 0.005, "conductance": 4.2e-9, "rig": "test"}
 

@@ -34,6 +34,9 @@ from pneumatic_unload.testline.schema import (
     UNLOADS,
 )
 
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = pytest.mark.serial
+
 LEGACY = Path(__file__).parent / "data" / "results_db"
 RUN = [sys.executable, "-m", "pneumatic_unload.app.cli"]
 #: Values a single-precision (REAL) column would change, and awkward doubles.

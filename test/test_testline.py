@@ -40,6 +40,9 @@ from pneumatic_unload.testline.batch import (
 )
 from pneumatic_unload.testline.db import SCHEMA_VERSION, file_rows
 
+#: run alone, after the parallel part of make test (see conftest.py)
+pytestmark = pytest.mark.serial
+
 SPEC = {"part_types": {"g14": {"match": "^V14-", "conductance": [4.5e-9, 5.5e-9],
                                "max_relative_std": 0.05}}}
 # columns that depend on when and where a row was written, not on the numbers
