@@ -75,6 +75,24 @@ def test_real_aerolab_log_used_within_the_probes_accuracy():
     assert "within the probe's accuracy" in u["status_text"]
 
 
+def test_real_aerolab_log_refused_for_the_pressure_is_a_reading_within_cs_sigma():
+    """The 0.094 in run's log: fitted jointly, the model's gas follows it to 0.66 K (within
+    the probe's 1 K), but the pressure's residual grows from 562 to 723 Pa rms (Ljung-Box p
+    4e-17 -> 3e-94), so it is not used; that reading's C, 9.14e-9 against the pressure's
+    8.35e-9, was 3.0 sigma away (the departure's line, C rms / (2 T10), 0.5 %). It is now
+    the gas temperature's line (gap / sqrt(3)): the reading within 2 sigma."""
+    (u,) = [x for x in aerolab_json("orifice_0.094in.csv")["unloads"] if x["final"]]
+    g = u["gas_temperature"]
+    assert not g["used"] and "not used: fitted jointly" in g["why"], g
+    (line,) = [x for x in u["budget"]["terms"] if "the log departs" in x["name"]]
+    assert "joint fit's reading" in line["note"], line
+    joint = float(line["note"].split("reading ")[1].split()[0])
+    gap = abs(joint - u["conductance_model"])
+    assert gap > 0.05 * u["conductance_model"]  # the two readings are far apart
+    assert line["std"] == pytest.approx(gap / 3**0.5, rel=0.01)  # (the note's 4 digits)
+    assert gap <= 2.0 * u["conductance_model_std"]
+
+
 #: The AeroLab orifices' diameters [m] (0.094 in and 0.125 in).
 DIAMETER = {"orifice_0.094in.csv": 0.094 * 0.0254, "orifice_0.125in.csv": 0.125 * 0.0254}
 

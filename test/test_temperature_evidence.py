@@ -10,8 +10,10 @@ used, and the joint fit's C is a line of the budget."""
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
+import pytest
 from foreign.newton_tank import discharge
 
 from pneumatic_unload.app.cli import main
@@ -119,3 +121,40 @@ def test_a_hot_start_through_a_slow_thermocouple_gives_t10_and_c(tmp_path, capsy
     assert abs(ev["sensor_time_constant"] - 3.0) < 0.5, ev
     assert abs(u["conductance_model"] / C - 1.0) < 0.01
     assert u["initial_temperature"] == ev["t10"]
+
+
+def _fit_with(**g):
+    from types import SimpleNamespace
+    base = {"departure_rms": 3.2, "noise": 0.2, "t10_assumed": 321.8, "joint_rms": 0.66,
+            "probe": 1.0, "joint_within_probe": True, "joint_pressure_rms": 723.0,
+            "pressure_rms": 562.0, "joint_conductance": 9.14e-9, "joint_critical_ratio": 0.50}
+    return SimpleNamespace(conductance=8.35e-9, critical_ratio=0.57,
+                           gas_temperature={**base, **g})
+
+
+def test_a_log_followed_only_at_the_pressures_cost_puts_its_reading_in_the_budget():
+    """Two readings of one record (AeroLab's 0.094 in run: the pressure alone, C 8.35e-9
+    with the log 3.2 K away after its lag and offset; fitted jointly, the log followed to
+    0.66 K within the probe's 1 K, the pressure's residual 723 Pa rms against 562, C
+    9.14e-9): which describes the gas is not known, so the line is the gap over sqrt(3),
+    not the departure's C rms / (2 T10) (0.5 %, which left the joint reading 3 sigma
+    away); b's line likewise. A joint fit that did not follow the log within the probe is
+    no reading: the departure's line alone, and none for b."""
+    from pneumatic_unload.curvefit.temperature_evidence import temperature_terms
+
+    (c_line,) = temperature_terms(_fit_with())
+    assert c_line.std == pytest.approx((9.14e-9 - 8.35e-9) / 3**0.5)
+    assert "joint fit's reading" in c_line.note and "0.66 K" in c_line.note
+    (b_line,) = temperature_terms(_fit_with(), "b")
+    assert b_line.std == pytest.approx(0.07 / 3**0.5)
+    # not within the probe: the departure's own line; no reading of b
+    (c_only,) = temperature_terms(_fit_with(joint_within_probe=False))
+    assert c_only.std == pytest.approx(8.35e-9 * 3.2 / (2.0 * 321.8))
+    assert temperature_terms(_fit_with(joint_within_probe=False), "b") == ()
+    # a joint reading without b (not determined there): no b line
+    assert temperature_terms(_fit_with(joint_critical_ratio=math.nan), "b") == ()
+    # a joint reading nearer than the departure's line: that line stays
+    (near,) = temperature_terms(_fit_with(joint_conductance=8.36e-9))
+    assert near.std == pytest.approx(8.35e-9 * 3.2 / (2.0 * 321.8))
+    # no departure: no line
+    assert temperature_terms(_fit_with(departure_rms=math.nan)) == ()

@@ -154,6 +154,8 @@ def with_temperature(fam: Family, best: str, series: tuple[FloatArray, FloatArra
                f"m^3/(s Pa) against {cf.conductance:.4g}): no heat law follows it, the "
                f"pressure alone is fitted and the departure is a line of the budget",
         "joint_rms": summary["rms"], "joint_pressure_rms": jc.rms,
-        "joint_conductance": jc.conductance,
+        "joint_conductance": jc.conductance, "joint_critical_ratio": jc.critical_ratio,
+        "probe": probe, "joint_within_probe": bool(summary["rms"] <= probe),
+        "pressure_rms": cf.rms,
         "departure_rms": float(ev.get("rms", summary["rms"])),
         "noise": noise, "t10_assumed": fam.settings.initial_temperature}

@@ -246,21 +246,40 @@ def channel_evidence(summary: dict[str, float]) -> dict[str, Any]:
             **({"probe": probe} if math.isfinite(probe) else {})}
 
 
-def temperature_terms(fit: Any) -> tuple[BudgetTerm, ...]:
-    """The line of C's budget where a logged gas temperature departs from every heat law
-    (a :class:`~pneumatic_unload.curvefit.curve_fit_result.CurveFit` whose ``gas_temperature`` has
-    the pressure fit's ``departure_rms`` [K] from the log, its thermometer's lag and
-    offset fitted): the gas temperature the model assumes is uncertain by that much, and
-    C from a pressure curve goes as 1/sqrt(T) (the flow C rho_N p sqrt(T_N/T) empties the
-    tank at a rate that goes as C sqrt(T)), so C's line is C rms / (2 T10); none
-    otherwise."""
+def temperature_terms(fit: Any, of: str = "C") -> tuple[BudgetTerm, ...]:
+    """The line of C's (``of`` "C") or b's ("b") budget where a logged gas temperature
+    departs from every heat law (a :class:`~pneumatic_unload.curvefit.curve_fit_result.CurveFit`
+    whose ``gas_temperature`` has the pressure fit's ``departure_rms`` [K] from the log, its
+    thermometer's lag and offset fitted); none otherwise.
+
+    C's: the gas temperature the model assumes is uncertain by that much, and C from a
+    pressure curve goes as 1/sqrt(T) (the flow C rho_N p sqrt(T_N/T) empties the tank at a
+    rate that goes as C sqrt(T)): C rms / (2 T10). Where the joint fit followed the log
+    within the probe's accuracy and was refused only for the pressure's residual grown
+    (:data:`~pneumatic_unload.curvefit.joint_family.PRESSURE_KEPT`), the record has two
+    readings, each preferred by one channel, and which describes the gas is not known:
+    the line is at least the gap between them over sqrt(3) (a rectangle from the reported
+    value to the joint one, as the wall's assumed gap), for C and for b [m^3/(s Pa)], [-].
+    """
     g = fit.gas_temperature
     rms = g.get("departure_rms", math.nan)
     if not math.isfinite(rms):
         return ()
+    own, joint = ((fit.conductance, g.get("joint_conductance", math.nan)) if of == "C" else
+                  (fit.critical_ratio, g.get("joint_critical_ratio", math.nan)))
+    gap = abs(joint - own) / math.sqrt(3.0) if g.get("joint_within_probe") else math.nan
+    why = (f"the joint fit's reading {joint:.4g} (the log followed to {g['joint_rms']:.2g} K, "
+           f"within the probe's {g['probe']:g} K; the pressure's residual "
+           f"{g['joint_pressure_rms']:.4g} Pa rms against {g['pressure_rms']:.4g}): "
+           "|gap|/sqrt(3)") if math.isfinite(gap) else ""
+    name = "gas temperature (the log departs from every heat law)"
+    if of != "C":
+        return (BudgetTerm(name, "model", math.nan, rms, "K", gap, why),) \
+            if math.isfinite(gap) else ()
     t10 = g["t10_assumed"]
-    return (BudgetTerm("gas temperature (the log departs from every heat law)", "model",
-                       math.nan, rms, "K", fit.conductance * rms / (2.0 * t10),
-                       f"the model's gas {rms:.2g} K rms from the log (noise "
-                       f"{g['noise']:.2g} K; lag and offset fitted); C goes as "
-                       f"1/sqrt(T): C rms/(2 T10)"),)
+    std = fit.conductance * rms / (2.0 * t10)
+    note = (f"the model's gas {rms:.2g} K rms from the log (noise {g['noise']:.2g} K; lag "
+            f"and offset fitted); C goes as 1/sqrt(T): C rms/(2 T10)")
+    if math.isfinite(gap) and gap > std:
+        std, note = gap, why
+    return (BudgetTerm(name, "model", math.nan, rms, "K", std, note),)

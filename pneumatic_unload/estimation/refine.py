@@ -215,7 +215,7 @@ def b_budget(fit: CurveFit, settings: EstimatorSettings,
                         model_form_std=fit.model_form_std_b, p10=fit.p10, p_atm=fit.p_atm,
                         atmosphere_measured=settings.end_pressure is None, wall=wall,
                         wall_fitted=law.endswith("+wall"),
-                        extra_terms=(subsonic_term(fit, "b"),),
+                        extra_terms=(subsonic_term(fit, "b"), *temperature_terms(fit, "b")),
                         offset_valley=fit.unfitted_offset.get("b", math.nan)).to_dict()
 
 
