@@ -30,6 +30,10 @@ minutes, 30 discharges)::
     | 0.9 | 6 / 0 | 0.98 | 1 |
     | 0.95 | 4 / 0 | 0.85 | 3 |
     | 0.99 | 5 / 1 | 1.08 | 4 |
+
+Then a plateau within 5 % of the given end pressure has nothing to unload
+(``decisions.END_GAP_MIN``, session 29; 7 s): 0 / 0 idle and 0 after the tail at every
+rho, tau_exp's column unchanged.
 """
 
 from __future__ import annotations

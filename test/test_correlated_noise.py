@@ -52,15 +52,54 @@ def test_the_plateau_correlation_and_its_scales():
 def test_an_idle_stream_of_correlated_noise_starts_no_unload(rho):
     """A minute at 1 kHz of AR(1) noise (300 Pa) on p_atm: no unload after the first
     plateau (whose few samples cannot show the correlation: see noise_scales's caller),
-    where there were 6-89 before; per-sample and block input decide alike."""
+    where there were 6-89 before, nor in it (a plateau at the atmosphere has nothing to
+    unload: END_GAP_MIN); per-sample and block input decide alike."""
     n = 60_000
     t = np.arange(n) * 1e-3
     p = P_ATM + _ar1(n, rho, 300.0, 4)
     res = analyze(t, p, EstimatorSettings(volume=2e-3))
-    assert [r.t_start for r in res if not r.t_start < 2.0] == []
+    assert [(r.status, r.t_start) for r in res] == []
     est = StreamingEstimator(EstimatorSettings(volume=2e-3))
     one = [r for k in range(n) for r in est.push(float(t[k]), float(p[k]))] + est.finish()
     assert [(r.status, r.t_start) for r in one] == [(r.status, r.t_start) for r in res]
+
+
+@pytest.mark.parametrize("direction", ["discharge", "charge"])
+def test_a_plateau_at_the_end_pressure_has_nothing_to_unload(direction):
+    """The first 3 s of ten streams of AR(1) noise (rho 0.9, 300 Pa) on the end pressure (a
+    discharge's p_atm, a charge's supply): the first plateau's 32-sample window cannot show
+    the correlation, and its wander gave 'aborted', 'bad_data' and 'not_choked' phantoms
+    (6 of 10 streams at p_atm; 1-4 of 30 discharges' tails). A plateau within END_GAP_MIN
+    of the end pressure has nothing to unload: no result, a diagnostic says why, once
+    per plateau. A discharge from 5.7 kPa above p_atm (the rule's edge: 5.07 kPa) is
+    still one."""
+    from pneumatic_unload.estimation.decisions import END_GAP_MIN
+
+    end = P_ATM if direction == "discharge" else 6e5
+    kw = {} if direction == "discharge" else {"direction": "charge", "supply_pressure": end}
+    t = np.arange(3000) * 1e-3
+    said = 0
+    for seed in range(10):
+        est = StreamingEstimator(EstimatorSettings(volume=2e-3, **kw))
+        out = est.push_block(t, end + _ar1(60_000, 0.9, 300.0, seed)[:t.size]) + est.finish()
+        assert [(r.status, r.t_start) for r in out] == [], seed
+        notes = [d for d in est.diagnostics if "nothing to unload" in d.message]
+        assert len(notes) <= 1 + sum("not confirmed" in d.message or "rose" in d.message
+                                     for d in est.diagnostics)
+        said += bool(notes)
+    assert said >= 1  # the rule is what kept them out (2 of these 10 at p_atm)
+    assert END_GAP_MIN * P_ATM < 5700.0
+    if direction == "discharge":
+        from pneumatic_unload.config import RigConfig
+        from pneumatic_unload.model.simulate import simulate
+
+        cfg = RigConfig(volume=2e-3, conductance=8e-9, initial_pressure=P_ATM + 5700.0,
+                        noise_std=30.0, seed=3)
+        sim = simulate(cfg)
+        res = analyze(sim.t, sim.measured, EstimatorSettings(volume=cfg.volume,
+                                                             curve_fit=False))
+        assert len({r.t_start for r in res}) == 1 and res[0].t_start == pytest.approx(
+            cfg.pre_time, abs=0.05), [(r.status, r.t_start, r.status_text) for r in res]
 
 
 def test_an_unload_under_correlated_noise_is_found_as_under_white_noise():

@@ -58,6 +58,14 @@ IDLE_KEEP = 1 << 20
 DT_DEFAULT = 1e-3
 #: Identical consecutive samples that mean a stuck sensor where the pressure must fall [-].
 STUCK_RUN = 2 * PERIOD
+#: A plateau nearer the given end pressure (the atmosphere of a discharge, the supply of a
+#: charge) than this fraction of it has nothing to unload: a fall there is the noise's
+#: wander, not an unload [-]. (5 % of p_atm is 5 kPa: p* 1.8 kPa from p_atm, no C to
+#: measure; wider than a transducer's zero offset of a few kPa. A transducer low-passed
+#: below its logging rate wanders by its marginal deviation, which a plateau's first
+#: second cannot show: at p_atm after a tail, or an idle stream's start, that gave
+#: 'aborted' and 'not_choked' phantoms.)
+END_GAP_MIN = 0.05
 
 
 def check_indices(next_check: int, end: int) -> NDArray[np.int64]:

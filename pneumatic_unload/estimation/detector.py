@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from pneumatic_unload.estimation.decisions import (
+    END_GAP_MIN,
     PERIOD,
     below,
     check_indices,
@@ -93,6 +94,17 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
             st.rearm_noted = True
             st.diag("ok", "pressure still falling after the unload's final plateau, no "
                     "charge since: not a new unload", float(buf.t[i]))
+        st.level = -math.inf
+        return []
+    end = s.end_pressure
+    if end is not None and abs(st.to_pa(st.plateau_level) - end) < END_GAP_MIN * end:
+        # a fall on a plateau at the end pressure: nothing to unload, the noise's wander
+        if not st.end_noted:
+            st.end_noted = True
+            st.diag("ok", f"a fall on a plateau at {st.to_pa(st.plateau_level):.0f} Pa, "
+                    f"within {END_GAP_MIN:.0%} of the "
+                    f"{'supply' if s.charge else 'atmosphere'} ({end:.0f} Pa): nothing "
+                    "to unload, not an unload", float(buf.t[i]))
         st.level = -math.inf
         return []
     st.unload = UnloadState(trigger=i)

@@ -252,6 +252,7 @@ class EstimatorState:
         self.plateau_window = (0, 0)
         self.scales = (1.0, 1.0)
         self.scaled = False
+        self.end_noted = False  # said once that this plateau is at the end pressure
 
     def set_pstar(self, atm: float) -> None:
         """Set p_atm (and so p* and the crossing window) [signal units]."""
