@@ -19,6 +19,7 @@ from pneumatic_unload.curvefit.curve_fit_result import CurveFit
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import HEAT_FIXED, HEAT_NATURAL
 from pneumatic_unload.model.heat import RA_TURBULENT, rayleigh, thermal_time_constant
+from pneumatic_unload.uncertainty.budget import BudgetTerm
 
 FloatArray = NDArray[np.float64]
 
@@ -105,3 +106,35 @@ def next_law_start(first: CurveFit, settings: EstimatorSettings, t0: float
     if first.subsonic_index_fitted:
         start["m"] = first.subsonic_index
     return start
+
+
+def hot_start_terms(fit: CurveFit, inadequate: bool, of: str = "C") -> tuple[BudgetTerm, ...]:
+    """C's (``of`` "C") or b's ("b") budget line of a hot start claimed from the pressure
+    alone in a fit the model does not describe; none otherwise.
+
+    A hot start (the chosen law beside a wall, T10 fitted without a log) bends the
+    pressure curve as the gas cools; where the residuals stay structured with it (model
+    inadequate), that bend may stand in for a flow curve outside the law's family (two
+    restrictions in series: a 47 K warm gas claimed in a nearly adiabatic 23 L tank, C -8.5
+    % at z -9.6, where every law without it read C within 0.1 %). The criterion cannot
+    arbitrate between readings that all misfit the record: the best law without the claim
+    (lowest BIC among the laws without a wall) is a reading of the record all the same,
+    and the line is the gap between the two over sqrt(3) (a rectangle from the reported
+    value to it, as the assumed wall's) [m^3/(s Pa)], [-].
+    """
+    if not inadequate or "+wall" not in fit.heat_law or "rms" in fit.gas_temperature:
+        return ()
+    others = {k: v for k, v in fit.laws.items()
+              if "+wall" not in k and math.isfinite(v.get("bic", math.nan))}
+    if not others:
+        return ()
+    key = min(others, key=lambda k: others[k]["bic"])
+    field = "conductance" if of == "C" else "critical_ratio"
+    own = fit.conductance if of == "C" else fit.critical_ratio
+    alt = float(others[key].get(field, math.nan))
+    if not (math.isfinite(alt) and math.isfinite(own)):
+        return ()
+    return (BudgetTerm(
+        "hot start (claimed from the pressure, the model inadequate)", "model", math.nan,
+        math.nan, "", abs(alt - own) / math.sqrt(3.0),
+        f"the best law without the claim ({key}) reads {alt:.4g}: |gap|/sqrt(3)"),)

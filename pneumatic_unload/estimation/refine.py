@@ -25,6 +25,7 @@ from pneumatic_unload.config.estimator import (
 from pneumatic_unload.config.rig import RigConfig
 from pneumatic_unload.config.tank import ATMOSPHERE_RANGE
 from pneumatic_unload.curvefit.fitting import CurveFit, fit_curve
+from pneumatic_unload.curvefit.heat_law_offer import hot_start_terms
 from pneumatic_unload.curvefit.recovery import fit_recovery
 from pneumatic_unload.curvefit.subsonic_offer import m_budget, offset_terms, subsonic_term
 from pneumatic_unload.curvefit.temperature_evidence import temperature_terms
@@ -200,11 +201,13 @@ def charge_final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: fl
 
 
 def b_budget(fit: CurveFit, settings: EstimatorSettings,
-             res: UnloadResult) -> dict[str, Any]:
+             res: UnloadResult, *, inadequate: bool = False) -> dict[str, Any]:
     """The budget of the curve fit's b [-]
     (:func:`~pneumatic_unload.uncertainty.budget_b.ratio_budget`) as
     :meth:`~pneumatic_unload.uncertainty.budget.Budget.to_dict`: the fit's type A, the inputs'
-    lines, the wall's (assumed or given: ``fit.wall_std_b``) and the heat laws' spread."""
+    lines, the wall's (assumed or given: ``fit.wall_std_b``), the heat laws' spread and,
+    in a fit the model does not describe (``inadequate``), a hot start's claim
+    (:func:`~pneumatic_unload.curvefit.heat_law_offer.hot_start_terms`)."""
     law = fit.heat_law
     wall = None
     if law != "none" and not law.endswith("+wall"):
@@ -215,7 +218,8 @@ def b_budget(fit: CurveFit, settings: EstimatorSettings,
                         model_form_std=fit.model_form_std_b, p10=fit.p10, p_atm=fit.p_atm,
                         atmosphere_measured=settings.end_pressure is None, wall=wall,
                         wall_fitted=law.endswith("+wall"),
-                        extra_terms=(subsonic_term(fit, "b"), *temperature_terms(fit, "b")),
+                        extra_terms=(subsonic_term(fit, "b"), *temperature_terms(fit, "b"),
+                                     *hot_start_terms(fit, inadequate, "b")),
                         offset_valley=fit.unfitted_offset.get("b", math.nan)).to_dict()
 
 
@@ -452,10 +456,13 @@ def refine_with_curve_fit(
              "conductance_crossing_inversion": res.conductance_model}
     if "budget_eq39" in res.extra:
         extra["budget_eq39"] = res.extra["budget_eq39"]
+    nrms = fit.rms / noise_std if math.isfinite(noise_std) and noise_std > 0 else math.nan
+    why = inadequacy(nrms, fit.whiteness_p, fit.inflation)
     budget = final_budget(res, settings, c=fit.conductance, type_a_std=c_std,
                           model_form_std=mf, heat_law=fit.heat_law,
                           extra_terms=(*extra_terms, subsonic_term(fit, "C"),
-                                       *offset_terms(fit), *temperature_terms(fit)), fit=fit)
+                                       *offset_terms(fit), *temperature_terms(fit),
+                                       *hot_start_terms(fit, why is not None)), fit=fit)
     if budget is not None:
         extra["budget"] = budget
         c_std = budget["combined_std"]
@@ -463,14 +470,12 @@ def refine_with_curve_fit(
         c_std = math.hypot(c_std, mf)
     b_std = fit.critical_ratio_std
     if math.isfinite(fit.critical_ratio):
-        extra["budget_b"] = b_budget(fit, settings, res)
+        extra["budget_b"] = b_budget(fit, settings, res, inadequate=why is not None)
         b_std = extra["budget_b"]["combined_std"]
     if math.isfinite(fit.critical_ratio) or fit.subsonic_index_fitted:
         extra["budget_m"] = m_budget(fit).to_dict()  # (m without b: a flow never choked)
     status, text = res.status, res.status_text
     quality = res.quality if fit.success else min(res.quality, 0.5)
-    nrms = fit.rms / noise_std if math.isfinite(noise_std) and noise_std > 0 else math.nan
-    why = inadequacy(nrms, fit.whiteness_p, fit.inflation)
     extra["model_inadequate"] = why or ""
     b = fit.critical_ratio
     if settings.charge:
