@@ -67,28 +67,40 @@ def test_the_combined_uncertainty_is_the_root_sum_of_squares_of_the_lines(final)
 
 def test_a_hot_start_claimed_in_an_inadequate_fit_has_the_best_law_without_it_as_a_line():
     """heat_law_offer.hot_start_terms, closed forms: the line is |C_alt - C|/sqrt(3) with
-    C_alt the lowest-BIC law without a wall; none where the fit is adequate, where no hot
-    start is claimed, where a log was used (T10 measured), or where the reading lacks b."""
+    C_alt the lowest-BIC law without a wall, where its chi^2 exceeds the claim's by no more
+    than the structure the claim leaves (chi^2 (1 - 1/structure); foreign draw 200's
+    numbers); none where the fit is adequate (structure 1), where a real warm gas leaves
+    the laws without it far behind (draw 39 without T: 50 x the chi^2 at structure 1.37),
+    where no hot start is claimed, where a log was used, or where the reading lacks b."""
     from types import SimpleNamespace
 
     from pneumatic_unload.curvefit.heat_law_offer import hot_start_terms
 
-    laws = {"fixed+wall|m": {"conductance": 0.915, "critical_ratio": 0.115, "bic": 545.7},
-            "density|m": {"conductance": 1.0001, "critical_ratio": 0.136, "bic": 726.2},
-            "fixed|m": {"conductance": 1.0006, "critical_ratio": 0.146, "bic": 739.2},
-            "natural": {"conductance": 1.023, "critical_ratio": math.nan, "bic": 1.8e6}}
+    laws = {"fixed+wall|m": {"conductance": 0.915, "critical_ratio": 0.115, "bic": 545.7,
+                             "chi2": 450.4},
+            "density|m": {"conductance": 1.0001, "critical_ratio": 0.136, "bic": 726.2,
+                          "chi2": 631.0},
+            "fixed|m": {"conductance": 1.0006, "critical_ratio": 0.146, "bic": 739.2,
+                        "chi2": 657.5},
+            "natural": {"conductance": 1.023, "critical_ratio": math.nan, "bic": 1.8e6,
+                        "chi2": 1.8e6}}
 
     def fit(**kw):
         base = dict(heat_law="fixed+wall", laws=laws, gas_temperature={"t10": 339.9},
                     conductance=0.915, critical_ratio=0.115)
         return SimpleNamespace(**{**base, **kw})
 
-    (c_line,) = hot_start_terms(fit(), True)
+    (c_line,) = hot_start_terms(fit(), 2.98)
     assert c_line.std == pytest.approx((1.0001 - 0.915) / math.sqrt(3.0))
     assert "(density|m)" in c_line.note
-    (b_line,) = hot_start_terms(fit(), True, "b")
+    (b_line,) = hot_start_terms(fit(), 2.98, "b")
     assert b_line.std == pytest.approx((0.136 - 0.115) / math.sqrt(3.0))
-    assert hot_start_terms(fit(), False) == ()
-    assert hot_start_terms(fit(heat_law="fixed"), True) == ()
-    assert hot_start_terms(fit(gas_temperature={"t10": 339.9, "rms": 0.4}), True) == ()
-    assert hot_start_terms(fit(critical_ratio=math.nan), True, "b") == ()
+    assert hot_start_terms(fit(), 1.0) == ()
+    # 631 - 450.4 = 180.6 against 450.4 (1 - 1/S): at S 1.66 just in, at 1.65 out
+    assert hot_start_terms(fit(), 1.67) != () and hot_start_terms(fit(), 1.65) == ()
+    warm = {**laws, "density|m": {**laws["density|m"], "chi2": 50 * 450.4, "bic": 2.3e4},
+            "fixed|m": {**laws["fixed|m"], "chi2": 50 * 450.4, "bic": 2.3e4}}
+    assert hot_start_terms(fit(laws=warm), 1.37) == ()
+    assert hot_start_terms(fit(heat_law="fixed"), 2.98) == ()
+    assert hot_start_terms(fit(gas_temperature={"t10": 339.9, "rms": 0.4}), 2.98) == ()
+    assert hot_start_terms(fit(critical_ratio=math.nan), 2.98, "b") == ()

@@ -108,27 +108,36 @@ def next_law_start(first: CurveFit, settings: EstimatorSettings, t0: float
     return start
 
 
-def hot_start_terms(fit: CurveFit, inadequate: bool, of: str = "C") -> tuple[BudgetTerm, ...]:
+def hot_start_terms(fit: CurveFit, structure: float, of: str = "C") -> tuple[BudgetTerm, ...]:
     """C's (``of`` "C") or b's ("b") budget line of a hot start claimed from the pressure
     alone in a fit the model does not describe; none otherwise.
 
     A hot start (the chosen law beside a wall, T10 fitted without a log) bends the
     pressure curve as the gas cools; where the residuals stay structured with it (model
-    inadequate), that bend may stand in for a flow curve outside the law's family (two
-    restrictions in series: a 47 K warm gas claimed in a nearly adiabatic 23 L tank, C -8.5
-    % at z -9.6, where every law without it read C within 0.1 %). The criterion cannot
-    arbitrate between readings that all misfit the record: the best law without the claim
-    (lowest BIC among the laws without a wall) is a reading of the record all the same,
-    and the line is the gap between the two over sqrt(3) (a rectangle from the reported
-    value to it, as the assumed wall's) [m^3/(s Pa)], [-].
+    inadequate: ``structure`` > 1, the variance inflation times the residual scale of
+    :func:`~pneumatic_unload.fit.uncertainty.inadequacy`), that bend may stand in for a
+    flow curve outside the law's family (two restrictions in series: a 47 K warm gas
+    claimed in a nearly adiabatic 23 L tank, C -8.5 % at z -9.6, where the laws without it
+    read C within 0.1 % at a chi^2 1.4 times the claim's, its structure 2.98). The best
+    law without the claim (lowest BIC among the laws without a wall) is then a reading of
+    the record all the same where its chi^2 exceeds the claim's by no more than the
+    structure the claim leaves unexplained, chi^2 (1 - 1/structure) (a real warm gas
+    leaves the laws without it 12-50 times its chi^2, at a structure of 1.1-1.4); the line
+    is the gap between the two over sqrt(3) (a rectangle from the reported value to it, as
+    the assumed wall's) [m^3/(s Pa)], [-].
     """
-    if not inadequate or "+wall" not in fit.heat_law or "rms" in fit.gas_temperature:
+    laws = {k: v for k, v in fit.laws.items() if math.isfinite(v.get("bic", math.nan))}
+    if not structure > 1.0 or "+wall" not in fit.heat_law or "rms" in fit.gas_temperature \
+            or not laws:
         return ()
-    others = {k: v for k, v in fit.laws.items()
-              if "+wall" not in k and math.isfinite(v.get("bic", math.nan))}
-    if not others:
+    chosen = min(laws, key=lambda k: laws[k]["bic"])
+    others = {k: v for k, v in laws.items() if "+wall" not in k}
+    if "+wall" not in chosen or not others:
         return ()
     key = min(others, key=lambda k: others[k]["bic"])
+    chi2 = laws[chosen]["chi2"]
+    if not others[key]["chi2"] - chi2 <= chi2 * (1.0 - 1.0 / structure):
+        return ()
     field = "conductance" if of == "C" else "critical_ratio"
     own = fit.conductance if of == "C" else fit.critical_ratio
     alt = float(others[key].get(field, math.nan))
@@ -137,4 +146,6 @@ def hot_start_terms(fit: CurveFit, inadequate: bool, of: str = "C") -> tuple[Bud
     return (BudgetTerm(
         "hot start (claimed from the pressure, the model inadequate)", "model", math.nan,
         math.nan, "", abs(alt - own) / math.sqrt(3.0),
-        f"the best law without the claim ({key}) reads {alt:.4g}: |gap|/sqrt(3)"),)
+        f"the best law without the claim ({key}) reads {alt:.4g} at chi^2 "
+        f"{others[key]['chi2']:.0f} against the claim's {chi2:.0f} (structure x "
+        f"{structure:.2f}): |gap|/sqrt(3)"),)
