@@ -104,3 +104,7 @@ def test_a_hot_start_claimed_in_an_inadequate_fit_has_the_best_law_without_it_as
     assert hot_start_terms(fit(heat_law="fixed"), 2.98) == ()
     assert hot_start_terms(fit(gas_temperature={"t10": 339.9, "rms": 0.4}), 2.98) == ()
     assert hot_start_terms(fit(critical_ratio=math.nan), 2.98, "b") == ()
+    # a law within the model-form spread's window (AeroLab 0.094 in: density|m at chi^2 74
+    # against the claim's 73) is in that spread already: no second line
+    assert hot_start_terms(fit(), 2.98, spread_window=181.0) == ()
+    assert hot_start_terms(fit(), 2.98, spread_window=10.0) != ()

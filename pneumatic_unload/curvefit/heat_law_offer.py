@@ -108,7 +108,8 @@ def next_law_start(first: CurveFit, settings: EstimatorSettings, t0: float
     return start
 
 
-def hot_start_terms(fit: CurveFit, structure: float, of: str = "C") -> tuple[BudgetTerm, ...]:
+def hot_start_terms(fit: CurveFit, structure: float, of: str = "C", *,
+                    spread_window: float = 0.0) -> tuple[BudgetTerm, ...]:
     """C's (``of`` "C") or b's ("b") budget line of a hot start claimed from the pressure
     alone in a fit the model does not describe; none otherwise.
 
@@ -124,7 +125,8 @@ def hot_start_terms(fit: CurveFit, structure: float, of: str = "C") -> tuple[Bud
     structure the claim leaves unexplained, chi^2 (1 - 1/structure) (a real warm gas
     leaves the laws without it 12-50 times its chi^2, at a structure of 1.1-1.4); the line
     is the gap between the two over sqrt(3) (a rectangle from the reported value to it, as
-    the assumed wall's) [m^3/(s Pa)], [-].
+    the assumed wall's) [m^3/(s Pa)], [-]. A law within ``spread_window`` of the claim's
+    BIC is in the heat laws' model-form spread already (``LAW_BIC_THRESHOLD``): no line.
     """
     laws = {k: v for k, v in fit.laws.items() if math.isfinite(v.get("bic", math.nan))}
     if not structure > 1.0 or "+wall" not in fit.heat_law or "rms" in fit.gas_temperature \
@@ -136,7 +138,8 @@ def hot_start_terms(fit: CurveFit, structure: float, of: str = "C") -> tuple[Bud
         return ()
     key = min(others, key=lambda k: others[k]["bic"])
     chi2 = laws[chosen]["chi2"]
-    if not others[key]["chi2"] - chi2 <= chi2 * (1.0 - 1.0 / structure):
+    if not others[key]["chi2"] - chi2 <= chi2 * (1.0 - 1.0 / structure) \
+            or others[key]["bic"] - laws[chosen]["bic"] < spread_window:
         return ()
     field = "conductance" if of == "C" else "critical_ratio"
     own = fit.conductance if of == "C" else fit.critical_ratio

@@ -26,6 +26,7 @@ from pneumatic_unload.config.rig import RigConfig
 from pneumatic_unload.config.tank import ATMOSPHERE_RANGE
 from pneumatic_unload.curvefit.fitting import CurveFit, fit_curve
 from pneumatic_unload.curvefit.heat_law_offer import hot_start_terms
+from pneumatic_unload.curvefit.law_family import LAW_BIC_THRESHOLD
 from pneumatic_unload.curvefit.recovery import fit_recovery
 from pneumatic_unload.curvefit.subsonic_offer import m_budget, offset_terms, subsonic_term
 from pneumatic_unload.curvefit.temperature_evidence import temperature_terms
@@ -201,12 +202,12 @@ def charge_final_budget(res: UnloadResult, settings: EstimatorSettings, *, c: fl
 
 
 def b_budget(fit: CurveFit, settings: EstimatorSettings,
-             res: UnloadResult, *, structure: float = 1.0) -> dict[str, Any]:
+             res: UnloadResult, *, hot: tuple[BudgetTerm, ...] = ()) -> dict[str, Any]:
     """The budget of the curve fit's b [-]
     (:func:`~pneumatic_unload.uncertainty.budget_b.ratio_budget`) as
     :meth:`~pneumatic_unload.uncertainty.budget.Budget.to_dict`: the fit's type A, the inputs'
     lines, the wall's (assumed or given: ``fit.wall_std_b``), the heat laws' spread and,
-    in a fit the model does not describe (``structure`` > 1), a hot start's claim
+    ``hot``, the line of a hot start claimed in a fit the model does not describe
     (:func:`~pneumatic_unload.curvefit.heat_law_offer.hot_start_terms`)."""
     law = fit.heat_law
     wall = None
@@ -219,7 +220,7 @@ def b_budget(fit: CurveFit, settings: EstimatorSettings,
                         atmosphere_measured=settings.end_pressure is None, wall=wall,
                         wall_fitted=law.endswith("+wall"),
                         extra_terms=(subsonic_term(fit, "b"), *temperature_terms(fit, "b"),
-                                     *hot_start_terms(fit, structure, "b")),
+                                     *hot),
                         offset_valley=fit.unfitted_offset.get("b", math.nan)).to_dict()
 
 
@@ -458,15 +459,16 @@ def refine_with_curve_fit(
         extra["budget_eq39"] = res.extra["budget_eq39"]
     nrms = fit.rms / noise_std if math.isfinite(noise_std) and noise_std > 0 else math.nan
     why = inadequacy(nrms, fit.whiteness_p, fit.inflation)
-    # the structure the fit leaves unexplained (1: none): its variance inflation times the
-    # residual scale, as the inadequacy text gives them
+    # the structure the fit leaves unexplained (1: none): variance inflation x residual scale
     structure = 1.0 if why is None else fit.inflation * (
         max(nrms, 1.0) ** 2 if math.isfinite(nrms) else 1.0)
+    hot = {of: hot_start_terms(fit, structure, of, spread_window=LAW_BIC_THRESHOLD)
+           for of in ("C", "b")}
     budget = final_budget(res, settings, c=fit.conductance, type_a_std=c_std,
                           model_form_std=mf, heat_law=fit.heat_law,
                           extra_terms=(*extra_terms, subsonic_term(fit, "C"),
                                        *offset_terms(fit), *temperature_terms(fit),
-                                       *hot_start_terms(fit, structure)), fit=fit)
+                                       *hot["C"]), fit=fit)
     if budget is not None:
         extra["budget"] = budget
         c_std = budget["combined_std"]
@@ -474,7 +476,7 @@ def refine_with_curve_fit(
         c_std = math.hypot(c_std, mf)
     b_std = fit.critical_ratio_std
     if math.isfinite(fit.critical_ratio):
-        extra["budget_b"] = b_budget(fit, settings, res, structure=structure)
+        extra["budget_b"] = b_budget(fit, settings, res, hot=hot["b"])
         b_std = extra["budget_b"]["combined_std"]
     if math.isfinite(fit.critical_ratio) or fit.subsonic_index_fitted:
         extra["budget_m"] = m_budget(fit).to_dict()  # (m without b: a flow never choked)
