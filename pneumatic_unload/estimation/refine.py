@@ -32,7 +32,7 @@ from pneumatic_unload.curvefit.subsonic_offer import m_budget, offset_terms, sub
 from pneumatic_unload.curvefit.temperature_evidence import temperature_terms
 from pneumatic_unload.estimation.endstep import TAIL_STEP
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
-from pneumatic_unload.fit.uncertainty import inadequacy
+from pneumatic_unload.fit.uncertainty import inadequacy, residual_scale
 from pneumatic_unload.model.inversion import (
     fitted_tau_exp,
     inversion_table,
@@ -460,8 +460,7 @@ def refine_with_curve_fit(
     nrms = fit.rms / noise_std if math.isfinite(noise_std) and noise_std > 0 else math.nan
     why = inadequacy(nrms, fit.whiteness_p, fit.inflation)
     # the structure the fit leaves unexplained (1: none): variance inflation x residual scale
-    structure = 1.0 if why is None else fit.inflation * (
-        max(nrms, 1.0) ** 2 if math.isfinite(nrms) else 1.0)
+    structure = 1.0 if why is None else fit.inflation * residual_scale(nrms)
     hot = {of: hot_start_terms(fit, structure, of, spread_window=LAW_BIC_THRESHOLD)
            for of in ("C", "b")}
     budget = final_budget(res, settings, c=fit.conductance, type_a_std=c_std,

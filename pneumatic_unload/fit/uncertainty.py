@@ -136,6 +136,12 @@ def structure_inflation(r: FloatArray, lags: int = 20) -> float:
     return float(min(max(1.0 + 2.0 * float(np.sum(rho)), 1.0), 1e4))
 
 
+def residual_scale(nrms: float) -> float:
+    """The residual variance's scale over the noise's, at least 1 [-] (1 where the noise is
+    unknown: ``nrms`` NaN), as :func:`inadequacy` states it."""
+    return max(nrms, 1.0) ** 2 if math.isfinite(nrms) else 1.0
+
+
 def inadequacy(nrms: float, whiteness_p: float, inflation: float) -> str | None:
     """Why a fitted model does not describe a record at its noise level, or None.
 
@@ -156,4 +162,4 @@ def inadequacy(nrms: float, whiteness_p: float, inflation: float) -> str | None:
     if not why:
         return None
     return (", ".join(why) + f"; sigma(C) from the record inflated (variance x {inflation:.2f}"
-            f", residual scale x {max(nrms, 1.0) ** 2 if math.isfinite(nrms) else 1.0:.2f})")
+            f", residual scale x {residual_scale(nrms):.2f})")
