@@ -230,7 +230,9 @@ def run(job: tuple[Case, bool | str]) -> dict:
                       fit.get("subsonic_index_std")),
         m_reported=math.isfinite(m_value), m_fitted=bool(fitted),
         heat_law=fit.get("heat_law", "-"),
-        inadequate=bool(extra.get("model_inadequate")))
+        inadequate=bool(extra.get("model_inadequate")),
+        largest={q: (extra.get(k) or {}).get("largest", "")
+                 for q, k in (("C", "budget"), ("b", "budget_b"), ("m", "budget_m"))})
     return out
 
 

@@ -1,8 +1,13 @@
 """Random draws of the acceptance's ranges, beyond the fixed grids: a script, not a test.
 
 ``python bench/bench_random_draws.py [foreign|temperature] [--draws N] [--first K] [--jobs J]
-[--draw K] [--with-log-only]`` (both kinds without one; project venv, ``PYTHONPATH`` at the
-repo root; ``--with-log-only``: the temperature draws with their log only). The
+[--draw K] [--with-log-only] [--record-only] [--rows FILE]`` (both kinds without one;
+project venv, ``PYTHONPATH`` at the repo root; ``--with-log-only``: the temperature draws
+with their log only; ``--record-only``: the inputs exact and no model-limits line, so the
+coverage measured is the record's own sigma's; ``--rows``: each analysis as a JSON line).
+``--audit ROWS...`` runs nothing and states the acceptance line by line from such rows
+(:func:`audit`: per quantity the share within the tolerance and within 2 sigma, whether
+that is consistent with 90-98 %, each miss a bound or a confident miss). The
 fixed grids of ``bench/bench_foreign_laws.py`` and ``bench/bench_temperature_records.py``
 cycle a few values of each factor; this draws every factor at random inside the issue's ranges, with
 the records made and analysed by those benches' own ``record`` and ``run`` (the
@@ -57,6 +62,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import sys
 from multiprocessing import Pool
@@ -120,9 +126,9 @@ def temperature_case(k: int) -> btr.Case:
     return dataclasses.replace(case, m=m)
 
 
-def _foreign(k: int) -> dict:
+def _foreign(k: int, record_only: bool = False) -> dict:
     case = foreign_case(k)
-    _, st = bfl.row(res := bfl.run((case, False)))
+    _, st = bfl.row(res := bfl.run((case, "record" if record_only else False)))
     if "error" in res:
         return {"k": k, "group": case.family, "fail": [res["error"]], "text": "", "st": {}}
     tr = res["truth"]
@@ -151,13 +157,14 @@ def _foreign(k: int) -> dict:
             f"{'' if res['m_fitted'] else ' held'}, {res['heat_law']}"
             f"{', inadequate' if res['inadequate'] else ''}")
     return {"k": k, "group": case.family, "fail": fail, "text": text,
-            "st": {q: (checks[q][0], zs[q]) for q in checks}}
+            "st": {q: (checks[q][0], zs[q]) for q in checks}, "largest": res["largest"]}
 
 
-def _temperature(k: int, kinds: tuple[bool, ...] = (True, False)) -> list[dict]:
+def _temperature(k: int, kinds: tuple[bool, ...] = (True, False),
+                 record_only: bool = False) -> list[dict]:
     case = temperature_case(k)
     out = []
-    for res in btr.run((case, False, False), kinds):
+    for res in btr.run((case, False, record_only), kinds):
         _, st = btr.row(res)
         group = f"{'with' if res['with_t'] else 'without'} T, {'hot' if case.dt_hot else 'not hot'}"
         if not st["ok"]:
@@ -179,13 +186,15 @@ def _temperature(k: int, kinds: tuple[bool, ...] = (True, False)) -> list[dict]:
                 f" b {st['b_err']:+.3f}; {st['status_text'][:160]}")
         out.append({"k": k, "group": group, "fail": fail, "text": text,
                     "st": {"C": (st["c_err"], st["c_z"]), "b": (st["b_err"], st["b_z"]),
-                           "m": (st["m_err"], st["m_z"])}})
+                           "m": (st["m_err"], st["m_z"])}, "largest": st["largest"],
+                    "t_ratio": st["t_ratio"] if res["with_t"] else None,
+                    "offset": (case.offset, st["off_err"], st["off_hit"])})
     return out
 
 
-def _one(job: tuple[str, int, tuple[bool, ...]]) -> list[dict]:
-    kind, k, kinds = job
-    return [_foreign(k)] if kind == "foreign" else _temperature(k, kinds)
+def _one(job: tuple[str, int, tuple[bool, ...], bool]) -> list[dict]:
+    kind, k, kinds, record_only = job
+    return [_foreign(k, record_only)] if kind == "foreign" else _temperature(k, kinds, record_only)
 
 
 def summary(rows: list[dict]) -> list[str]:
@@ -205,6 +214,89 @@ def summary(rows: list[dict]) -> list[str]:
     return lines
 
 
+def tolerance(group: str, q: str) -> float | None:
+    """The issue's tolerance of quantity ``q`` (C relative, b and m absolute) in ``group``;
+    None where it asks coverage only (without the temperature column: C within 2 % and an
+    honest sigma)."""
+    if group.startswith("without T"):
+        return btr.C_TOL_WITHOUT if q == "C" else None
+    return {"C": 0.01, "b": 0.03, "m": 0.05}[q]
+
+
+def _binom_tail(k: int, n: int, p: float, upper: bool) -> float:
+    """P(X >= k) (``upper``) or P(X <= k) for X ~ Binomial(n, p)."""
+    ks = range(k, n + 1) if upper else range(0, k + 1)
+    return float(sum(math.comb(n, i) * p**i * (1.0 - p) ** (n - i) for i in ks))
+
+
+def coverage_verdict(k: int, n: int, lo: float = 0.90, hi: float = 0.98) -> str:
+    """Whether k of n within 2 sigma is consistent with a coverage in [lo, hi] (a one-sided
+    binomial test at 5 % toward the side the share lies on)."""
+    if n == 0:
+        return "-"
+    if k / n > hi:
+        p = _binom_tail(k, n, hi, upper=True)
+        return f"over (p {p:.2g} at {hi:.0%})" if p < 0.05 else "in"
+    if k / n < lo:
+        p = _binom_tail(k, n, lo, upper=False)
+        return f"under (p {p:.2g} at {lo:.0%})" if p < 0.05 else "in"
+    return "in"
+
+
+def audit(rows: list[dict]) -> list[str]:
+    """The acceptance line by line. Per group and quantity: the tolerance, the share within
+    it, the share with |error| <= 2 sigma and whether that share is consistent with
+    90-98 % (among the analyses that report the quantity; the others are listed). Each
+    miss of the tolerance is classified: a *bound* where |error| <= 2 sigma (then sigma >=
+    tol / 2: the record's own sigma says it cannot meet the tolerance at 95 %; the budget
+    line that dominates is named), else a *confident miss*. sigma is error / z. For the
+    temperature records, the temperature's rms against its noise and the offsets."""
+    lines = ["| group | q | tol | n | within tol | abs z <= 2 | 90-98 % | bound misses "
+             "(largest line: count) | confident misses (draw: error, z, largest line) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for g in sorted({r["group"] for r in rows}):
+        rs = [r for r in rows if r["group"] == g]
+        for q in ("C", "b", "m"):
+            tol = tolerance(g, q)
+            got = [(r["k"], *r["st"][q], r.get("largest", {}).get(q, "?"))
+                   for r in rs if q in r["st"] and math.isfinite(r["st"][q][0])]
+            absent = [r["k"] for r in rs if q not in r["st"] or not math.isfinite(r["st"][q][0])]
+            z_ok = [k for k, _e, z, _l in got if math.isfinite(z) and abs(z) <= 2.0]
+            miss = [(k, e, z, lg) for k, e, z, lg in got
+                    if tol is not None and not (math.isfinite(e) and abs(e) <= tol)]
+            bound: dict[str, int] = {}
+            confident = []
+            for k, e, z, lg in miss:
+                if math.isfinite(z) and abs(z) <= 2.0:
+                    bound[lg] = bound.get(lg, 0) + 1
+                else:
+                    confident.append(f"{k}: {e:+.3g}, z {z:+.1f}, {lg}")
+            n_reported = len(got)
+            lines.append(
+                f"| {g} | {q} | {'-' if tol is None else f'{tol:g}'} | {len(rs)}"
+                f"{f' (not reported: draws {absent})' if absent else ''} | "
+                f"{'-' if tol is None else f'{n_reported - len(miss)}/{n_reported}'} | "
+                f"{len(z_ok)}/{n_reported} | {coverage_verdict(len(z_ok), n_reported)} | "
+                f"{'; '.join(f'{lg}: {c}' for lg, c in sorted(bound.items())) or '-'} | "
+                f"{'; '.join(confident) or '-'} |")
+    if not any("offset" in r for r in rows):
+        return lines
+    lines += ["", "| group | n | T rms / noise: median, max | within 2 x noise | offset within "
+              f"{btr.OFFSET_TOL:g} Pa | offset misses (draw: true, error [Pa]) |",
+              "|---|---|---|---|---|---|"]
+    for g in sorted({r["group"] for r in rows if "offset" in r}):
+        rs = [r for r in rows if r["group"] == g and "offset" in r]
+        ratio = np.array([r["t_ratio"] for r in rs if r.get("t_ratio") is not None], float)
+        ratio = ratio[np.isfinite(ratio)]
+        off_miss = [f"{r['k']}: {r['offset'][0]:+.0f}, {r['offset'][1]:+.0f}" for r in rs
+                    if not r["offset"][2]]
+        rms = (f"{np.median(ratio):.2f}, {ratio.max():.2f} | "
+               f"{int(np.sum(ratio <= btr.RMS_FACTOR))}/{len(rs)}" if ratio.size else "- | -")
+        lines.append(f"| {g} | {len(rs)} | {rms} | {len(rs) - len(off_miss)}/{len(rs)} | "
+                     f"{'; '.join(off_miss) or '-'} |")
+    return lines
+
+
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("kind", nargs="?", choices=("foreign", "temperature"))
@@ -214,18 +306,31 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--draw", type=int, help="analyse this draw alone and print it")
     ap.add_argument("--with-log-only", action="store_true",
                     help="temperature: each record with its log only (not without it)")
+    ap.add_argument("--record-only", action="store_true",
+                    help="the inputs exact and no model-limits line: the record's own sigma")
+    ap.add_argument("--rows", type=Path, help="write each analysis as a JSON line here")
+    ap.add_argument("--audit", type=Path, nargs="+", metavar="ROWS",
+                    help="print the acceptance's audit of rows written by --rows, run nothing")
     args = ap.parse_args(argv)
+    if args.audit:
+        rows = [json.loads(line) for p in args.audit for line in p.read_text().splitlines()]
+        print("\n".join(audit(rows)))
+        return 0
     if args.kind is None:
         return max(main([kind, *argv]) for kind in ("foreign", "temperature"))
     ks = [args.draw] if args.draw is not None else range(args.first, args.first + args.draws)
     kinds = (True,) if args.with_log_only else (True, False)
-    jobs = [(args.kind, k, kinds) for k in ks]
+    jobs = [(args.kind, k, kinds, args.record_only) for k in ks]
     if args.jobs > 1:
         with Pool(args.jobs) as pool:
             rows = [r for rs in pool.imap(_one, jobs) for r in rs]
     else:
         rows = [r for job in jobs for r in _one(job)]
-    print(f"{args.kind}: draws {ks[0]}-{ks[-1]}, {len(rows)} analyses\n")
+    if args.rows:
+        with args.rows.open("w") as f:
+            f.writelines(json.dumps(r, default=float) + "\n" for r in rows)
+    print(f"{args.kind}: draws {ks[0]}-{ks[-1]}, {len(rows)} analyses"
+          f"{', record only' if args.record_only else ''}\n")
     print("\n".join(summary(rows)))
     print("\nFailures (draw, group: what, the record and the result):\n")
     for r in rows:

@@ -336,7 +336,9 @@ def row(res: dict) -> tuple[str, dict]:
     ratio = rms / noise if noise > 0 else math.nan
     stats.update(ok=True, c_err=ce, c_z=_z(c - case.conductance, c_std), b_err=be,
                  b_z=_z(be, b_std), m_err=m - case.m, m_z=_z(m - case.m, m_std),
-                 off_hit=off_hit, t_ratio=ratio,
+                 off_hit=off_hit, off_err=oe, t_ratio=ratio,
+                 largest={q: (u.get(k) or {}).get("largest", "")
+                          for q, k in (("C", "budget"), ("b", "budget_b"), ("m", "budget_m"))},
                  status=u.get("status", "?"), status_text=u.get("status_text", ""))
     used = "used" if ev.get("used") else "not used"
     follows = {True: "follows", False: "departs"}.get(ev.get("follows"), "")

@@ -102,6 +102,38 @@ def test_a_plateau_at_the_end_pressure_has_nothing_to_unload(direction):
             cfg.pre_time, abs=0.05), [(r.status, r.t_start, r.status_text) for r in res]
 
 
+def test_a_fall_not_followed_on_a_charged_plateau_is_no_unload():
+    """Idle minutes of AR(1) noise (300 Pa) on a 6 bar plateau: a fall in the plateau's
+    first second, whose 32-sample window cannot show the correlation, is confirmed
+    (seeds 4 and 9 at rho 0.9) and nothing follows it; the stream's end used to report it
+    as 'aborted: stream ended before the p* crossing'. The samples since show no fall
+    (unloading.not_followed): no result, a diagnostic says why; per-sample and block
+    input alike. A slow discharge (50 L, tau about 500 s) cut 9 s after its opening, far
+    short of its 10 % drop, is still an unload the stream ended in."""
+    from pneumatic_unload.config import RigConfig
+    from pneumatic_unload.model.simulate import simulate
+
+    n = 60_000
+    t = np.arange(n) * 1e-3
+    for seed in (4, 9):
+        p = 6e5 + _ar1(n, 0.9, 300.0, seed)
+        est = StreamingEstimator(EstimatorSettings(volume=2e-3))
+        out = est.push_block(t, p) + est.finish()
+        assert out == [], [(r.status, r.status_text) for r in out]
+        assert [d.message for d in est.diagnostics if "not followed" in d.message], seed
+        one = StreamingEstimator(EstimatorSettings(volume=2e-3))
+        assert [r for k in range(20_000) for r in one.push(float(t[k]), float(p[k]))] + \
+            one.finish() == []
+    cfg = RigConfig(volume=50e-3, conductance=1e-9, initial_pressure=6e5, noise_std=0.0,
+                    noise_ar_rho=0.9, noise_ar_std=300.0, seed=2)
+    sim = simulate(cfg)
+    keep = sim.t < cfg.pre_time + 9.0
+    assert sim.measured[keep][-1] > 6e5 - 0.1 * (6e5 - P_ATM)  # short of the start fit
+    res = analyze(sim.t[keep], sim.measured[keep], EstimatorSettings(volume=cfg.volume))
+    assert [(r.status, r.status_text) for r in res] == \
+        [("aborted", "stream ended before the p* crossing")]
+
+
 def test_an_unload_under_correlated_noise_is_found_as_under_white_noise():
     """A 6 bar discharge (the package's simulator) under AR(1) noise of rho 0.95 (a 1 kPa
     transducer low-passed at 2.6 Hz x its 1 kHz rate / 2 pi): one unload, found at its

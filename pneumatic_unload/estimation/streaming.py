@@ -332,6 +332,10 @@ class StreamingEstimator:
         if st.mode == RECOVERY:
             out.append(sse.abort_result(st, n - 1, recovered=False))
             out[-1].final = True
+        elif st.mode == UNLOADING and unloading.not_followed(st, n - 1):
+            st.diag("ok", f"the fall confirmed at {float(st.buf.t[u.trigger]):.3f} s was not "
+                    "followed: at the stream's end the pressure is back at the plateau "
+                    f"({st.to_pa(st.plateau_level):.0f} Pa): no unload", st.last_t)
         elif st.mode == UNLOADING and unloading.end_plateau_auto(st, n - 1):
             # p_atm from the final samples (short record, e.g. 1 Hz): crossing, then tail
             out += unloading.check_final_plateau_auto(st, n - 1, at_end=True)

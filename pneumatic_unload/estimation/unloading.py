@@ -302,6 +302,32 @@ def stalled_at(st: EstimatorState, k: int | np.ndarray) -> np.bool_ | np.ndarray
     return stalled(cs, tv, k, i0=u.i0, sigma=st.sigma, slope0=u.slope0)
 
 
+#: Fewest samples after a confirmed fall that can show it was not followed [-].
+FOLLOW_MIN = 64 * PERIOD
+
+
+def not_followed(st: EstimatorState, k: int) -> bool:
+    """A confirmed fall not followed by an unload, seen at index k: the start not yet fitted
+    (the drop short of 10 % of the pressure change) and the FOLLOW_MIN or more samples
+    since the confirmation show no fall: their straight line's drop over them is less than
+    3 standard errors, the noise's correlation about the line included
+    (:func:`~.regression.variance_inflation`). Correlated noise on a charged plateau gives
+    such a fall in the plateau's first second, whose 32-sample window cannot show the
+    correlation (6 bar, AR(1) rho 0.8-0.95: 5 of 40 idle minutes)."""
+    u = st.unload
+    lo = u.trigger + PERIOD
+    if u.refined or k + 1 - lo < FOLLOW_MIN:
+        return False
+    x = np.frombuffer(st.buf.p, dtype=float)[lo:k + 1]
+    v = np.arange(x.size, dtype=float) - 0.5 * (x.size - 1)
+    y = x - float(np.mean(x))
+    vv = float(v @ v)
+    slope = float(y @ v) / vv
+    e = y - slope * v
+    se = math.sqrt(float(e @ e) / (x.size - 2) / vv * variance_inflation(x))
+    return -slope < 3.0 * se
+
+
 def on_stuck(st: EstimatorState, i: int) -> list[UnloadResult]:
     """The sensor stuck while the pressure must fall (a charge's: rise) (index i): one
     'bad_data' result, and the rest of the unload is skipped."""
