@@ -142,6 +142,14 @@ class Case:
     tau_heat: float
     seed: int = 0
     tau0_recorded: float = TAU0_RECORDED  # the record's length after the opening [tau0]
+    # the rig as it is where the analysis is told the defaults (bench_random_draws
+    # --drawn-inputs): T10 [K], the wall [K] (None: T10), p_atm [Pa abs], the transducer's
+    # zero [Pa] and the V the analysis is given [m^3] (None: ``volume``)
+    t10: float = T10
+    t_wall: float | None = None
+    p_atm: float = P_ATM
+    offset: float = 0.0
+    volume_given: float | None = None
 
 
 def cases(quick: bool = False, seeds: int = 1, family: str | None = None) -> list[Case]:
@@ -176,10 +184,11 @@ def record(case: Case) -> tuple[np.ndarray, np.ndarray]:
     """The case's noisy record: t [s], p [Pa abs]."""
     tau0 = case.volume / (1.4e5 * case.law.conductance)
     t = np.arange(0.0, PLATEAU + case.tau0_recorded * tau0, 1.0 / RATE)
-    p = discharge(t, volume=case.volume, p10=case.p10, t10=T10, p_atm=P_ATM,
-                  tau_heat=case.tau_heat, t_open=PLATEAU, flow_law=case.law)
+    p = discharge(t, volume=case.volume, p10=case.p10, t10=case.t10, p_atm=case.p_atm,
+                  tau_heat=case.tau_heat, t_open=PLATEAU, flow_law=case.law,
+                  t_wall=case.t_wall)
     rng = np.random.default_rng([zlib.crc32(case.name.encode()), case.seed])
-    return t, p + rng.normal(0.0, NOISE, t.size)
+    return t, p + case.offset + rng.normal(0.0, NOISE, t.size)
 
 
 def _finite(*values: object) -> float:
@@ -207,7 +216,8 @@ def run(job: tuple[Case, bool | str]) -> dict:
         given = dict(EXACT_INPUTS_FOREIGN_MODEL)
     start = time.process_time()
     try:
-        results = merge_final(analyze(t, y, EstimatorSettings(volume=case.volume, **given)))
+        volume = case.volume if case.volume_given is None else case.volume_given
+        results = merge_final(analyze(t, y, EstimatorSettings(volume=volume, **given)))
     except Exception as exc:  # a bench reports, it does not stop
         return {**out, "error": f"{type(exc).__name__}: {exc}"[:120]}
     out["cpu"] = time.process_time() - start
