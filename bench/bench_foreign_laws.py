@@ -241,6 +241,7 @@ def run(job: tuple[Case, bool | str]) -> dict:
         m_reported=math.isfinite(m_value), m_fitted=bool(fitted),
         heat_law=fit.get("heat_law", "-"),
         inadequate=bool(extra.get("model_inadequate")),
+        b_note=fit.get("critical_ratio_source", ""),
         largest={q: (extra.get(k) or {}).get("largest", "")
                  for q, k in (("C", "budget"), ("b", "budget_b"), ("m", "budget_m"))})
     return out

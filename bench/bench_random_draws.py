@@ -64,6 +64,7 @@ import argparse
 import dataclasses
 import json
 import math
+import re
 import sys
 from multiprocessing import Pool
 from pathlib import Path
@@ -141,6 +142,14 @@ def drawn_inputs(case: bfl.Case, k: int) -> bfl.Case:
         volume_given=case.volume * (1.0 + float(rng.normal(0.0, 0.005))))
 
 
+def _unreported(note: str, truth: float) -> list[float] | None:
+    """A b not reported: [the fit's b, its sigma, the truth] from the package's note ("not
+    determined: the fit's 0.420 +- 0.051 ..."), None when b is reported or the note gives no
+    value."""
+    hit = re.search(r"the fit's ([0-9.]+) \+- ([0-9.]+)", note or "")
+    return [float(hit[1]), float(hit[2]), truth] if hit else None
+
+
 def _foreign(k: int, mode: str = "default") -> dict:
     case = foreign_case(k)
     if mode == "drawn":
@@ -174,7 +183,9 @@ def _foreign(k: int, mode: str = "default") -> dict:
             f"{'' if res['m_fitted'] else ' held'}, {res['heat_law']}"
             f"{', inadequate' if res['inadequate'] else ''}")
     return {"k": k, "group": case.family, "fail": fail, "text": text,
-            "st": {q: (checks[q][0], zs[q]) for q in checks}, "largest": res["largest"]}
+            "st": {q: (checks[q][0], zs[q]) for q in checks}, "largest": res["largest"],
+            "b_unreported": _unreported(res.get("b_note", ""),
+                                        tr.fit_b if free else tr.critical_ratio)}
 
 
 def _temperature(k: int, kinds: tuple[bool, ...] = (True, False),
@@ -204,6 +215,7 @@ def _temperature(k: int, kinds: tuple[bool, ...] = (True, False),
         out.append({"k": k, "group": group, "fail": fail, "text": text,
                     "st": {"C": (st["c_err"], st["c_z"]), "b": (st["b_err"], st["b_z"]),
                            "m": (st["m_err"], st["m_z"])}, "largest": st["largest"],
+                    "b_unreported": _unreported(st["b_note"], case.b),
                     "t_ratio": st["t_ratio"] if res["with_t"] else None,
                     "offset": (case.offset, st["off_err"], st["off_hit"])})
     return out
@@ -277,7 +289,14 @@ def audit(rows: list[dict]) -> list[str]:
             tol = tolerance(g, q)
             got = [(r["k"], *r["st"][q], r.get("largest", {}).get(q, "?"))
                    for r in rs if q in r["st"] and math.isfinite(r["st"][q][0])]
-            absent = [r["k"] for r in rs if q not in r["st"] or not math.isfinite(r["st"][q][0])]
+            absent = []
+            for r in rs:
+                if q in r["st"] and math.isfinite(r["st"][q][0]):
+                    continue
+                fit = r.get("b_unreported") if q == "b" else None
+                absent.append(f"{r['k']}" if not fit else
+                              f"{r['k']} (the fit's {fit[0]:.3f} +- {fit[1]:.3f} for "
+                              f"{fit[2]:.3f}{': a bound' if tol and fit[1] > tol / 2 else ''})")
             z_ok = [k for k, _e, z, _l in got if math.isfinite(z) and abs(z) <= 2.0]
             miss = [(k, e, z, lg) for k, e, z, lg in got
                     if tol is not None and not (math.isfinite(e) and abs(e) <= tol)]
@@ -291,7 +310,7 @@ def audit(rows: list[dict]) -> list[str]:
             n_reported = len(got)
             lines.append(
                 f"| {g} | {q} | {'-' if tol is None else f'{tol:g}'} | {len(rs)}"
-                f"{f' (not reported: draws {absent})' if absent else ''} | "
+                f"{' (not reported: ' + '; '.join(absent) + ')' if absent else ''} | "
                 f"{'-' if tol is None else f'{n_reported - len(miss)}/{n_reported}'} | "
                 f"{len(z_ok)}/{n_reported} | {coverage_verdict(len(z_ok), n_reported)} | "
                 f"{'; '.join(f'{lg}: {c}' for lg, c in sorted(bound.items())) or '-'} | "

@@ -337,6 +337,7 @@ def row(res: dict) -> tuple[str, dict]:
     stats.update(ok=True, c_err=ce, c_z=_z(c - case.conductance, c_std), b_err=be,
                  b_z=_z(be, b_std), m_err=m - case.m, m_z=_z(m - case.m, m_std),
                  off_hit=off_hit, off_err=oe, t_ratio=ratio,
+                 b_note=u.get("critical_ratio_source") or "",
                  largest={q: (u.get(k) or {}).get("largest", "")
                           for q, k in (("C", "budget"), ("b", "budget_b"), ("m", "budget_m"))},
                  status=u.get("status", "?"), status_text=u.get("status_text", ""))
