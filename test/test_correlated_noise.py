@@ -105,11 +105,12 @@ def test_a_plateau_at_the_end_pressure_has_nothing_to_unload(direction):
 def test_a_fall_not_followed_on_a_charged_plateau_is_no_unload():
     """Idle minutes of AR(1) noise (300 Pa) on a 6 bar plateau: a fall in the plateau's
     first second, whose 32-sample window cannot show the correlation, is confirmed
-    (seeds 4 and 9 at rho 0.9) and nothing follows it; the stream's end used to report it
-    as 'aborted: stream ended before the p* crossing'. The samples since show no fall
-    (unloading.not_followed): no result, a diagnostic says why; per-sample and block
-    input alike. A slow discharge (50 L, tau about 500 s) cut 9 s after its opening, far
-    short of its 10 % drop, is still an unload the stream ended in."""
+    (seeds 4 and 9 at rho 0.9) and nothing follows it. The unload waited for a drop that
+    never came, its samples never trimmed, and the stream's end reported it as 'aborted:
+    stream ended before the p* crossing'. The samples since show no fall (follow.no_fall):
+    waiting again, a diagnostic says why; no result; per-sample and block input decide
+    alike. A slow discharge (50 L, tau about 500 s) cut 9 s after its opening, far short
+    of its 10 % drop, is still an unload the stream ended in."""
     from pneumatic_unload.config import RigConfig
     from pneumatic_unload.model.simulate import simulate
 
@@ -120,10 +121,13 @@ def test_a_fall_not_followed_on_a_charged_plateau_is_no_unload():
         est = StreamingEstimator(EstimatorSettings(volume=2e-3))
         out = est.push_block(t, p) + est.finish()
         assert out == [], [(r.status, r.status_text) for r in out]
-        assert [d.message for d in est.diagnostics if "not followed" in d.message], seed
+        said = [(d.t, d.message) for d in est.diagnostics if "not followed" in d.message]
+        assert len(said) == 1 and "waiting again" in said[0][1], (seed, said)
         one = StreamingEstimator(EstimatorSettings(volume=2e-3))
         assert [r for k in range(20_000) for r in one.push(float(t[k]), float(p[k]))] + \
             one.finish() == []
+        assert [(d.t, d.message) for d in one.diagnostics if "not followed" in d.message] \
+            == said
     cfg = RigConfig(volume=50e-3, conductance=1e-9, initial_pressure=6e5, noise_std=0.0,
                     noise_ar_rho=0.9, noise_ar_std=300.0, seed=2)
     sim = simulate(cfg)
@@ -132,6 +136,30 @@ def test_a_fall_not_followed_on_a_charged_plateau_is_no_unload():
     res = analyze(sim.t[keep], sim.measured[keep], EstimatorSettings(volume=cfg.volume))
     assert [(r.status, r.status_text) for r in res] == \
         [("aborted", "stream ended before the p* crossing")]
+
+
+def test_an_unload_after_a_fall_not_followed_is_found_at_its_opening():
+    """The idle 6 bar plateau of seed 4 above (its phantom fall at 0.35 s, waiting again 8
+    s later), then a discharge opened at 20 s under the same noise: one unload, found at
+    its opening, C within 1 %; block and per-sample input give the same numbers."""
+    from pneumatic_unload.config import RigConfig
+    from pneumatic_unload.model.simulate import simulate
+
+    cfg = RigConfig(volume=2e-3, conductance=8e-9, critical_ratio=0.4, initial_pressure=6e5,
+                    noise_std=0.0, pre_time=20.0, seed=1)
+    sim = simulate(cfg)
+    p = sim.measured + _ar1(sim.t.size, 0.9, 300.0, 4)
+    est = StreamingEstimator(EstimatorSettings(volume=cfg.volume))
+    res = est.push_block(sim.t, p) + est.finish()
+    assert [d for d in est.diagnostics if "not followed" in d.message]
+    (final,) = [r for r in res if r.final]
+    assert {r.t_start for r in res} == {final.t_start}
+    assert final.t_start == pytest.approx(cfg.pre_time, abs=0.02)
+    assert abs(final.conductance_model / cfg.conductance - 1.0) < 0.01
+    one = StreamingEstimator(EstimatorSettings(volume=cfg.volume))
+    got = [r for k in range(p.size) for r in one.push(float(sim.t[k]), float(p[k]))]
+    assert [(r.t_start, r.conductance_model) for r in got + one.finish() if r.final] == \
+        [(final.t_start, final.conductance_model)]
 
 
 def test_an_unload_under_correlated_noise_is_found_as_under_white_noise():

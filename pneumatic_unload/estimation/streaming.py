@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
-from pneumatic_unload.estimation import decisions, detector, sse, tail, unloading
+from pneumatic_unload.estimation import decisions, detector, follow, sse, tail, unloading
 from pneumatic_unload.estimation.buffer import ReadingLog, SampleBuffer
 from pneumatic_unload.estimation.crossing import rehearse_crossing
 from pneumatic_unload.estimation.decisions import SCAN_HORIZON
@@ -329,13 +329,11 @@ class StreamingEstimator:
         u = st.unload
         n = len(st.buf)
         out: list[UnloadResult] = []
+        if st.mode == UNLOADING and follow.lost_at_end(st, n - 1):
+            st.to_waiting(n)  # a fall that nothing followed: no unload to report
         if st.mode == RECOVERY:
             out.append(sse.abort_result(st, n - 1, recovered=False))
             out[-1].final = True
-        elif st.mode == UNLOADING and unloading.not_followed(st, n - 1):
-            st.diag("ok", f"the fall confirmed at {float(st.buf.t[u.trigger]):.3f} s was not "
-                    "followed: at the stream's end the pressure is back at the plateau "
-                    f"({st.to_pa(st.plateau_level):.0f} Pa): no unload", st.last_t)
         elif st.mode == UNLOADING and unloading.end_plateau_auto(st, n - 1):
             # p_atm from the final samples (short record, e.g. 1 Hz): crossing, then tail
             out += unloading.check_final_plateau_auto(st, n - 1, at_end=True)

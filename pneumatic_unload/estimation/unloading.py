@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from pneumatic_unload.estimation import reduction
+from pneumatic_unload.estimation import follow, reduction
 from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.decisions import (
     CONFIRM,
@@ -302,32 +302,6 @@ def stalled_at(st: EstimatorState, k: int | np.ndarray) -> np.bool_ | np.ndarray
     return stalled(cs, tv, k, i0=u.i0, sigma=st.sigma, slope0=u.slope0)
 
 
-#: Fewest samples after a confirmed fall that can show it was not followed [-].
-FOLLOW_MIN = 64 * PERIOD
-
-
-def not_followed(st: EstimatorState, k: int) -> bool:
-    """A confirmed fall not followed by an unload, seen at index k: the start not yet fitted
-    (the drop short of 10 % of the pressure change) and the FOLLOW_MIN or more samples
-    since the confirmation show no fall: their straight line's drop over them is less than
-    3 standard errors, the noise's correlation about the line included
-    (:func:`~.regression.variance_inflation`). Correlated noise on a charged plateau gives
-    such a fall in the plateau's first second, whose 32-sample window cannot show the
-    correlation (6 bar, AR(1) rho 0.8-0.95: 5 of 40 idle minutes)."""
-    u = st.unload
-    lo = u.trigger + PERIOD
-    if u.refined or k + 1 - lo < FOLLOW_MIN:
-        return False
-    x = np.frombuffer(st.buf.p, dtype=float)[lo:k + 1]
-    v = np.arange(x.size, dtype=float) - 0.5 * (x.size - 1)
-    y = x - float(np.mean(x))
-    vv = float(v @ v)
-    slope = float(y @ v) / vv
-    e = y - slope * v
-    se = math.sqrt(float(e @ e) / (x.size - 2) / vv * variance_inflation(x))
-    return -slope < 3.0 * se
-
-
 def on_stuck(st: EstimatorState, i: int) -> list[UnloadResult]:
     """The sensor stuck while the pressure must fall (a charge's: rise) (index i): one
     'bad_data' result, and the rest of the unload is skipped."""
@@ -348,6 +322,8 @@ def step_unloading(st: EstimatorState, i: int) -> list[UnloadResult]:
             st.next_check = i + PERIOD  # the stall test needs the start fit
             if st.stuck(i):
                 return on_stuck(st, i)
+            if follow.due(u.trigger, i) and follow.not_followed(st, i):
+                return follow.wait_again(st, i)
         return []
     if below(p, st.level) and math.isfinite(u.pstar):
         if u.mid_pending:
@@ -380,18 +356,23 @@ def scan_unloading(st: EstimatorState, i: int, end: int) -> int:
     checks = range(st.next_check, min(j, end), PERIOD)
     if len(checks) == 0:
         return j
+    u = st.unload
     if len(checks) <= FEW_CHECKS:  # one at a time, as the step takes them
-        refined = st.unload.refined
+        refined = u.refined
         for k in checks:
-            if st.stuck(k) or (refined and (stalled_at(st, k) or reduce_due(st, k))):
+            if st.stuck(k) or (refined and (stalled_at(st, k) or reduce_due(st, k))) or (
+                    not refined and follow.due(u.trigger, k) and follow.not_followed(st, k)):
                 st.next_check = k
                 return k
         st.next_check = checks[-1] + PERIOD
         return j
     ks = check_indices(st.next_check, min(j, end))
     event = st.stuck(ks)
-    if st.unload.refined:
+    if u.refined:
         event = event | stalled_at(st, ks) | reduce_due(st, ks)
+    else:  # the few checks where the fall's follow-up is tested
+        for h in np.flatnonzero(follow.due(u.trigger, ks)):
+            event[h] |= follow.not_followed(st, int(ks[h]))
     hit = np.flatnonzero(event)
     if hit.size:
         st.next_check = int(ks[int(hit[0])])
