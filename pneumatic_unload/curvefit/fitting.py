@@ -49,6 +49,7 @@ from pneumatic_unload.curvefit.law_search import choose_laws
 from pneumatic_unload.curvefit.offset_offer import (
     OFFSET_GAP_NOISE,
     OFFSET_GAP_Z,
+    OFFSET_READING,
     keep_probe,
     offer_offset,
     offset_verdict,
@@ -166,6 +167,7 @@ def fit_curve(
                                plateau_drift_z=drifts, t10_logged=logged,
                                plateau_bend_z=bends), tried)
     offset_why = ""
+    offset_reading: dict[str, Any] = {}
     if settings.end_pressure is not None:
         # p_atm given: a record that settles away from it (a transducer's zero offset)
         # has the offset fitted, the family fitted again with it, where the criterion
@@ -193,6 +195,18 @@ def fit_curve(
             cf0 = fam.fits[best][0]
             offset_why = (f"fitted: the record settles {cf0.pressure_offset:+.0f} +- "
                           f"{cf0.pressure_offset_std:.0f} Pa from the given p_atm")
+        elif clear and temperature is None:
+            # the end clearly away from p_atm and the offset not preferred: the family's
+            # best with it is a reading of the record all the same, counted by the
+            # criterion in the model-form spread as the laws are (a +0.7 kPa zero taken up
+            # as m 0.833 +- 0.004 and a warm wall, where the constant hA with the offset
+            # read m 0.689 for 0.692, 6 worse by the criterion)
+            offset_reading = {OFFSET_READING + alt[1]: alt[0].fits[alt[1]]}
+            r0 = alt[0].fits[alt[1]][0]
+            offset_why += (f"; with the offset ({r0.pressure_offset:+.0f} Pa) the family's "
+                           f"best ({alt[1]}) reads C {r0.conductance:.4g}, b "
+                           f"{r0.critical_ratio:.3f}, m {r0.subsonic_index:.3f}: in the model "
+                           "form's spread")
     temp_why: dict[str, Any] = {}
     if temperature is not None:
         fam, best, trace, temp_why = with_temperature(fam, best, temperature, tried)
@@ -219,20 +233,24 @@ def fit_curve(
     ref_law = best if len(same) > 1 else min(held, key=lambda k: bic[k])
     pool = same if len(same) > 1 else held
     spread_bic = bic
-    if fam.unclaimed:
+    readings = {**fam.unclaimed, **offset_reading}
+    if readings:
         # a warm gas the record neither claims (within a room's spread, its plateau
         # straight) nor rules out: its hot start's C is a reading of the record all the
         # same, counted by the criterion as the laws are (a 5-8 K warm gas in a large tank
-        # reads C 2-5 % high, z to 2.6, when left out)
-        pool = {**pool, **fam.unclaimed}
-        spread_bic = criterion({**fits, **fam.unclaimed}, span.n)
+        # reads C 2-5 % high, z to 2.6, when left out); so is a zero offset's
+        pool = {**pool, **readings}
+        spread_bic = criterion({**fits, **readings}, span.n)
+    with_m = {k: f for k, f in readings.items() if k.endswith(M_SUFFIX)}
     mf = law_spread(pool, spread_bic, ref_law, LAW_BIC_THRESHOLD, "conductance", empty=0.0)
     mf_b = spread_b(pool, spread_bic, ref_law, LAW_BIC_THRESHOLD)
     if best.endswith(M_SUFFIX):
-        mf_m = law_spread(same, bic, best, LAW_BIC_THRESHOLD, "subsonic_index")
+        mf_m = law_spread({**same, **with_m}, spread_bic, best, LAW_BIC_THRESHOLD,
+                          "subsonic_index")
     elif best + M_SUFFIX in fits:  # m held, the laws fitted with m too: their spread of m
-        mf_m = law_spread({k: f for k, f in fits.items() if k.endswith(M_SUFFIX)}, bic,
-                          best + M_SUFFIX, LAW_BIC_THRESHOLD, "subsonic_index")
+        mf_m = law_spread({**{k: f for k, f in fits.items() if k.endswith(M_SUFFIX)},
+                           **with_m}, spread_bic, best + M_SUFFIX, LAW_BIC_THRESHOLD,
+                          "subsonic_index")
         m_c, m_b, m_u = held_spread(m_c, m_b, m_u, mf_m)
     else:
         mf_m = math.nan

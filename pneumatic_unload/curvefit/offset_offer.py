@@ -32,6 +32,9 @@ OFFSET_GAP_Z = 5.0
 #: ``bench/bench_engine.py`` ends 281 Pa above p_atm, 32 standard errors but 0.28 of its
 #: noise: probing it in full cost ``analyze`` 0.1 s, 0.42 -> 0.49 of a raw bag iteration).
 OFFSET_GAP_NOISE = 0.5
+#: Key prefix of the family's best fit with the offset where the offset is not fitted
+#: though the record's end is clearly away from p_atm: a reading in the model-form spread.
+OFFSET_READING = "with the offset: "
 #: The record's last 2 % must lie within this fraction of the drop of the given p_atm plus
 #: the fitted offset [-]: the record settles on its final plateau.
 SETTLED_FRACTION = 0.01
