@@ -43,8 +43,11 @@ settings.register_profile(
                            HealthCheck.filter_too_much])
 settings.load_profile("make-test")
 
-#: Time bound of one example [s] (a hang fails the test).
-LIMIT_S = 60.0
+#: Time bound of one example [s]: a hang fails the test, a slow machine must not. The
+#: slowest example (a 1.3 Hz logger CSV of a slow discharge with its temperature column:
+#: hot starts and the joint fit) takes 24-31 s beside two other busy processes on 2
+#: cores; with four, a fresh clone's ``make test`` passed 60 s on it.
+LIMIT_S = 180.0
 #: Wild input overflows numpy's arithmetic on purpose: its warnings are not failures.
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 
