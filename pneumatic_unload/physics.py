@@ -81,11 +81,11 @@ AIR = Gas()
 
 def flow_function(
     r: ArrayLike, critical_ratio: float, subsonic_index: float = 0.5,
-    r_linear: float = R_LINEAR,
+    r_linear: float = R_LINEAR, ellipse_exponent: float = 2.0,
 ) -> NDArray[np.float64]:
     """ISO 6358 flow function phi(r) of the pressure ratio r = p2/p1 [-].
 
-    phi = 1 for r <= b (choked); [1 - ((r - b)/(1 - b))^2]^m for b < r <= r_linear;
+    phi = 1 for r <= b (choked); [1 - ((r - b)/(1 - b))^q]^m for b < r <= r_linear;
     linear in (1 - r) above r_linear, reaching 0 at r = 1 and going negative (reverse flow)
     for r > 1, so that ODE solvers see a Lipschitz right-hand side.
 
@@ -99,6 +99,8 @@ def flow_function(
         Subsonic index m [-] (0.5 is the paper's eq 7 ellipse).
     r_linear : float
         Start of the linear end region [-].
+    ellipse_exponent : float
+        q [-]: 2 in ISO 6358-1:2013 (the kernel's ``pu_flow_phi`` alike).
 
     Returns
     -------
@@ -108,9 +110,11 @@ def flow_function(
     r = np.asarray(r, dtype=float)
     b = critical_ratio
     x = np.clip((r - b) / (1.0 - b), 0.0, None)
-    phi = np.where(r <= b, 1.0, np.power(np.clip(1.0 - x * x, 0.0, None), subsonic_index))
+    q = ellipse_exponent
+    xq = x * x if q == 2.0 else np.power(x, q)
+    phi = np.where(r <= b, 1.0, np.power(np.clip(1.0 - xq, 0.0, None), subsonic_index))
     xl = (r_linear - b) / (1.0 - b)
-    phi_l = (1.0 - xl * xl) ** subsonic_index
+    phi_l = (1.0 - (xl * xl if q == 2.0 else xl ** q)) ** subsonic_index
     lin = phi_l * (1.0 - r) / (1.0 - r_linear)
     return np.where(r > r_linear, lin, phi)
 

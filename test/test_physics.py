@@ -49,6 +49,27 @@ def test_flow_function_shape():
                 float(ph.flow_function(x, bb, mm)), rel=1e-14, abs=1e-15)
 
 
+def test_flow_function_with_another_ellipse_exponent():
+    """phi = (1 - x^q)^m: the closed form at q 3, the ISO law bit for bit at q 2, the
+    linear end continuous, the compiled twin the same function."""
+    b, m, q = 0.3, 0.4, 3.0
+    x = (0.65 - b) / (1 - b)
+    assert float(ph.flow_function(0.65, b, m, ellipse_exponent=q)) == pytest.approx(
+        (1 - x**3) ** m, rel=1e-14)
+    r = np.linspace(0.0, 1.1, 57)
+    assert np.array_equal(ph.flow_function(r, b, m, ellipse_exponent=2.0),
+                          ph.flow_function(r, b, m))
+    e = 1e-9
+    lo, hi = ph.flow_function([ph.R_LINEAR - e, ph.R_LINEAR + e], b, m, ellipse_exponent=q)
+    assert lo == pytest.approx(hi, rel=1e-5)
+    for xx in (0.1, 0.5, 0.9, 0.9995, 1.001):
+        for qq in (1.3, 2.0, 3.7):
+            assert kernel.flow_phi(xx, b, m, ph.R_LINEAR, q=qq) == pytest.approx(
+                float(ph.flow_function(xx, b, m, ellipse_exponent=qq)), rel=1e-14, abs=1e-15)
+    # a larger q: a flow closer to choked just above b (the curve's knee sharper)
+    assert ph.flow_function(0.5, b, m, ellipse_exponent=3.0) > ph.flow_function(0.5, b, m)
+
+
 def test_simulated_isentropic_discharge_matches_closed_form():
     cfg = RigConfig(volume=2e-3, conductance=5e-9, critical_ratio=0.5, pre_time=0.0,
                     initial_temperature=300.0, noise_std=0.0)

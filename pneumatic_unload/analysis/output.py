@@ -71,6 +71,9 @@ UNLOAD_JSON_KEYS: dict[str, str] = {
     "critical_ratio_source": "final results: why b is not reported (null), with the fit's "
                              "value and 1-sigma, in words; '' when it is",
     "offset_source": "why the transducer's zero offset was fitted or not, in words",
+    "shape_source": "final results: the flow curve's shape beyond the ISO 6358-1 law, in "
+                    "words: the ellipse's exponent q fitted and the ISO (b, m) nearest that "
+                    "curve over r (in the model form's spread of b and m), or why not read",
     "gas_temperature": "final results in 'unloads': the evidence of the record's gas "
                        "temperature: 'used' (false, with 'why', when the record carries "
                        "none); when used, the fitted readings' rms and the channel's noise "
@@ -120,6 +123,7 @@ def unload_json(r: UnloadResult) -> dict[str, Any]:
     d["subsonic_source"] = cf.get("subsonic_source", "")
     d["critical_ratio_source"] = cf.get("critical_ratio_source", "")
     d["offset_source"] = cf.get("offset_source", "")
+    d["shape_source"] = cf.get("shape_source", "")
     if "gas_temperature" in extra:
         d["gas_temperature"] = extra["gas_temperature"]
     d["model_inadequate"] = extra.get("model_inadequate", "")

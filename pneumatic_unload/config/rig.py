@@ -66,6 +66,10 @@ class RigConfig(TankSpec):
         "sonic conductance C of the component under test")
     critical_ratio: float = number(0.4, "-", 0.0, 0.99, "critical pressure ratio b")
     subsonic_index: float = number(0.5, "-", 0.1, 1.0, "ISO 6358 subsonic index m")
+    ellipse_exponent: float = number(
+        2.0, "-", 1.0, 6.0, "exponent q of the subsonic branch, phi = (1 - x^q)^m, x = (r - "
+        "b)/(1 - b): 2 in ISO 6358-1:2013; another q is a flow curve that is not ISO-shaped "
+        "(two restrictions in series)")
     initial_pressure: float = number(
         7e5, "Pa", 1e3, 5e7, "initial tank pressure p10 (absolute; a charge's starting "
         "pressure, e.g. an evacuated tank's few kPa)")

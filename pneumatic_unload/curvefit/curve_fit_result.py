@@ -112,6 +112,13 @@ class CurveFit:
         the heat laws), else held at 0.5 (std NaN).
     subsonic_index_fitted : bool
         m was fitted (True) or held (False).
+    ellipse_exponent, ellipse_exponent_std : float
+        The exponent q of the subsonic branch's ellipse, phi = (1 - x^q)^m, and its 1-sigma
+        [-]: 2 and NaN in the ISO 6358-1 law (always, but in the flow-curve shape's
+        reading, :mod:`pneumatic_unload.curvefit.shape_reading`).
+    shape_source : str
+        The flow-curve shape's reading in words: the law fitted with q free and the ISO
+        6358-1 (b, m) nearest its flow curve ('' where it was not made).
     subsonic_std, subsonic_std_b : float
         With m held: C's [m^3/(s Pa)] and b's [-] standard uncertainty from holding it (the
         budgets' 'subsonic index' line, :mod:`pneumatic_unload.curvefit.subsonic_offer`); 0 when m
@@ -185,6 +192,9 @@ class CurveFit:
     subsonic_std: float = 0.0
     subsonic_std_b: float = 0.0
     subsonic_source: str = ""
+    ellipse_exponent: float = 2.0
+    ellipse_exponent_std: float = math.nan
+    shape_source: str = ""
     model_form_std_m: float = math.nan
     pressure_offset: float = 0.0
     pressure_offset_std: float = math.nan

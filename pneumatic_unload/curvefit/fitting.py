@@ -56,6 +56,7 @@ from pneumatic_unload.curvefit.offset_offer import (
     unfitted_offset_lines,
 )
 from pneumatic_unload.curvefit.plateau import plateau_bend, plateau_drift
+from pneumatic_unload.curvefit.shape_reading import read_shape, shape_wins
 from pneumatic_unload.curvefit.subsonic_offer import (
     M_SUFFIX,
     held_lines,
@@ -233,7 +234,11 @@ def fit_curve(
     ref_law = best if len(same) > 1 else min(held, key=lambda k: bic[k])
     pool = same if len(same) > 1 else held
     spread_bic = bic
-    readings = {**fam.unclaimed, **offset_reading}
+    # the flow curve's shape beyond the ISO law: the ISO (b, m) nearest the curve fitted
+    # with q free, a reading as the others (a pair in series read b 0.347 by the discharge's
+    # own weighting where its curve's is 0.210)
+    shape, shape_why = read_shape(fam, best) if temperature is None else ({}, "")
+    readings = {**fam.unclaimed, **offset_reading, **shape}
     if readings:
         # a warm gas the record neither claims (within a room's spread, its plateau
         # straight) nor rules out: its hot start's C is a reading of the record all the
@@ -256,6 +261,19 @@ def fit_curve(
         mf_m = math.nan
     if ref_law != best:  # relative spreads carried over to the chosen law's values
         mf *= cf.conductance / fits[ref_law][0].conductance
+    if (won := shape_wins(shape, spread_bic, best)) is not None:
+        # the curve with q free clearly better: the ISO (b, m) nearest it reported, the
+        # spreads kept about the discharge's own ISO fit: the move is their model-form
+        # line (q is one shape among many; a pair in series, 46 L: b 0.265 and m 0.547 by
+        # the discharge's weighting, 0.253 and 0.570 from the curve, for 0.250 and 0.575,
+        # with the curve's own sigma 0.002 and 0.003 covering m at z -2.1 only)
+        got = shape[won][0]
+        cf = dataclasses.replace(cf, critical_ratio=got.critical_ratio,
+                                 critical_ratio_std=got.critical_ratio_std,
+                                 critical_ratio_source="", subsonic_index_fitted=True,
+                                 subsonic_index=got.subsonic_index)
+        m_c, m_b, m_u = 0.0, 0.0, got.subsonic_index_std
+        m_why = f"m fitted: the ISO law nearest the flow curve with q free ({shape_why})"
     table = {law: {"conductance": f[0].conductance, "critical_ratio": f[0].critical_ratio,
                    "bic": bic[law], "chi2": f[1] / criterion_unit(fits),
                    **({"subsonic_index": f[0].subsonic_index,
@@ -270,7 +288,7 @@ def fit_curve(
         heat_law=best.removesuffix(M_SUFFIX) if natural else "none",
         not_offered=_refusals(fam), subsonic_std=m_c, subsonic_std_b=m_b,
         subsonic_index_std=m_u, subsonic_source=m_why, model_form_std_m=mf_m,
-        offset_source=offset_why,
+        offset_source=offset_why, shape_source=shape_why,
         gas_temperature=cf.gas_temperature or temp_why)
     if settings.end_pressure is not None and not settings.charge and not fam.offset:
         out = dataclasses.replace(out, unfitted_offset=unfitted_offset_lines(fam, best))

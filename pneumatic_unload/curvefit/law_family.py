@@ -2,15 +2,14 @@
 variants, each with the subsonic index m held at 0.5 or fitted; and the information
 criterion that chooses among them.
 
-:class:`Family` fits the laws in turn (:func:`~pneumatic_unload.curvefit.law_fit.fit_law`), each
-starting from the first law's fit, offers a law with a second parameter only where the
-record determines it (:mod:`pneumatic_unload.curvefit.heat_law_offer`), explores strong and weak
-exchange when every law leaves structure, and adds the hot-start variants where the wall
-assumed at T10 leaves structure or T10 is far from a room's temperature. :func:`offer_m`
-adds a law's variant with m fitted (or held) where the record determines m
-(:mod:`pneumatic_unload.curvefit.subsonic_offer`). :func:`criterion` is the BIC of every fit.
-Keys of the table: the law ('natural', 'fixed', 'density', 'natural+turbulent'), '+wall'
-for a hot start, '|m' for m fitted.
+:class:`Family` fits the laws in turn (:func:`~.law_fit.fit_law`), each starting from the
+first law's fit, offers a law with a second parameter only where the record determines it
+(:mod:`~.heat_law_offer`), explores strong and weak exchange when every law leaves
+structure, and adds the hot-start variants where the wall assumed at T10 leaves structure
+or T10 is far from a room's temperature. :func:`offer_m` adds a law's variant with m fitted
+(or held) where the record determines m (:mod:`~.subsonic_offer`). :func:`criterion` is
+the BIC of every fit. Keys: the law ('natural', 'fixed', 'density', 'natural+turbulent'),
+'+wall' for a hot start, '|m' for m fitted.
 
 SI units: s, Pa absolute, K, m^3/(s Pa).
 """
@@ -166,19 +165,20 @@ class Family:
         return self.settings.heat_model == "natural"
 
     def fit(self, key: str, *, start: dict[str, float] | None, max_nfev: int,
-            profile_heat: bool = False, explore: bool = False) -> Fit:
-        """The fit of a table key [see the module note] (kept in ``raw``, not offered)."""
-        law, wall, fit_m = split_key(key)
-        if key in self.seeds:  # a start near this key's minimum: a few iterations
+            profile_heat: bool = False, explore: bool = False, fit_q: bool = False,
+            keep: dict[str, Any] | None = None) -> Fit:
+        """The fit of a table key (kept in ``raw``, not offered); ``fit_q``: q freed too,
+        a reading (:mod:`~.shape_reading`) kept in ``keep`` alone."""
+        (law, wall, fit_m), kept = split_key(key), {} if keep is None else keep
+        if key in self.seeds and not fit_q:  # a start near this key's minimum
             start, max_nfev = self.seeds[key], max(max_nfev, SEEDED_NFEV)
-        kept: dict[str, Any] = {}
-        self.raw[key] = kept
+        self.raw.update({} if fit_q else {key: kept})
         settings, warm = self.settings, wall and self.t10_assumed
         if warm:  # a hot start read as a gas warm from its charge in a tank at the room's
             settings = with_wall(settings, AMBIENT_TEMPERATURE)
         out = fit_law(self.span, settings, profile_heat=profile_heat, law=law,
                       start=start, max_nfev=max_nfev, fit_wall=wall and not warm,
-                      fit_m=fit_m, fit_offset=self.offset, fit_t10=warm,
+                      fit_m=fit_m, fit_offset=self.offset, fit_t10=warm, fit_q=fit_q,
                       explore=explore, keep=kept, **self.common)
         kept["fit"], kept["entry"] = out[0], out
         return out

@@ -106,7 +106,7 @@ def fit_law(
     profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
     max_nfev: int = 200, explore: bool = False, trace: Trace,
     hold: tuple[str, ...] = (), fit_wall: bool = False, fit_m: bool = False,
-    fit_offset: bool = False, fit_t10: bool = False,
+    fit_offset: bool = False, fit_t10: bool = False, fit_q: bool = False,
     keep: dict[str, Any] | None = None,
 ) -> tuple[CurveFit, float, int]:
     """One law's fit for :func:`~pneumatic_unload.curvefit.fitting.fit_curve`; returns (fit,
@@ -150,6 +150,9 @@ def fit_law(
         Fit the subsonic index m too (else held at 0.5).
     fit_t10 : bool
         Fit T10 too (a hot start whose T10 was not measured: the wall as in ``settings``).
+    fit_q : bool
+        Fit the exponent q of the subsonic branch's ellipse too (else ISO 6358-1's 2; see
+        :mod:`pneumatic_unload.curvefit.shape_reading`).
     keep : dict, optional
         Receives the fit's :class:`~pneumatic_unload.fit.lsq.FitResult` ('result') and
         model ('model'), for :func:`~pneumatic_unload.curvefit.wall_moves.wall_linear`.
@@ -168,7 +171,7 @@ def fit_law(
     ch = trace.channel
     model = estimator_model(settings, neutral, heat_law=law, fit_wall=fit_wall, fit_m=fit_m,
                             fit_offset=fit_offset, thermometer=ch is not None,
-                            fit_t10=fit_t10,
+                            fit_t10=fit_t10, fit_q=fit_q,
                             thermometer_offset=ch is not None and ch.offset)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
     if ch is not None and ch.lag is not None:
@@ -280,6 +283,8 @@ def fit_law(
         whiteness_p=whiteness_p, heat_turbulent=v.get("heat_turbulent", 1.0),
         heat_turbulent_std=float(std["heat_turbulent"]) if "heat_turbulent" in free
         else math.nan, subsonic_index=m, subsonic_index_std=m_std, subsonic_index_fitted=fit_m,
+        ellipse_exponent=v.get("q", 2.0),
+        ellipse_exponent_std=float(std["q"]) if "q" in free else math.nan,
         pressure_offset=v.get("offset", 0.0),
         pressure_offset_std=float(std["offset"]) if "offset" in free else math.nan,
         gas_temperature=channel_summary(ch, fit.fun, v, std) if ch is not None else

@@ -23,7 +23,11 @@ from pneumatic_unload.config.estimator import EstimatorSettings, wall_uncertaint
 from pneumatic_unload.config.tank import wall_pair
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import Start
-from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START, ParametricModel
+from pneumatic_unload.model.parametric import (
+    ISO_ELLIPSE_EXPONENT,
+    SUBSONIC_INDEX_START,
+    ParametricModel,
+)
 from pneumatic_unload.physics import P_STAR_FRACTION, isentropic_crossing_time
 
 FloatArray = NDArray[np.float64]
@@ -38,14 +42,15 @@ def estimator_model(settings: EstimatorSettings, start: Start, *,
                     p_atm: float | None = None, heat_law: str = "natural",
                     fit_wall: bool = False, fit_m: bool = False,
                     fit_offset: bool = False, thermometer: bool = False,
-                    fit_t10: bool = False, thermometer_offset: bool = False
-                    ) -> ParametricModel:
+                    fit_t10: bool = False, thermometer_offset: bool = False,
+                    fit_q: bool = False) -> ParametricModel:
     """The parametric model of the estimator: heat transfer (``heat_law``, and the wall
     temperature as a parameter with ``fit_wall``) or none; the subsonic index m a parameter
     with ``fit_m`` (else held at 0.5); the transducer's zero offset a parameter ('offset'
     [Pa]) with ``fit_offset``; T10 and a thermometer's lag parameters with ``thermometer``
     (a logged gas temperature fitted beside), and its offset [K] with
-    ``thermometer_offset``; T10 alone with ``fit_t10``."""
+    ``thermometer_offset``; T10 alone with ``fit_t10``; the ellipse's exponent q a
+    parameter with ``fit_q`` (else ISO 6358-1's 2)."""
     effects: tuple[str, ...] = ("heat_transfer",) if settings.heat_model == "natural" else ()
     if fit_offset:
         effects = (*effects, "sensor_offset")
@@ -59,6 +64,7 @@ def estimator_model(settings: EstimatorSettings, start: Start, *,
     return ParametricModel(effects, tank, start, heat_law=heat_law,
                            fit_wall_temperature=fit_wall and bool(effects),
                            subsonic_index=None if fit_m else SUBSONIC_INDEX_START,
+                           ellipse_exponent=None if fit_q else ISO_ELLIPSE_EXPONENT,
                            thermometer=thermometer, fit_initial_temperature=fit_t10,
                            thermometer_offset=thermometer_offset, charge=charge)
 

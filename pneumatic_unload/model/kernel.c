@@ -15,7 +15,7 @@ enum {
     HEAT_MODE, HEAT_A, HEAT_RA, PIPE, PIPE_VOLUME, PIPE_C_RHO,
     T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN,
     LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B, HEAT_TURB,
-    CHARGE, P_SUPPLY, T_SUPPLY, HEAT_JET, N_PARAMETERS
+    CHARGE, P_SUPPLY, T_SUPPLY, HEAT_JET, Q_EXPONENT, N_PARAMETERS
 };
 
 /* Exponent of the inflow's Reynolds number in a charge's jet-driven convection [-]. */
@@ -47,16 +47,25 @@ static double grid_step(double h)
 }
 
 /* ISO 6358 flow function phi(r), r = p2/p1 [-]; b critical ratio, m subsonic index,
- * linear in (1 - r) above r_linear (0 at r = 1, negative beyond: reverse flow). */
-double pu_flow_phi(double r, double b, double m, double r_linear)
+ * q the exponent of the subsonic branch's ellipse (2 in ISO 6358-1:2013: phi =
+ * (1 - x^q)^m, x = (r - b)/(1 - b); another q describes a curve that is not ISO-shaped,
+ * e.g. two restrictions in series), linear in (1 - r) above r_linear (0 at r = 1,
+ * negative beyond: reverse flow). q = 2 is computed as x * x (the law as it always was,
+ * bit for bit). */
+static double ellipse_power(double x, double q)
+{
+    return q == 2.0 ? x * x : pow(x, q);
+}
+
+double pu_flow_phi(double r, double b, double m, double q, double r_linear)
 {
     if (r <= b) return 1.0;
     if (r > r_linear) {
         double xl = (r_linear - b) / (1.0 - b);
-        return pow(1.0 - xl * xl, m) * (1.0 - r) / (1.0 - r_linear);
+        return pow(1.0 - ellipse_power(xl, q), m) * (1.0 - r) / (1.0 - r_linear);
     }
     double x = (r - b) / (1.0 - b);
-    return pow(1.0 - x * x, m);
+    return pow(1.0 - ellipse_power(x, q), m);
 }
 
 /* Wall heat flow into the gas Q [W] at p [Pa], gas temperature t_gas [K].
@@ -97,11 +106,11 @@ static double valve_branch(double a, double p, double t_node, const double *prm)
     /* the component's term in the order of the original formula (bit-identical results
      * without leaks) */
     double g = a * prm[C_RHO] * p * sq_tn / sqrt(t_node)
-               * pu_flow_phi(p_atm / p, prm[B_RATIO], prm[M_INDEX], r_lin);
+               * pu_flow_phi(p_atm / p, prm[B_RATIO], prm[M_INDEX], prm[Q_EXPONENT], r_lin);
     if (prm[LEAK_DOWN] != 0.0) g += a * prm[LEAK_DOWN] * (p - p_atm);
     if (prm[OLEAK_DOWN_C_RHO] > 0.0)
         g += a * prm[OLEAK_DOWN_C_RHO] * p * sq_tn / sqrt(t_node)
-             * pu_flow_phi(p_atm / p, prm[OLEAK_DOWN_B], LEAK_M_INDEX, r_lin);
+             * pu_flow_phi(p_atm / p, prm[OLEAK_DOWN_B], LEAK_M_INDEX, 2.0, r_lin);
     return g;
 }
 
@@ -114,7 +123,7 @@ static double supply_branch(double a, double p, const double *prm)
     if (a <= 0.0) return 0.0;
     double p_s = prm[P_SUPPLY];
     return a * prm[C_RHO] * p_s * prm[SQRT_TN] / sqrt(prm[T_SUPPLY])
-           * pu_flow_phi(p / p_s, prm[B_RATIO], prm[M_INDEX], prm[R_LIN]);
+           * pu_flow_phi(p / p_s, prm[B_RATIO], prm[M_INDEX], prm[Q_EXPONENT], prm[R_LIN]);
 }
 
 /* dy/dt of y = (p [Pa], T [K][, p_pipe [Pa]]) at t [s].
@@ -135,7 +144,7 @@ void pu_rhs(double t, const double *y, const double *prm, double *dy)
         double g_leak = prm[LEAK] * (p1 - p_atm);
         if (prm[OLEAK_C_RHO] > 0.0)
             g_leak += prm[OLEAK_C_RHO] * p1 * sq_tn / sqrt(t1)
-                      * pu_flow_phi(p_atm / p1, prm[OLEAK_B], LEAK_M_INDEX, r_lin);
+                      * pu_flow_phi(p_atm / p1, prm[OLEAK_B], LEAK_M_INDEX, 2.0, r_lin);
         double q = pu_heat_flow(prm[HEAT_MODE], prm[HEAT_A], prm[HEAT_RA], t_wall, p1, t1,
                                 prm[HEAT_TURB]);
         /* forced convection by the incoming jet: hA = HEAT_JET |g_in|^0.67 [W/K] */
@@ -152,7 +161,7 @@ void pu_rhs(double t, const double *y, const double *prm, double *dy)
     }
     if (prm[PIPE] > 0.0) {
         double p2 = y[2];
-        g1 = prm[PIPE_C_RHO] * p1 * sq_tn / sqrt(t1) * pu_flow_phi(p2 / p1, 0.5, 0.5, r_lin);
+        g1 = prm[PIPE_C_RHO] * p1 * sq_tn / sqrt(t1) * pu_flow_phi(p2 / p1, 0.5, 0.5, 2.0, r_lin);
         double g2 = valve_branch(a, p2, t_wall, prm);
         dy[2] = prm[R_GAS] * t_wall / prm[PIPE_VOLUME] * (g1 - g2);
     } else {
@@ -161,7 +170,7 @@ void pu_rhs(double t, const double *y, const double *prm, double *dy)
     double g_out = g1 + prm[LEAK] * (p1 - p_atm);
     if (prm[OLEAK_C_RHO] > 0.0)
         g_out += prm[OLEAK_C_RHO] * p1 * sq_tn / sqrt(t1)
-                 * pu_flow_phi(p_atm / p1, prm[OLEAK_B], LEAK_M_INDEX, r_lin);
+                 * pu_flow_phi(p_atm / p1, prm[OLEAK_B], LEAK_M_INDEX, 2.0, r_lin);
     double q = pu_heat_flow(prm[HEAT_MODE], prm[HEAT_A], prm[HEAT_RA], t_wall, p1, t1,
                             prm[HEAT_TURB]);
     /* The gas leaving (or, for g < 0, entering) is taken at the tank gas temperature.

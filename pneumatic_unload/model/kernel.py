@@ -63,7 +63,9 @@ HEAT_TURB = 26
 # a charge (1.0; 0.0: a discharge) from a supply at P_SUPPLY [Pa abs], T_SUPPLY [K]; the
 # coefficient of its jet-driven convection, hA = HEAT_JET |G_in|^JET_EXPONENT [W/K]
 CHARGE, P_SUPPLY, T_SUPPLY, HEAT_JET = 27, 28, 29, 30
-N_PARAMETERS = 31
+# the exponent q of the component's subsonic ellipse, phi = (1 - x^q)^m [-] (2: ISO 6358-1)
+Q_EXPONENT = 31
+N_PARAMETERS = 32
 #: Exponent of the inflow's Reynolds number in a charge's jet-driven convection
 #: (JET_EXPONENT of kernel.c) [-].
 JET_EXPONENT = 0.67
@@ -168,7 +170,7 @@ def _load() -> ctypes.CDLL:
     if lib.pu_n_parameters() != N_PARAMETERS:
         raise KernelBuildError("kernel.c and kernel.py disagree on the parameter slots")
     lib.pu_flow_phi.restype = dbl
-    lib.pu_flow_phi.argtypes = [dbl] * 4
+    lib.pu_flow_phi.argtypes = [dbl] * 5
     lib.pu_heat_flow.restype = dbl
     lib.pu_heat_flow.argtypes = [dbl] * 7
     lib.pu_opening.restype = dbl
@@ -189,14 +191,15 @@ def _load() -> ctypes.CDLL:
 _LIB = _load()
 
 
-def flow_phi(r: float, b: float, m: float, r_linear: float) -> float:
+def flow_phi(r: float, b: float, m: float, r_linear: float, q: float = 2.0) -> float:
     """ISO 6358 flow function phi(r) of the pressure ratio r = p2/p1 [-].
 
-    1 for r <= b (choked); [1 - ((r - b)/(1 - b))^2]^m up to r_linear; linear in (1 - r)
+    1 for r <= b (choked); [1 - ((r - b)/(1 - b))^q]^m up to r_linear; linear in (1 - r)
     above, 0 at r = 1 and negative beyond (reverse flow). b: critical pressure ratio [-];
-    m: subsonic index [-]; r_linear [-].
+    m: subsonic index [-]; r_linear [-]; q: the ellipse's exponent [-] (2 in ISO
+    6358-1:2013; another q: a flow curve that is not ISO-shaped).
     """
-    return float(_LIB.pu_flow_phi(r, b, m, r_linear))
+    return float(_LIB.pu_flow_phi(r, b, m, q, r_linear))
 
 
 def heat_flow(mode: float, coeff: float, ra_const: float, t_wall: float, p: float,

@@ -120,6 +120,7 @@ def kernel_parameters(cfg: RigConfig, t_open: float) -> FloatArray:
     prm[kernel.T_WALL] = cfg.wall
     prm[kernel.B_RATIO] = cfg.critical_ratio
     prm[kernel.M_INDEX] = cfg.subsonic_index
+    prm[kernel.Q_EXPONENT] = cfg.ellipse_exponent
     prm[kernel.C_RHO] = cfg.conductance * RHO_N
     prm[kernel.LEAK] = cfg.leak_coefficient if cfg.has("leak") else 0.0
     if cfg.has("leak_downstream"):

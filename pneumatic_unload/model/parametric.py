@@ -41,6 +41,10 @@ from pneumatic_unload.model.sensor import first_order_lag, sensor_response
 SUBSONIC_INDEX_START = 0.5
 #: Bounds of a fitted m [-] (the simulator's range).
 SUBSONIC_INDEX_RANGE = (0.1, 1.0)
+#: The exponent q of the subsonic branch's ellipse in ISO 6358-1:2013 [-].
+ISO_ELLIPSE_EXPONENT = 2.0
+#: Bounds of a fitted q [-] (those of the configuration's ``ellipse_exponent``).
+ELLIPSE_EXPONENT_RANGE = (1.0, 6.0)
 #: Bounds of a thermometer's fitted time constant [s] (a reading as good as instantaneous
 #: - a simulator's, or a probe far faster than the logger - to a sheathed probe in a
 #: thermowell) and its start.
@@ -86,6 +90,12 @@ class ParametricModel:
         The component's ISO 6358-1 subsonic index m [-] held at this value; None: m is a
         parameter ('m', start :data:`SUBSONIC_INDEX_START`, bounds
         :data:`SUBSONIC_INDEX_RANGE`).
+    ellipse_exponent : float or None
+        The exponent q of the component's subsonic ellipse, phi = (1 - x^q)^m [-], held at
+        this value (2: ISO 6358-1:2013); None: q is a parameter ('q', start 2, bounds
+        :data:`ELLIPSE_EXPONENT_RANGE`): a flow curve that is not ISO-shaped (two
+        restrictions in series), read by
+        :mod:`pneumatic_unload.curvefit.shape_reading`.
     thermometer : bool
         A logged gas temperature is fitted beside the pressure: T10 (the gas temperature at
         the opening, 't10' [K], start ``tank.initial_temperature``) and the thermometer's
@@ -107,6 +117,7 @@ class ParametricModel:
     def __init__(self, effects: tuple[str, ...], tank: TankSpec, start: Start, *,
                  heat_law: str = "natural", fit_wall_temperature: bool = False,
                  subsonic_index: float | None = SUBSONIC_INDEX_START,
+                 ellipse_exponent: float | None = ISO_ELLIPSE_EXPONENT,
                  thermometer: bool = False, fit_initial_temperature: bool = False,
                  thermometer_offset: bool = False,
                  charge: tuple[float | None, float] | None = None) -> None:
@@ -129,6 +140,7 @@ class ParametricModel:
         self.hot_start = HOT_START in effects
         self.fit_wall_temperature = fit_wall_temperature or self.hot_start
         self.subsonic_index = subsonic_index
+        self.ellipse_exponent = ellipse_exponent
         self.thermometer = thermometer
         self.thermometer_offset = thermometer and thermometer_offset
         self.fit_initial_temperature = fit_initial_temperature or thermometer
@@ -160,6 +172,10 @@ class ParametricModel:
             lo, hi = SUBSONIC_INDEX_RANGE
             ps.append(Parameter("m", SUBSONIC_INDEX_START, lo, hi, "-", scale=0.1,
                                 doc="ISO 6358-1 subsonic index"))
+        if self.ellipse_exponent is None:
+            lo, hi = ELLIPSE_EXPONENT_RANGE
+            ps.append(Parameter("q", ISO_ELLIPSE_EXPONENT, lo, hi, "-", scale=0.2,
+                                doc="exponent of the subsonic branch's ellipse"))
         if self.fit_initial_temperature:
             ps.append(Parameter("t10", self.tank.initial_temperature, 150.0, 600.0, "K",
                                 scale=2.0, doc="gas temperature at the valve opening"))
@@ -248,6 +264,8 @@ class ParametricModel:
             "initial_pressure": clamp(v["p10"], *P10_BOUNDS),
             "subsonic_index": clamp(v.get("m", self.subsonic_index or SUBSONIC_INDEX_START),
                                     *SUBSONIC_INDEX_RANGE),
+            "ellipse_exponent": clamp(v.get("q", self.ellipse_exponent or
+                                            ISO_ELLIPSE_EXPONENT), *ELLIPSE_EXPONENT_RANGE),
             "wall_temperature": float(v.get("t_wall", tank.wall if "t10" not in v or
                                             tank.wall_temperature is not None
                                             else clamp(v["t10"], 150.0, 600.0)))}
