@@ -350,6 +350,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--draw", type=int, help="analyse this draw alone and print it")
     ap.add_argument("--with-log-only", action="store_true",
                     help="temperature: each record with its log only (not without it)")
+    ap.add_argument("--without-log-only", action="store_true",
+                    help="temperature: each record without its log only")
     ap.add_argument("--record-only", action="store_true",
                     help="the inputs exact and no model-limits line: the record's own sigma")
     ap.add_argument("--drawn-inputs", action="store_true",
@@ -366,7 +368,8 @@ def main(argv: list[str]) -> int:
     if args.kind is None:
         return max(main([kind, *argv]) for kind in ("foreign", "temperature"))
     ks = [args.draw] if args.draw is not None else range(args.first, args.first + args.draws)
-    kinds = (True,) if args.with_log_only else (True, False)
+    kinds = (True,) if args.with_log_only else (False,) if args.without_log_only \
+        else (True, False)
     if args.drawn_inputs and args.kind != "foreign":
         ap.error("--drawn-inputs: the foreign draws only (the temperature draws draw their "
                  "offsets and warm gases already)")
