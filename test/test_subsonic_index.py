@@ -46,6 +46,20 @@ def _run(law: IsoLaw | Nozzle | Series, volume: float, p10: float, tau_heat: flo
     return r
 
 
+def _stress_draw(k: int, law: Series, volume: float, p10: float, tau_heat: float,
+                 tail: float) -> UnloadResult:
+    """Foreign draw ``k`` of ``bench/bench_random_draws.py`` rebuilt (the rig at the
+    defaults: its noise seeded by 'stress-k'), analysed with the default settings."""
+    tau0 = volume / (1.4e5 * law.conductance)
+    t = np.arange(0.0, 0.2 + tail * tau0, 1e-3)
+    p = discharge(t, volume=volume, p10=p10, t10=T10, p_atm=P_ATM, tau_heat=tau_heat,
+                  t_open=0.2, flow_law=law)
+    seed = [zlib.crc32(f"stress-{k}".encode()), 0]
+    y = p + np.random.default_rng(seed).normal(0.0, NOISE, t.size)
+    (r,) = merge_final(analyze(t, y, EstimatorSettings(volume=volume)))
+    return r
+
+
 @pytest.mark.parametrize("m,b,volume,c,p10,tau_heat", [
     (0.25, 0.3, 2.5e-3, 4e-9, 7e5, 10.0), (0.35, 0.1, 2e-3, 2e-9, 7e5, 5.0),
     (0.62, 0.1, 5e-3, 1.2e-8, 8e5, 5.0), (0.75, 0.45, 10e-3, 2e-8, 8e5, 20.0)])
@@ -116,13 +130,8 @@ def test_a_hot_start_claimed_in_an_inadequate_fit_keeps_the_reading_without_it()
     within 2 sigma."""
     law = Series(IsoLaw(2.2949248420434337e-09, 0.14303529491113368, 0.49130338344121444),
                  IsoLaw(1.3547010256784893e-09, 0.16673738368978694, 0.6543352197308598))
-    volume, p10 = 0.02276759347812514, 990879.9636061225
-    tau0 = volume / (1.4e5 * law.conductance)
-    t = np.arange(0.0, 0.2 + 8.920631630181514 * tau0, 1e-3)
-    p = discharge(t, volume=volume, p10=p10, t10=T10, p_atm=P_ATM,
-                  tau_heat=1590.540436111127, t_open=0.2, flow_law=law)
-    y = p + np.random.default_rng([zlib.crc32(b"stress-200"), 0]).normal(0.0, NOISE, t.size)
-    (r,) = merge_final(analyze(t, y, EstimatorSettings(volume=volume)))
+    r = _stress_draw(200, law, 0.02276759347812514, 990879.9636061225, 1590.540436111127,
+                     8.920631630181514)
     c = truth(law).conductance
     assert "+wall" in r.extra["curve_fit"]["heat_law"] and r.extra["model_inadequate"]
     (line,) = [x for x in r.extra["budget"]["terms"] if x["name"].startswith("hot start")]
@@ -323,13 +332,8 @@ def test_a_pair_in_series_reads_the_iso_law_nearest_its_flow_curve():
     the ISO law nearest its curve is reported: b and m within the tolerance and 2 sigma."""
     law = Series(IsoLaw(1.0205487604621236e-08, 0.514122626201049, 0.6065037388207638),
                  IsoLaw(2.0600311602371668e-08, 0.25622481505346206, 0.3855516787667509))
-    volume, p10 = 0.03366697224034439, 702677.4921182452
-    tau0 = volume / (1.4e5 * law.conductance)
-    t = np.arange(0.0, 0.2 + 8.507290577381873 * tau0, 1e-3)
-    p = discharge(t, volume=volume, p10=p10, t10=T10, p_atm=P_ATM,
-                  tau_heat=6626.506880036085, t_open=0.2, flow_law=law)
-    y = p + np.random.default_rng([zlib.crc32(b"stress-68"), 0]).normal(0.0, NOISE, t.size)
-    (r,) = merge_final(analyze(t, y, EstimatorSettings(volume=volume)))
+    r = _stress_draw(68, law, 0.03366697224034439, 702677.4921182452, 6626.506880036085,
+                     8.507290577381873)
     tr = truth(law)
     fit = r.extra["curve_fit"]
     assert fit["subsonic_index_fitted"] and "q free" in fit["subsonic_source"], fit
