@@ -22,7 +22,11 @@ import pytest
 from foreign.newton_tank import IsoLaw, Nozzle, Series, discharge, iso_phi, truth
 from scipy.optimize import least_squares
 
-from pneumatic_unload.curvefit.shape_reading import iso_reduction, reduction_covariance
+from pneumatic_unload.curvefit.shape_reading import (
+    iso_reduction,
+    reduction_covariance,
+    shape_wins,
+)
 from pneumatic_unload.curvefit.subsonic_offer import SUBSONIC_INDEX_PRIOR_SD, SUBSONIC_TERM
 from pneumatic_unload.estimation import EstimatorSettings, UnloadResult, analyze, merge_final
 from pneumatic_unload.physics import flow_function
@@ -342,3 +346,20 @@ def test_a_pair_in_series_reads_the_iso_law_nearest_its_flow_curve():
     for got, std, true, tol in ((r.critical_ratio, r.critical_ratio_std, tr.fit_b, 0.03),
                                 (r.subsonic_index, r.subsonic_index_std, tr.fit_m, 0.05)):
         assert abs(got - true) <= min(tol, 2.0 * std), (got, std, true)
+
+
+def test_the_shape_wins_only_over_every_other_reading():
+    """:func:`shape_wins`: the curve with q free is reported only where the criterion
+    prefers it by its threshold to every fit and reading. Foreign draw 196 with the inputs
+    drawn (a pair in series, the gas 3.2 K warmer than its wall, a -0.5 kPa zero): the
+    shape's reading was 51 better than the chosen law but 8 worse than an unclaimed warm
+    gas's, and reported m 0.492 +- 0.004 for 0.515 (z -4.4); the chosen law read 0.515."""
+    entry = (None, 0.0, 0)
+    shape = {"flow-curve shape: density|m": entry}
+    bic = {"density|m": 0.0, "fixed+wall|m": -59.1, "flow-curve shape: density|m": -51.4}
+    assert shape_wins(shape, bic) is None
+    bic["fixed+wall|m"] = -40.0
+    assert shape_wins(shape, bic) == "flow-curve shape: density|m"
+    bic["fixed+wall|m"] = -45.0  # within the threshold of it: not clearly better
+    assert shape_wins(shape, bic) is None
+    assert shape_wins({}, bic) is None

@@ -261,7 +261,7 @@ def fit_curve(
         mf_m = math.nan
     if ref_law != best:  # relative spreads carried over to the chosen law's values
         mf *= cf.conductance / fits[ref_law][0].conductance
-    if (won := shape_wins(shape, spread_bic, best)) is not None:
+    if (won := shape_wins(shape, spread_bic)) is not None:
         # the curve with q free clearly better: the ISO (b, m) nearest it reported, the
         # spreads kept about the discharge's own ISO fit: the move is their model-form
         # line (q is one shape among many; a pair in series, 46 L: b 0.265 and m 0.547 by
