@@ -64,6 +64,14 @@ tail of the statistics; the pairs in series miss b and m at 2 sigma on 3 and 2 d
 only) and 204, 195, 189 (drawn inputs, about 15 min) of 209, 205, 209; the series' 74, 67,
 64 / 52, 43, 41 / 73, 55, 48 of 74.
 
+Session 31 (the flow curve's shape read with the ISO ellipse's exponent q free and reduced
+to the ISO law over a uniform grid of r, ``curvefit.shape_reading``; 4-5 min for the
+foreign draws, 9-10 with the inputs drawn, 7 for the temperature draws without their log,
+on 2 quiet cores): |z| <= 2 for the ISO law's C, b, m 209, 205, 208 (default), 199, 195,
+202 (record only), 204, 196, 191 (drawn); the series' 74, 69, 68 / 60, 56, 60 / 73, 62, 58
+of 74, b within 0.03 65 -> 66 and m within 0.05 68 -> 70 (default). The temperature draws
+without their log: every draw's verdict and coverage unchanged.
+
 """
 
 from __future__ import annotations

@@ -32,10 +32,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
 from pneumatic_unload.curvefit.law_family import LAW_BIC_THRESHOLD, Family, Fit
 from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX
+from pneumatic_unload.fit.lsq import minimize
+from pneumatic_unload.fit.params import Parameter, Parameters
 from pneumatic_unload.physics import R_LINEAR, flow_function
 
 FloatArray = NDArray[np.float64]
@@ -47,6 +48,9 @@ SHAPE_READING = "flow-curve shape: "
 #: from 0 to the linear end r_l [-] (as ISO 6358-3 fits a system's computed curve; the
 #: linear end is the law's own, not a shape).
 REDUCTION_GRID = np.linspace(0.0, R_LINEAR, 1000)
+#: The flow function's resolution the reduction's residuals are scaled by [-] (the
+#: engine stops at a thousandth of a residual variance: b and m to ~1e-9).
+PHI_RESOLUTION = 1e-7
 #: Evaluation budget of the q-free fit from the m-free one [-].
 SHAPE_NFEV = 60
 #: Relative step of the reduction's Jacobian (central differences) [-].
@@ -55,17 +59,19 @@ JACOBIAN_STEP = 1e-4
 
 def iso_reduction(b: float, m: float, q: float) -> tuple[float, float]:
     """The ISO 6358-1 (b, m) nearest the flow curve of (b, m, q) [-]: least squares on phi
-    over :data:`REDUCTION_GRID` (the curve itself where q = 2)."""
+    over :data:`REDUCTION_GRID` through the package's engine (the curve itself where
+    q = 2)."""
     if q == 2.0:
         return b, m
     target = flow_function(REDUCTION_GRID, b, m, ellipse_exponent=q)
-
-    def gap(v: FloatArray) -> FloatArray:
-        return flow_function(REDUCTION_GRID, float(v[0]), float(v[1])) - target
-
-    sol = least_squares(gap, [min(max(b, 0.0), 0.95), min(max(m, 0.1), 1.0)],
-                        bounds=([0.0, 0.05], [0.99, 3.0]), xtol=1e-12, ftol=1e-12)
-    return float(sol.x[0]), float(sol.x[1])
+    params = Parameters([
+        Parameter("b", min(max(b, 0.0), 0.95), 0.0, 0.99, "-", scale=0.1,
+                  doc="critical pressure ratio"),
+        Parameter("m", min(max(m, 0.1), 1.0), 0.05, 3.0, "-", scale=0.1,
+                  doc="subsonic index")])
+    got = minimize(lambda v: (flow_function(REDUCTION_GRID, v["b"], v["m"]) - target)
+                   / PHI_RESOLUTION, params, max_nfev=200)
+    return float(got.values["b"]), float(got.values["m"])
 
 
 def reduction_covariance(b: float, m: float, q: float, cov: FloatArray) -> FloatArray:
