@@ -60,8 +60,7 @@ LAW_BIC_THRESHOLD = 10.0
 #: noise alone gains its chi^2 of one degree of freedom less ln n (about -5).
 HOT_TWIN_MARGIN = 0.0
 #: A twin (m or an offset freed) is fitted in full only where its first-order BIC gain is
-#: above this [-] (half of the criterion's threshold of 10: the first order may under-state
-#: a large move).
+#: above this [-] (half the criterion's threshold: the first order may under-state a move).
 TWIN_BIC_MARGIN = 5.0
 #: The laws with a second heat parameter: the one-parameter law each extends and the
 #: starting values of the heat exchange taken from its fit.
@@ -92,8 +91,7 @@ class Family:
     settings : EstimatorSettings
         Tank, gas and heat model.
     common : dict
-        Arguments of every :func:`~pneumatic_unload.curvefit.law_fit.fit_law` call (trace, starting
-        values, hold, fit_heat).
+        Arguments of every :func:`~.law_fit.fit_law` call (trace, starting values, hold, fit_heat).
     profile_heat : bool
         Profile the heat scale where its likelihood is not quadratic (the laws' first fits).
     offset : bool
@@ -169,10 +167,12 @@ class Family:
             keep: dict[str, Any] | None = None) -> Fit:
         """The fit of a table key (kept in ``raw``, not offered); ``fit_q``: q freed too,
         a reading (:mod:`~.shape_reading`) kept in ``keep`` alone."""
-        (law, wall, fit_m), kept = split_key(key), {} if keep is None else keep
-        if key in self.seeds and not fit_q:  # a start near this key's minimum
-            start, max_nfev = self.seeds[key], max(max_nfev, SEEDED_NFEV)
-        self.raw.update({} if fit_q else {key: kept})
+        law, wall, fit_m = split_key(key)
+        kept: dict[str, Any] = {} if keep is None else keep
+        if not fit_q:  # (a q-free fit is a reading, kept in ``keep`` alone)
+            self.raw[key] = kept
+            if key in self.seeds:  # a start near this key's minimum: a few iterations
+                start, max_nfev = self.seeds[key], max(max_nfev, SEEDED_NFEV)
         settings, warm = self.settings, wall and self.t10_assumed
         if warm:  # a hot start read as a gas warm from its charge in a tank at the room's
             settings = with_wall(settings, AMBIENT_TEMPERATURE)

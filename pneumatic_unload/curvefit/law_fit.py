@@ -34,7 +34,7 @@ from pneumatic_unload.fit.uncertainty import (
 )
 from pneumatic_unload.model.effects import Start, exchange_extremes
 from pneumatic_unload.model.inversion import estimator_model
-from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
+from pneumatic_unload.model.parametric import ISO_ELLIPSE_EXPONENT, SUBSONIC_INDEX_START
 from pneumatic_unload.physics import tau_exp_eq38
 
 FloatArray = NDArray[np.float64]
@@ -283,7 +283,7 @@ def fit_law(
         whiteness_p=whiteness_p, heat_turbulent=v.get("heat_turbulent", 1.0),
         heat_turbulent_std=float(std["heat_turbulent"]) if "heat_turbulent" in free
         else math.nan, subsonic_index=m, subsonic_index_std=m_std, subsonic_index_fitted=fit_m,
-        ellipse_exponent=v.get("q", 2.0),
+        ellipse_exponent=v.get("q", ISO_ELLIPSE_EXPONENT),
         ellipse_exponent_std=float(std["q"]) if "q" in free else math.nan,
         pressure_offset=v.get("offset", 0.0),
         pressure_offset_std=float(std["offset"]) if "offset" in free else math.nan,

@@ -41,6 +41,7 @@ from pneumatic_unload.curvefit.law_family import LAW_BIC_THRESHOLD, Family, Fit
 from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX
 from pneumatic_unload.fit.lsq import minimize
 from pneumatic_unload.fit.params import Parameter, Parameters
+from pneumatic_unload.model.parametric import ISO_ELLIPSE_EXPONENT
 from pneumatic_unload.physics import R_LINEAR, flow_function
 
 FloatArray = NDArray[np.float64]
@@ -70,7 +71,7 @@ def iso_reduction(b: float, m: float, q: float) -> tuple[float, float]:
     """The ISO 6358-1 (b, m) nearest the flow curve of (b, m, q) [-]: least squares on phi
     over :data:`REDUCTION_GRID` through the package's engine (the curve itself where
     q = 2)."""
-    if q == 2.0:
+    if q == ISO_ELLIPSE_EXPONENT:
         return b, m
     target = flow_function(REDUCTION_GRID, b, m, ellipse_exponent=q)
     params = Parameters([
@@ -106,9 +107,7 @@ def physical_covariance(kept: dict[str, Any], names: tuple[str, ...]) -> FloatAr
         return None
     cov = np.asarray(res.covariance(kept["s2"]), dtype=float)
     idx = [free.index(n) for n in names]
-    values = res.values
-    d = np.array([(values[n] if res.params[n].log else 1.0) * res.params[n].scale
-                  for n in names])
+    d = np.array([res.params.value_std(n, res.values[n], 1.0) for n in names])
     out = cov[np.ix_(idx, idx)] * np.outer(d, d)
     return out if np.all(np.isfinite(out)) else None
 
@@ -124,7 +123,7 @@ def read_shape(fam: Family, best: str) -> tuple[dict[str, Fit], str]:
         return {}, "not read: no fit with m free to start from"
     kept: dict[str, Any] = {}
     try:
-        cf, chi2, k = fam.fit(law_key, start={**fam.start_of(source), "q": 2.0},
+        cf, chi2, k = fam.fit(law_key, start={**fam.start_of(source), "q": ISO_ELLIPSE_EXPONENT},
                               max_nfev=SHAPE_NFEV, fit_q=True, keep=kept)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return {}, f"not read: the fit with q free failed ({exc})"
