@@ -221,3 +221,49 @@ def test_heat_laws_against_their_formulae():
         assert q13(p, t) / q1(p, t) == pytest.approx(1.3 if ra >= RA_TURBULENT else 1.0)
     assert rayleigh(base, np.array([7e5]), np.array([250.0]))[0] >= RA_TURBULENT
     assert rayleigh(base, np.array([1.1e5]), np.array([285.0]))[0] < RA_TURBULENT
+
+
+#: Pairs in series (upstream (C1, b1, m1), downstream (C2, b2, m2)): the downstream element
+#: choking first, the upstream one (C1 <= b1 C2), nearly equal, far apart in m.
+SERIES_PAIRS = [((1.3e-8, 0.42, 0.52), (1.2e-8, 0.18, 0.30)),
+                ((2e-9, 0.45, 0.40), (9e-9, 0.30, 0.60)),
+                ((5e-9, 0.30, 0.50), (5e-9, 0.30, 0.50)),
+                ((5.6e-9, 0.49, 0.69), (4.4e-9, 0.14, 0.37))]
+
+
+@pytest.mark.parametrize("pair", SERIES_PAIRS)
+def test_a_pair_in_series_agrees_with_an_independent_one(pair):
+    """``pu_series_phi`` (two ISO elements in series, ISO 6358-3's computation) against
+    test/foreign's pair, written apart with scipy's brentq: within 1e-10 over r from
+    choking to reverse flow; choked exactly 1 below the pair's critical ratio, linear
+    above r_l as the ISO law, and a discharge of the simulator through the pair within
+    0.5 Pa of the foreign model's (Newton cooling, 10 bar)."""
+    from foreign.newton_tank import IsoLaw, Series, discharge
+
+    (c1, b1, m1), (c2, b2, m2) = pair
+    law = Series(IsoLaw(c1, b1, m1), IsoLaw(c2, b2, m2))
+    r = np.linspace(0.001, 1.02, 800)
+    ours = kernel.component_phi(r, b1, m1, 0.999, series=(b2, m2, c2 / c1))
+    theirs = np.array([law.phi(float(x)) for x in r])
+    assert np.max(np.abs(ours - theirs)) < 1e-10
+    assert np.all(ours[r < law.critical_ratio * (1 - 1e-9)] == 1.0)
+    assert not np.any(ours[r > law.critical_ratio * (1 + 1e-6)] == 1.0)
+    end = kernel.series_phi(0.999, b1, m1, b2, m2, c2 / c1, 0.999)
+    assert kernel.series_phi(0.9995, b1, m1, b2, m2, c2 / c1, 0.999) == pytest.approx(
+        end / 2, rel=1e-12)
+    # the simulator's discharge through the pair (its conductance the pair's)
+    volume, p10, tau_h = 2e-3, 1e6, 20.0
+    t = np.linspace(0.0, 3.0 * volume / (1.4e5 * law.conductance), 400)
+    ref = discharge(t, volume=volume, p10=p10, t10=293.15, p_atm=101325.0, tau_heat=tau_h,
+                    t_open=0.0, flow_law=law)
+    hA = p10 * volume / 293.15 / 0.4 / tau_h  # m0 c_v / tau_h, c_v = R/(gamma - 1)
+    cfg = RigConfig(volume=volume, conductance=law.conductance, critical_ratio=b1,
+                    subsonic_index=m1, series_conductance_ratio=c2 / c1,
+                    series_critical_ratio=b2, series_subsonic_index=m2,
+                    initial_pressure=p10, effects=("heat_transfer",),
+                    heat_transfer_mode="fixed", heat_transfer_coefficient=hA,
+                    gas_constant=287.05)
+    ours_p = integrate(cfg, t, 0.0, rtol=1e-10)[:, 0]
+    assert np.max(np.abs(ours_p - ref)) < 0.5
+    alone = integrate(cfg.replace(series_conductance_ratio=0.0), t, 0.0, rtol=1e-10)[:, 0]
+    assert np.max(np.abs(alone - ref)) > 1e3  # the second element matters

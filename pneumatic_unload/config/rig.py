@@ -70,6 +70,15 @@ class RigConfig(TankSpec):
         2.0, "-", 1.0, 6.0, "exponent q of the subsonic branch, phi = (1 - x^q)^m, x = (r - "
         "b)/(1 - b): 2 in ISO 6358-1:2013; another q is a flow curve that is not ISO-shaped "
         "(two restrictions in series)")
+    series_conductance_ratio: float = number(
+        0.0, "-", 0.0, 100.0, "a second ISO 6358-1 element in series downstream of the "
+        "component (ISO 6358-3: one mass flow, no volume between them): its conductance over "
+        "the upstream element's, C2/C1; 0: none. With it, conductance is the pair's and "
+        "critical_ratio, subsonic_index the upstream element's")
+    series_critical_ratio: float = number(
+        0.5, "-", 0.0, 0.99, "critical pressure ratio b2 of the downstream element in series")
+    series_subsonic_index: float = number(
+        0.5, "-", 0.1, 1.0, "subsonic index m2 of the downstream element in series")
     initial_pressure: float = number(
         7e5, "Pa", 1e3, 5e7, "initial tank pressure p10 (absolute; a charge's starting "
         "pressure, e.g. an evacuated tank's few kPa)")

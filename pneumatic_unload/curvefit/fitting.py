@@ -56,7 +56,7 @@ from pneumatic_unload.curvefit.offset_offer import (
     unfitted_offset_lines,
 )
 from pneumatic_unload.curvefit.plateau import plateau_bend, plateau_drift
-from pneumatic_unload.curvefit.shape_reading import read_shape, shape_wins
+from pneumatic_unload.curvefit.shape_reading import read_shapes, shape_wins
 from pneumatic_unload.curvefit.subsonic_offer import (
     M_SUFFIX,
     held_lines,
@@ -235,9 +235,10 @@ def fit_curve(
     pool = same if len(same) > 1 else held
     spread_bic = bic
     # the flow curve's shape beyond the ISO law: the ISO (b, m) nearest the curve fitted
-    # with q free, a reading as the others (a pair in series read b 0.347 by the discharge's
-    # own weighting where its curve's is 0.210)
-    shape, shape_why = read_shape(fam, best) if temperature is None else ({}, "")
+    # with q free (every law with m) or as a pair in series (the chosen law), readings as
+    # the others (a pair in series read b 0.347 by the discharge's own weighting where its
+    # curve's is 0.210)
+    shape, shape_why = read_shapes(fam, best) if temperature is None else ({}, "")
     readings = {**fam.unclaimed, **offset_reading, **shape}
     if readings:
         # a warm gas the record neither claims (within a room's spread, its plateau
@@ -247,15 +248,17 @@ def fit_curve(
         pool = {**pool, **readings}
         spread_bic = criterion({**fits, **readings}, span.n)
     with_m = {k: f for k, f in readings.items() if k.endswith(M_SUFFIX)}
-    mf = law_spread(pool, spread_bic, ref_law, LAW_BIC_THRESHOLD, "conductance", empty=0.0)
-    mf_b = spread_b(pool, spread_bic, ref_law, LAW_BIC_THRESHOLD)
+    own = frozenset(shape)  # the shape's readings: their own variance counts
+    mf = law_spread(pool, spread_bic, ref_law, LAW_BIC_THRESHOLD, "conductance", empty=0.0,
+                    own=own)
+    mf_b = spread_b(pool, spread_bic, ref_law, LAW_BIC_THRESHOLD, own=own)
     if best.endswith(M_SUFFIX):
         mf_m = law_spread({**same, **with_m}, spread_bic, best, LAW_BIC_THRESHOLD,
-                          "subsonic_index")
+                          "subsonic_index", own=own)
     elif best + M_SUFFIX in fits:  # m held, the laws fitted with m too: their spread of m
         mf_m = law_spread({**{k: f for k, f in fits.items() if k.endswith(M_SUFFIX)},
                            **with_m}, spread_bic, best + M_SUFFIX, LAW_BIC_THRESHOLD,
-                          "subsonic_index")
+                          "subsonic_index", own=own)
         m_c, m_b, m_u = held_spread(m_c, m_b, m_u, mf_m)
     else:
         mf_m = math.nan
@@ -273,7 +276,8 @@ def fit_curve(
                                  critical_ratio_source="", subsonic_index_fitted=True,
                                  subsonic_index=got.subsonic_index)
         m_c, m_b, m_u = 0.0, 0.0, got.subsonic_index_std
-        m_why = f"m fitted: the ISO law nearest the flow curve with q free ({shape_why})"
+        m_why = (f"m fitted: the ISO law nearest the flow curve of the reading '{won}' "
+                 f"({shape_why})")
     table = {law: {"conductance": f[0].conductance, "critical_ratio": f[0].critical_ratio,
                    "bic": bic[law], "chi2": f[1] / criterion_unit(fits),
                    **({"subsonic_index": f[0].subsonic_index,

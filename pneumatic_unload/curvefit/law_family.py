@@ -163,13 +163,13 @@ class Family:
         return self.settings.heat_model == "natural"
 
     def fit(self, key: str, *, start: dict[str, float] | None, max_nfev: int,
-            profile_heat: bool = False, explore: bool = False, fit_q: bool = False,
+            profile_heat: bool = False, explore: bool = False, shape: str = "iso",
             keep: dict[str, Any] | None = None) -> Fit:
-        """The fit of a table key (kept in ``raw``, not offered); ``fit_q``: q freed too,
-        a reading (:mod:`~.shape_reading`) kept in ``keep`` alone."""
+        """The fit of a table key (kept in ``raw``, not offered); ``shape`` not 'iso': the
+        flow curve's (law_fit's), a reading (:mod:`~.shape_reading`) kept in ``keep`` alone."""
         law, wall, fit_m = split_key(key)
         kept: dict[str, Any] = {} if keep is None else keep
-        if not fit_q:  # (a q-free fit is a reading, kept in ``keep`` alone)
+        if shape == "iso":  # (another shape's fit is a reading, kept in ``keep`` alone)
             self.raw[key] = kept
             if key in self.seeds:  # a start near this key's minimum: a few iterations
                 start, max_nfev = self.seeds[key], max(max_nfev, SEEDED_NFEV)
@@ -178,7 +178,7 @@ class Family:
             settings = with_wall(settings, AMBIENT_TEMPERATURE)
         out = fit_law(self.span, settings, profile_heat=profile_heat, law=law,
                       start=start, max_nfev=max_nfev, fit_wall=wall and not warm,
-                      fit_m=fit_m, fit_offset=self.offset, fit_t10=warm, fit_q=fit_q,
+                      fit_m=fit_m, fit_offset=self.offset, fit_t10=warm, shape=shape,
                       explore=explore, keep=kept, **self.common)
         kept["fit"], kept["entry"] = out[0], out
         return out

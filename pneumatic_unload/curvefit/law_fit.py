@@ -106,7 +106,7 @@ def fit_law(
     profile_heat: bool = True, law: str = "natural", start: dict[str, float] | None = None,
     max_nfev: int = 200, explore: bool = False, trace: Trace,
     hold: tuple[str, ...] = (), fit_wall: bool = False, fit_m: bool = False,
-    fit_offset: bool = False, fit_t10: bool = False, fit_q: bool = False,
+    fit_offset: bool = False, fit_t10: bool = False, shape: str = "iso",
     keep: dict[str, Any] | None = None,
 ) -> tuple[CurveFit, float, int]:
     """One law's fit for :func:`~pneumatic_unload.curvefit.fitting.fit_curve`; returns (fit,
@@ -150,9 +150,10 @@ def fit_law(
         Fit the subsonic index m too (else held at 0.5).
     fit_t10 : bool
         Fit T10 too (a hot start whose T10 was not measured: the wall as in ``settings``).
-    fit_q : bool
-        Fit the exponent q of the subsonic branch's ellipse too (else ISO 6358-1's 2; see
-        :mod:`pneumatic_unload.curvefit.shape_reading`).
+    shape : str
+        The flow curve: 'iso' (ISO 6358-1), 'q' (the exponent q of the subsonic branch's
+        ellipse fitted too) or 'series' (two ISO elements in series, their second's b2, m2
+        and C2/C1 fitted too); see :mod:`pneumatic_unload.curvefit.shape_reading`.
     keep : dict, optional
         Receives the fit's :class:`~pneumatic_unload.fit.lsq.FitResult` ('result') and
         model ('model'), for :func:`~pneumatic_unload.curvefit.wall_moves.wall_linear`.
@@ -171,7 +172,7 @@ def fit_law(
     ch = trace.channel
     model = estimator_model(settings, neutral, heat_law=law, fit_wall=fit_wall, fit_m=fit_m,
                             fit_offset=fit_offset, thermometer=ch is not None,
-                            fit_t10=fit_t10, fit_q=fit_q,
+                            fit_t10=fit_t10, shape=shape,
                             thermometer_offset=ch is not None and ch.offset)
     fixed = {"heat_scale": 1.0} if natural and not fit_heat else {}
     if ch is not None and ch.lag is not None:

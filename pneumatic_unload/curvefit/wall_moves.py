@@ -88,12 +88,15 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
 
 
 def law_spread(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, float],
-               best: str, threshold: float, attr: str, empty: float = math.nan) -> float:
+               best: str, threshold: float, attr: str, empty: float = math.nan,
+               own: frozenset[str] = frozenset()) -> float:
     """Model-form 1-sigma of a fitted quantity ``attr`` ('conductance' [m^3/(s Pa)],
     'critical_ratio' [-]): the spread of its values over the laws within ``threshold`` in
     BIC (the curve fit's LAW_BIC_THRESHOLD) of ``best`` about the best law's value,
     weighted exp(-dBIC/2); ``empty`` when no law carries a finite value, NaN when the
-    chosen law's value is not finite."""
+    chosen law's value is not finite. The fits named in ``own`` add their own variance
+    beyond the chosen law's (``attr + '_std'``), weighted alike: the model average's
+    variance (a reading that determines the quantity loosely widens it)."""
     v0 = getattr(fits[best][0], attr)
     var, w_sum = 0.0, 0.0
     near = {law: bic[law] - bic[best] for law, f in fits.items()
@@ -105,13 +108,17 @@ def law_spread(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, floa
         w = math.exp(-0.5 * (d - d_min))
         w_sum += w
         var += w * (getattr(fits[law][0], attr) - v0) ** 2
+        if law in own:
+            extra = getattr(fits[law][0], attr + "_std") ** 2 \
+                - getattr(fits[best][0], attr + "_std") ** 2
+            var += w * extra if math.isfinite(extra) else 0.0
     if not w_sum > 0:
         return empty
-    return math.sqrt(var / w_sum) if math.isfinite(v0) else math.nan
+    return math.sqrt(max(var, 0.0) / w_sum) if math.isfinite(v0) else math.nan
 
 
 def spread_b(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, float],
-             best: str, threshold: float = 10.0) -> float:
+             best: str, threshold: float = 10.0, own: frozenset[str] = frozenset()) -> float:
     """b's model-form 1-sigma [-] (:func:`law_spread` of the critical ratio); NaN when the
     chosen law did not determine b."""
-    return law_spread(fits, bic, best, threshold, "critical_ratio")
+    return law_spread(fits, bic, best, threshold, "critical_ratio", own=own)

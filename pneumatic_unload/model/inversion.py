@@ -38,19 +38,27 @@ HEAT_CORRELATION_REL_STD = 0.3
 #: where the data do not yet show b [-] (orifices 0.3-0.5, valves 0.2-0.4).
 CRITICAL_RATIO_PRIOR_STD = 0.1
 
+#: The flow-curve shapes :func:`estimator_model` takes [-]: the ISO 6358-1 law, the law
+#: with its ellipse's exponent q free, two ISO elements in series.
+FLOW_SHAPES = ("iso", "q", "series")
+
+
 def estimator_model(settings: EstimatorSettings, start: Start, *,
                     p_atm: float | None = None, heat_law: str = "natural",
                     fit_wall: bool = False, fit_m: bool = False,
                     fit_offset: bool = False, thermometer: bool = False,
                     fit_t10: bool = False, thermometer_offset: bool = False,
-                    fit_q: bool = False) -> ParametricModel:
+                    shape: str = "iso") -> ParametricModel:
     """The parametric model of the estimator: heat transfer (``heat_law``, and the wall
     temperature as a parameter with ``fit_wall``) or none; the subsonic index m a parameter
     with ``fit_m`` (else held at 0.5); the transducer's zero offset a parameter ('offset'
     [Pa]) with ``fit_offset``; T10 and a thermometer's lag parameters with ``thermometer``
     (a logged gas temperature fitted beside), and its offset [K] with
-    ``thermometer_offset``; T10 alone with ``fit_t10``; the ellipse's exponent q a
-    parameter with ``fit_q`` (else ISO 6358-1's 2)."""
+    ``thermometer_offset``; T10 alone with ``fit_t10``; the flow curve's ``shape``:
+    'iso' (ISO 6358-1), 'q' (the ellipse's exponent q a parameter) or 'series' (two ISO
+    elements in series, :class:`ParametricModel`'s ``series``)."""
+    if shape not in FLOW_SHAPES:
+        raise ValueError(f"unknown flow-curve shape {shape!r}; known: {FLOW_SHAPES}")
     effects: tuple[str, ...] = ("heat_transfer",) if settings.heat_model == "natural" else ()
     if fit_offset:
         effects = (*effects, "sensor_offset")
@@ -64,7 +72,8 @@ def estimator_model(settings: EstimatorSettings, start: Start, *,
     return ParametricModel(effects, tank, start, heat_law=heat_law,
                            fit_wall_temperature=fit_wall and bool(effects),
                            subsonic_index=None if fit_m else SUBSONIC_INDEX_START,
-                           ellipse_exponent=None if fit_q else ISO_ELLIPSE_EXPONENT,
+                           ellipse_exponent=None if shape == "q" else ISO_ELLIPSE_EXPONENT,
+                           series=shape == "series",
                            thermometer=thermometer, fit_initial_temperature=fit_t10,
                            thermometer_offset=thermometer_offset, charge=charge)
 

@@ -15,7 +15,8 @@ enum {
     HEAT_MODE, HEAT_A, HEAT_RA, PIPE, PIPE_VOLUME, PIPE_C_RHO,
     T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN,
     LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B, HEAT_TURB,
-    CHARGE, P_SUPPLY, T_SUPPLY, HEAT_JET, Q_EXPONENT, N_PARAMETERS
+    CHARGE, P_SUPPLY, T_SUPPLY, HEAT_JET, Q_EXPONENT, SERIES_KAPPA, SERIES_B, SERIES_M,
+    SERIES_X0, N_PARAMETERS
 };
 
 /* Exponent of the inflow's Reynolds number in a charge's jet-driven convection [-]. */
@@ -68,6 +69,97 @@ double pu_flow_phi(double r, double b, double m, double q, double r_linear)
     return pow(1.0 - ellipse_power(x, q), m);
 }
 
+/* The root of a falling gap f on [lo, hi] (f(lo) > 0 > f(hi); an end where it is not)
+ * by the Illinois method, to the last bits (a fit's finite differences see a smooth
+ * function of the parameters). a: the gap's arguments. */
+typedef double (*gap_fn)(double x, const double *a);
+
+static double falling_root(gap_fn f, const double *a, double lo, double hi)
+{
+    double flo = f(lo, a), fhi = f(hi, a), x = lo;
+    if (!(flo > 0.0)) return lo;
+    if (!(fhi < 0.0)) return hi;
+    int side = 0;
+    for (int i = 0; i < 200 && hi - lo > 1e-15 * hi; i++) {
+        x = (lo * fhi - hi * flo) / (fhi - flo);
+        if (!(x > lo && x < hi)) x = 0.5 * (lo + hi);
+        double fx = f(x, a);
+        if (fx > 0.0) { lo = x; flo = fx; if (side == 1) fhi *= 0.5; side = 1; }
+        else if (fx < 0.0) { hi = x; fhi = fx; if (side == -1) flo *= 0.5; side = -1; }
+        else return x;
+    }
+    return x;
+}
+
+/* a = (b1, m1, b2, m2, kappa, r, r_linear): the upstream element at x = p_i/p1 against
+ * the downstream one at r/x (continuity, C1 phi1(x) = C2 x phi2(r/x), per C1) and the
+ * choked pair's (phi1(x) = kappa x: the downstream element choked). */
+static double series_gap(double x, const double *a)
+{
+    return pu_flow_phi(x, a[0], a[1], 2.0, a[6])
+           - a[4] * x * pu_flow_phi(a[5] / x, a[2], a[3], 2.0, a[6]);
+}
+
+static double choked_gap(double x, const double *a)
+{
+    return pu_flow_phi(x, a[0], a[1], 2.0, a[6]) - a[4] * x;
+}
+
+/* The intermediate ratio x0 = p_i/p1 [-] of two ISO 6358-1 elements in series when the
+ * pair is choked (upstream element b1, m1; the downstream one's conductance kappa times
+ * the upstream one's): phi1(x0) = kappa x0 (the downstream element choked), or 1/kappa
+ * when the upstream element chokes first (kappa b1 >= 1). */
+double pu_series_choked(double b1, double m1, double kappa, double r_linear)
+{
+    double a[7] = {b1, m1, 0.0, 0.0, kappa, 0.0, r_linear};
+    return kappa * b1 >= 1.0 ? 1.0 / kappa : falling_root(choked_gap, a, b1, 1.0);
+}
+
+/* Flow function [-] of two ISO 6358-1 elements in series (ISO 6358-3: one mass flow
+ * through both, one stagnation temperature, no volume between them), normalised by the
+ * pair's choked flow: the upstream element (b1, m1), the downstream one (b2, m2) of
+ * conductance kappa C1; phi = phi1(x)/phi1(x0), x = p_i/p1 by continuity at r = p2/p1,
+ * x0 the choked pair's (pu_series_choked, passed in: it depends on the parameters
+ * alone). Linear in (1 - r) above r_linear from its value there, as the ISO law. */
+static double series_phi_at(double r, double b1, double m1, double b2, double m2,
+                            double kappa, double r_linear, double x0)
+{
+    double rr = r > r_linear ? r_linear : r;
+    double end = r > r_linear ? (1.0 - r) / (1.0 - r_linear) : 1.0;
+    if (kappa * b1 < 1.0 && rr <= b2 * x0) return end;  /* choked */
+    double a[7] = {b1, m1, b2, m2, kappa, rr, r_linear};
+    return pu_flow_phi(falling_root(series_gap, a, rr, 1.0), b1, m1, 2.0, r_linear)
+           / pu_flow_phi(x0, b1, m1, 2.0, r_linear) * end;
+}
+
+double pu_series_phi(double r, double b1, double m1, double b2, double m2, double kappa,
+                     double r_linear)
+{
+    return series_phi_at(r, b1, m1, b2, m2, kappa, r_linear,
+                         pu_series_choked(b1, m1, kappa, r_linear));
+}
+
+/* The component's flow function [-]: the ISO law (b, m, q), or a pair in series where
+ * SERIES_KAPPA > 0 (its upstream element b, m; the downstream SERIES_B, SERIES_M; the
+ * choked pair's SERIES_X0 from pu_series_choked, packed with the parameters). */
+static double component_phi(double r, const double *prm, double r_lin)
+{
+    if (prm[SERIES_KAPPA] > 0.0)
+        return series_phi_at(r, prm[B_RATIO], prm[M_INDEX], prm[SERIES_B], prm[SERIES_M],
+                             prm[SERIES_KAPPA], r_lin, prm[SERIES_X0]);
+    return pu_flow_phi(r, prm[B_RATIO], prm[M_INDEX], prm[Q_EXPONENT], r_lin);
+}
+
+/* pu_series_phi (kappa > 0) or pu_flow_phi at n ratios r into out [-]. */
+void pu_component_phi_array(int n, const double *r, double b, double m, double q,
+                            double b2, double m2, double kappa, double r_linear,
+                            double *out)
+{
+    for (int i = 0; i < n; i++)
+        out[i] = kappa > 0.0 ? pu_series_phi(r[i], b, m, b2, m2, kappa, r_linear)
+                             : pu_flow_phi(r[i], b, m, q, r_linear);
+}
+
 /* Wall heat flow into the gas Q [W] at p [Pa], gas temperature t_gas [K].
  * natural: Q = coeff Nu(Ra) (Tw - T), Nu = 0.59 Ra^0.25 (Ra < 1e9) or turb 0.10 Ra^(1/3)
  * (turb [-] scales the turbulent branch alone: 1 is the correlation as published; 1.3
@@ -106,7 +198,7 @@ static double valve_branch(double a, double p, double t_node, const double *prm)
     /* the component's term in the order of the original formula (bit-identical results
      * without leaks) */
     double g = a * prm[C_RHO] * p * sq_tn / sqrt(t_node)
-               * pu_flow_phi(p_atm / p, prm[B_RATIO], prm[M_INDEX], prm[Q_EXPONENT], r_lin);
+               * component_phi(p_atm / p, prm, r_lin);
     if (prm[LEAK_DOWN] != 0.0) g += a * prm[LEAK_DOWN] * (p - p_atm);
     if (prm[OLEAK_DOWN_C_RHO] > 0.0)
         g += a * prm[OLEAK_DOWN_C_RHO] * p * sq_tn / sqrt(t_node)
@@ -123,7 +215,7 @@ static double supply_branch(double a, double p, const double *prm)
     if (a <= 0.0) return 0.0;
     double p_s = prm[P_SUPPLY];
     return a * prm[C_RHO] * p_s * prm[SQRT_TN] / sqrt(prm[T_SUPPLY])
-           * pu_flow_phi(p / p_s, prm[B_RATIO], prm[M_INDEX], prm[Q_EXPONENT], prm[R_LIN]);
+           * component_phi(p / p_s, prm, prm[R_LIN]);
 }
 
 /* dy/dt of y = (p [Pa], T [K][, p_pipe [Pa]]) at t [s].

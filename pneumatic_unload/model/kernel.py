@@ -65,7 +65,12 @@ HEAT_TURB = 26
 CHARGE, P_SUPPLY, T_SUPPLY, HEAT_JET = 27, 28, 29, 30
 # the exponent q of the component's subsonic ellipse, phi = (1 - x^q)^m [-] (2: ISO 6358-1)
 Q_EXPONENT = 31
-N_PARAMETERS = 32
+# a second ISO element in series downstream of the component (ISO 6358-3): its
+# conductance over the component's upstream element's, kappa = C2/C1 [-] (0: none), its
+# b and m [-]; C_RHO is then the pair's and B_RATIO, M_INDEX the upstream element's
+# (and the choked pair's intermediate ratio, :func:`series_choked`, packed with them)
+SERIES_KAPPA, SERIES_B, SERIES_M, SERIES_X0 = 32, 33, 34, 35
+N_PARAMETERS = 36
 #: Exponent of the inflow's Reynolds number in a charge's jet-driven convection
 #: (JET_EXPONENT of kernel.c) [-].
 JET_EXPONENT = 0.67
@@ -171,6 +176,12 @@ def _load() -> ctypes.CDLL:
         raise KernelBuildError("kernel.c and kernel.py disagree on the parameter slots")
     lib.pu_flow_phi.restype = dbl
     lib.pu_flow_phi.argtypes = [dbl] * 5
+    lib.pu_series_phi.restype = dbl
+    lib.pu_series_phi.argtypes = [dbl] * 7
+    lib.pu_series_choked.restype = dbl
+    lib.pu_series_choked.argtypes = [dbl] * 4
+    lib.pu_component_phi_array.restype = None
+    lib.pu_component_phi_array.argtypes = [i32, arr] + [dbl] * 7 + [arr]
     lib.pu_heat_flow.restype = dbl
     lib.pu_heat_flow.argtypes = [dbl] * 7
     lib.pu_opening.restype = dbl
@@ -200,6 +211,34 @@ def flow_phi(r: float, b: float, m: float, r_linear: float, q: float = 2.0) -> f
     6358-1:2013; another q: a flow curve that is not ISO-shaped).
     """
     return float(_LIB.pu_flow_phi(r, b, m, q, r_linear))
+
+
+def series_phi(r: float, b1: float, m1: float, b2: float, m2: float, kappa: float,
+               r_linear: float) -> float:
+    """Flow function phi(r) [-] of two ISO 6358-1 elements in series (ISO 6358-3: one mass
+    flow, one stagnation temperature, no volume between), normalised by the pair's choked
+    flow: the upstream element (b1, m1), the downstream one (b2, m2) of conductance kappa
+    times the upstream one's [-]; linear in (1 - r) above r_linear [-] as the ISO law."""
+    return float(_LIB.pu_series_phi(r, b1, m1, b2, m2, kappa, r_linear))
+
+
+def series_choked(b1: float, m1: float, kappa: float, r_linear: float) -> float:
+    """The intermediate ratio p_i/p1 [-] of :func:`series_phi`'s pair when it is choked
+    (the SERIES_X0 slot)."""
+    return float(_LIB.pu_series_choked(b1, m1, kappa, r_linear))
+
+
+def component_phi(r: FloatArray, b: float, m: float, r_linear: float, *, q: float = 2.0,
+                  series: tuple[float, float, float] | None = None) -> FloatArray:
+    """The component's flow function at the ratios r [-]: the ISO law (b, m, q) of
+    :func:`flow_phi`, or with ``series`` = (b2, m2, kappa) the pair of :func:`series_phi`
+    whose upstream element is (b, m)."""
+    r = np.ascontiguousarray(r, dtype=float)
+    out = np.empty_like(r)
+    b2, m2, kappa = series if series is not None else (0.5, 0.5, 0.0)
+    _LIB.pu_component_phi_array(r.size, r.ctypes.data, b, m, q, b2, m2, kappa, r_linear,
+                                out.ctypes.data)
+    return out
 
 
 def heat_flow(mode: float, coeff: float, ra_const: float, t_wall: float, p: float,

@@ -121,6 +121,12 @@ def kernel_parameters(cfg: RigConfig, t_open: float) -> FloatArray:
     prm[kernel.B_RATIO] = cfg.critical_ratio
     prm[kernel.M_INDEX] = cfg.subsonic_index
     prm[kernel.Q_EXPONENT] = cfg.ellipse_exponent
+    prm[kernel.SERIES_KAPPA] = cfg.series_conductance_ratio
+    prm[kernel.SERIES_B] = cfg.series_critical_ratio
+    prm[kernel.SERIES_M] = cfg.series_subsonic_index
+    if cfg.series_conductance_ratio > 0.0:
+        prm[kernel.SERIES_X0] = kernel.series_choked(
+            cfg.critical_ratio, cfg.subsonic_index, cfg.series_conductance_ratio, R_LINEAR)
     prm[kernel.C_RHO] = cfg.conductance * RHO_N
     prm[kernel.LEAK] = cfg.leak_coefficient if cfg.has("leak") else 0.0
     if cfg.has("leak_downstream"):

@@ -45,6 +45,11 @@ SUBSONIC_INDEX_RANGE = (0.1, 1.0)
 ISO_ELLIPSE_EXPONENT = 2.0
 #: Bounds of a fitted q [-] (those of the configuration's ``ellipse_exponent``).
 ELLIPSE_EXPONENT_RANGE = (1.0, 6.0)
+#: Bounds of a fitted pair in series' C2/C1 [-] (a second element from 20 times narrower
+#: to 20 times wider than the first; beyond, the pair is one element to the record).
+SERIES_RATIO_RANGE = (0.05, 20.0)
+#: Bounds of a fitted downstream element's b [-] (the component's b's).
+SERIES_B_RANGE = (0.0, 0.95)
 #: Bounds of a thermometer's fitted time constant [s] (a reading as good as instantaneous
 #: - a simulator's, or a probe far faster than the logger - to a sheathed probe in a
 #: thermowell) and its start.
@@ -96,6 +101,11 @@ class ParametricModel:
         :data:`ELLIPSE_EXPONENT_RANGE`): a flow curve that is not ISO-shaped (two
         restrictions in series), read by
         :mod:`pneumatic_unload.curvefit.shape_reading`.
+    series : bool
+        The component as two ISO 6358-1 elements in series (ISO 6358-3): 'C' the pair's
+        conductance, 'b' and 'm' the upstream element's, and parameters for the downstream
+        one: 'b2' [-], 'm2' [-] and its conductance over the upstream one's, 'kappa' [-]
+        (:data:`SERIES_RATIO_RANGE`).
     thermometer : bool
         A logged gas temperature is fitted beside the pressure: T10 (the gas temperature at
         the opening, 't10' [K], start ``tank.initial_temperature``) and the thermometer's
@@ -118,8 +128,8 @@ class ParametricModel:
                  heat_law: str = "natural", fit_wall_temperature: bool = False,
                  subsonic_index: float | None = SUBSONIC_INDEX_START,
                  ellipse_exponent: float | None = ISO_ELLIPSE_EXPONENT,
-                 thermometer: bool = False, fit_initial_temperature: bool = False,
-                 thermometer_offset: bool = False,
+                 series: bool = False, thermometer: bool = False,
+                 fit_initial_temperature: bool = False, thermometer_offset: bool = False,
                  charge: tuple[float | None, float] | None = None) -> None:
         bad = [e for e in effects if e not in CANDIDATES]
         if bad:
@@ -141,6 +151,7 @@ class ParametricModel:
         self.fit_wall_temperature = fit_wall_temperature or self.hot_start
         self.subsonic_index = subsonic_index
         self.ellipse_exponent = ellipse_exponent
+        self.series = series
         self.thermometer = thermometer
         self.thermometer_offset = thermometer and thermometer_offset
         self.fit_initial_temperature = fit_initial_temperature or thermometer
@@ -176,6 +187,13 @@ class ParametricModel:
             lo, hi = ELLIPSE_EXPONENT_RANGE
             ps.append(Parameter("q", ISO_ELLIPSE_EXPONENT, lo, hi, "-", scale=0.2,
                                 doc="exponent of the subsonic branch's ellipse"))
+        if self.series:
+            ps += [Parameter("b2", 0.3, *SERIES_B_RANGE, "-", scale=0.1,
+                             doc="downstream element's critical pressure ratio"),
+                   Parameter("m2", SUBSONIC_INDEX_START, *SUBSONIC_INDEX_RANGE, "-",
+                             scale=0.1, doc="downstream element's subsonic index"),
+                   Parameter("kappa", 1.0, *SERIES_RATIO_RANGE, "-", log=True, scale=0.1,
+                             doc="downstream element's conductance over the upstream one's")]
         if self.fit_initial_temperature:
             ps.append(Parameter("t10", self.tank.initial_temperature, 150.0, 600.0, "K",
                                 scale=2.0, doc="gas temperature at the valve opening"))
@@ -266,6 +284,10 @@ class ParametricModel:
                                     *SUBSONIC_INDEX_RANGE),
             "ellipse_exponent": clamp(v.get("q", self.ellipse_exponent or
                                             ISO_ELLIPSE_EXPONENT), *ELLIPSE_EXPONENT_RANGE),
+            **({"series_conductance_ratio": clamp(v["kappa"], *SERIES_RATIO_RANGE),
+                "series_critical_ratio": clamp(v["b2"], *SERIES_B_RANGE),
+                "series_subsonic_index": clamp(v["m2"], *SUBSONIC_INDEX_RANGE)}
+               if self.series else {}),
             "wall_temperature": float(v.get("t_wall", tank.wall if "t10" not in v or
                                             tank.wall_temperature is not None
                                             else clamp(v["t10"], 150.0, 600.0)))}
