@@ -421,3 +421,21 @@ def test_the_shape_wins_only_over_every_other_reading():
     both["flow-curve pair: density|m"] = (dataclasses.replace(pair, critical_ratio_std=0.08),
                                           0.0, 0)
     assert shape_wins(both, bic) is None
+
+
+def test_the_estimator_model_takes_the_three_shapes_and_refuses_another():
+    """``estimator_model``'s flow-curve shapes: the ISO law (b, m), q beside them, a pair
+    in series (b2, m2, kappa beside them); another shape is one clear error."""
+    from pneumatic_unload.model.effects import Start
+    from pneumatic_unload.model.inversion import estimator_model
+
+    settings = EstimatorSettings(volume=2e-3)
+    start = Start(conductance=5e-9, critical_ratio=0.3, t_open=0.2, p10=7e5, p_atm=P_ATM,
+                  tau=2.0, dt=1e-3, t_first=0.0, t_last=10.0)
+    names = {shape: {p.name for p in estimator_model(settings, start, fit_m=True,
+                                                     shape=shape).parameters}
+             for shape in ("iso", "q", "series")}
+    assert names["q"] - names["iso"] == {"q"}
+    assert names["series"] - names["iso"] == {"b2", "m2", "kappa"}
+    with pytest.raises(ValueError, match="unknown flow-curve shape 'spline'"):
+        estimator_model(settings, start, shape="spline")

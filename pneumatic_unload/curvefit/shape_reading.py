@@ -10,22 +10,30 @@ them, and a heat law takes up part of the rest (a pair whose ISO b over a unifor
 is 0.210 read 0.347 with the truth's own heat law and m free). ISO 6358-1's test and ISO
 6358-3 fit the law to the flow curve over its pressure ratios instead.
 
-:func:`read_shape` fits the chosen heat law once more with m and the ellipse's exponent q
-free (phi = (1 - x^q)^m, x = (r - b)/(1 - b); q = 2 is the ISO law), from the fit with m
-free, and reduces that flow curve to the ISO law by least squares over a uniform grid of
-r (:data:`REDUCTION_GRID`, :func:`iso_reduction`). The reduced (b, m), their covariance
+:func:`read_shape` fits a heat law once more with m free and a shape beyond the ISO law's,
+from its fit with m free: the ellipse's exponent q (phi = (1 - x^q)^m, x = (r - b)/(1 - b);
+q = 2 is the ISO law), or the component as two ISO elements in series (ISO 6358-3: one mass
+flow, the downstream element's b2, m2 and C2/C1 fitted; the kernel's ``pu_series_phi``).
+It reduces that flow curve to the ISO law by least squares over a uniform grid of r
+(:data:`REDUCTION_GRID`, :func:`iso_reduction`). The reduced (b, m), their covariance
 carried through the reduction's Jacobian, and the fit's chi^2 are a reading of the record
 that the model-form spread of C, b and m counts by the information criterion, as it counts
-the heat laws (:func:`pneumatic_unload.curvefit.fitting.fit_curve`). Where the q-free fit
-is clearly better than every other fit and reading (:func:`shape_wins`: by the criterion's
+the heat laws (:func:`pneumatic_unload.curvefit.fitting.fit_curve`), with the reading's own
+variance (a shape the record determines loosely widens the spread). :func:`read_shapes`
+reads q for every heat law fitted with m free (a heat law takes up part of a shape, so the
+shape read with the chosen law alone can be the wrong one) and the pair for the chosen law
+(its fit costs about ten q-free fits). Where the best reading that the record determines
+(:func:`settles`) is clearly better than every fit (:func:`shape_wins`: by the criterion's
 threshold, the rule the heat laws use), its reduced b and m are the ones reported. Either
 way the spread is taken about the discharge's own ISO fit: the distance the reduction
-moved b and m is their model-form line (q is one shape among many; a pair in series whose
-curve leaves choking gradually is not followed by it: draw 182 of the foreign draws reads
-q 2.04 +- 0.10 and b 0.282 for 0.210, a record that does not tell these curves apart).
-Made for the pressure alone (not where a logged temperature is fitted).
+moved b and m is their model-form line. Not every pair is resolved: draw 182 of the
+foreign draws (a pair cooled by a constant hA) is fitted 3 chi^2 units better by the ISO
+law with the natural-convection law's turbulent branch free (b 0.284 for 0.210) than by
+the pair with the truth's own heat law started at the truth's values: a record that does
+not tell these curves apart. Made for the pressure alone (not where a logged
+temperature is fitted).
 
-SI units: s, Pa absolute; b, m and q are dimensionless.
+SI units: s, Pa absolute; b, m, q, b2, m2 and C2/C1 are dimensionless.
 """
 
 from __future__ import annotations

@@ -24,6 +24,7 @@ from pneumatic_unload.config.tank import wall_pair
 from pneumatic_unload.model import discharge
 from pneumatic_unload.model.effects import Start
 from pneumatic_unload.model.parametric import (
+    FLOW_SHAPES,
     ISO_ELLIPSE_EXPONENT,
     SUBSONIC_INDEX_START,
     ParametricModel,
@@ -37,11 +38,6 @@ HEAT_CORRELATION_REL_STD = 0.3
 #: 1-sigma of the critical pressure ratio b about the settings' value at the crossing,
 #: where the data do not yet show b [-] (orifices 0.3-0.5, valves 0.2-0.4).
 CRITICAL_RATIO_PRIOR_STD = 0.1
-
-#: The flow-curve shapes :func:`estimator_model` takes [-]: the ISO 6358-1 law, the law
-#: with its ellipse's exponent q free, two ISO elements in series.
-FLOW_SHAPES = ("iso", "q", "series")
-
 
 def estimator_model(settings: EstimatorSettings, start: Start, *,
                     p_atm: float | None = None, heat_law: str = "natural",

@@ -45,6 +45,9 @@ SUBSONIC_INDEX_RANGE = (0.1, 1.0)
 ISO_ELLIPSE_EXPONENT = 2.0
 #: Bounds of a fitted q [-] (those of the configuration's ``ellipse_exponent``).
 ELLIPSE_EXPONENT_RANGE = (1.0, 6.0)
+#: The flow-curve shapes of the estimator's model [-]: the ISO 6358-1 law, the law with
+#: its ellipse's exponent q free, two ISO elements in series.
+FLOW_SHAPES = ("iso", "q", "series")
 #: Bounds of a fitted pair in series' C2/C1 [-] (a second element from 20 times narrower
 #: to 20 times wider than the first; beyond, the pair is one element to the record).
 SERIES_RATIO_RANGE = (0.05, 20.0)
