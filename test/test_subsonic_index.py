@@ -447,3 +447,27 @@ def test_the_estimator_model_takes_the_three_shapes_and_refuses_another():
     assert names["series"] - names["iso"] == {"b2", "m2", "kappa"}
     with pytest.raises(ValueError, match="unknown flow-curve shape 'spline'"):
         estimator_model(settings, start, shape="spline")
+
+
+def test_a_reading_counts_its_own_variance_in_the_spread():
+    """``law_spread`` with ``own``: a reading named there adds its own variance beyond the
+    chosen law's, weighted as its distance (the model average's variance, closed form);
+    without it only the distance counts; one outside the criterion's window adds nothing."""
+    from pneumatic_unload.curvefit.wall_moves import law_spread
+
+    def entry(b: float, sd: float) -> tuple[CurveFit, float, int]:
+        return (CurveFit(5e-9, 5e-11, b, sd, 0.0, 7e5, 1e5, 1.0, 0.1, 1e3, 1000, True),
+                0.0, 0)
+
+    fits = {"fixed|m": entry(0.30, 0.01), "flow-curve pair: fixed|m": entry(0.26, 0.05)}
+    bic = {"fixed|m": 0.0, "flow-curve pair: fixed|m": 2.0}
+    w = math.exp(-1.0)
+    plain = law_spread(fits, bic, "fixed|m", 10.0, "critical_ratio")
+    assert plain == pytest.approx(math.sqrt(w * 0.04**2 / (1.0 + w)), rel=1e-12)
+    own = law_spread(fits, bic, "fixed|m", 10.0, "critical_ratio",
+                     own=frozenset({"flow-curve pair: fixed|m"}))
+    assert own == pytest.approx(math.sqrt(w * (0.04**2 + 0.05**2 - 0.01**2) / (1.0 + w)),
+                                rel=1e-12)
+    bic["flow-curve pair: fixed|m"] = 12.0
+    assert law_spread(fits, bic, "fixed|m", 10.0, "critical_ratio",
+                      own=frozenset({"flow-curve pair: fixed|m"})) == 0.0
