@@ -72,6 +72,12 @@ on 2 quiet cores): |z| <= 2 for the ISO law's C, b, m 209, 205, 208 (default), 1
 of 74, b within 0.03 65 -> 66 and m within 0.05 68 -> 70 (default). The temperature draws
 without their log: every draw's verdict and coverage unchanged.
 
+Session 32 (the pair in series as a shape of the fit; q read with every law fitted with m
+free; 5-6 min for the foreign draws, 9-10 with the inputs drawn, 7 for the temperature
+draws without their log): the ISO law's C, b, m 209, 205, 208 / 199, 196, 202 / 204, 195,
+191; the series' 74, 71, 68 / 62, 61, 63 / 73, 63, 61 of 74, b within 0.03 66 and m within
+0.05 69 (default). The temperature draws without their log: unchanged.
+
 """
 
 from __future__ import annotations
