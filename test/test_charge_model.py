@@ -208,3 +208,32 @@ def test_a_charge_given_to_analyze_is_said_to_be_one(p10, p_s):
     assert got, why
     assert float(got[1]) == pytest.approx(p10, abs=500.0)
     assert float(got[2]) == pytest.approx(p_s, rel=5e-3)
+
+
+def test_a_charge_through_a_pair_in_series_agrees_with_an_independent_model():
+    """A charge through two ISO elements in series (the supply side upstream: the kernel's
+    ``pu_series_phi`` in the supply's branch) against ``foreign/newton_tank.charge`` with
+    test/foreign's pair (written apart): the same pressure and gas temperature, and not
+    those of the upstream element alone."""
+    from foreign.newton_tank import IsoLaw, Series, charge
+
+    from pneumatic_unload.model import simulate
+
+    law = Series(IsoLaw(1.3e-8, 0.42, 0.52), IsoLaw(1.2e-8, 0.18, 0.30))
+    p10, p_s, t_s, tau_heat = 1e5, 6e5, 310.0, 8.0
+    h_a = p10 * V / (R * 293.15) * R / (GAMMA - 1.0) / tau_heat
+    cfg = RigConfig(direction="charge", volume=V, conductance=law.conductance,
+                    critical_ratio=0.42, subsonic_index=0.52,
+                    series_conductance_ratio=1.2 / 1.3, series_critical_ratio=0.18,
+                    series_subsonic_index=0.30, initial_pressure=p10,
+                    initial_temperature=293.15, supply_pressure=p_s, supply_temperature=t_s,
+                    noise_std=0.0, rate=100.0, pre_time=0.5, effects=("heat_transfer",),
+                    heat_transfer_mode="fixed", heat_transfer_coefficient=h_a)
+    sim = simulate(cfg, rtol=1e-10)
+    gas = np.empty_like(sim.t)
+    p = charge(sim.t, volume=V, p10=p10, t10=293.15, p_supply=p_s, t_supply=t_s,
+               tau_heat=tau_heat, t_open=sim.t_open, flow_law=law, temperature_out=gas)
+    assert np.max(np.abs(sim.pressure - p)) < 2e-6 * p_s
+    assert np.max(np.abs(sim.temperature - gas)) < 1e-4
+    alone = simulate(cfg.replace(series_conductance_ratio=0.0), rtol=1e-10)
+    assert np.max(np.abs(alone.pressure - p)) > 1e-3 * p_s
