@@ -14,7 +14,8 @@ feeds their uncertainty budgets; the re-heating after an aborted unload gives eq
 * :mod:`~pneumatic_unload.curvefit.subsonic_offer` - whether a record carries the subsonic
   index m, and the budget line of holding it;
 * :mod:`~pneumatic_unload.curvefit.shape_reading` - the flow curve's shape beyond the ISO
-  law (the ellipse's exponent q freed) and the ISO (b, m) nearest it over r;
+  law (the ellipse's exponent q freed, or two ISO elements in series) and the ISO (b, m)
+  nearest it over r;
 * :mod:`~pneumatic_unload.curvefit.linear_twin` - a fit's twin with one parameter more, to
   first order;
 * :mod:`~pneumatic_unload.curvefit.temperature_evidence` - the logged gas temperature

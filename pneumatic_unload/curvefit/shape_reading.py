@@ -56,7 +56,7 @@ from pneumatic_unload.physics import R_LINEAR, flow_function
 
 FloatArray = NDArray[np.float64]
 
-#: Key prefix of the shape's reading in the model-form pool (its key ends with M_SUFFIX:
+#: Key prefix of each shape's reading in the model-form pool (the key ends with M_SUFFIX:
 #: it carries an m).
 SHAPE_READING = {"q": "flow-curve shape: ", "series": "flow-curve pair: "}
 #: The pressure ratios over which a flow curve is reduced to the ISO 6358-1 law: uniform
@@ -143,8 +143,8 @@ def physical_covariance(kept: dict[str, Any], names: tuple[str, ...]) -> FloatAr
     return out if np.all(np.isfinite(out)) else None
 
 
-def shape_start(source: CurveFit, shape: str) -> dict[str, float]:
-    """The q-free or pair fit's start from the m-free fit ``source`` [-]: q at ISO's 2; a
+def shape_start(shape: str) -> dict[str, float]:
+    """The shape's parameters' start [-], beside the m-free fit's values: q at ISO's 2; a
     pair whose downstream element is :data:`SERIES_START_RATIO` times as wide as the
     fitted one (b 0.3, m 0.5), so that its curve starts near the fitted ISO curve."""
     if shape == "q":
@@ -164,7 +164,7 @@ def read_shape(fam: Family, best: str, shape: str = "q") -> tuple[dict[str, Fit]
     kept: dict[str, Any] = {}
     try:
         cf, chi2, k = fam.fit(law_key, start={**fam.start_of(source),
-                                              **shape_start(source, shape)},
+                                              **shape_start(shape)},
                               max_nfev=SHAPE_NFEV, shape=shape, keep=kept)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return {}, f"not read: the fit with the {shape} shape failed ({exc})"

@@ -150,13 +150,15 @@ static double component_phi(double r, const double *prm, double r_lin)
     return pu_flow_phi(r, prm[B_RATIO], prm[M_INDEX], prm[Q_EXPONENT], r_lin);
 }
 
-/* pu_series_phi (kappa > 0) or pu_flow_phi at n ratios r into out [-]. */
+/* pu_series_phi (kappa > 0; the choked pair's ratio solved once) or pu_flow_phi at n
+ * ratios r into out [-]. */
 void pu_component_phi_array(int n, const double *r, double b, double m, double q,
                             double b2, double m2, double kappa, double r_linear,
                             double *out)
 {
+    double x0 = kappa > 0.0 ? pu_series_choked(b, m, kappa, r_linear) : 0.0;
     for (int i = 0; i < n; i++)
-        out[i] = kappa > 0.0 ? pu_series_phi(r[i], b, m, b2, m2, kappa, r_linear)
+        out[i] = kappa > 0.0 ? series_phi_at(r[i], b, m, b2, m2, kappa, r_linear, x0)
                              : pu_flow_phi(r[i], b, m, q, r_linear);
 }
 
