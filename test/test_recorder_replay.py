@@ -77,7 +77,7 @@ _TOOL = textwrap.dedent(
 
     from pneumatic_unload.nodes.replay import use_fast_heartbeat
 
-    use_fast_heartbeat()  # quick wait_for_all_acked() for flush() below
+    PROFILE = use_fast_heartbeat()  # quick wait_for_all_acked() for flush() below
     ARGS = json.loads(sys.argv[1])
     DEADLINE = time.monotonic() + ARGS.get("timeout", 25.0)
 
@@ -228,6 +228,8 @@ _TOOL = textwrap.dedent(
         rc = 130
     node.destroy_node()
     rclpy.try_shutdown()
+    if PROFILE is not None:
+        PROFILE.unlink(missing_ok=True)
     sys.exit(rc)
     '''
 )
@@ -241,9 +243,17 @@ def tool(tmp_path_factory) -> Path:
 
 
 def _spawn(args: list[str], cwd: Path) -> subprocess.Popen:
+    """Start ``args`` in ``cwd``, with ``cwd`` its temporary directory too (the Fast DDS
+    profile the replay writes lands there: :func:`left_profiles`)."""
     return subprocess.Popen(
         args, cwd=cwd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True)
+        text=True, env={**os.environ, "TMPDIR": str(cwd)})
+
+
+def left_profiles(cwd: Path) -> list[Path]:
+    """The replay's Fast DDS profiles left in ``cwd`` (each process removes its own when it
+    ends, also on SIGINT)."""
+    return sorted(cwd.glob("pneumatic_unload_replay_*.xml"))
 
 
 def start_node(node: str, cwd: Path, **params) -> subprocess.Popen:
@@ -566,6 +576,7 @@ def test_replay_delivers_every_sample_with_original_stamps(tool, sim_bag, tmp_pa
     assert rc == 0, rep_err
     rc, out, err = finish(sub)
     assert rc == 0, err
+    assert not left_profiles(tmp_path)
     got = last_json(out)
     samples = np.array(got["samples"])
     assert samples.shape[0] == t_ref.size, "samples lost or duplicated"
@@ -600,6 +611,7 @@ def test_replay_loop_until_sigint(tool, sim_bag, tmp_path, procs):
     assert rep.poll() is None, "replay with loop:=true ended by itself"
     rc, _, rep_err = interrupt(rep)
     assert rc == 0, rep_err
+    assert not left_profiles(tmp_path)
 
 
 def test_bad_parameters_are_rejected_with_the_reason(tmp_path, sim_bag, procs):
