@@ -96,6 +96,9 @@ class CurveFit:
         b's standard uncertainty from the wall [-]: assumed (as ``wall_std``) or given (its
         ``temperature_uncertainty``), the chosen law refitted with the wall moved to first
         order; NaN when no heat law was fitted, the wall was fitted, or b is not determined.
+    wall_std_m : float
+        m's standard uncertainty from the wall [-], as ``wall_std_b``'s; NaN also with m
+        held.
     model_form_std_b : float
         b's model-form 1-sigma [-]: the spread of the b of the laws that fit about as
         well, weighted as C's (not in ``critical_ratio_std``).
@@ -183,6 +186,7 @@ class CurveFit:
     wall_source: str = ""
     wall_std: float = math.nan
     wall_std_b: float = math.nan
+    wall_std_m: float = math.nan
     model_form_std_b: float = math.nan
     conductance_reproducibility: float = math.nan
     critical_ratio_reproducibility: float = math.nan

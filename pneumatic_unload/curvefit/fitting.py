@@ -314,20 +314,22 @@ def fit_curve(
             for k, f in fits.items()
             if "+wall" in k and bic[k] - bic[best] < LAW_BIC_THRESHOLD])
         if u == 0.0:
-            wall_std = wall_std_b = 0.0
+            wall_std = wall_std_b = wall_std_m = 0.0
         elif (u <= WALL_LINEAR_MAX or settings.wall_temperature is not None) \
                 and raw.get(best):
-            wall_std, wall_std_b = wall_linear(trace, raw[best], settings, u, law=law_b)
+            wall_std, wall_std_b, wall_std_m = wall_linear(trace, raw[best], settings, u,
+                                                           law=law_b)
             if not math.isfinite(wall_std) and settings.wall_temperature is None:
                 # not linear (or not computable) to first order: the two refits
-                wall_std, wall_std_b = _wall_refit(trace, out, settings, u, law=law_b,
-                                                   fit_heat=bool(fit_heat), hold=hold,
-                                                   span=span, fit_m=fit_m)
+                wall_std, wall_std_b, wall_std_m = _wall_refit(
+                    trace, fits[best][0], settings, u, law=law_b, fit_heat=bool(fit_heat),
+                    hold=hold, span=span, fit_m=fit_m)
         else:
-            wall_std, wall_std_b = _wall_refit(trace, out, settings, u, law=law_b,
-                                               fit_heat=bool(fit_heat), hold=hold, span=span,
-                                               fit_m=fit_m)
-        out = dataclasses.replace(out, wall_std_b=wall_std_b)
+            wall_std, wall_std_b, wall_std_m = _wall_refit(
+                trace, fits[best][0], settings, u, law=law_b, fit_heat=bool(fit_heat),
+                hold=hold, span=span, fit_m=fit_m)
+        out = dataclasses.replace(out, wall_std_b=wall_std_b,
+                                  wall_std_m=wall_std_m if fit_m else math.nan)
         if settings.wall_temperature is None:
             out = dataclasses.replace(out, wall_uncertainty=u, wall_source=why,
                                       wall_std=wall_std)
@@ -358,13 +360,14 @@ def _refusals(fam: Family) -> dict[str, str]:
 
 def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: float, *,
                 law: str, fit_heat: bool, hold: tuple[str, ...],
-                span: CurveSpan, fit_m: bool = False) -> tuple[float, float]:
-    """C's and b's standard uncertainties ([m^3/(s Pa)], [-]) from an assumed wall
-    temperature of standard uncertainty u [K]: ``law`` refitted (from ``fit``) with the wall
+                span: CurveSpan, fit_m: bool = False) -> tuple[float, float, float]:
+    """C's, b's and m's standard uncertainties ([m^3/(s Pa)], [-], [-]) from an assumed wall
+    temperature of standard uncertainty u [K]: ``law`` refitted (from ``fit``, the chosen
+    law's own fit: a shape reading's reported b and m are not a fit's) with the wall
     at T10 + u and T10 - u, the root mean square of the two moves (the fitted heat exchange
     takes up part of a move, which the crossing's inversion with the correlation held does
     not, and may take it up unevenly: the response is not linear over u of 10-20 K); NaN
-    when a refit fails (b's: also when b is not determined)."""
+    when a refit fails (b's: also when b is not determined; m's: also with m held)."""
     out = []
     for sign in (1.0, -1.0):
         wall = float(np.clip(settings.wall + sign * u, *WALL_RANGE))
@@ -379,9 +382,11 @@ def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: flo
                              trace=trace, hold=hold, fit_m=fit_m,
                              fit_offset=math.isfinite(fit.pressure_offset_std))[0]
         except (ValueError, FloatingPointError, np.linalg.LinAlgError):
-            return math.nan, math.nan
-        out.append((again.conductance, again.critical_ratio))
-    c_std = math.sqrt(sum((c - fit.conductance) ** 2 for c, _b in out) / 2.0) \
-        if all(math.isfinite(c) for c, _b in out) else math.nan
-    b_std = math.sqrt(sum((b - fit.critical_ratio) ** 2 for _c, b in out) / 2.0)
-    return c_std, b_std
+            return math.nan, math.nan, math.nan
+        out.append((again.conductance, again.critical_ratio,
+                    again.subsonic_index if fit_m else math.nan))
+    c_std = math.sqrt(sum((c - fit.conductance) ** 2 for c, _b, _m in out) / 2.0) \
+        if all(math.isfinite(c) for c, _b, _m in out) else math.nan
+    b_std = math.sqrt(sum((b - fit.critical_ratio) ** 2 for _c, b, _m in out) / 2.0)
+    m_std = math.sqrt(sum((m - fit.subsonic_index) ** 2 for _c, _b, m in out) / 2.0)
+    return c_std, b_std, m_std

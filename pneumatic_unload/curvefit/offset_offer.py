@@ -137,7 +137,8 @@ def unfitted_offset_lines(fam: Family, best: str) -> dict[str, float]:
     """The transducer's zero not fitted (p_atm given): b's and m's standard uncertainty [-]
     from its stated uncertainty d [Pa] (``pressure_uncertainty``, default 0.1 % of p10),
     along the chosen fit ``best``'s valley with the offset freed (its first-order twin's
-    slopes: |db/dd| d, |dm/dd| d; m's NaN where m is held). An offset hides in the
+    slopes: |db/dd| d, |dm/dd| d; with m held, m's from the law's fit with m free, NaN
+    without it). An offset hides in the
     subsonic tail's shape where the record ends before its final plateau, b and m taking it
     up: the first-order line at the transition (b^2 d / p_atm) missed that (a +0.7 kPa zero
     read m 0.591 +- 0.009 for 0.50). d is the stated input's, as C's line of the offset
@@ -147,7 +148,13 @@ def unfitted_offset_lines(fam: Family, best: str) -> dict[str, float]:
     if tw is None:
         return {}
     d = input_uncertainties(fam.settings, fam.fits[best][0].p10)["pressure"]
+    slope_m = tw.slope_m
+    if not best.endswith(M_SUFFIX) and best + M_SUFFIX in fam.fits:
+        # m held: its line is the move of the law's m-free fit (m at 0.500 +- 0.001 with a
+        # -240 Pa zero, held, for 0.529: the held value's own line covered 0.004)
+        held = fam.twin(best + M_SUFFIX, "offset")
+        slope_m = held.slope_m if held is not None else math.nan
     # (math.nan itself where a slope is not known: results are compared as dicts, and a
     # NaN equals only itself)
     return {"input_std": d, "b": abs(tw.slope_b) * d if math.isfinite(tw.slope_b) else math.nan,
-            "m": abs(tw.slope_m) * d if math.isfinite(tw.slope_m) else math.nan}
+            "m": abs(slope_m) * d if math.isfinite(slope_m) else math.nan}

@@ -20,9 +20,12 @@ carried through the reduction's Jacobian, and the fit's chi^2 are a reading of t
 that the model-form spread of C, b and m counts by the information criterion, as it counts
 the heat laws (:func:`pneumatic_unload.curvefit.fitting.fit_curve`), with the reading's own
 variance (a shape the record determines loosely widens the spread). :func:`read_shapes`
-reads q for every heat law fitted with m free (a heat law takes up part of a shape, so the
-shape read with the chosen law alone can be the wrong one) and the pair for the chosen law
-(its fit costs about ten q-free fits). Where the best reading that the record determines
+reads both shapes for every heat law fitted with m free: a heat law takes up part of a
+shape, so the shape read with the chosen law alone can be the wrong one (foreign draw 111,
+a pair cooled by a constant hA: the chosen law, natural convection's turbulent branch
+free, read b 0.026 +- 0.007 for 0.357 and its own pair reading b 0.037; the pair read
+with the density law fits 35 better by the criterion and reads b 0.294 +- 0.052, with
+the truth's own law 0.356). Where the best reading that the record determines
 (:func:`settles`) is clearly better than every fit (:func:`shape_wins`: by the criterion's
 threshold, the rule the heat laws use), its reduced b and m are the ones reported. Either
 way the spread is taken about the discharge's own ISO fit: the distance the reduction
@@ -191,23 +194,23 @@ def read_shape(fam: Family, best: str, shape: str = "q") -> tuple[dict[str, Fit]
 
 
 def read_shapes(fam: Family, best: str) -> tuple[dict[str, Fit], str]:
-    """The shape's readings of the record: the q-free fit (:func:`read_shape`) of every
-    heat law fitted with m free, and the pair in series of the chosen one (its fit costs
-    about ten q-free fits: three more parameters and a flow function solved per
-    evaluation); ({key: reading}, the chosen law's readings in words)."""
+    """The shape's readings of the record: the q-free fit and the pair in series
+    (:func:`read_shape`) of every heat law fitted with m free (a pair's fit costs about ten
+    q-free fits: three more parameters and a flow function solved per evaluation);
+    ({key: reading}, the chosen law's readings in words)."""
     first = best if best.endswith(M_SUFFIX) else best + M_SUFFIX
     keys = [first] + [k for k in fam.fits if k.endswith(M_SUFFIX) and k != first]
     out: dict[str, Fit] = {}
     words = []
     for key in keys:
-        for shape in SHAPE_PARAMETERS if key == first else ("q",):
+        for shape in SHAPE_PARAMETERS:
             got, why = read_shape(fam, key, shape)
             out.update(got)
             if key == first:
                 words.append(why)
     if len(keys) > 1:
-        words.append(f"q read with the {len(keys) - 1} other heat law(s) fitted with m "
-                     "free too")
+        words.append(f"q and the pair read with the {len(keys) - 1} other heat law(s) "
+                     "fitted with m free too")
     return out, "; ".join(words)
 
 

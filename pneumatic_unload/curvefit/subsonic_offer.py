@@ -23,7 +23,13 @@ import numpy as np
 from pneumatic_unload.curvefit.curve_fit_result import CurveFit
 from pneumatic_unload.curvefit.linear_twin import Twin, valley_slopes
 from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
-from pneumatic_unload.uncertainty.budget import Budget, BudgetTerm, model_form_term, record_term
+from pneumatic_unload.uncertainty.budget import (
+    WALL_TERM,
+    Budget,
+    BudgetTerm,
+    model_form_term,
+    record_term,
+)
 
 #: Name of m's line in the budgets of C and b.
 SUBSONIC_TERM = "subsonic index m"
@@ -122,29 +128,33 @@ def subsonic_term(fit: CurveFit, quantity: str) -> BudgetTerm:
 
 
 def m_budget(fit: CurveFit) -> Budget:
-    """The budget of m [-]: fitted, the curve fit's line and the heat laws' spread of the
-    laws fitted with m (``fit.model_form_std_m``), and the transducer's zero where it was
-    not fitted (``fit.unfitted_offset``: its move along the fit's valley); held, the held
-    value's uncertainty
-    (:func:`held_lines`) and, where the laws were fitted with m too, their spread of m
-    (``fit.model_form_std_m``, folded into ``fit.subsonic_index_std``). The wall
-    temperature's move of m is not evaluated (as b's, it is of second order where the wall
-    is assumed at T10)."""
+    """The budget of m [-]: fitted, the curve fit's line, the wall temperature's (the chosen
+    law refitted with the wall moved, ``fit.wall_std_m``: a 2 K wall moved m by 0.010 where
+    its fit said +- 0.001), the transducer's zero where it was not fitted
+    (``fit.unfitted_offset``: its move along the fit's valley) and the heat laws' spread of
+    the laws fitted with m (``fit.model_form_std_m``); held, the held value's uncertainty
+    (:func:`held_lines`), the zero's move of the law's m-free fit, and, where the laws were
+    fitted with m too, their spread of m (``fit.model_form_std_m``, folded into
+    ``fit.subsonic_index_std``)."""
+    mf = fit.model_form_std_m if math.isfinite(fit.model_form_std_m) else 0.0
+    off = fit.unfitted_offset
+    zero = (BudgetTerm("pressure transducer (offset)", "B", fit.p10, off["input_std"],
+                       "Pa", off["m"], "not fitted: the fit's move along its valley with "
+                       "the zero freed, to first order" + (
+                           "" if fit.subsonic_index_fitted else " (the law's fit with m "
+                           "free)")),) \
+        if math.isfinite(off.get("m", math.nan)) else ()
     if fit.subsonic_index_fitted:
-        mf = fit.model_form_std_m if math.isfinite(fit.model_form_std_m) else 0.0
-        off = fit.unfitted_offset
-        zero = (BudgetTerm("pressure transducer (offset)", "B", fit.p10, off["input_std"],
-                           "Pa", off["m"], "not fitted: the fit's move along its valley with "
-                           "the zero freed, to first order"),) \
-            if math.isfinite(off.get("m", math.nan)) else ()
+        wall = (BudgetTerm(WALL_TERM, "B", math.nan, fit.wall_uncertainty, "K",
+                           fit.wall_std_m, "the chosen law refitted with the wall moved, "
+                           "to first order"),) if math.isfinite(fit.wall_std_m) else ()
         return Budget(fit.subsonic_index, (
             record_term("curve fit (noise, AR(1), residual structure)",
-                        fit.subsonic_index_std), *zero, model_form_term(mf)))
-    mf = fit.model_form_std_m if math.isfinite(fit.model_form_std_m) else 0.0
+                        fit.subsonic_index_std), *wall, *zero, model_form_term(mf)))
     held = math.sqrt(max(fit.subsonic_index_std**2 - mf**2, 0.0))
     return Budget(fit.subsonic_index, (
         BudgetTerm("m held", "B", fit.subsonic_index, held, "-", held, fit.subsonic_source),
-        *((model_form_term(mf),) if mf > 0.0 else ())))
+        *zero, *((model_form_term(mf),) if mf > 0.0 else ())))
 
 
 def held_spread(m_c: float, m_b: float, m_u: float, spread: float

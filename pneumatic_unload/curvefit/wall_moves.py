@@ -1,9 +1,10 @@
-"""The wall temperature's and the heat laws' moves of the curve fit's C and b, for the
+"""The wall temperature's and the heat laws' moves of the curve fit's C, b and m, for the
 lines of their budgets (:mod:`pneumatic_unload.uncertainty.budget`).
 
 A wall temperature assumed (= T10) or given has a standard uncertainty; the fitted C and b
-move with it. :func:`wall_linear` takes the move to first order from the fit's Jacobian (two
-model evaluations); the full refit is :func:`pneumatic_unload.curvefit.fitting.fit_curve`'s.
+(and m, where fitted) move with it. :func:`wall_linear` takes the move to first order from
+the fit's Jacobian (two model evaluations); the full refit is
+:func:`pneumatic_unload.curvefit.fitting.fit_curve`'s.
 :func:`spread_b` is b's model-form spread over the heat laws that fit about equally well
 (C's is computed beside the BIC table in :mod:`pneumatic_unload.curvefit.fitting`).
 
@@ -32,8 +33,9 @@ NULL_RCOND = 1e-8
 
 
 def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
-                u: float, *, law: str) -> tuple[float, float]:
-    """C's and b's standard uncertainties ([m^3/(s Pa)], [-]) from a wall temperature of
+                u: float, *, law: str) -> tuple[float, float, float]:
+    """C's, b's and m's standard uncertainties ([m^3/(s Pa)], [-], [-]) from a wall
+    temperature of
     standard uncertainty u [K]: the curve fit's law refitted with the wall moved, to first
     order, at a cost of two model evaluations instead of two fits (``kept``: the fit's
     FitResult 'result' and model 'model'). With the wall moved by +-u the residual at the
@@ -41,14 +43,16 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
     -J^+ dr with the fit's Jacobian J (the fitted values are the minimum of the unmoved
     problem, J^T r = 0 there); the moves are root-mean-squared as the refit's are. NaN when
     it cannot be computed, or the step leaves the float range (the response is then not
-    linear: the caller refits); b's NaN also when b was not fitted."""
+    linear: the caller refits); b's (m's) NaN also when b (m) was not fitted."""
     fit, model = kept["result"], kept["model"]
     free = list(fit.params.free)
     jac = np.asarray(fit.jac, dtype=float)
     if "C" not in free or jac.shape != (fit.fun.size, len(free)) \
             or not np.all(np.isfinite(jac)):
-        return math.nan, math.nan
-    moves, b_moves = [], []
+        return math.nan, math.nan, math.nan
+    moves: list[float] = []
+    b_moves: list[float] = []
+    m_moves: list[float] = []
     lo, hi = fit.params.bounds()
     with np.errstate(all="ignore"):
         live = ~((fit.x - lo < 1e-3 * (hi - lo)) | (hi - fit.x < 1e-3 * (hi - lo)))
@@ -63,9 +67,9 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
             try:
                 dr = np.asarray(trace.residual(moved)(fit.values), dtype=float) - fit.fun
             except (ValueError, ArithmeticError):
-                return math.nan, math.nan
+                return math.nan, math.nan, math.nan
             if not np.all(np.isfinite(dr)):
-                return math.nan, math.nan
+                return math.nan, math.nan, math.nan
             # parameters on a bound of their range (a thermometer's lag at its floor) are
             # held: their flat column would take the step out of the float range
             dx = np.zeros(len(free))
@@ -80,11 +84,16 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
                     # near its faded end: no exchange) the step is undefined: held
                     continue
             if v is None:
-                return math.nan, math.nan
+                return math.nan, math.nan, math.nan
             moves.append(v["C"] - fit.values["C"])
             b_moves.append(v["b"] - fit.values["b"] if "b" in free else math.nan)
-    return (math.sqrt(sum(m * m for m in moves) / 2.0),
-            math.sqrt(sum(m * m for m in b_moves) / 2.0))
+            m_moves.append(v["m"] - fit.values["m"] if "m" in free else math.nan)
+    return _rms(moves), _rms(b_moves), _rms(m_moves)
+
+
+def _rms(moves: list[float]) -> float:
+    """The root mean square of the two moves [their unit] (NaN if either is)."""
+    return math.sqrt(sum(d * d for d in moves) / 2.0)
 
 
 def law_spread(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, float],
