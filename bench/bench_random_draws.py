@@ -78,6 +78,12 @@ draws without their log): the ISO law's C, b, m 209, 205, 208 / 199, 196, 202 / 
 191; the series' 74, 71, 68 / 62, 61, 63 / 73, 63, 61 of 74, b within 0.03 66 and m within
 0.05 69 (default). The temperature draws without their log: unchanged.
 
+Session 33 (m's budget with the wall's line where m is fitted and the unfitted zero's with
+m held; the pair read with every heat law fitted with m free): the ISO law's C, b, m 209,
+205, 208 / 199, 196, 202 / 204, 195, 197; the series' 74, 72, 69 / 63, 63, 65 / 73, 64,
+65 of 74, b within 0.03 67 and m within 0.05 70 (default); every audit line consistent
+with 90-98 % but the default's ISO C and b (over 98 %: the rig exact).
+
 """
 
 from __future__ import annotations
