@@ -467,8 +467,11 @@ def test_the_rig_s_inputs_move_m_within_its_sigma(name):
     tr = truth(law)
     assert abs(r.subsonic_index - tr.fit_m) <= min(0.05, 2.0 * r.subsonic_index_std), \
         (r.subsonic_index, r.subsonic_index_std, tr.fit_m)
-    terms = {x["name"]: x["std"] for x in r.extra["budget_m"]["terms"]}
-    assert terms.get(line, 0.0) >= 0.5 * abs(r.subsonic_index - tr.fit_m), terms
+    terms = {x["name"]: x for x in r.extra["budget_m"]["terms"]}
+    assert terms[line]["std"] >= 0.5 * abs(r.subsonic_index - tr.fit_m), terms
+    # the input's own uncertainty stated: the zero's 0.1 % of p10 [Pa], the wall's 2 K
+    assert terms[line]["input_std"] == pytest.approx(1e-3 * p10 if "offset" in line else 2.0,
+                                                     rel=1e-3), terms[line]
 
 
 def test_the_shape_wins_only_over_every_other_reading():

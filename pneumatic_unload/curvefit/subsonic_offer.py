@@ -127,7 +127,7 @@ def subsonic_term(fit: CurveFit, quantity: str) -> BudgetTerm:
                       0.0 if fit.subsonic_index_fitted else std, note)
 
 
-def m_budget(fit: CurveFit) -> Budget:
+def m_budget(fit: CurveFit, wall_input: float = math.nan) -> Budget:
     """The budget of m [-]: fitted, the curve fit's line, the wall temperature's (the chosen
     law refitted with the wall moved, ``fit.wall_std_m``: a 2 K wall moved m by 0.010 where
     its fit said +- 0.001), the transducer's zero where it was not fitted
@@ -145,7 +145,7 @@ def m_budget(fit: CurveFit) -> Budget:
                            "free)")),) \
         if math.isfinite(off.get("m", math.nan)) else ()
     if fit.subsonic_index_fitted:
-        wall = (BudgetTerm(WALL_TERM, "B", math.nan, fit.wall_uncertainty, "K",
+        wall = (BudgetTerm(WALL_TERM, "B", math.nan, wall_input, "K",
                            fit.wall_std_m, "the chosen law refitted with the wall moved, "
                            "to first order"),) if math.isfinite(fit.wall_std_m) else ()
         return Budget(fit.subsonic_index, (

@@ -477,8 +477,10 @@ def refine_with_curve_fit(
     if math.isfinite(fit.critical_ratio):
         extra["budget_b"] = b_budget(fit, settings, res, hot=hot["b"])
         b_std = extra["budget_b"]["combined_std"]
-    if math.isfinite(fit.critical_ratio) or fit.subsonic_index_fitted:
-        extra["budget_m"] = m_budget(fit).to_dict()  # (m without b: a flow never choked)
+    if math.isfinite(fit.critical_ratio) or fit.subsonic_index_fitted:  # (m: never choked)
+        u_w = fit.wall_uncertainty  # [K] the wall's, assumed (from the record) or given
+        extra["budget_m"] = m_budget(fit, u_w if math.isfinite(u_w) else
+                                     wall_uncertainty(settings)[0]).to_dict()
     status, text = res.status, res.status_text
     quality = res.quality if fit.success else min(res.quality, 0.5)
     extra["model_inadequate"] = why or ""
