@@ -35,10 +35,10 @@ NULL_RCOND = 1e-8
 def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
                 u: float, *, law: str) -> tuple[float, float, float]:
     """C's, b's and m's standard uncertainties ([m^3/(s Pa)], [-], [-]) from a wall
-    temperature of
-    standard uncertainty u [K]: the curve fit's law refitted with the wall moved, to first
-    order, at a cost of two model evaluations instead of two fits (``kept``: the fit's
-    FitResult 'result' and model 'model'). With the wall moved by +-u the residual at the
+    temperature of standard uncertainty u [K]: the curve fit's law refitted with the wall
+    moved, to first order, at a cost of two model evaluations instead of two fits
+    (``kept``: the fit's FitResult 'result' and model 'model'). With the wall moved by +-u
+    the residual at the
     fitted values changes by dr; the refit's parameter shift is the Gauss-Newton step
     -J^+ dr with the fit's Jacobian J (the fitted values are the minimum of the unmoved
     problem, J^T r = 0 there); the moves are root-mean-squared as the refit's are. NaN when
