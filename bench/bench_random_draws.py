@@ -82,7 +82,9 @@ Session 33 (m's budget with the wall's line where m is fitted and the unfitted z
 m held; the pair read with every heat law fitted with m free): the ISO law's C, b, m 209,
 205, 208 / 199, 196, 202 / 204, 195, 197; the series' 74, 72, 69 / 63, 63, 65 / 73, 64,
 65 of 74, b within 0.03 67 and m within 0.05 70 (default); every audit line consistent
-with 90-98 % but the default's ISO C and b (over 98 %: the rig exact).
+with 90-98 % but the default's ISO C and b (over 98 %: the rig exact). The temperature
+draws: |z_m| <= 2 with their log 163 -> 167/170, without it 110 -> 111 (hot) and 49 -> 50
+(not hot); every other verdict unchanged.
 
 """
 
