@@ -65,7 +65,7 @@ from pneumatic_unload.curvefit.subsonic_offer import (
     subsonic_index_problem,
     twin_lines,
 )
-from pneumatic_unload.curvefit.wall_moves import law_spread, spread_b, wall_linear
+from pneumatic_unload.curvefit.wall_moves import law_spread, rms_moves, spread_b, wall_linear
 from pneumatic_unload.fit.lsq import numerical_reproducibility
 from pneumatic_unload.fit.reduced import Reducer
 from pneumatic_unload.fit.trace import Trace
@@ -385,8 +385,7 @@ def _wall_refit(trace: Trace, fit: CurveFit, settings: EstimatorSettings, u: flo
             return math.nan, math.nan, math.nan
         out.append((again.conductance, again.critical_ratio,
                     again.subsonic_index if fit_m else math.nan))
-    c_std = math.sqrt(sum((c - fit.conductance) ** 2 for c, _b, _m in out) / 2.0) \
+    c_std = rms_moves([c - fit.conductance for c, _b, _m in out]) \
         if all(math.isfinite(c) for c, _b, _m in out) else math.nan
-    b_std = math.sqrt(sum((b - fit.critical_ratio) ** 2 for _c, b, _m in out) / 2.0)
-    m_std = math.sqrt(sum((m - fit.subsonic_index) ** 2 for _c, _b, m in out) / 2.0)
-    return c_std, b_std, m_std
+    return (c_std, rms_moves([b - fit.critical_ratio for _c, b, _m in out]),
+            rms_moves([m - fit.subsonic_index for _c, _b, m in out]))

@@ -152,8 +152,8 @@ def unfitted_offset_lines(fam: Family, best: str) -> dict[str, float]:
     if not best.endswith(M_SUFFIX) and best + M_SUFFIX in fam.fits:
         # m held: its line is the move of the law's m-free fit (m at 0.500 +- 0.001 with a
         # -240 Pa zero, held, for 0.529: the held value's own line covered 0.004)
-        held = fam.twin(best + M_SUFFIX, "offset")
-        slope_m = held.slope_m if held is not None else math.nan
+        free_m = fam.twin(best + M_SUFFIX, "offset")
+        slope_m = free_m.slope_m if free_m is not None else math.nan
     # (math.nan itself where a slope is not known: results are compared as dicts, and a
     # NaN equals only itself)
     return {"input_std": d, "b": abs(tw.slope_b) * d if math.isfinite(tw.slope_b) else math.nan,

@@ -88,11 +88,12 @@ def wall_linear(trace: Trace, kept: dict[str, Any], settings: EstimatorSettings,
             moves.append(v["C"] - fit.values["C"])
             b_moves.append(v["b"] - fit.values["b"] if "b" in free else math.nan)
             m_moves.append(v["m"] - fit.values["m"] if "m" in free else math.nan)
-    return _rms(moves), _rms(b_moves), _rms(m_moves)
+    return rms_moves(moves), rms_moves(b_moves), rms_moves(m_moves)
 
 
-def _rms(moves: list[float]) -> float:
-    """The root mean square of the two moves [their unit] (NaN if either is)."""
+def rms_moves(moves: list[float]) -> float:
+    """The root mean square of the two moves (the wall at +-u) [their unit]; NaN if
+    either is."""
     return math.sqrt(sum(d * d for d in moves) / 2.0)
 
 

@@ -477,7 +477,7 @@ def refine_with_curve_fit(
     if math.isfinite(fit.critical_ratio):
         extra["budget_b"] = b_budget(fit, settings, res, hot=hot["b"])
         b_std = extra["budget_b"]["combined_std"]
-    if math.isfinite(fit.critical_ratio) or fit.subsonic_index_fitted:  # (m: never choked)
+    if math.isfinite(fit.critical_ratio) or fit.subsonic_index_fitted:  # (m without b: unchoked)
         u_w = fit.wall_uncertainty  # [K] the wall's, assumed (from the record) or given
         extra["budget_m"] = m_budget(fit, u_w if math.isfinite(u_w) else
                                      wall_uncertainty(settings)[0]).to_dict()
