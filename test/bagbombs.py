@@ -7,8 +7,8 @@ by ``extra`` zero bytes; the chunk then truly decompresses to ``records + extra`
 ``claim`` sets the uncompressed size the chunk record and its chunk index declare:
 ``"true"`` (the real size), ``"records"`` (only the records: the chunk lies small) or a
 number of bytes (e.g. 1 TiB). By default the compressed frame carries its content size,
-as a one-shot
-compressor writes it, so that a decompressor trusting the frame allocates it whole.
+as a one-shot compressor writes it, so that a decompressor trusting the frame allocates
+it whole.
 """
 
 from __future__ import annotations
