@@ -285,7 +285,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_recover(args: argparse.Namespace) -> int:
     """Recover a bag whose writer died."""
-    from pneumatic_unload.io.bag import BagError, recover
+    from pneumatic_unload.io.bag import TOPIC_PRESSURE, BagError, recover
 
     try:
         report = recover(Path(args.bag))
@@ -294,6 +294,9 @@ def cmd_recover(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise CliError(f"recover {args.bag}: {exc}") from exc
     print(report)
+    if not report.messages.get(TOPIC_PRESSURE):
+        raise CliError(f"recover {args.bag}: no pressure sample ({TOPIC_PRESSURE}) is left in "
+                       "the bag: there is nothing to analyse")
     return 0
 
 

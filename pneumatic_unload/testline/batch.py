@@ -38,7 +38,13 @@ from pneumatic_unload.testline.accounting import (
     timed_chunk,
     worker_snapshot,
 )
-from pneumatic_unload.testline.db import FileRecord, known_contents, open_db, write_files
+from pneumatic_unload.testline.db import (
+    FileRecord,
+    ResultsDBError,
+    known_contents,
+    open_db,
+    write_files,
+)
 from pneumatic_unload.testline.job import InputOptions, options_hash
 
 #: Suffixes of the inputs a batch picks up in a folder (plus bag folders).
@@ -282,6 +288,7 @@ def run_batch(paths: Sequence[str], options: InputOptions, *, db_path: str | Pat
     res = BatchResult()
     acc = res.accounting
     cpu0 = thread_cpu()
+    db_failed = False
     try:
         try:
             if workers <= 1 and not scheduler:
@@ -295,8 +302,12 @@ def run_batch(paths: Sequence[str], options: InputOptions, *, db_path: str | Pat
                 acc.client = cpu_delta(cpu0, thread_cpu())
             else:
                 _on_dask(items, options, known, force, workers, scheduler, out.add, res)
+        except ResultsDBError:
+            db_failed = True  # the database's error stands; no second wait on it below
+            raise
         finally:
-            out.flush(everything=True)
+            if not db_failed:
+                out.flush(everything=True)
     except KeyboardInterrupt:
         res.interrupted = True
     finally:
@@ -326,11 +337,19 @@ def _on_dask(items: list[tuple[int, str]], options: InputOptions, known: frozens
         known_arg: Any = client.scatter([known], broadcast=True)[0] if known else known
         futs = {client.submit(timed_chunk, chunk, options, known_arg, force, pure=False):
                 chunk for chunk in chunks(items, n_workers or workers)}
-        for fut in as_completed(futs):
+        running = as_completed(futs)
+        for fut in running:
             try:
                 done, stamp = fut.result()
                 acc.tasks.append(stamp)
-            except Exception as exc:  # a worker died: each input's row says so
+            except Exception as exc:  # the task failed (its worker died)
+                if len(futs[fut]) > 1:  # each input again alone: only the culprit fails
+                    for one in futs[fut]:
+                        again = client.submit(timed_chunk, [one], options, known_arg, force,
+                                              pure=False)
+                        futs[again] = [one]
+                        running.add(again)
+                    continue
                 ohash = options_hash(options)
                 done = [(k, FileRecord(
                     path=path, content_hash=f"failed:{k}", settings_hash=ohash, part_id="",
