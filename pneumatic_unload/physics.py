@@ -198,8 +198,19 @@ def p_star(p10: float, p_atm: float, fraction: float = P_STAR_FRACTION) -> float
     return p_atm + fraction * (p10 - p_atm)
 
 
+def reference_pressure(gas: Gas = AIR) -> float:
+    """The paper's p_N for ``gas`` [Pa]: the term rho_N R T_N of the choked mass flow
+    C rho_N p1 sqrt(T_N/T1) written in eqs 22, 28, 38 and 39, which the paper prints as
+    p_N for air (0.28 % apart). C is defined with rho_N = 1.185 kg/m^3, the density of the
+    ISO 8778 standard reference atmosphere, whatever the gas (ISO 6358-1:2013's sonic
+    conductance, :func:`mass_flow`), so another gas keeps rho_N and brings its own R: p_N R
+    / R_air, p_N itself for air (a hydrogen tank's p_N 14.4 times air's, helium's 7.2)."""
+    return P_N * (gas.gas_constant / AIR.gas_constant)
+
+
 def tau0(volume: float, conductance: float, t10: float = T_N, gas: Gas = AIR) -> float:
-    """Initial characteristic time tau0 = V sqrt(T_N/T10) / (gamma p_N C) [s] (eq 28).
+    """Initial characteristic time tau0 = V sqrt(T_N/T10) / (gamma p_N C) [s] (eq 28),
+    p_N the gas's (:func:`reference_pressure`).
 
     Parameters
     ----------
@@ -212,7 +223,7 @@ def tau0(volume: float, conductance: float, t10: float = T_N, gas: Gas = AIR) ->
     gas : Gas
         Gas properties.
     """
-    return volume * math.sqrt(T_N / t10) / (gas.gamma * P_N * conductance)
+    return volume * math.sqrt(T_N / t10) / (gas.gamma * reference_pressure(gas) * conductance)
 
 
 def tau_exp_eq38(
@@ -248,7 +259,8 @@ def conductance_eq39(
 ) -> float:
     """Sonic conductance from the unloading time, the paper's eq 39 [m^3/(s Pa)].
 
-    C = ((p10 - p_atm)/p10) sqrt(T_N/T10) V / (gamma p_N tau_exp). Biased by design: see
+    C = ((p10 - p_atm)/p10) sqrt(T_N/T10) V / (gamma p_N tau_exp), p_N the gas's
+    (:func:`reference_pressure`: the paper's p_N for air). Biased by design: see
     :func:`eq39_bias_isentropic` and ``method.md``.
 
     Parameters
@@ -271,10 +283,11 @@ def conductance_eq39(
 def eq39_factors(p10: float, p_atm: float, volume: float, t10: float = T_N,
                  gas: Gas = AIR) -> tuple[float, float]:
     """eq 39 as C = a / (b tau_exp) (:func:`conductance_eq39`, the same doubles): a =
-    ((p10 - p_atm)/p10) sqrt(T_N/T10) V [m^3] and b = gamma p_N [Pa], which do not depend
-    on tau_exp (prepared before the live crossing). Pressures [Pa absolute], V [m^3],
-    T10 [K]."""
-    return (p10 - p_atm) / p10 * math.sqrt(T_N / t10) * volume, gas.gamma * P_N
+    ((p10 - p_atm)/p10) sqrt(T_N/T10) V [m^3] and b = gamma p_N [Pa] (p_N the gas's,
+    :func:`reference_pressure`), which do not depend on tau_exp (prepared before the live
+    crossing). Pressures [Pa absolute], V [m^3], T10 [K]."""
+    return ((p10 - p_atm) / p10 * math.sqrt(T_N / t10) * volume,
+            gas.gamma * reference_pressure(gas))
 
 
 def choked_time_constant(
@@ -286,7 +299,8 @@ def choked_time_constant(
     p1/p10 = (1 + t/Theta)^(-2 gamma/(gamma - 1)) with
     Theta = 2 V / ((gamma - 1) C rho_N R sqrt(T_N T10)), which is exact for the ISO 6358 flow
     law with rho_N = 1.185 kg/m^3. The paper writes p_N in place of rho_N R T_N (eq 22);
-    ``paper_form=True`` gives that version (0.28 % apart for air).
+    ``paper_form=True`` gives that version with the gas's p_N (:func:`reference_pressure`;
+    0.28 % apart for air).
 
     Parameters
     ----------
@@ -303,7 +317,8 @@ def choked_time_constant(
     """
     k = gas.gamma - 1.0
     if paper_form:
-        return volume / (P_N * conductance) * (2.0 / k) * math.sqrt(T_N / t10)
+        return volume / (reference_pressure(gas) * conductance) * (2.0 / k) * math.sqrt(
+            T_N / t10)
     return 2.0 * volume / (k * conductance * RHO_N * gas.gas_constant * math.sqrt(T_N * t10))
 
 

@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 import pytest
-from realdata import AEROLAB_ARGS, aerolab_json, real_file
+from realdata import aerolab_args, aerolab_json, real_file
 
 from pneumatic_unload.app.cli import main
 from pneumatic_unload.io.bag import read_estimates
@@ -49,7 +49,7 @@ def test_real_aerolab_text_and_json_tell_b_and_m_alike(capsys):
     JSON does (the text said "b, m = not identifiable" with m in the JSON)."""
     (u,) = [x for x in aerolab_json("orifice_0.094in.csv")["unloads"] if x["final"]]
     code, text, _ = _run(capsys, "analyze", str(real_file("aerolab/orifice_0.094in.csv")),
-                         *AEROLAB_ARGS)
+                         *aerolab_args("orifice_0.094in.csv"))
     assert code == 0
     if u["critical_ratio"] is None:
         assert u["critical_ratio_source"].startswith("not determined: the fit's ")

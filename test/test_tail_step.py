@@ -83,11 +83,12 @@ def _aerolab(name: str) -> dict:
     return u
 
 
-@pytest.mark.parametrize("name,t_step", [("orifice_0.094in.csv", 260.0),
-                                         ("orifice_0.125in.csv", 151.0)])
+@pytest.mark.parametrize("name,t_step", [("orifice_0.125in.csv", 151.0)])
 def test_real_aerolab_tail_ends_before_its_step(name, t_step):
-    """Both runs: the tail ends on the +0.5 kPa level, the step said (-2.9 kPa), no zero
-    offset fitted from it (the 0.094 in run read -3861 +- 622 Pa before)."""
+    """The tail ends on the +0.5 kPa level, the step said (-2.9 kPa), no zero offset fitted
+    from it. (The 0.094 in run begins after its opening: analysed from ``--start-time``,
+    its unload ends where the record settles, and no offset is fitted:
+    test_cli.py's real-data tests.)"""
     u = _aerolab(name)
     assert u["t_end"] == pytest.approx(t_step - 1.0)
     assert "steps by -29" in u["status_text"] and f"t={t_step:.6f} s" in u["status_text"]

@@ -25,6 +25,17 @@ def rms_sigma(x: FloatArray) -> float:
     return float(np.std(np.diff(x))) / math.sqrt(2.0)
 
 
+def curvature_sigma(x: FloatArray) -> float:
+    """Noise standard deviation from second differences, robustly (the normal-consistent
+    median absolute deviation over sqrt(6)) [unit of x]: a smooth fall's trend and curvature
+    drop out, and a few samples where the fall bends sharply (a valve's opening ramp) do not
+    count; 0 for fewer than 5 samples."""
+    if x.size < 5:
+        return 0.0
+    d2 = np.diff(x, 2)
+    return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
+
+
 def noise_correlation(x: FloatArray) -> float:
     """Lag-1 correlation rho of noise ``x`` read as AR(1) noise, 0 where it is not
     significant [-]: rho = 1 + 2 r, r the first differences' own lag-1 correlation (first

@@ -30,6 +30,7 @@ from pneumatic_unload.estimation.refine import end_level_problem, needs_model
 from pneumatic_unload.estimation.regression import (
     correlated_noise_factor,
     crossing_window,
+    curvature_sigma,
     first_below_in,
     hinge_cov,
     hinge_fit,
@@ -115,34 +116,81 @@ def no_plateau(t: FloatArray, p: FloatArray, min_plateau: int, slope0: float,
 
 
 def first_unload_check(st: EstimatorState, i: int, t: FloatArray, p: FloatArray,
-                       slope0: float, drift: float = 0.0) -> bool:
+                       slope0: float, drift: float = 0.0) -> tuple[bool, str]:
     """The first unload of a stream, whose plateau began with the stream's first sample:
-    True when it is to be skipped (decided at index i [-]; t [s], p [signal units]: the
-    samples before its start; slope0: initial fall rate [signal units/s]; ``drift``: the
-    plateau's fitted drift [signal units/s], 0 if none: then a live stream's first samples
-    falling at all are no plateau, e.g. a 5 L unload joined 1.2 s in).
+    (skip, why): skip is True when it is to be skipped (decided at index i [-]; t [s], p
+    [signal units]: the samples before its start; slope0: initial fall rate [signal
+    units/s]; ``drift``: the plateau's fitted drift [signal units/s], 0 if none: then a
+    live stream's first samples falling at all are no plateau, e.g. a 5 L unload joined
+    1.2 s in); why is the reason it has no plateau ('' when it has one).
 
     Without a pre-step plateau (:func:`no_plateau`) a live stream (``live``: a node that
     may start or restart at any time) joined an unload under way: no result for it, a
     warning, and the rest of it is skipped until a plateau. Offline, a record is taken to
-    start where its author chose (e.g. at the valve opening): the unload is analysed, with
-    a warning that p10 and its start come from its first samples.
+    start where its author chose: the caller judges whether the opening is in it
+    (:func:`opening_in_record`, once the start's uncertainty is known).
     """
     st.stream_start = False
     why = no_plateau(t, p, st.settings.min_plateau, slope0,
                      0.0 if st.live and drift != 0.0 else PLATEAU_FALL_FRACTION)
     if not why:
-        return False
+        return False, ""
     if st.live:
         st.diag("warn", f"{why}: the stream started during an unload (estimator started or "
                         f"restarted mid-unload): no estimate for this unload; waiting for a "
                         f"plateau before the next one", float(st.buf.t[i]))
         st.to_skip(i)
-        return True
-    st.diag("warn", f"{why}: the record starts at or after the valve opening; p10 and the "
-                    f"start come from its first samples (the estimate may be biased)",
-            float(st.buf.t[i]))
-    return False
+        return True, why
+    return False, why
+
+
+#: The fitted opening of a record without a plateau must lie at least this many of its
+#: standard errors after the record's first sample to be in the record [-]: closer, the
+#: record's first samples already fall as the fitted start's neighbourhood does (one-sided
+#: 4 sigma: a record that truly begins on a flat stretch fails it with a probability of
+#: about 3e-5 for a normal error of the start).
+OPENING_IN_RECORD_Z = 4.0
+
+
+#: Samples at the head of a record that show whether its fall is still gathering pace [-]:
+#: the fewest through which a straight line has a residual (a rate and its noise).
+RAMP_SAMPLES = 3
+
+
+def opening_in_record(t_head: FloatArray, p_head: FloatArray, t0: float, t0_std: float,
+                      slope0: float, sigma: float, why: str) -> str:
+    """'' when the opening of a record without a plateau (``why``: the reason it has none)
+    is in the record; else why the unload is refused, with what to pass instead.
+
+    The opening is in the record when the fitted start t0 [s] lies
+    :data:`OPENING_IN_RECORD_Z` standard errors ``t0_std`` [s] or more after its first
+    sample (flat samples before it), or when its first samples (``t_head`` [s], ``p_head``
+    [signal units]: :data:`RAMP_SAMPLES` of them) fall slower than the start fit's initial
+    rate slope0 [signal units/s] by that many standard errors of their rate (sigma [signal
+    units]: the start window's noise, :func:`~.regression.curvature_sigma`): the valve's
+    opening ramp, the fall gathering pace. A
+    record cut after the opening falls at the first sample at its full rate, slowing: its
+    own p10 and start would be taken (a 5 L tank's record cut 1 s in: C 4 % low)."""
+    lead = t0 - float(t_head[0])
+    z = lead / t0_std if t0_std > 0.0 else (math.inf if lead > 0.0 else 0.0)
+    if z >= OPENING_IN_RECORD_Z:
+        return ""
+    tc = t_head - t_head.mean()
+    sxx = float(tc @ tc)
+    if sxx > 0.0 and sigma > 0.0 and math.isfinite(slope0):
+        fall = -float(tc @ (p_head - p_head.mean())) / sxx
+        if (slope0 - fall) / (sigma / math.sqrt(sxx)) >= OPENING_IN_RECORD_Z:
+            return ""
+    t_first = float(t_head[0])
+    return (f"{why}, and the pressure already falls at the record's first sample at its "
+            f"full rate (the fitted opening lies {lead:.3g} s after it, {z:.1f} standard "
+            f"errors of the start, fewer than {OPENING_IN_RECORD_Z:g}; no opening ramp in "
+            f"its first {t_head.size} samples): the record begins at or after the valve "
+            f"opening, and its p10 and start are not measured. If it begins at the "
+            f"opening, give the opening: --start-time {t_first:.6g} (start_time) with "
+            f"--atmosphere PA and, when no sample falls on the opening, --initial-pressure "
+            f"PA (docs: Records that begin at the opening); if it begins later, the unload "
+            f"cannot be measured from it")
 
 
 def fall_exponent(gamma: float) -> float:
@@ -251,15 +299,28 @@ def refine_start(st: EstimatorState, i: int) -> list[UnloadResult]:
     u.i0 = int(np.searchsorted(tv, t0))
     # the first unload of a stream: judged on its whole plateau since the stream began (a
     # slow tail joined late looks flat over the hinge's window, not over seconds)
-    if st.stream_start and first_unload_check(st, i, tv[min(lo, st.arm_index):u.i0],
-                                              pv[min(lo, st.arm_index):u.i0], slope, drift):
-        return []
+    first = min(lo, st.arm_index)
+    no_plateau_why = ""
+    if st.stream_start:
+        skip, no_plateau_why = first_unload_check(st, i, tv[first:u.i0], pv[first:u.i0],
+                                                  slope, drift)
+        if skip:
+            return []
     # the start's and p10's (co)variance from the hinge model's information (its curvature
     # and continuity included; p* moves with p10, see crossing_result)
     u.inflation = variance_inflation(pre)  # correlated noise (tau_sigma and p_atm's too)
     v_t0, u.t0_p10_cov, u.p10_var = [u.inflation * x for x in hinge_cov(
         tv[lo:n], t0, slope, curv, rms, exponent=k)] if slope > 0 else (math.inf, 0.0, math.inf)
     u.t0_std = math.sqrt(v_t0)
+    if no_plateau_why:  # offline: a record without a plateau
+        head = slice(first, min(first + RAMP_SAMPLES, n))
+        refused = opening_in_record(tv[head], pv[head], t0, u.t0_std, slope,
+                                    curvature_sigma(pw), no_plateau_why)
+        if refused:
+            return st.bad(i, refused)
+        st.diag("warn", f"{no_plateau_why}: the record starts at or after the valve "
+                        f"opening; p10 and the start come from its first samples (the "
+                        f"estimate may be biased)", float(st.buf.t[i]))
     u.p10 = p10
     u.slope0 = slope
     st.sigma = max(rms, 1e-12)
