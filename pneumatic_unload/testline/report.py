@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from pneumatic_unload import __version__
+from pneumatic_unload.estimation.types import ESTIMATE_STATUSES
 from pneumatic_unload.testline.batch import part_summary
 from pneumatic_unload.testline.db import file_rows, hide_password, open_db, unload_rows
 from pneumatic_unload.testline.spec import DM3_PER_S_BAR
@@ -205,7 +206,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
         pts = [(u["t_start"] or 0.0, u["recommended_conductance"], f"{u['part_id']} "
                 f"{Path(u['path']).name}#{u['unload_index']}") for u in unloads
                if (u["part_type"] or "") == t and u["recommended_conductance"] is not None
-               and u["status"] in ("ok", "aborted_sse", "not_choked")]
+               and u["status"] in ESTIMATE_STATUSES]
         h.append(control_chart(pts, t or "parts without a type"))
     h.append("<h2>Repeatability</h2><table><tr><th class='l'>part type</th><th>parts</th>"
              "<th>pooled s(C)</th></tr>")
