@@ -175,9 +175,9 @@ def test_analyze_text_says_an_unknown_uncertainty_in_words():
     assert "REPORT C       = 8.100e-09 m^3/(s Pa) (uncertainty not known) = 0.8100" in text
     r.conductance_model_std, r.critical_ratio_std, r.tau_exp_std = 2e-11, 0.01, 0.001
     text = format_result(r)
-    assert "C (model)      = 8.100e-09 +- 2e-11 m^3/(s Pa) = 0.8100 +- 0.002" in text
+    assert "C (model)      = 8.100e-09 +- 2.0e-11 m^3/(s Pa) = 0.8100 +- 0.0020 " in text
     assert "b              = 0.450 +- 0.010" in text and "(+- 0.001 s)" in text
-    assert "REPORT C       = 8.100e-09 +- 4e-11 m^3/(s Pa) (k = 2) = 0.8100 +- 0.004" in text
+    assert "REPORT C       = 8.100e-09 +- 4.0e-11 m^3/(s Pa) (k = 2) = 0.8100 +- 0.0040 " in text
 
 
 def test_text_output_prints_c_with_four_significant_digits_in_si_and_dm3():
@@ -216,8 +216,8 @@ def test_batch_parts_table_and_demo_print_c_with_four_significant_digits():
     est = {"conductance": 3.1e-9, "conductance_model": 3e-9, "conductance_model_std": 2e-11,
            "critical_ratio": 0.4, "tau_exp": 0.5, "method": "eq39"}
     line = _fmt(est)
-    assert "C (eq 39) = 0.3100 " in line and "model C = 3.000e-09 +- 2e-11 m^3/(s Pa) = " \
-        "0.3000 +- 0.002 dm^3/(s bar)" in line, line
+    assert "C (eq 39) = 0.3100 " in line and "model C = 3.000e-09 +- 2.0e-11 m^3/(s Pa) = " \
+        "0.3000 +- 0.0020 dm^3/(s bar)" in line, line
 
 
 def test_analyze_does_not_load_the_test_line(tmp_path):

@@ -172,16 +172,26 @@ def c_dm3(c: float) -> str:
     return f"{c / DM3_PER_S_BAR:#.{C_DIGITS}g}".rstrip(".")
 
 
+def two_digits(x: float) -> str:
+    """An uncertainty with two significant digits, in fixed point where that is short
+    ('0.0021', '0.000052', '12'); 'n/a' when not finite."""
+    if not math.isfinite(x):
+        return "n/a"
+    if x == 0 or not 1e-6 <= abs(x) < 1e4:
+        return f"{x:.2g}"
+    return f"{x:.{max(0, 1 - math.floor(math.log10(abs(x))))}f}"
+
+
 def c_both(c: float, std: float = math.nan, note: str = "") -> str:
     """C in SI and in dm^3/(s bar), each with :data:`C_DIGITS` significant digits and
-    with ``std`` (2 significant digits; words when not known): '3.012e-09 +- 2.1e-11
+    with ``std`` (two significant digits; words when not known): '3.012e-09 +- 2.1e-11
     m^3/(s Pa) = 0.3012 +- 0.0021 dm^3/(s bar)'. ``note`` follows the SI unit (e.g.
     ' (k = 2)')."""
     if not math.isfinite(c):
         return "n/a"
     if math.isfinite(std):
-        return (f"{c_si(c)} +- {std:.2g} m^3/(s Pa){note} = {c_dm3(c)} +- "
-                f"{std / DM3_PER_S_BAR:.2g} dm^3/(s bar)")
+        return (f"{c_si(c)} +- {std:.1e} m^3/(s Pa){note} = {c_dm3(c)} +- "
+                f"{two_digits(std / DM3_PER_S_BAR)} dm^3/(s bar)")
     return f"{c_si(c)} m^3/(s Pa) (uncertainty not known) = {c_dm3(c)} dm^3/(s bar)"
 
 

@@ -94,9 +94,9 @@ def _fmt_c(c: Any) -> str:
 
 def _fmt_s(s: Any) -> str:
     """A standard deviation of C [m^3/(s Pa)] in dm^3/(s bar), two significant digits."""
-    from pneumatic_unload.analysis.output import DM3_PER_S_BAR
+    from pneumatic_unload.analysis.output import DM3_PER_S_BAR, two_digits
 
-    return "-" if s is None else f"{s / DM3_PER_S_BAR:.2g}"
+    return "-" if s is None else two_digits(s / DM3_PER_S_BAR)
 
 
 def parts_text(parts: list[dict[str, Any]]) -> str:
