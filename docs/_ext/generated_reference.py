@@ -335,7 +335,7 @@ def status_section() -> list[str]:
              ":data:`pneumatic_unload.estimation.types.STATUS_MEANINGS`:", ""]
     rows = [[literal(k), esc(types.STATUS_MEANINGS[k])] for k in types.STATUSES]
     lines += list_table(["Status", "Meaning"], rows, "18 82")
-    lines += ["Former words, read as the current one from databases and JSON written by "
+    lines += ["Former words, read as the current one from results databases written by "
               "older versions: " + ", ".join(f"{literal(old)} (now {literal(new)})"
                                              for old, new in types.STATUS_ALIASES.items())
               + ".", ""]

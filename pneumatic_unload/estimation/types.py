@@ -42,9 +42,10 @@ STATUS_MEANINGS: dict[str, str] = {
     "bad_data": "no estimate: the record cannot be analysed (status_text says why)",
 }
 
-#: Former status words and the word that replaced them: a database, a JSON file or a CSV
-#: written by an older version is read with the new word (bags store the index, not the
-#: word, so they need no alias).
+#: Former status words and the word that replaced them: a results database written by an
+#: older version reads with the new word (``testline.db.unload_rows``; any other reader of
+#: stored words calls :func:`canonical_status`). Bags store the index, not the word: they
+#: need no alias.
 STATUS_ALIASES: dict[str, str] = {"not_choked": "ok_subsonic"}
 
 #: Statuses of a result that carries a C (see :func:`recommended`).
