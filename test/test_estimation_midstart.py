@@ -45,7 +45,7 @@ def test_live_joined_mid_unload_gives_no_result_for_it_and_the_next_ones_are_rig
     assert [r.status for r in full] == ["ok"] * 3
     k = opens[0] + int(frac * 1.2 * rate)  # the stream starts frac of the way into unload 0
     got, est = _live(st, t[k:], p[k:])
-    # before: an 'ok' result 1-8 % off, or 'not_choked', for the partial unload
+    # before: an 'ok' result 1-8 % off, or 'ok_subsonic', for the partial unload
     assert [r.status for r in got] == ["ok", "ok"]
     assert [r.index for r in got] == [0, 1]
     assert [r.t_start for r in got] == pytest.approx([full[1].t_start, full[2].t_start],
@@ -149,7 +149,7 @@ def test_a_recovery_no_fit_describes_ends_and_the_next_unloads_are_estimated(mon
 def test_live_joined_in_a_slow_tail_publishes_no_bogus_estimate(volume, join):
     """A node restarted late in a slow unload (5-25 L): the tail looks flat over the few
     dozen samples before it "drops" on; it was taken for an opening and published C
-    20-50 % off ('not_choked'). A plateau too short to tell a fall under way from a flat one
+    20-50 % off ('ok_subsonic'). A plateau too short to tell a fall under way from a flat one
     is no plateau: the unload is skipped with the reason."""
     from pneumatic_unload.analysis.runs import settings_for
     from pneumatic_unload.model import simulate
@@ -160,7 +160,7 @@ def test_live_joined_in_a_slow_tail_publishes_no_bogus_estimate(volume, join):
     sim = simulate(cfg)
     k = int(np.searchsorted(sim.t, sim.t_open + join))
     out, est = _live(settings_for(cfg), sim.t[k:], sim.measured[k:])
-    assert not [r for r in out if r.status in ("ok", "not_choked", "aborted_sse")], [
+    assert not [r for r in out if r.status in ("ok", "ok_subsonic", "aborted_sse")], [
         (r.status, r.conductance_model) for r in out]
     msgs = " | ".join(d.message for d in est.diagnostics)
     assert "no plateau before the drop" in msgs and "started during an unload" in msgs
@@ -186,8 +186,8 @@ def test_live_joined_where_the_fall_looks_like_a_drifting_plateau(join):
     """The node test's rig (5 L, heat exchange, 8e-9 m^3/(s Pa), 1 kHz): joined 0.4, 1.8 or
     3.2 s into unload 0, the stream's first samples fell like a plateau drifting toward the
     opening of a hot start, the start was fitted with that drift, and the partial unload
-    gave a result (main 968cd85: bad_data, bad_data, not_choked; CI's node test, joined
-    0.9 s in, 'not_choked' with a C). A live stream's first plateau that drifts is no
+    gave a result (main 968cd85: bad_data, bad_data, ok_subsonic; CI's node test, joined
+    0.9 s in, 'ok_subsonic' with a C). A live stream's first plateau that drifts is no
     plateau: no result for it, the warning, and the next unloads right."""
     cfg = RigConfig(volume=5e-3, conductance=C_TRUE, critical_ratio=0.4,
                     effects="heat_transfer", noise_std=1000.0, quantization=10.0,

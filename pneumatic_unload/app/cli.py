@@ -8,7 +8,7 @@ recover BAG      make a bag whose writer was killed readable again
 
 Exit status of ``analyze`` (:data:`pneumatic_unload.analysis.output.EXIT_STATUS`): 0 when at
 least one unload gives C (a finite recommended C and a status other than 'bad_data': 'ok',
-'aborted_sse', 'not_choked' with its curve-fit C; other unloads of the record may have
+'aborted_sse', 'ok_subsonic' with its curve-fit C; other unloads of the record may have
 failed, each says why); 1 when the record gives no estimate: no unload
 found, every unload failed (e.g. all 'bad_data': a stuck or saturated sensor, a clock step),
 or the readings look like gauge pressures taken as absolute; the reason is on stderr and in

@@ -115,7 +115,7 @@ class Estimate:
     final : bool
         The full-curve fit's estimate (else the p* crossing's).
     status, status_text : str
-        'ok', 'aborted_sse', 'aborted', 'not_choked' or 'bad_data', and why.
+        'ok', 'aborted_sse', 'aborted', 'ok_subsonic' or 'bad_data', and why.
     conductance, conductance_std : float
         The recommended C and its combined standard uncertainty [m^3/(s Pa)].
     critical_ratio, subsonic_index : float

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pneumatic_unload.estimation.types import ESTIMATE_STATUSES
 from pneumatic_unload.testline.accounting import (
     Accounting,
     cpu_delta,
@@ -402,7 +403,7 @@ def part_summary(unloads: Sequence[dict[str, Any]],
         cs = [u["recommended_conductance"] for u in us
               if u.get("recommended_conductance") is not None
               and math.isfinite(u["recommended_conductance"])
-              and u.get("status") in ("ok", "aborted_sse", "not_choked")]
+              and u.get("status") in ESTIMATE_STATUSES]
         verdicts = [u.get("verdict") for u in us]
         if all(v is None for v in verdicts):
             verdict, why = None, None
@@ -432,7 +433,7 @@ def by_direction(unloads: Sequence[dict[str, Any]]) -> dict[str, dict[str, float
     for d in ("discharge", "charge"):
         cs = [(u["recommended_conductance"], u["recommended_std"]) for u in unloads
               if (u.get("direction") or "discharge") == d
-              and u.get("status") in ("ok", "aborted_sse", "not_choked")
+              and u.get("status") in ESTIMATE_STATUSES
               and u.get("recommended_conductance") is not None
               and u.get("recommended_std") is not None
               and math.isfinite(u["recommended_conductance"])

@@ -39,6 +39,7 @@ from typing import Any
 
 import sqlalchemy as sa
 
+from pneumatic_unload.estimation.types import canonical_status
 from pneumatic_unload.testline.redact import redact
 from pneumatic_unload.testline.schema import (
     BUSY_TIMEOUT,
@@ -484,7 +485,10 @@ def unload_rows(con: ResultsDB, part_id: str | None = None) -> list[dict[str, An
         UNLOADS, FILES, UNLOADS.c.file_id == f.id)
     if part_id is not None:
         q = q.where(UNLOADS.c.part_id == part_id)
-    return con.rows(q.order_by(f.id, UNLOADS.c.unload_index))
+    rows = con.rows(q.order_by(f.id, UNLOADS.c.unload_index))
+    for r in rows:  # a database written by an older version: its status words read as now
+        r["status"] = canonical_status(r["status"])
+    return rows
 
 
 def file_rows(con: ResultsDB) -> list[dict[str, Any]]:

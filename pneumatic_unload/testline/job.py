@@ -23,12 +23,9 @@ from pneumatic_unload.analysis.output import finite_or_none, unload_json
 from pneumatic_unload.analysis.records import RecordError, analyze_input, open_record
 from pneumatic_unload.config import ConfigError
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.estimation.types import ESTIMATE_STATUSES
 from pneumatic_unload.testline.db import FileRecord
 from pneumatic_unload.testline.spec import Spec
-
-#: Statuses of a result that carry a C (see :func:`~pneumatic_unload.estimation.types.
-#: recommended`).
-ESTIMATE_STATUSES = ("ok", "aborted_sse", "not_choked")
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from pneumatic_unload import __version__
 from pneumatic_unload.config.estimator import EstimatorSettings
-from pneumatic_unload.estimation.types import UnloadResult
+from pneumatic_unload.estimation.types import ESTIMATE_STATUSES, UnloadResult
 from pneumatic_unload.testline.db import FileRecord, open_db, write_file
 from pneumatic_unload.testline.job import result_row, settings_json
 from pneumatic_unload.testline.spec import Spec
@@ -83,7 +83,7 @@ class LiveResults:
             part_id=part_id or "unnamed",
             part_type=self.spec.part_type(part_id) if self.spec is not None else "",
             status="ok" if u["recommended_conductance"] is not None
-            and r.status in ("ok", "aborted_sse", "not_choked") else "no_estimate",
+            and r.status in ESTIMATE_STATUSES else "no_estimate",
             reason="" if r.status == "ok" else f"{r.status}: {r.status_text}",
             unloads=[u], settings=sj, writer=self.writer, package_version=__version__)
         write_file(self.db, rec, replace=True)  # a later estimate of the unload replaces it
