@@ -270,10 +270,21 @@ def _law(name: str, rng: np.random.Generator, h_ref: float, tau0: float,
     raise ValueError(f"unknown heat law {name!r}; one of {', '.join(LAWS)}")
 
 
-def draw(law_name: str, k: int, direction: str = "discharge") -> Record:
-    """Draw ``k`` of ``law_name`` (seeded by both and the direction): see the module's
-    text for the ranges. A draw whose cooling no strength reaches is drawn again from the
-    same generator (reproducible)."""
+@dataclass(frozen=True)
+class Drawn:
+    """A draw's parameters: the rig, the heat law (its strength solved for the cooling),
+    the opening instant [s] and the record's end [s]."""
+
+    rig: Rig
+    law: HeatLaw
+    t_open: float
+    t_end: float
+
+
+def parameters(law_name: str, k: int, direction: str = "discharge") -> Drawn:
+    """The parameters of draw ``k`` of ``law_name`` (seeded by both and the direction): see
+    the module's text for the ranges. A draw whose tau0 is out of range or whose cooling no
+    strength reaches is drawn again from the same generator (reproducible)."""
     rng = np.random.default_rng([zlib.crc32(f"{law_name}/{direction}".encode()), k])
     while True:
         volume = _log_uniform(rng, 1e-3, 20e-3)
@@ -299,7 +310,14 @@ def draw(law_name: str, k: int, direction: str = "discharge") -> Record:
             break
     # the opening between two samples: a fraction of a period after the plateau's end
     t_open = plateau + float(rng.uniform(0.0, 1.0)) / RATE
-    t = np.arange(0.0, t_open + recorded * tau0, 1.0 / RATE)
+    return Drawn(rig, law, t_open, t_open + recorded * tau0)
+
+
+def draw(law_name: str, k: int, direction: str = "discharge") -> Record:
+    """Draw ``k`` of ``law_name``: :func:`parameters`, the record at 1 kHz and its noise."""
+    d = parameters(law_name, k, direction)
+    rig, law, t_open = d.rig, d.law, d.t_open
+    t = np.arange(0.0, d.t_end, 1.0 / RATE)
     after = t >= t_open
     p_true = np.full(t.size, rig.p10)
     temp = np.full(t.size, rig.t10)
