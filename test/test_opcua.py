@@ -3,9 +3,9 @@
 The bench is started by the package's launcher from ``launch/bench.launch.yaml`` (as
 ``ros2 launch`` would), the bridge on a free port, each bench on a ROS domain of its own.
 A measurement of the simulated rig (V = 1 L, C = 8e-9 m^3/(s Pa)) takes about 4 s; after
-it the rig vents and recharges by itself, and a Measure called before that fails with
-"the tank is not charged" (BadDeviceFailure): :func:`_measure` waits for the charge by
-calling again, as a PLC would.
+it the rig vents and recharges by itself, and a Measure called meanwhile waits for the
+charge (the bridge sends its goal again while the valve service answers "the tank is not
+charged", for charge_wait s): a PLC calls Measure whenever Ready is True.
 """
 
 from __future__ import annotations
@@ -41,9 +41,9 @@ from pneumatic_unload.plc import APPLICATION_URI, NAMESPACE, Outcome, hash_passw
 LAUNCH = Path(__file__).resolve().parent.parent / "launch" / "bench.launch.yaml"
 #: The rig's conductance (the launch argument: the truth) [m^3/(s Pa)].
 TRUE_C = 8e-9
-#: A client's request timeout: longer than a measurement (the bridge's measure_timeout
-#: 60 s and final_timeout 30 s bound it) [s].
-CALL_TIMEOUT = 120.0
+#: A client's request timeout: longer than a measurement (the bridge's charge_wait 30 s,
+#: measure_timeout 60 s and final_timeout 30 s bound it) [s].
+CALL_TIMEOUT = 150.0
 
 
 def _free_port() -> int:
@@ -143,17 +143,9 @@ class _Nodes:
         return s
 
 
-async def _measure(n: _Nodes, part: str, timeout: float = 60.0) -> list[Any]:
-    """Measure, called again while the rig recharges after the last unload."""
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            return await n.call("Measure", ua.Variant(part, ua.VariantType.String))
-        except ua.uaerrors.BadDeviceFailure:
-            why = await n.read("Message")
-            if "not charged" not in why or time.monotonic() > deadline:
-                raise
-            await asyncio.sleep(0.5)
+async def _measure(n: _Nodes, part: str) -> list[Any]:
+    """Measure, called once (the bridge waits for the rig's charge itself)."""
+    return await n.call("Measure", ua.Variant(part, ua.VariantType.String))
 
 
 def _run(coro: Any) -> Any:
@@ -205,7 +197,7 @@ def test_measure_over_opc_ua_gives_the_rigs_c(bench: Bench) -> None:
             assert await n1.read("Verdict") == "pass"
             # State is the bridge's now: 'done', or under load 'no estimator' already (a
             # late estimator report); the measurement's outcome is Message
-            assert await n2.read("State") in ("done", "no estimator")
+            assert await n2.read("State") in ("ready", "no estimator")
             assert await n2.read("MeasureDone") is True
             assert await n2.read("Message") == "ok"
             assert await n1.read("PartId") == ("part-A" if ok[0] is results[0] else "part-B")
@@ -227,27 +219,89 @@ def test_start_and_poll(bench: Bench) -> None:
 
     async def main() -> None:
         async with _client(bench.url) as (_c, n):
-            deadline = time.monotonic() + 60.0
-            while True:
-                assert await n.call("StartMeasure", "odd-C") is None  # no outputs
-                while not await n.read("MeasureDone"):
-                    await asyncio.sleep(0.2)
-                assert await n.read("PartId") == "odd-C"
-                # the measurement's outcome is its Message ('ok' or why it failed); State is
-                # the bridge's now (under load a late estimator report may already have
-                # turned it to 'no estimator': seen once in CI)
-                message = await n.read("Message")
-                if message == "ok":
-                    break
-                assert "not charged" in message  # the rig recharging
-                assert time.monotonic() < deadline
-                await asyncio.sleep(0.5)
+            await n.wait_state("ready")
+            count = await n.read("MeasurementCount")
+            assert await n.call("StartMeasure", "odd-C") is None  # no outputs
+            assert await n.read("Ready") is False
+            while not await n.read("MeasureDone"):
+                await asyncio.sleep(0.2)
+            assert await n.read("MeasurementCount") == count + 1
+            assert await n.read("PartId") == "odd-C"
+            # started while the rig may still recharge after the last test's unload: the
+            # bridge waited for the charge (its Message 'ok', not "not charged")
+            assert await n.read("Message") == "ok"
             assert await n.read("Conductance") == pytest.approx(TRUE_C, rel=0.02)
             assert await n.read("PartId") == "odd-C"
             assert await n.read("Verdict") == "fail"  # outside its type's range
             assert await n.read("Message") == "ok"
 
     _run(main())
+
+
+def test_a_plc_waits_for_ready_measures_again_and_reads_every_result(bench: Bench) -> None:
+    """As a PLC integrator sees it: the nodes resolve by browse path in the package's
+    namespace (``Objects/2:PneumaticUnload/2:Ready``); after a measurement Ready is True
+    (State 'ready') and a Measure called at once succeeds (the bridge waits for the rig's
+    recharge); the count and time of the results grow; eq 39's C, the status, the expanded
+    U and the pressures are there with their units; Charge answers; Abort stops a
+    measurement, whose results then read Bad."""
+
+    async def main() -> None:
+        async with _client(bench.url) as (c, n):
+            assert n.idx == 2
+            obj = await c.nodes.objects.get_child("2:PneumaticUnload")
+            assert obj.nodeid == n.obj.nodeid
+            ready = await c.nodes.objects.get_child(["2:PneumaticUnload", "2:Ready"])
+            deadline = time.monotonic() + 60.0
+            while not await ready.read_value():
+                assert time.monotonic() < deadline
+                await asyncio.sleep(0.2)
+            assert await n.read("State") == "ready"
+            count = await n.read("MeasurementCount")
+            for part in ("part-M", "part-N"):  # back to back: the second waits the charge
+                c_meas, _b, verdict = await _measure(n, part)
+                assert c_meas == pytest.approx(TRUE_C, rel=0.02) and verdict == "pass"
+                assert await n.read("State") in ("ready", "no estimator")
+            assert await n.read("MeasurementCount") == count + 2
+            ended = await n.read("ResultTime")
+            age = datetime.datetime.now(datetime.UTC) - ended.replace(tzinfo=datetime.UTC)
+            assert datetime.timedelta(0) <= age < datetime.timedelta(minutes=2)
+            assert await n.read("ConductanceEq39") == pytest.approx(TRUE_C, rel=0.05)
+            std = await n.read("ConductanceStd")
+            assert await n.read("ConductanceExpanded") == pytest.approx(2.0 * std)
+            assert await n.read("Status") == "ok" and await n.read("StatusText")
+            assert await n.read("InitialPressure") == pytest.approx(7e5, rel=0.01)
+            assert 0.0 < await n.read("CriticalPressure") < 7e5
+            assert await n.read("AtmosphericPressure") == pytest.approx(101325.0, rel=0.05)
+            units = {}
+            for name in ("Conductance", "ConductanceEq39", "TauExp", "InitialPressure",
+                         "CriticalPressure", "CriticalRatio", "SubsonicIndex"):
+                eu = await n.node(name).get_child("0:EngineeringUnits")
+                info = await eu.read_value()
+                assert info.NamespaceUri == "http://www.opcfoundation.org/UA/units/un/cefact"
+                units[name] = info.UnitId.to_bytes(3, "big").decode()
+            assert units == {"Conductance": "N45", "ConductanceEq39": "N45", "TauExp": "SEC",
+                             "InitialPressure": "PAL", "CriticalPressure": "PAL",
+                             "CriticalRatio": "C62", "SubsonicIndex": "C62"}
+            assert await n.call("Charge") is None  # the simulator: "already charged"
+            assert "charge" in await n.read("Message")
+            with pytest.raises(ua.uaerrors.BadInvalidState):
+                await n.call("Abort")  # nothing runs
+            assert await n.call("StartMeasure", "part-O") is None
+            assert await n.call("Abort") is None
+            assert await n.read("MeasureDone") is True
+            assert "aborted" in await n.read("Message")
+            assert await n.read("MeasurementCount") == count + 3
+            for name in ("Conductance", "Verdict", "Status"):
+                dv = await n.node(name).read_data_value(raise_on_bad_status=False)
+                assert dv.StatusCode.name == "BadRequestCancelledByClient", name
+            c_meas, _b, _v = await _measure(n, "part-P")  # measuring again after it
+            assert c_meas == pytest.approx(TRUE_C, rel=0.02)
+            dv = await n.node("Conductance").read_data_value()
+            assert dv.StatusCode.is_good()
+
+    _run(main())
+    assert bench.alive()
 
 
 _DYING_CLIENT = textwrap.dedent("""
@@ -314,7 +368,7 @@ def test_bad_clients_leave_the_bridge_serving(bench: Bench, tmp_path: Path) -> N
                 await asyncio.sleep(0.2)
             assert await n.read("PartId") == "part-D"
             assert await n.read("Message") == "ok"
-            assert await n.read("State") in ("done", "no estimator")  # the bridge's now
+            assert await n.read("State") in ("ready", "no estimator")  # the bridge's now
             c, _b, _v = await _measure(n, "part-E")
             assert c == pytest.approx(TRUE_C, rel=0.02)
 
@@ -579,6 +633,56 @@ def test_only_trusted_and_valid_client_certificates_get_a_session(tmp_path: Path
                 await substituted(None)
             async with _client(url, **plant.client()) as (_c, n):  # still serving
                 assert await n.read("State") == "no estimator"
+
+    _run(main())
+
+
+def test_results_go_bad_after_a_failed_measurement_and_the_table_is_the_server_s(
+        ) -> None:
+    """In process (a stand-in measurement): a good measurement's results read Good, a
+    failed one's results read NaN/'' with the failure's code (not the previous part's C as
+    Good); every row of :func:`address_space` resolves by its browse path on the server,
+    and every node of the object is a row."""
+    from pneumatic_unload.plc import Estimate, Security, address_space
+
+    est = Estimate(unload_index=1, final=True, status="ok", status_text="a fine fit",
+                   conductance=8e-9, conductance_std=1e-11, critical_ratio=0.4,
+                   subsonic_index=0.5, tau_exp=2.0, verdict="pass", verdict_reason="in",
+                   conductance_eq39=7.9e-9, p10=7e5, p_star=2.4e5, p_atm=101325.0)
+    outcomes = [Outcome("Good", "ok", est), Outcome("BadDeviceFailure", "valve refused")]
+
+    async def measure(_part: str) -> Outcome:
+        return outcomes.pop(0)
+
+    async def main() -> None:
+        url = _url()
+        async with _server(url, Security(allow_anonymous=True), measure) as server:
+            await server.set_estimator(True)
+            async with _client(url) as (c, n):
+                dv = await n.node("Conductance").read_data_value(raise_on_bad_status=False)
+                assert dv.StatusCode.name == "BadWaitingForInitialData"  # none yet
+                assert await n.read("Ready") is True
+                assert await _measure(n, "part-Q") == [8e-9, 0.4, "pass"]
+                assert await n.read("ConductanceExpanded") == pytest.approx(2e-11)
+                assert await n.read("ConductanceEq39") == 7.9e-9
+                assert await n.read("VerdictReason") == "in"
+                with pytest.raises(ua.uaerrors.BadDeviceFailure):
+                    await _measure(n, "part-R")
+                for name in ("Conductance", "ConductanceEq39", "CriticalRatio", "Verdict",
+                             "Status", "InitialPressure"):
+                    dv = await n.node(name).read_data_value(raise_on_bad_status=False)
+                    assert dv.StatusCode.name == "BadDeviceFailure", name
+                assert await n.read("Message") == "valve refused"
+                assert await n.read("MeasurementCount") == 2
+                assert (await n.read("Ready"), await n.read("State")) == (True, "ready")
+                rows = address_space()
+                for path, _kind, _unit, _doc in rows:
+                    node = await c.nodes.objects.get_child(path.split("/"))
+                    assert node.nodeid.NamespaceIndex == n.idx
+                children = await n.obj.get_children()
+                names = {(await ch.read_browse_name()).to_string() for ch in children}
+                assert {f"2:OBJECT/{x}" for x in names} == {
+                    p.replace("PneumaticUnload", "OBJECT", 1) for p, *_ in rows[1:]}
 
     _run(main())
 

@@ -447,6 +447,23 @@ def architecture_page(srcdir: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+# ------------------------------------------------------------------ the OPC UA address space
+#: The included table of the OPC UA bridge's nodes (``.. include::`` of the cell how-to; not
+#: a page of its own).
+OPCUA_TABLE = "opcua_address_space.inc"
+
+
+def opcua_table() -> str:
+    """The address space of the OPC UA bridge's object, from
+    :func:`pneumatic_unload.plc.address_space` (browse path, class and type, unit, meaning)."""
+    from pneumatic_unload.plc import address_space
+
+    rows = [[literal(path), esc(kind), esc(unit) if unit else "\\-", esc(doc)]
+            for path, kind, unit, doc in address_space()]
+    return "\n".join(list_table(["Browse path under Objects", "Node", "Unit (UNECE)",
+                                  "Meaning"], rows, "26 22 14 38")) + "\n"
+
+
 # ------------------------------------------------------------------------------ writing
 def _write(path: Path, text: str) -> None:
     if not path.is_file() or path.read_text(encoding="utf-8") != text:
@@ -463,6 +480,7 @@ def generate(app: Sphinx) -> None:
     assert tuple(pages) == PAGES
     for name, text in pages.items():
         _write(out / f"{name}.rst", text)
+    _write(out / OPCUA_TABLE, opcua_table())
     for stale in set(out.glob("*.rst")) - {out / f"{n}.rst" for n in PAGES}:
         stale.unlink()
 

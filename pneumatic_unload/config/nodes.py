@@ -169,7 +169,8 @@ def _opcua() -> list[ParameterSpec]:
         _str("estimator", "/estimator", "the estimator node: its ~/measure action and "
              "~/estimate topic"),
         _double("measure_timeout", 60.0, "a measurement's timeout (the ~/measure goal's); "
-                "an OPC UA client's call timeout must exceed it plus final_timeout", "s",
+                "an OPC UA client's call timeout must exceed it plus final_timeout and "
+                "charge_wait", "s",
                 0.1, 1e6),
         _bool("trigger_valve", True, "a measurement opens the valve (the estimator's "
               "valve_service); false: it waits for an unload started otherwise"),
@@ -179,6 +180,11 @@ def _opcua() -> list[ParameterSpec]:
         _double("estimator_wait", 10.0, "a measurement waits this long for the "
                 "estimator (its ~/measure action server, and pressure samples reaching it: "
                 "its /diagnostics reports)", "s", 0.0, 1e6),
+        _double("charge_wait", 30.0, "a measurement whose valve is refused because the "
+                "tank is not charged (the rig recharging after its last unload) tries again "
+                "for this long", "s", 0.0, 1e6),
+        _str("charge_service", "/simulator/charge", "std_srvs/Trigger service that "
+             "recharges the rig (the OPC UA Charge method; '': none)"),
         _str("spec_file", "", "specification of the part types (YAML; the estimator's "
              "file): the Verdict of a measurement's final estimate ('': none)"),
         _str("security_policy", "None", "'None' (a lab bench) or 'Basic256Sha256' "

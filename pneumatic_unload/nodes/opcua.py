@@ -17,7 +17,12 @@ Action client
     <estimator>/measure (pneumatic_unload_msgs/action/Measure): one goal per OPC UA
         ``Measure``/``StartMeasure`` call; its crossing estimate is followed by the unload's
         final (full-curve fit) estimate on the topic, which the call returns (after
-        ``final_timeout`` s without it: the crossing's, said so in ``Message``).
+        ``final_timeout`` s without it: the crossing's, said so in ``Message``). A goal
+        refused because the tank is not charged (the rig recharging after its last
+        unload) is sent again every :data:`RETRY_PERIOD` s for ``charge_wait`` s; ``Abort``
+        cancels the goal.
+Service client
+    ``charge_service`` (std_srvs/Trigger): the OPC UA ``Charge`` method.
 
 Between the threads. The server's methods await :meth:`OpcUaNode.measure` in the asyncio
 loop: it queues the request and wakes the executor through a guard condition (the one
@@ -67,6 +72,15 @@ ESTIMATOR_DIAGNOSTICS = "pneumatic_unload: estimator"
 #: Oldest estimator report that still tells it hears the rig [s] (it reports each
 #: diagnostics_period, 1 s by default).
 REPORT_AGE = 5.0
+#: Period of a measurement's new goal while the rig recharges [s].
+RETRY_PERIOD = 0.5
+#: What the rig's valve service says when the tank is not charged (model.rig.RigStream).
+NOT_CHARGED = "not charged"
+#: Longest wait for the charge service's answer [s].
+CHARGE_TIMEOUT = 10.0
+#: Longest wait for an aborted goal's end before the next measurement's goal is sent [s]
+#: (the estimator checks a cancel request every few tens of ms).
+CANCEL_WAIT = 5.0
 
 
 @dataclass
@@ -80,6 +94,10 @@ class _Measurement:
     key: tuple[int, int] | None = None  # (unload start [ns], unload index) of its unload
     crossing: Estimate | None = None
     final_deadline: float = math.inf
+    handle: Any = None  # the goal's handle, once accepted
+    sent_at: float = 0.0  # the last goal sent [s, monotonic]
+    result: Any = None  # the goal's result future, once accepted
+    retry_at: float = 0.0  # a goal refused for the charge: the next one not before [s]
 
 
 class OpcUaNode(Node):
@@ -121,6 +139,13 @@ class OpcUaNode(Node):
         #: Estimates by unload key, the latest last (executor thread).
         self._seen: OrderedDict[tuple[int, int], Estimate] = OrderedDict()
         self._requests: deque[tuple[str, Callable[[Outcome], None]]] = deque()
+        self._charges: deque[Callable[[Outcome], None]] = deque()
+        #: Charge service calls awaiting their answer: (future, start [s], finish, name).
+        self._pending_charges: list[tuple[Any, float, Callable[[Outcome], None], str]] = []
+        self._abort_requested = False
+        #: An aborted goal's result future and the longest wait for it [s, monotonic]: the
+        #: estimator refuses a new goal until the cancelled one has ended.
+        self._draining: tuple[Any, float] | None = None
         self._current: _Measurement | None = None
         self._estimator_present = False
         #: The estimator's reports of its samples received: (count [-], arrival [s,
@@ -137,7 +162,9 @@ class OpcUaNode(Node):
         self._thread = threading.Thread(target=self._loop.run_forever, name="opcua",
                                         daemon=True)
         self._thread.start()
-        self._bridge = BridgeServer(p("endpoint"), self.measure, security)
+        self._bridge = BridgeServer(p("endpoint"), self.measure, security,
+                                    charge=self.charge if p("charge_service") else None,
+                                    abort=self.abort)
         try:
             asyncio.run_coroutine_threadsafe(self._bridge.start(), self._loop).result(
                 START_TIMEOUT)
@@ -165,7 +192,7 @@ class OpcUaNode(Node):
         """The timeouts and trigger_valve change at run time (the next measurement takes
         them); the server's and security's parameters do not."""
         fixed = set(changes) - {"measure_timeout", "trigger_valve", "final_timeout",
-                                "estimator_wait"}
+                                "estimator_wait", "charge_wait"}
         return f"{', '.join(sorted(fixed))} cannot change at run time (restart the node)" \
             if fixed else ""
 
@@ -185,6 +212,25 @@ class OpcUaNode(Node):
         self._requests.append((part, finish))
         self._wake.trigger()
         return await done
+
+    async def charge(self) -> Outcome:
+        """The rig's recharge (the server's ``Charge``, in its event loop): the charge
+        service called from the executor's thread, its answer awaited."""
+        loop = asyncio.get_running_loop()
+        done: asyncio.Future[Outcome] = loop.create_future()
+
+        def finish(outcome: Outcome) -> None:  # from the executor's thread
+            loop.call_soon_threadsafe(lambda: done.done() or done.set_result(outcome))
+
+        self._charges.append(finish)
+        self._wake.trigger()
+        return await done
+
+    def abort(self) -> None:
+        """Stop the measurement under way (the server's ``Abort``, in its event loop): its
+        goal cancelled in the executor's thread."""
+        self._abort_requested = True
+        self._wake.trigger()
 
     def _to_server(self, coro: Any) -> None:
         """Run a coroutine of the server in its loop (not waited for)."""
@@ -234,6 +280,22 @@ class OpcUaNode(Node):
         return ""
 
     def _take_requests(self) -> None:
+        if self._abort_requested:  # before the requests: a Measure after an Abort starts
+            self._abort_requested = False
+            aborted = Outcome("BadRequestCancelledByClient", "aborted by a client's Abort "
+                              "call")
+            while self._requests:  # the aborted measurement, not taken yet
+                self.get_logger().warn(f"part {self._requests[0][0]!r}: aborted")
+                self._requests.popleft()[1](aborted)
+            m = self._current
+            if m is not None:
+                if m.handle is not None:  # the next goal waits for this one's end
+                    m.handle.cancel_goal_async()
+                    self._draining = (m.result, time.monotonic() + CANCEL_WAIT)
+                self._done(Outcome("BadRequestCancelledByClient", "aborted by a client's "
+                                   "Abort call"))
+        while self._charges:
+            self._charge(self._charges.popleft())
         while self._requests:
             part, finish = self._requests.popleft()
             if self._current is not None:  # the server allows one: never here
@@ -243,7 +305,17 @@ class OpcUaNode(Node):
             self._tick()
 
     def _tick(self) -> None:
-        """Estimator presence (``State``), and the deadlines of the measurement."""
+        """Estimator presence (``State``), and the deadlines of the measurement and of the
+        charge service's answers."""
+        for call in list(self._pending_charges):
+            fut, t0, finish, service = call
+            if fut.done():
+                self._pending_charges.remove(call)
+            elif time.monotonic() - t0 > CHARGE_TIMEOUT:
+                self._pending_charges.remove(call)
+                fut.cancel()
+                finish(Outcome("BadTimeout", f"no answer from {service} within "
+                               f"{CHARGE_TIMEOUT:g} s"))
         why = self._ready()
         if (not why) != self._estimator_present:
             self._estimator_present = not why
@@ -252,8 +324,11 @@ class OpcUaNode(Node):
         if m is None:
             return
         now = time.monotonic()
+        if self._draining is not None and (self._draining[0].done()
+                                           or now > self._draining[1]):
+            self._draining = None
         if not m.sent:
-            if not why:
+            if not why and now >= m.retry_at and self._draining is None:
                 self._send(m)
             elif now - m.t0 > self._p("estimator_wait"):
                 self._done(Outcome("BadNoCommunication", f"{why} (waited "
@@ -262,34 +337,74 @@ class OpcUaNode(Node):
             self._done(Outcome("Good", f"ok (no final estimate within "
                                f"{self._p('final_timeout'):g} s: the p* crossing's)",
                                judged(m.crossing, self._spec, m.part)))
-        elif m.crossing is None and now - m.t0 > self._p("measure_timeout") + RESULT_SLACK:
+        elif m.crossing is None and \
+                now - m.sent_at > self._p("measure_timeout") + RESULT_SLACK:
             self._done(Outcome("BadTimeout", f"no answer from {self._action} within "
                                f"{self._p('measure_timeout') + RESULT_SLACK:g} s"))
 
     def _send(self, m: _Measurement) -> None:
-        m.sent = True
+        m.sent, m.sent_at = True, time.monotonic()
         goal = self._Measure.Goal(timeout=float(self._p("measure_timeout")),
                                   trigger_valve=bool(self._p("trigger_valve")),
                                   part_id=m.part)
-        self.get_logger().info(f"measuring part {m.part!r} through {self._action}")
+        if m.retry_at == 0.0:  # its first goal (a retry while the rig recharges is quiet)
+            self.get_logger().info(f"measuring part {m.part!r} through {self._action}")
         self._client.send_goal_async(goal).add_done_callback(
             lambda fut: self._guarded("goal response", self._on_goal_response, m, fut))
 
-    def _on_goal_response(self, m: _Measurement, fut: Any) -> None:
-        if m is not self._current:
+    def _charge(self, finish: Callable[[Outcome], None]) -> None:
+        """Call the charge service; its answer to ``finish`` (not waited for here)."""
+        from std_srvs.srv import Trigger
+
+        service = self._p("charge_service")
+        client = self.create_client(Trigger, service)
+        if not client.wait_for_service(timeout_sec=0.5):
+            self.destroy_client(client)
+            finish(Outcome("BadNoCommunication", f"charge service {service} not available"))
             return
+        fut = client.call_async(Trigger.Request())
+        t0 = time.monotonic()
+
+        def answered(f: Any) -> None:
+            self.destroy_client(client)
+            resp = f.result()
+            if resp.success or "already charged" in resp.message:
+                finish(Outcome("Good", f"charge: {resp.message}"))
+            else:
+                finish(Outcome("BadDeviceFailure", f"charge service {service} refused: "
+                               f"{resp.message}"))
+
+        fut.add_done_callback(lambda f: self._guarded("charge", answered, f)
+                              if not f.cancelled() else None)
+        self._pending_charges.append((fut, t0, finish, service))
+
+    def _on_goal_response(self, m: _Measurement, fut: Any) -> None:
         handle = fut.result()
+        if m is not self._current:  # aborted (or shut down) before its goal's answer
+            if handle is not None and handle.accepted:
+                handle.cancel_goal_async()
+                self._draining = (handle.get_result_async(),
+                                  time.monotonic() + CANCEL_WAIT)
+            return
         if handle is None or not handle.accepted:
             self._done(Outcome("BadInvalidState", f"{self._action} refused the goal (a "
                                "measurement is running there)"))
             return
-        handle.get_result_async().add_done_callback(
+        m.handle = handle
+        m.result = handle.get_result_async()
+        m.result.add_done_callback(
             lambda f: self._guarded("goal result", self._on_result, m, f))
 
     def _on_result(self, m: _Measurement, fut: Any) -> None:
         if m is not self._current:
             return
         res = fut.result().result
+        if not res.success and NOT_CHARGED in res.message and \
+                time.monotonic() - m.t0 < self._p("charge_wait"):
+            # the rig recharging after its last unload: the goal again, a little later
+            m.sent, m.handle = False, None
+            m.retry_at = time.monotonic() + RETRY_PERIOD
+            return
         if not res.success:
             code = "BadTimeout" if res.message.startswith("timeout") else "BadDeviceFailure"
             self._done(Outcome(code, res.message))

@@ -1,23 +1,31 @@
 """The cell's PLC's way in: the OPC UA server of the bench (asyncua), ROS-free.
 
-:mod:`.bridge` builds the address space (object ``PneumaticUnload`` in namespace
-``urn:pneumatic-unload``: the latest estimate, the state, the methods ``Measure`` and
-``StartMeasure``), :mod:`.security` says who may connect and who may measure, :mod:`.calls`
-keeps a session alive through a method call of tens of seconds. The ROS node
-(:mod:`pneumatic_unload.nodes.opcua`) runs the server in an asyncio loop of its own and
-hands it the estimates and the measurements (the estimator's ``~/measure`` action).
+:mod:`.address` declares the address space (object ``PneumaticUnload`` in namespace
+``urn:pneumatic-unload``: the latest estimate, the state, the methods ``Measure``,
+``StartMeasure``, ``Charge`` and ``Abort``; :func:`address_space` lists its nodes) and
+:mod:`.bridge` serves it, :mod:`.security` says who may connect and who may measure,
+:mod:`.calls` keeps a session alive through a method call of tens of seconds and checks
+certificates and logins. The ROS node (:mod:`pneumatic_unload.nodes.opcua`) runs the
+server in an asyncio loop of its own thread and hands it the estimates and the
+measurements (the estimator's ``~/measure`` action).
 """
 
-from pneumatic_unload.plc.bridge import (
+from pneumatic_unload.plc.address import (
     APPLICATION_URI,
+    METHODS,
     NAMESPACE,
     OBJECT,
     VARIABLES,
-    BridgeServer,
+    AbortFn,
+    ChargeFn,
     Estimate,
     MeasureFn,
+    Method,
     Outcome,
+    Variable,
+    address_space,
 )
+from pneumatic_unload.plc.bridge import BridgeServer
 from pneumatic_unload.plc.security import (
     POLICIES,
     Security,
@@ -26,6 +34,7 @@ from pneumatic_unload.plc.security import (
     load_users,
 )
 
-__all__ = ["APPLICATION_URI", "NAMESPACE", "OBJECT", "POLICIES", "VARIABLES", "BridgeServer",
-           "Estimate", "MeasureFn", "Outcome", "Security", "SecurityError", "hash_password",
+__all__ = ["APPLICATION_URI", "METHODS", "NAMESPACE", "OBJECT", "POLICIES", "VARIABLES",
+           "AbortFn", "BridgeServer", "ChargeFn", "Estimate", "MeasureFn", "Method", "Outcome",
+           "Security", "SecurityError", "Variable", "address_space", "hash_password",
            "load_users"]

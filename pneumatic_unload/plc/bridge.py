@@ -1,18 +1,30 @@
 """The OPC UA server of the bench (asyncua, ROS-free): its address space and methods.
 
-Under ``Objects`` the object ``PneumaticUnload`` (namespace ``urn:pneumatic-unload``, node
-ids ``ns=<i>;s=PneumaticUnload.<Name>``) holds the variables of :data:`VARIABLES` (C and its
-standard uncertainty [m^3/(s Pa)] with their EngineeringUnits, b and m [-], tau_exp [s] with
-its EngineeringUnits, the verdict, the part, the state) and two ways to measure:
+Under ``Objects`` the object ``PneumaticUnload`` (browse names and node ids in the
+namespace ``urn:pneumatic-unload``: ``Objects/<i>:PneumaticUnload/<i>:State``, node ids
+``ns=<i>;s=PneumaticUnload.<Name>``) holds the variables of :data:`.address.VARIABLES` (the
+address-space table: :func:`.address.address_space`) and the methods of
+:data:`.address.METHODS`:
 
 ``Measure(PartId) -> (Conductance, CriticalRatio, Verdict)``
     runs one measurement and answers when it is done (tens of seconds: the session stays
     alive meanwhile, see :mod:`.calls`; the client's own request timeout must exceed the
     measurement, e.g. asyncua's ``Client(url, timeout=120)``, a PLC's method-call timeout
     likewise); a failed measurement answers a Bad status code, its reason in ``Message``.
+    A rig still recharging after its last unload is waited for (the measurement's own
+    ``charge_wait``, the ROS node's).
 ``StartMeasure(PartId) -> ()``
-    starts one and answers at once; poll ``MeasureDone`` (False while it runs, True when
-    its results and ``State`` 'done' or 'failed' are written), as PLC function blocks do.
+    starts one and answers at once; wait for ``MeasureDone`` True (or ``MeasurementCount``
+    to grow), as PLC function blocks do.
+``Charge() -> ()``
+    asks the rig to recharge (a rig that does not by itself; the node's charge service).
+``Abort() -> ()``
+    stops the measurement under way (its results Bad, ``Message`` says so).
+
+``Ready`` is True when a ``Measure`` or ``StartMeasure`` would start now (the estimator is
+there and no measurement runs; ``State`` 'ready'). After a failed measurement its result
+variables hold NaN or '' with the failure's Bad status code (a client reading them gets the
+code, never the previous part's value as Good).
 
 One measurement at a time: a call while one runs (from any client) is answered
 ``BadInvalidState`` at once ("busy"), never queued. A client that disconnects during its
@@ -28,7 +40,6 @@ import datetime
 import logging
 import math
 import unicodedata
-from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,6 +50,18 @@ from asyncua.crypto.truststore import TrustStore
 from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
 
 from pneumatic_unload.plc import calls
+from pneumatic_unload.plc.address import (
+    APPLICATION_URI,
+    METHODS,
+    NAMESPACE,
+    OBJECT,
+    VARIABLES,
+    AbortFn,
+    ChargeFn,
+    Estimate,
+    MeasureFn,
+    Outcome,
+)
 from pneumatic_unload.plc.security import (
     MAX_MESSAGE,
     MAX_STRING,
@@ -48,115 +71,8 @@ from pneumatic_unload.plc.security import (
     Users,
 )
 
-#: The namespace of the bridge's nodes.
-NAMESPACE = "urn:pneumatic-unload"
-#: The object under Objects.
-OBJECT = "PneumaticUnload"
-#: The server's application URI (a certificate's subjectAltName URI should be it).
-APPLICATION_URI = "urn:pneumatic-unload:opcua"
-#: UNECE units of OPC UA's EngineeringUnits (OPC 10000-8, EUInformation).
-CEFACT = "http://www.opcfoundation.org/UA/units/un/cefact"
-_Double, _String, _Boolean = ua.VariantType.Double, ua.VariantType.String, \
-    ua.VariantType.Boolean
+_Double, _String = ua.VariantType.Double, ua.VariantType.String
 
-
-@dataclass(frozen=True)
-class Unit:
-    """EngineeringUnits of a variable: its UNECE common code (UnitId -1 and this package's
-    namespace when UNECE has none), symbol and meaning."""
-
-    code: str
-    symbol: str
-    description: str
-
-    def information(self) -> ua.EUInformation:
-        """The EUInformation (UnitId of a code: its characters as bytes, big-endian)."""
-        eu = ua.EUInformation()
-        eu.NamespaceUri = CEFACT if self.code else NAMESPACE
-        eu.UnitId = int.from_bytes(self.code.encode(), "big") if self.code else -1
-        eu.DisplayName = ua.LocalizedText(self.symbol)
-        eu.Description = ua.LocalizedText(self.description)
-        return eu
-
-
-CONDUCTANCE_UNIT = Unit("", "m³/(s·Pa)", "cubic metre per second per pascal (sonic "
-                        "conductance C, ISO 6358)")
-SECOND = Unit("SEC", "s", "second")
-
-#: The variables of the object: name, type, initial value, unit, meaning.
-VARIABLES: tuple[tuple[str, ua.VariantType, Any, Unit | None, str], ...] = (
-    ("State", _String, "starting", None, "no estimator (its ~/measure action is not "
-     "there, or no samples reach it), ready, measuring, done (the last measurement gave "
-     "C), failed (see Message)"),
-    ("Conductance", _Double, math.nan, CONDUCTANCE_UNIT,
-     "the recommended sonic conductance C of the last estimate"),
-    ("ConductanceStd", _Double, math.nan, CONDUCTANCE_UNIT,
-     "its combined standard uncertainty"),
-    ("CriticalRatio", _Double, math.nan, None, "critical pressure ratio b [-]"),
-    ("SubsonicIndex", _Double, math.nan, None, "ISO 6358-1 subsonic index m [-]"),
-    ("TauExp", _Double, math.nan, SECOND, "experimental unloading time tau_exp"),
-    ("Verdict", _String, "", None, "pass or fail against the part's specification ('' "
-     "none, or an estimate not of a measurement)"),
-    ("PartId", _String, "", None, "the part of the measurement started last"),
-    ("MeasureDone", _Boolean, False, None, "the measurement started last is over (False "
-     "while it runs)"),
-    ("Message", _String, "", None, "ok, or why the last measurement failed"),
-)
-
-
-@dataclass(frozen=True)
-class Estimate:
-    """What the PLC sees of one estimate (SI units; NaN where unknown).
-
-    Attributes
-    ----------
-    unload_index : int
-        The estimator's unload index [-].
-    final : bool
-        The full-curve fit's estimate (else the p* crossing's).
-    status, status_text : str
-        'ok', 'aborted_sse', 'aborted', 'ok_subsonic' or 'bad_data', and why.
-    conductance, conductance_std : float
-        The recommended C and its combined standard uncertainty [m^3/(s Pa)].
-    critical_ratio, subsonic_index : float
-        b and m [-].
-    tau_exp : float
-        The experimental unloading time [s].
-    verdict, verdict_reason : str
-        'pass', 'fail' or '' against the part's specification, and why.
-    """
-
-    unload_index: int
-    final: bool
-    status: str
-    status_text: str
-    conductance: float
-    conductance_std: float
-    critical_ratio: float
-    subsonic_index: float
-    tau_exp: float
-    verdict: str = ""
-    verdict_reason: str = ""
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """The end of a measurement: ``status`` 'Good' or the name of a Bad status code
-    (``asyncua.ua.StatusCodes``), ``message`` 'ok' or why, and its estimate."""
-
-    status: str
-    message: str
-    estimate: Estimate | None = None
-
-    @property
-    def ok(self) -> bool:
-        """The measurement gave its estimate."""
-        return self.status == "Good" and self.estimate is not None
-
-
-#: A measurement of a part (its id): the caller's coroutine function, run in the server's
-#: event loop.
-MeasureFn = Callable[[str], Awaitable[Outcome]]
 
 
 def _argument(name: str, vtype: ua.VariantType, doc: str) -> ua.Argument:
@@ -197,16 +113,25 @@ class BridgeServer:
         Runs one measurement of a part.
     security : Security
         Policy, certificates, users.
+    charge : ChargeFn or None
+        The rig's recharge (None: ``Charge`` answers BadNotImplemented).
+    abort : AbortFn or None
+        Stops the caller's side of a measurement on ``Abort`` (the bridge cancels its own
+        wait in any case).
     """
 
     endpoint: str
     measure: MeasureFn
     security: Security = field(default_factory=Security)
+    charge: ChargeFn | None = None
+    abort: AbortFn | None = None
     server: Server | None = None
     _nodes: dict[str, Any] = field(default_factory=dict)
     _busy: bool = False
     _estimator: bool = False
-    _last: Outcome | None = None
+    _count: int = 0
+    _current: asyncio.Task[Outcome] | None = None
+    _aborting: bool = False
     _tasks: set[asyncio.Task[Any]] = field(default_factory=set)
     _users: Users | None = None
 
@@ -244,30 +169,31 @@ class BridgeServer:
                 CertificateValidatorOptions.TRUSTED_VALIDATION
                 | CertificateValidatorOptions.PEER_CLIENT, store))
         idx = await server.register_namespace(NAMESPACE)
-        obj = await server.nodes.objects.add_object(ua.NodeId(OBJECT, idx), OBJECT)
-        for name, vtype, value, unit, doc in VARIABLES:
-            var = await obj.add_variable(ua.NodeId(f"{OBJECT}.{name}", idx), name, value,
-                                         vtype)
+        obj = await server.nodes.objects.add_object(ua.NodeId(OBJECT, idx),
+                                                    ua.QualifiedName(OBJECT, idx))
+        for v in VARIABLES:
+            var = await obj.add_variable(ua.NodeId(f"{OBJECT}.{v.name}", idx),
+                                         ua.QualifiedName(v.name, idx), v.initial, v.vtype)
             await var.write_attribute(ua.AttributeIds.Description, ua.DataValue(
-                ua.Variant(ua.LocalizedText(doc), ua.VariantType.LocalizedText)))
-            if unit is not None:
+                ua.Variant(ua.LocalizedText(v.doc), ua.VariantType.LocalizedText)))
+            if v.unit is not None:  # a standard property: its browse name in namespace 0
                 await var.add_property(
-                    ua.NodeId(f"{OBJECT}.{name}.EngineeringUnits", idx),
-                    ua.QualifiedName("EngineeringUnits", 0), unit.information(),
+                    ua.NodeId(f"{OBJECT}.{v.name}.EngineeringUnits", idx),
+                    ua.QualifiedName("EngineeringUnits", 0), v.unit.information(),
                     ua.VariantType.ExtensionObject, ua.NodeId(ua.ObjectIds.EUInformation))
-            self._nodes[name] = var
-        part = _argument("PartId", _String, "the part measured (results database, "
-                                            "specification)")
-        await obj.add_method(ua.NodeId(f"{OBJECT}.Measure", idx), "Measure",
-                             self._call_measure, [part], [
-                                 _argument("Conductance", _Double,
-                                           "the recommended C [m^3/(s Pa)]"),
-                                 _argument("CriticalRatio", _Double, "b [-]"),
-                                 _argument("Verdict", _String, "pass, fail or ''")])
-        await obj.add_method(ua.NodeId(f"{OBJECT}.StartMeasure", idx), "StartMeasure",
-                             self._call_start, [part], [])
+            self._nodes[v.name] = var
+        handlers = {"Measure": self._call_measure, "StartMeasure": self._call_start,
+                    "Charge": self._call_charge, "Abort": self._call_abort}
+        for m in METHODS:
+            node = await obj.add_method(
+                ua.NodeId(f"{OBJECT}.{m.name}", idx), ua.QualifiedName(m.name, idx),
+                handlers[m.name], [_argument(*a) for a in m.inputs],
+                [_argument(*a) for a in m.outputs])
+            await node.write_attribute(ua.AttributeIds.Description, ua.DataValue(
+                ua.Variant(ua.LocalizedText(m.doc), ua.VariantType.LocalizedText)))
         self.server = server
         await server.start()
+        await self._write_results(None, ua.StatusCodes.BadWaitingForInitialData)
         await self._refresh()
 
     async def stop(self) -> None:
@@ -292,14 +218,11 @@ class BridgeServer:
     async def show(self, est: Estimate) -> None:
         """An estimate into the variables (as estimates arrive; a measurement's own with its
         verdict at its end)."""
-        await self._write(Conductance=est.conductance, ConductanceStd=est.conductance_std,
-                          CriticalRatio=est.critical_ratio,
-                          SubsonicIndex=est.subsonic_index, TauExp=est.tau_exp,
-                          Verdict=est.verdict)
+        await self._write_results(est, ua.StatusCodes.Good)
 
     async def set_estimator(self, present: bool) -> None:
         """The estimator is there (its ``~/measure`` action server, samples reaching it),
-        or not (``State``)."""
+        or not (``State``, ``Ready``)."""
         if present != self._estimator:
             self._estimator = present
             await self._refresh()
@@ -339,9 +262,7 @@ class BridgeServer:
         task = await self._begin(part)
         outcome = await asyncio.shield(task)  # a caller gone: the measurement goes on
         if not outcome.ok or outcome.estimate is None:
-            code = getattr(ua.StatusCodes, outcome.status, ua.StatusCodes.BadUnexpectedError)
-            return ua.StatusCode(code if code != ua.StatusCodes.Good
-                                 else ua.StatusCodes.BadUnexpectedError)
+            return ua.StatusCode(_code(outcome.status))
         e = outcome.estimate
         return [ua.Variant(e.conductance, _Double), ua.Variant(e.critical_ratio, _Double),
                 ua.Variant(e.verdict, _String)]
@@ -353,39 +274,72 @@ class BridgeServer:
         await self._begin(part)
         return []
 
+    async def _call_charge(self, _parent: ua.NodeId, *args: Any) -> Any:
+        if args:
+            return _bad("BadTooManyArguments")
+        refused = self._refuse()
+        if refused is not None:
+            return refused
+        if self.charge is None:
+            return _bad("BadNotImplemented")
+        outcome = await self.charge()
+        await self._write(Message=outcome.message)
+        return [] if outcome.status == "Good" else ua.StatusCode(_code(outcome.status))
+
+    async def _call_abort(self, _parent: ua.NodeId, *args: Any) -> Any:
+        if args:
+            return _bad("BadTooManyArguments")
+        task = self._current
+        if not self._busy or task is None or task.done():
+            return _bad("BadInvalidState")  # nothing to abort
+        self._aborting = True
+        if self.abort is not None:
+            self.abort()
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        return []
+
     async def _begin(self, part: str) -> asyncio.Task[Outcome]:
         """Start a measurement: busy at once (a second call sees it), ``MeasureDone``
         False and ``State`` 'measuring' before the call answers; its task."""
         self._busy = True
         try:
-            await self._write(PartId=part, MeasureDone=False, Message="measuring",
-                              Verdict="")
+            await self._write(PartId=part, MeasureDone=False, Message="measuring")
             await self._refresh()
         except BaseException:
             self._busy = False
             raise
         task = asyncio.get_running_loop().create_task(self._run(part))
+        self._current = task
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
         return task
 
     async def _run(self, part: str) -> Outcome:
-        """One measurement: its results into the variables (``MeasureDone`` last)."""
+        """One measurement: its results into the variables (Good, or Bad with the
+        failure's code), then the count and time, ``MeasureDone`` last."""
         try:
             try:
                 outcome = await self.measure(part)
             except asyncio.CancelledError:
-                outcome = Outcome("BadShutdown", "the bridge stopped during the measurement")
-                raise
+                if not self._aborting:
+                    outcome = Outcome("BadShutdown",
+                                      "the bridge stopped during the measurement")
+                    raise
+                outcome = Outcome("BadRequestCancelledByClient",
+                                  "aborted by a client's Abort call")
             except Exception as exc:  # never silent, never fatal
                 logging.getLogger(__name__).exception("measurement of %r failed", part)
                 outcome = Outcome("BadInternalError", f"{type(exc).__name__}: {exc}")
-            if outcome.estimate is not None:
-                await self.show(outcome.estimate)
         finally:
-            self._busy = False
-        self._last = outcome
-        await self._write(Message=outcome.message)
+            self._busy, self._aborting = False, False
+        if outcome.ok and outcome.estimate is not None:
+            await self.show(outcome.estimate)
+        else:
+            await self._write_results(None, _code(outcome.status))
+        self._count += 1
+        await self._write(Message=outcome.message, MeasurementCount=self._count,
+                          ResultTime=datetime.datetime.now(datetime.UTC))
         await self._refresh()
         await self._write(MeasureDone=True)
         return outcome
@@ -395,18 +349,34 @@ class BridgeServer:
         """The value of ``State``."""
         if self._busy:
             return "measuring"
-        if not self._estimator:
-            return "no estimator"
-        if self._last is None:
-            return "ready"
-        return "done" if self._last.ok else "failed"
+        return "ready" if self._estimator else "no estimator"
 
     async def _refresh(self) -> None:
-        await self._write(State=self.state())
+        state = self.state()
+        await self._write(State=state, Ready=state == "ready")
 
     async def _write(self, **values: Any) -> None:
-        types = {name: vtype for name, vtype, *_ in VARIABLES}
+        types = {v.name: v.vtype for v in VARIABLES}
         for name, value in values.items():
             node = self._nodes.get(name)
             if node is not None:
                 await node.write_value(ua.Variant(value, types[name]))
+
+    async def _write_results(self, est: Estimate | None, code: int) -> None:
+        """The result variables: an estimate's values (Good), or NaN and '' with the Bad
+        ``code`` (no estimate yet, a failed measurement)."""
+        values = est.results() if est is not None else {}
+        for v in VARIABLES:
+            node = self._nodes.get(v.name)
+            if not v.result or node is None:
+                continue
+            value = values.get(v.name, math.nan if v.vtype == _Double else "")
+            dv = ua.DataValue(ua.Variant(value, v.vtype), StatusCode=ua.StatusCode(code))
+            await node.write_value(dv)
+
+
+def _code(status: str) -> int:
+    """The Bad status code of a failed outcome's status name (BadUnexpectedError for an
+    unknown name, or 'Good' without an estimate)."""
+    code = getattr(ua.StatusCodes, status, ua.StatusCodes.BadUnexpectedError)
+    return int(code) if code != ua.StatusCodes.Good else ua.StatusCodes.BadUnexpectedError

@@ -9,7 +9,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from pneumatic_unload.estimation import STATUSES
-from pneumatic_unload.plc.bridge import Estimate
+from pneumatic_unload.plc.address import Estimate
 
 if TYPE_CHECKING:  # the node loads a specification only when it is given one
     from pneumatic_unload.testline.spec import Spec
@@ -17,7 +17,7 @@ if TYPE_CHECKING:  # the node loads a specification only when it is given one
 #: The UnloadEstimate fields :func:`estimate_from_fields` reads.
 FIELDS = ("unload_index", "status", "status_text", "method", "conductance",
           "conductance_std", "conductance_model", "conductance_model_std", "critical_ratio",
-          "subsonic_index", "tau_exp")
+          "subsonic_index", "tau_exp", "p10", "p_star", "p_atm")
 
 
 def is_final(fields: Mapping[str, Any]) -> bool:
@@ -41,7 +41,9 @@ def estimate_from_fields(fields: Mapping[str, Any]) -> Estimate:
         status=STATUSES[status] if 0 <= status < len(STATUSES) else f"status {status}",
         status_text=str(fields["status_text"]), conductance=c, conductance_std=sd,
         critical_ratio=float(fields["critical_ratio"]),
-        subsonic_index=float(fields["subsonic_index"]), tau_exp=float(fields["tau_exp"]))
+        subsonic_index=float(fields["subsonic_index"]), tau_exp=float(fields["tau_exp"]),
+        conductance_eq39=float(fields["conductance"]), p10=float(fields["p10"]),
+        p_star=float(fields["p_star"]), p_atm=float(fields["p_atm"]))
 
 
 def judged(est: Estimate, spec: Spec | None, part_id: str) -> Estimate:
