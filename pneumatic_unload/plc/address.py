@@ -122,7 +122,7 @@ VARIABLES: tuple[Variable, ...] = (
              "unloading time's crossing", True),
     Variable("AtmosphericPressure", _Double, math.nan, PASCAL, "p_atm, the downstream "
              "pressure", True),
-    Variable("Status", _String, "", None, "the estimate's status word (ok, not_choked, "
+    Variable("Status", _String, "", None, "the estimate's status word (ok, ok_subsonic, "
              "aborted_sse, aborted, bad_data)", True),
     Variable("StatusText", _String, "", None, "what the status means for this estimate",
              True),
