@@ -82,7 +82,8 @@ def options_from(args: argparse.Namespace) -> InputOptions:
     except SpecError as exc:
         raise BatchCliError(str(exc)) from exc
     return InputOptions(settings=settings, csv=csv, topic=args.topic,
-                        part_regex=args.part_regex or "", spec=spec)
+                        part_regex=args.part_regex or "", spec=spec,
+                        override=bool(getattr(args, "override", False)))
 
 
 def _fmt_c(c: Any) -> str:
@@ -166,7 +167,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
                "skipped": res.skipped, "interrupted": res.interrupted,
                "workers": res.workers,
                "files": [{"path": r.path, "part_id": r.part_id, "status": r.status,
-                          "reason": r.reason, "n_unloads": len(r.unloads)}
+                          "reason": r.reason, "n_unloads": len(r.unloads),
+                          "settings_notes": r.settings_notes}
                          for r in res.records],
                "parts": parts}
         print(json.dumps(out, indent=2, allow_nan=False, default=json_default))
@@ -175,6 +177,9 @@ def cmd_batch(args: argparse.Namespace) -> int:
               f"already in {hide_password(args.db)}" + (", interrupted" if res.interrupted else ""))
         for r in failed:
             print(f"  {r.path}: {r.status}: {r.reason}")
+        for r in res.records:
+            if r.settings_notes:
+                print(f"  {r.path}: settings: {r.settings_notes}")
         print(parts_text(parts))
     for r in failed:
         print(f"pneumatic-unload: {r.path}: {r.status}: {r.reason}", file=sys.stderr)
@@ -271,6 +276,10 @@ def add_parsers(sub: Any, add_input_options: Callable[[argparse.ArgumentParser],
     ba.add_argument("--settings", metavar="YAML",
                     help="estimator settings for inputs that carry none (CSV logs): "
                          "volume, initial_temperature, ... [SI]")
+    ba.add_argument("--override", action="store_true",
+                    help="the settings given (options, --settings) win over the values a "
+                         "bag records (default: the bag's win, and the output says where "
+                         "they differ)")
     ba.add_argument("--part-regex", metavar="REGEX",
                     help="part id: the first group of REGEX on each path (default: the "
                          "file name without its suffix)")

@@ -96,6 +96,10 @@ class FileRecord:
         Who wrote it ('batch', or the estimator node's name).
     package_version : str
         The package version that made the numbers.
+    settings_notes : str
+        Where a setting given on the command line met another value recorded in the input
+        (a bag): which one was used and why, one note per setting joined by '; ' ('' when
+        none did).
     """
 
     path: str
@@ -109,6 +113,7 @@ class FileRecord:
     part_type: str = ""
     writer: str = "batch"
     package_version: str = ""
+    settings_notes: str = ""
 
 
 #: Longest one operation of :class:`ResultsDB` (a query, a write with its retries) waits
@@ -372,7 +377,7 @@ def _prepared(rec: FileRecord, now: str) -> tuple[dict[str, Any], list[dict[str,
              "n_unloads": len(rec.unloads),
              "settings_json": json.dumps(rec.settings, sort_keys=True, default=str),
              "package_version": rec.package_version, "analysed_at": now,
-             "writer": rec.writer},
+             "writer": rec.writer, "settings_notes": rec.settings_notes or None},
             [{"unload_index": k, "part_id": rec.part_id,
               **{n: _num(u.get(n)) for n in _NAMES},
               "verdict": u.get("verdict"), "verdict_reason": u.get("verdict_reason"),

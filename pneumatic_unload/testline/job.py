@@ -21,7 +21,7 @@ from typing import Any
 from pneumatic_unload import __version__
 from pneumatic_unload.analysis.output import finite_or_none, unload_json
 from pneumatic_unload.analysis.records import RecordError, analyze_input, open_record
-from pneumatic_unload.config import ConfigError
+from pneumatic_unload.config import ConfigError, TankSpec, adapters
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.types import ESTIMATE_STATUSES
 from pneumatic_unload.testline.db import FileRecord
@@ -35,8 +35,9 @@ class InputOptions:
     Attributes
     ----------
     settings : dict
-        Estimator settings given for every input [SI] (over a bag's stored ones; a CSV
-        needs at least ``volume``).
+        Estimator settings given for every input [SI]: a CSV log's (it needs at least
+        ``volume``); a bag's own recorded value wins over one of these unless
+        ``override`` (see :func:`settings_given`).
     csv : dict
         CSV reading options (columns, units, gauge, atmosphere [Pa]) of
         :func:`~pneumatic_unload.analysis.records.open_record`.
@@ -46,7 +47,10 @@ class InputOptions:
         Regular expression on the file's path whose first group (or whole match) is the
         part id; '' takes the file name without its suffix.
     spec : Spec or None
-        Specification the unloads are judged against.
+        Specification the unloads are judged against (and per-file settings, which win
+        over a bag's recorded ones).
+    override : bool
+        ``settings`` win over the values a bag records (``--override``).
     """
 
     settings: dict[str, Any] = field(default_factory=dict)
@@ -54,6 +58,7 @@ class InputOptions:
     topic: str = "/tank/pressure"
     part_regex: str = ""
     spec: Spec | None = None
+    override: bool = False
 
 
 def content_hash(path: str | Path) -> str:
@@ -95,8 +100,62 @@ def options_hash(options: InputOptions) -> str:
     spec = options.spec.to_dict() if options.spec is not None else None
     blob = json.dumps({"settings": options.settings, "csv": options.csv,
                        "topic": options.topic, "part_regex": options.part_regex,
-                       "spec": spec, "version": __version__}, sort_keys=True, default=str)
+                       "spec": spec, "version": __version__,
+                       **({"override": True} if options.override else {})},
+                      sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def recorded_settings(cfg: dict[str, Any]) -> dict[str, Any]:
+    """The estimator settings an input records [SI]: a bag's live estimator settings when
+    it has them, else its rig configuration's tank and gas (see
+    :func:`~pneumatic_unload.analysis.records.settings_for`); a CSV log: none."""
+    live = cfg.get("estimator_settings")
+    if isinstance(live, dict):
+        return adapters.from_mapping(EstimatorSettings, live, strict=False)
+    return TankSpec.fields_of(cfg)
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal settings values (numbers to a relative 1e-9: a unit conversion's rounding)."""
+    if isinstance(a, bool) or isinstance(b, bool) or not (
+            isinstance(a, int | float) and isinstance(b, int | float)):
+        return bool(a == b)
+    return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=0.0)
+
+
+def _shown(v: Any) -> str:
+    return f"{v:.6g}" if isinstance(v, float) else str(v)
+
+
+def settings_given(cfg: dict[str, Any], options: InputOptions, path: str
+                   ) -> tuple[dict[str, Any], list[str]]:
+    """The settings to apply over what the input records, and a note per setting where a
+    given value meets another recorded one.
+
+    The bag's recorded value wins over the command line's (``options.settings``) unless
+    ``options.override``; the specification's per-file settings for ``path`` win over
+    both. A note names the setting, both values and which one was used.
+    """
+    recorded = recorded_settings(cfg)
+    per_file = options.spec.file_settings(path) if options.spec is not None else {}
+    given = {**options.settings, **per_file}
+    notes: list[str] = []
+    for k in sorted(given):
+        if k not in recorded or _same(recorded[k], given[k]):
+            continue
+        mine, theirs = _shown(given[k]), _shown(recorded[k])
+        if k in per_file:
+            notes.append(f"{k}: the specification's files entry {mine} used over the "
+                         f"bag's {theirs}")
+        elif options.override:
+            notes.append(f"{k}: the command line's {mine} used over the bag's {theirs} "
+                         "(--override)")
+        else:
+            notes.append(f"{k}: the bag's {theirs} used, not the command line's {mine} "
+                         "(--override uses the command line's)")
+            del given[k]
+    return given, notes
 
 
 def settings_json(s: EstimatorSettings) -> dict[str, Any]:
@@ -183,11 +242,14 @@ def _analyze_file(path: str, options: InputOptions, chash: str | None, pid: str,
         except OSError as exc:
             return FileRecord(content_hash=f"unreadable:{path}", status="error",
                               reason=f"{path}: {exc}", **base)
+    notes: list[str] = []
     try:
         rec = open_record(path, topic=options.topic, **options.csv)
-        ana = analyze_input(rec, dict(options.settings))
+        given, notes = settings_given(rec.cfg, options, str(path))
+        ana = analyze_input(rec, given)
     except (RecordError, EstimationError, ConfigError) as exc:
-        return FileRecord(content_hash=chash, status="error", reason=str(exc), **base)
+        return FileRecord(content_hash=chash, status="error", reason=str(exc),
+                          settings_notes="; ".join(notes), **base)
     sj = settings_json(ana.settings)
     run, results, problem = ana.run, ana.unloads, ana.input_problem
     unloads = [result_row(r) for r in results]
@@ -206,7 +268,7 @@ def _analyze_file(path: str, options: InputOptions, chash: str | None, pid: str,
         reason = no_estimate(unloads)
         status = "no_estimate" if reason else "ok"
     return FileRecord(content_hash=chash, status=status, reason=reason, unloads=unloads,
-                      settings=sj, **base)
+                      settings=sj, settings_notes="; ".join(notes), **base)
 
 
 def analyze_chunk(items: Sequence[tuple[int, str]], options: InputOptions,

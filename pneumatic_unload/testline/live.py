@@ -60,15 +60,17 @@ class LiveResults:
             return None
         return self.spec.judge(part_id, result_row(r))
 
-    def write(self, r: UnloadResult, settings: EstimatorSettings, part_id: str
-              ) -> tuple[str, str] | None:
+    def write(self, r: UnloadResult, settings: EstimatorSettings, part_id: str, *,
+              timeout: float | None = None) -> tuple[str, str] | None:
         """Write one (final) estimate for ``part_id``; returns its verdict (see
-        :meth:`judge`).
+        :meth:`judge`). On a PostgreSQL server it returns or fails within ``timeout`` s
+        (None: the database's ``ANSWER_TIMEOUT``), plus at most the connect timeout.
 
         Raises
         ------
         ResultsDBError
-            The database cannot be written (busy beyond its timeout, disk full, ...).
+            The database cannot be written (busy beyond its timeout, disk full, a server
+            that does not answer within ``timeout``, ...).
         """
         u = result_row(r)
         verdict = self.judge(r, part_id)
@@ -86,7 +88,8 @@ class LiveResults:
             and r.status in ESTIMATE_STATUSES else "no_estimate",
             reason="" if r.status == "ok" else f"{r.status}: {r.status_text}",
             unloads=[u], settings=sj, writer=self.writer, package_version=__version__)
-        write_file(self.db, rec, replace=True)  # a later estimate of the unload replaces it
+        # a later estimate of the unload replaces it
+        write_file(self.db, rec, replace=True, timeout=timeout)
         return verdict
 
     def close(self) -> None:

@@ -31,9 +31,9 @@ import sqlalchemy as sa
 from pneumatic_unload.testline.redact import redact
 
 #: Schema version written by this package [-] (SQLite's ``PRAGMA user_version``).
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 #: Alembic revision of each schema version: REVISIONS[k - 1] is version k.
-REVISIONS: tuple[str, ...] = ("0001", "0002", "0003")
+REVISIONS: tuple[str, ...] = ("0001", "0002", "0003", "0004")
 #: The revision this package writes and reads.
 HEAD = REVISIONS[-1]
 #: Where the revisions are (a folder of the package, not a Python package itself).
@@ -98,6 +98,8 @@ FILES = sa.Table(
     sa.Column("settings_json", sa.Text),
     *[sa.Column(n, sa.Text, nullable=False) for n in (
         "package_version", "analysed_at", "writer")],
+    # schema 4: where a setting given met another recorded in the input (see FileRecord)
+    sa.Column("settings_notes", sa.Text),
     sa.UniqueConstraint("content_hash", "settings_hash"),
 )
 #: One row per unload of an input; (file_id, unload_index) is unique.

@@ -10,10 +10,17 @@ A specification is a YAML (or JSON) file::
         critical_ratio: [0.3, 0.6]     # b range (optional)
         max_relative_std: 0.02         # sigma(C)/C at most (optional)
 
+    # optional: settings for some inputs [SI], by a regular expression on the input's path;
+    # they win over what a bag records (the command line's do not, without --override)
+    files:
+      "V14-007":
+        volume: 4.0e-3
+
 The first part type whose ``match`` finds the part id applies; a part with none has no
-verdict. An unload passes when its recommended C (and b, and sigma(C)/C, when the type
-states them) lie in range; an unload without a C fails with its reason; a part passes when
-every unload does. SI units.
+verdict. The first ``files`` entry whose expression finds the path applies. An unload
+passes when its recommended C (and b, and sigma(C)/C, when the type states them) lie in
+range; an unload without a C fails with its reason; a part passes when every unload does.
+SI units.
 """
 
 from __future__ import annotations
@@ -89,6 +96,12 @@ class Spec:
     """The part types of a specification file, in file order."""
 
     types: tuple[PartType, ...]
+    #: (regular expression on an input's path, estimator settings [SI]), in file order
+    files: tuple[tuple[str, dict[str, Any]], ...] = ()
+
+    def file_settings(self, path: str) -> dict[str, Any]:
+        """The settings of the first ``files`` entry whose expression finds ``path``."""
+        return next((dict(d) for rx, d in self.files if re.search(rx, path)), {})
 
     def part_type(self, part_id: str) -> str:
         """The name of the first part type matching ``part_id`` ('' when none)."""
@@ -105,7 +118,10 @@ class Spec:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (NaN limits as None)."""
-        return {"part_types": [finite_or_none(vars(t)) for t in self.types]}
+        out: dict[str, Any] = {"part_types": [finite_or_none(vars(t)) for t in self.types]}
+        if self.files:
+            out["files"] = [[rx, d] for rx, d in self.files]
+        return out
 
 
 def _pair(name: str, key: str, v: Any, src: str) -> tuple[float, float]:
@@ -132,6 +148,10 @@ def parse_spec(data: Any, src: str = "specification") -> Spec:
     if not isinstance(data, dict) or not isinstance(data.get("part_types"), dict) \
             or not data["part_types"]:
         raise SpecError(f"{src}: expected a mapping 'part_types' of part type names")
+    unknown_top = set(data) - {"part_types", "files"}
+    if unknown_top:
+        raise SpecError(f"{src}: unknown keys {sorted(unknown_top)} (part_types, files)")
+    files = _file_settings(data.get("files"), src)
     out = []
     for name, d in data["part_types"].items():
         if not isinstance(d, dict):
@@ -159,7 +179,33 @@ def parse_spec(data: Any, src: str = "specification") -> Spec:
             raise SpecError(f"{src}: part type {name!r}: max_relative_std must be in (0, 1)")
         out.append(PartType(str(name), match, c_lo, c_hi, b_lo, b_hi,
                             float(rel) if rel is not None else math.nan))
-    return Spec(tuple(out))
+    return Spec(tuple(out), files)
+
+
+def _file_settings(data: Any, src: str) -> tuple[tuple[str, dict[str, Any]], ...]:
+    """The ``files`` entries of a specification: (expression, settings [SI])."""
+    if data is None:
+        return ()
+    if not isinstance(data, dict):
+        raise SpecError(f"{src}: files must be a mapping of path expressions to settings")
+    from pneumatic_unload.config import ConfigError, adapters
+    from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+
+    out = []
+    for rx, d in data.items():
+        try:
+            re.compile(str(rx))
+        except re.error as exc:
+            raise SpecError(f"{src}: files: bad expression {rx!r}: {exc}") from exc
+        if not isinstance(d, dict):
+            raise SpecError(f"{src}: files: {rx!r} must be a mapping of estimator settings")
+        try:
+            settings = adapters.from_mapping(EstimatorSettings, d)
+            EstimatorSettings(**{"volume": 1e-3, **settings})  # each value in range
+        except (ConfigError, EstimationError, TypeError) as exc:
+            raise SpecError(f"{src}: files: {rx!r}: {exc}") from exc
+        out.append((str(rx), settings))
+    return tuple(out)
 
 
 def read_file_data(path: str | Path) -> Any:
