@@ -52,7 +52,7 @@ grep -rlZ --include='*.cmake' '/opt/python/cp3' "$VENV_ABS/share" 2>/dev/null | 
 # Build the interface package when its sources changed since the last build.
 MSG_HASH="$(cat msg_defs/package.xml msg_defs/CMakeLists.txt msg_defs/msg/* msg_defs/action/* | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$VENV/.msgs-built" 2>/dev/null)" != "$MSG_HASH" ]; then
-  echo "[setup] building msg_defs (pneumatic_unload_msgs) into $VENV (about 1 min)"
+  echo "[setup] building msg_defs (pneumatic_unload_msgs) into $VENV (1-3 min)"
   rm -rf build/msg_defs && mkdir -p build
   AMENT_PREFIX_PATH="$VENV_ABS" cmake -S msg_defs -B build/msg_defs \
     -DCMAKE_PREFIX_PATH="$VENV_ABS" -DCMAKE_INSTALL_PREFIX="$VENV_ABS" \
