@@ -111,7 +111,7 @@ def coverage(n: int, seed: int = 100, extra: tuple[str, ...] = ()) -> None:
         sim = simulate(cfg, rtol=SIM_RTOL)
         res = merge_final(analyze(sim.t, sim.measured, settings_for(cfg)))
         r = res[0]
-        if not (r.final and r.status in ("ok", "not_choked")):
+        if not (r.final and r.status in ("ok", "ok_subsonic")):
             print(f"trial {k}: {r.status} {r.status_text}")
             continue
         tau_true = true_crossing(sim, cfg.atmosphere)

@@ -59,8 +59,8 @@ analyze's default, and the offset was fitted without it too):
   z up to 7.7), the two long-plateau failures as above (-82 %, -17 %); the temperature
   column removes the bias (the same traces with it: within 0.62 %).
 * CPU per analysis: 2.6 s mean (max 6.4) with the temperature, 1.2 s (3.1) without, not
-  hot; 4.0 (8.2) and 2.1 (3.8) on hot starts. Status: not_choked 15/24, ok 9/24 either
-  way (not_choked: 15 of the 16 cases with b 0.2-0.3, p* below p_atm / b).
+  hot; 4.0 (8.2) and 2.1 (3.8) on hot starts. Status: ok_subsonic 15/24, ok 9/24 either
+  way (ok_subsonic: 15 of the 16 cases with b 0.2-0.3, p* below p_atm / b).
 
 Measured after the joint fit (the gas temperature fitted with the pressure: T10 and the
 thermometer's lag parameters), the start found on a drifting plateau and a hot start read

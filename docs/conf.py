@@ -37,6 +37,9 @@ html_theme = "alabaster"
 html_theme_options = {"description": "sonic conductance from tank discharges (ROS 2)",
                       "page_width": "1240px", "sidebar_width": "240px"}
 html_sidebars = {"**": ["about.html", "navigation.html", "relations.html", "searchbox.html"]}
+# docs/_static/wrap.css: long commands wrap instead of scrolling out of sight
+html_static_path = ["_static"]
+html_css_files = ["wrap.css"]
 
 # numpy-style docstrings; Google style ("Args:") only in pneumatic_unload.io (see setup:
 # elsewhere a "Parameters:" paragraph, as in the node modules' docstrings, is plain text)

@@ -8,17 +8,35 @@ VENV="${VENV:-.venv}"
 PYTHON="${PYTHON:-python3}"
 
 if [ ! -x "$VENV/bin/python" ]; then
-  echo "[setup] creating $VENV"
+  echo "[setup] first run: creating $VENV (seconds), then the steps below; later runs skip"
+  echo "[setup]   what is done"
   "$PYTHON" -m venv "$VENV"
 fi
 VPY="$VENV/bin/python"
 VENV_ABS="$(cd "$VENV" && pwd)"
 
 if ! cmp -s requirements.lock "$VENV/.requirements.lock"; then
-  echo "[setup] installing the pinned set (requirements.lock)"
-  # (pip's "Location ... is ignored" lines come from this machine's pip config: noise)
-  "$VPY" -m pip install --disable-pip-version-check -q -r requirements.lock 2>&1 \
-    | { grep -v "is ignored: it is neither a file nor a directory" || true; }
+  NPKG="$(grep -c '==' requirements.lock)"
+  echo "[setup] installing the pinned set (requirements.lock, $NPKG packages, ~1 GB with"
+  echo "[setup]   the ROS 2 wheels): 5-20 min on a first run, depending on the network;"
+  echo "[setup]   under a minute from pip's cache. Each package is listed as it is fetched."
+  # a line a minute while pip unpacks or downloads without a word; stopped on any exit
+  ( trap 'kill $! 2>/dev/null; exit 0' TERM; t=0
+    while :; do sleep 60 & wait $!; t=$((t + 1)); echo "[setup]   ... pip still working ($t min)"; done ) &
+  HEARTBEAT=$!
+  trap 'kill "$HEARTBEAT" 2>/dev/null || true' EXIT
+  # pip's "Collecting" lines numbered; its "Location ... is ignored" lines come from this
+  # machine's pip config: noise. pip's whole output is kept in $VENV/pip-install.log.
+  "$VPY" -m pip install --disable-pip-version-check --progress-bar off -r requirements.lock 2>&1 \
+    | tee "$VENV/pip-install.log" | { k=0; while IFS= read -r line; do case "$line" in
+        *"is ignored: it is neither a file nor a directory"*) ;;
+        "Collecting "*) k=$((k + 1)); read -r _ name _ <<<"$line"; echo "[setup]   $k/$NPKG $name" ;;
+        "Installing collected packages"*) echo "[setup]   unpacking the packages into the venv (1-3 min)" ;;
+        "Successfully installed"*) echo "[setup]   done: $(wc -w <<<"${line#Successfully installed}") package(s) installed" ;;
+        ERROR*|WARNING*) echo "$line" ;;
+      esac; done; } \
+    || { echo "[setup] pip failed; its whole output: $VENV/pip-install.log" >&2; exit 1; }
+  kill "$HEARTBEAT" 2>/dev/null || true
   cp requirements.lock "$VENV/.requirements.lock"
   rm -f "$VENV/.msgs-built"
 fi
@@ -34,7 +52,7 @@ grep -rlZ --include='*.cmake' '/opt/python/cp3' "$VENV_ABS/share" 2>/dev/null | 
 # Build the interface package when its sources changed since the last build.
 MSG_HASH="$(cat msg_defs/package.xml msg_defs/CMakeLists.txt msg_defs/msg/* msg_defs/action/* | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$VENV/.msgs-built" 2>/dev/null)" != "$MSG_HASH" ]; then
-  echo "[setup] building msg_defs (pneumatic_unload_msgs) into $VENV"
+  echo "[setup] building msg_defs (pneumatic_unload_msgs) into $VENV (about 1 min)"
   rm -rf build/msg_defs && mkdir -p build
   AMENT_PREFIX_PATH="$VENV_ABS" cmake -S msg_defs -B build/msg_defs \
     -DCMAKE_PREFIX_PATH="$VENV_ABS" -DCMAKE_INSTALL_PREFIX="$VENV_ABS" \
@@ -48,7 +66,7 @@ fi
 
 PKG_HASH="$(cat setup.py setup.cfg package.xml | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$VENV/.pkg-installed" 2>/dev/null)" != "$PKG_HASH" ]; then
-  echo "[setup] installing pneumatic_unload (editable)"
+  echo "[setup] installing pneumatic_unload (editable, a few seconds)"
   "$VPY" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e . 2>&1 \
     | { grep -v "is ignored: it is neither a file nor a directory" || true; }
   echo "$PKG_HASH" > "$VENV/.pkg-installed"

@@ -31,7 +31,7 @@ def _run(t, p, st):
 
 
 def test_statuses_order_is_the_message_constants():
-    assert STATUSES[:5] == ("ok", "aborted_sse", "aborted", "not_choked", "bad_data")
+    assert STATUSES[:5] == ("ok", "aborted_sse", "aborted", "ok_subsonic", "bad_data")
 
 
 def test_inf_values_and_nan_stamps_are_skipped_with_a_diagnostic():
@@ -57,12 +57,12 @@ def test_gap_during_the_unload_is_flagged_and_lowers_quality():
     assert res[0].quality <= 0.5
 
 
-def test_start_never_choked_is_not_choked():
+def test_start_never_choked_is_ok_subsonic():
     # p10 = 1.6 bar abs < p_atm / b = 2.03 bar: the flow is subsonic from the start
     _cfg, sim, st = _rig(initial_pressure=1.6e5, critical_ratio=0.5)
     st = dataclasses.replace(st, critical_ratio=0.5)
     res, _ = _run(sim.t, sim.measured, st)
-    assert len(res) == 1 and res[0].status == "not_choked"
+    assert len(res) == 1 and res[0].status == "ok_subsonic"
     assert "subsonic" in res[0].status_text
     assert res[0].quality < 1.0
 

@@ -170,14 +170,54 @@ def test_analyze_text_says_an_unknown_uncertainty_in_words():
     text = format_result(r)
     assert "nan" not in text and "inf" not in text, text
     assert "tau_exp        = 0.500000 s  (uncertainty not known)" in text
-    assert "C (model)      = 8.1e-09 m^3/(s Pa) (uncertainty not known) = 0.8100" in text
+    assert "C (model)      = 8.100e-09 m^3/(s Pa) (uncertainty not known) = 0.8100" in text
     assert "b              = 0.450 (uncertainty not known)" in text
-    assert "REPORT C       = 8.1e-09 m^3/(s Pa) (uncertainty not known) = 0.8100" in text
+    assert "REPORT C       = 8.100e-09 m^3/(s Pa) (uncertainty not known) = 0.8100" in text
     r.conductance_model_std, r.critical_ratio_std, r.tau_exp_std = 2e-11, 0.01, 0.001
     text = format_result(r)
-    assert "C (model)      = 8.1e-09 +- 2e-11 m^3/(s Pa) = 0.8100" in text
+    assert "C (model)      = 8.100e-09 +- 2.0e-11 m^3/(s Pa) = 0.8100 +- 0.0020 " in text
     assert "b              = 0.450 +- 0.010" in text and "(+- 0.001 s)" in text
-    assert "REPORT C       = 8.1e-09 +- 4e-11 m^3/(s Pa) (k = 2) = 0.8100" in text
+    assert "REPORT C       = 8.100e-09 +- 4.0e-11 m^3/(s Pa) (k = 2) = 0.8100 +- 0.0040 " in text
+
+
+def test_text_output_prints_c_with_four_significant_digits_in_si_and_dm3():
+    """C 3e-9 m^3/(s Pa) was printed '3e-09' (one significant digit, trailing zeros
+    dropped by :g): every C of the text output has four in SI and in dm^3/(s bar)."""
+    import math
+
+    from pneumatic_unload.analysis.output import c_dm3, c_si, format_result
+    from pneumatic_unload.estimation import UnloadResult
+
+    assert (c_si(3e-9), c_dm3(3e-9)) == ("3.000e-09", "0.3000")
+    assert (c_si(3.0123e-9), c_dm3(3.0123e-9)) == ("3.012e-09", "0.3012")
+    assert (c_dm3(8.3e-10), c_dm3(1.234e-7), c_dm3(math.nan)) == ("0.08300", "12.34", "n/a")
+    r = UnloadResult(index=0, status="ok", status_text="ok", t_start=0.0, t_cross=0.5,
+                     tau_exp=0.5, tau_exp_std=0.001, p10=7e5, p_atm=101325.0,
+                     p_star=3e5, initial_temperature=293.15, volume=1e-3,
+                     conductance=3e-9, conductance_model=3e-9,
+                     conductance_model_std=2.1e-11, final=True)
+    text = format_result(r)
+    assert "C (eq 39)      = 3.000e-09 m^3/(s Pa) = 0.3000 dm^3/(s bar)" in text, text
+    assert "C (model)      = 3.000e-09 +- 2.1e-11 m^3/(s Pa) = 0.3000 +- 0.0021 dm^3/(s bar)" \
+        in text, text
+    assert "REPORT C       = 3.000e-09 +- 4.2e-11 m^3/(s Pa) (k = 2) = 0.3000 +- 0.0042 " \
+        "dm^3/(s bar)" in text, text
+    assert "3e-09" not in text
+
+
+def test_batch_parts_table_and_demo_print_c_with_four_significant_digits():
+    from pneumatic_unload.app.batch_cli import parts_text
+    from pneumatic_unload.app.demo import _fmt
+
+    part = {"part_id": "V14-1", "part_type": "g14", "n": 2, "conductance_mean": 3e-9,
+            "conductance_std": 1.2e-12, "verdict": "pass", "verdict_reason": ""}
+    row = parts_text([part]).splitlines()[-1].split()
+    assert row[3:5] == ["0.3000", "0.00012"], row
+    est = {"conductance": 3.1e-9, "conductance_model": 3e-9, "conductance_model_std": 2e-11,
+           "critical_ratio": 0.4, "tau_exp": 0.5, "method": "eq39"}
+    line = _fmt(est)
+    assert "C (eq 39) = 0.3100 " in line and "model C = 3.000e-09 +- 2.0e-11 m^3/(s Pa) = " \
+        "0.3000 +- 0.0020 dm^3/(s bar)" in line, line
 
 
 def test_analyze_does_not_load_the_test_line(tmp_path):

@@ -68,7 +68,7 @@ def test_an_idle_stream_of_correlated_noise_starts_no_unload(rho):
 def test_a_plateau_at_the_end_pressure_has_nothing_to_unload(direction):
     """The first 3 s of ten streams of AR(1) noise (rho 0.9, 300 Pa) on the end pressure (a
     discharge's p_atm, a charge's supply): the first plateau's 32-sample window cannot show
-    the correlation, and its wander gave 'aborted', 'bad_data' and 'not_choked' phantoms
+    the correlation, and its wander gave 'aborted', 'bad_data' and 'ok_subsonic' phantoms
     (6 of 10 streams at p_atm; 1-4 of 30 discharges' tails). A plateau within END_GAP_MIN
     of the end pressure has nothing to unload: no result, a diagnostic says why, once
     per plateau. A discharge from 5.7 kPa above p_atm (the rule's edge: 5.07 kPa) is

@@ -39,7 +39,7 @@ def test_the_launch_file_s_nodes_arguments_and_parameter_files() -> None:
     assert nodes["estimator"]["params"]["direction"] == "both"
     assert nodes["estimator"]["params"]["results_db"] == ""  # an empty string kept
     assert nodes["simulator"]["params"]["start_delay"] == -1.0  # the default
-    assert nodes["opcua"]["params"]["endpoint"] == "opc.tcp://0.0.0.0:4840/pneumatic_unload/"
+    assert nodes["opcua"]["params"]["endpoint"] == "opc.tcp://127.0.0.1:4840/pneumatic_unload/"
     assert nodes["opcua"]["params"]["security_policy"] == "None"  # a string, not null
 
 
@@ -47,7 +47,19 @@ def test_the_opc_ua_bridge_is_optional_and_takes_its_port() -> None:
     """opcua:=false leaves the bridge out (a node's ``if``); opcua_port sets its endpoint."""
     assert "opcua" not in {n["name"] for n in load_launch(LAUNCH, {"opcua": "false"})}
     nodes = {n["name"]: n for n in load_launch(LAUNCH, {"opcua_port": "4855"})}
-    assert nodes["opcua"]["params"]["endpoint"] == "opc.tcp://0.0.0.0:4855/pneumatic_unload/"
+    assert nodes["opcua"]["params"]["endpoint"] == "opc.tcp://127.0.0.1:4855/pneumatic_unload/"
+    nodes = {n["name"]: n for n in load_launch(LAUNCH, {
+        "opcua_host": "0.0.0.0", "opcua_trusted_certs": "/etc/pki/plc",
+        "opcua_revoked_certs": "/etc/pki/crl", "opcua_allow_anonymous": "true"})}
+    params = nodes["opcua"]["params"]  # every security setting is a launch argument
+    assert params["endpoint"] == "opc.tcp://0.0.0.0:4840/pneumatic_unload/"
+    assert (params["trusted_certs"], params["revoked_certs"]) == ("/etc/pki/plc", "/etc/pki/crl")
+    assert params["allow_anonymous"] is True
+    from pneumatic_unload.config.nodes import node_parameters
+
+    security = {"endpoint", "security_policy", "certificate", "private_key", "users_file",
+                "allow_anonymous", "trusted_certs", "revoked_certs"}
+    assert security <= set(node_parameters("opcua")) and security <= set(params)
     with pytest.raises(LaunchError, match="not true or false"):
         load_launch(LAUNCH, {"opcua": "maybe"})
 

@@ -29,8 +29,9 @@ def tank_5l():
 @pytest.mark.parametrize("cut_s", [0.03, 1.0, 2.8])
 def test_a_record_cut_after_its_opening_is_refused_with_what_to_pass(tank_5l, cut_s):
     """Its first 30, 1000 or 2800 rows after the opening cut: it gave 'ok' with C -0.2 %,
-    -4.5 % (final; p10 563 kPa) and 'not_choked' -15.6 %. Now one 'bad_data' result that
-    says the fall is under way at the first sample and names --start-time."""
+    -4.5 % (final; p10 563 kPa) and 'not_choked' (now 'ok_subsonic') -15.6 %. Now one
+    'bad_data' result that says the fall is under way at the first sample and names
+    --start-time."""
     cfg, sim = tank_5l
     k = int(np.searchsorted(sim.t, sim.t_open + cut_s))
     got = analyze(sim.t[k:], sim.measured[k:], settings_for(cfg))

@@ -36,7 +36,7 @@ from asyncua.client.ua_client import UaClientState  # noqa: E402
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256  # noqa: E402
 
 from pneumatic_unload.app.launch import free_domain_id  # noqa: E402
-from pneumatic_unload.plc import APPLICATION_URI, NAMESPACE, hash_password  # noqa: E402
+from pneumatic_unload.plc import APPLICATION_URI, NAMESPACE, Outcome, hash_password  # noqa: E402
 
 LAUNCH = Path(__file__).resolve().parent.parent / "launch" / "bench.launch.yaml"
 #: The rig's conductance (the launch argument: the truth) [m^3/(s Pa)].
@@ -91,13 +91,13 @@ def _bench(tmp: Path, *args: str) -> Iterator[Bench]:
 
 
 @contextlib.asynccontextmanager
-async def _client(url: str, *, wait: float = 60.0, **security: Any
-                  ) -> AsyncIterator[tuple[Client, Any]]:
+async def _client(url: str, *, wait: float = 60.0, timeout: float = CALL_TIMEOUT,
+                  **security: Any) -> AsyncIterator[tuple[Client, Any]]:
     """A connected client (asyncua's defaults but the request timeout: a 1 s watchdog),
     the bridge's object; retries the connection while the bench starts."""
     deadline = time.monotonic() + wait
     while True:
-        c = Client(url, timeout=CALL_TIMEOUT)
+        c = Client(url, timeout=timeout)
         if security:
             c.application_uri = "urn:pneumatic-unload:test-client"
             if security.get("user"):
@@ -173,11 +173,11 @@ SPEC = """part_types:
 
 @pytest.fixture(scope="module")
 def bench(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Bench]:
-    """The launch file's bench with the bridge on a free port (security None), a part
-    specification (:data:`SPEC`)."""
+    """The launch file's bench with the bridge on a free port (security None, anonymous
+    sessions may measure: a lab bench), a part specification (:data:`SPEC`)."""
     tmp = tmp_path_factory.mktemp("bench")
     (tmp / "spec.yaml").write_text(SPEC)
-    with _bench(tmp, f"spec_file:={tmp / 'spec.yaml'}") as b:
+    with _bench(tmp, f"spec_file:={tmp / 'spec.yaml'}", "opcua_allow_anonymous:=true") as b:
         yield b
 
 
@@ -324,8 +324,10 @@ def test_bad_clients_leave_the_bridge_serving(bench: Bench, tmp_path: Path) -> N
 
 
 # --------------------------------------------------------------------------- security
-def _certificate(folder: Path, name: str, uri: str, server: bool) -> tuple[Path, Path]:
-    """A self-signed application certificate (DER) and its key (PEM)."""
+def _certificate(folder: Path, name: str, uri: str, server: bool, *,
+                 valid: tuple[float, float] = (-1.0, 30.0)) -> tuple[Path, Path]:
+    """A self-signed application certificate (DER) and its key (PEM), valid from
+    ``valid[0]`` to ``valid[1]`` days from now."""
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import rsa
@@ -336,8 +338,8 @@ def _certificate(folder: Path, name: str, uri: str, server: bool) -> tuple[Path,
     now = datetime.datetime.now(datetime.UTC)
     cert = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
             .public_key(key.public_key()).serial_number(x509.random_serial_number())
-            .not_valid_before(now - datetime.timedelta(days=1))
-            .not_valid_after(now + datetime.timedelta(days=30))
+            .not_valid_before(now + datetime.timedelta(days=valid[0]))
+            .not_valid_after(now + datetime.timedelta(days=valid[1]))
             .add_extension(x509.SubjectAlternativeName([
                 x509.UniformResourceIdentifier(uri), x509.DNSName("localhost"),
                 x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]), critical=False)
@@ -365,13 +367,16 @@ def test_a_plant_s_bridge_lets_only_its_users_measure(tmp_path: Path) -> None:
     server_cert, server_key = _certificate(tmp_path, "bridge", APPLICATION_URI, True)
     client_cert, client_key = _certificate(tmp_path, "plc", "urn:pneumatic-unload:test-client",
                                            False)
+    trusted = tmp_path / "trusted"
+    trusted.mkdir()
+    (trusted / client_cert.name).write_bytes(client_cert.read_bytes())
     users = tmp_path / "users.txt"
     users.write_text(f"# the cell's PLC\nplc:{hash_password('s3cret')}\n")
     sec = {"certificate": str(client_cert), "private_key": str(client_key),
            "server_certificate": str(server_cert)}
     with _bench(tmp_path, "opcua_security_policy:=Basic256Sha256",
                 f"opcua_certificate:={server_cert}", f"opcua_private_key:={server_key}",
-                f"opcua_users_file:={users}") as bench:
+                f"opcua_trusted_certs:={trusted}", f"opcua_users_file:={users}") as bench:
 
         async def main() -> None:
             async with _client(bench.url, **sec) as (_c, n):  # anonymous, encrypted
@@ -405,7 +410,8 @@ def test_without_an_estimator_a_measurement_fails_cleanly_and_sigint_stops_a_cal
 
     port = _free_port()
     url = f"opc.tcp://127.0.0.1:{port}/pneumatic_unload/"
-    node = NodeProcess("opcua", {"endpoint": url, "estimator_wait": 2.0}, tmp_path,
+    node = NodeProcess("opcua", {"endpoint": url, "estimator_wait": 2.0,
+                                 "allow_anonymous": True}, tmp_path,
                        env={**os.environ, "ROS_DOMAIN_ID": str(free_domain_id())})
     try:
         async def main() -> None:
@@ -448,13 +454,22 @@ def test_users_file_and_security_settings_are_checked(tmp_path: Path) -> None:
             load_users(users)
     cert = tmp_path / "c.der"
     cert.write_bytes(b"x")
+    empty = tmp_path / "empty"
+    empty.mkdir()
     for kwargs, why in [({"policy": "Basic128Rsa15"}, "must be one of"),
                         ({"policy": "Basic256Sha256"}, "needs the server's certificate"),
                         ({"policy": "Basic256Sha256", "certificate": str(cert),
                           "private_key": str(tmp_path / "none.pem")}, "no such file"),
                         ({"users": {"plc": h}}, "in clear"),
-                        ({"allow_anonymous": False}, "needs users"),
-                        ({"trusted_certs": str(tmp_path / "none")}, "no such folder")]:
+                        ({"policy": "Basic256Sha256", "certificate": str(cert),
+                          "private_key": str(cert)}, "needs a trust list"),
+                        ({"policy": "Basic256Sha256", "certificate": str(cert),
+                          "private_key": str(cert), "trusted_certs": str(tmp_path / "none")},
+                         "no such folder"),
+                        ({"policy": "Basic256Sha256", "certificate": str(cert),
+                          "private_key": str(cert), "trusted_certs": str(empty)},
+                         "no certificate"),
+                        ({"trusted_certs": str(empty)}, "need security_policy")]:
         with pytest.raises(SecurityError, match=why):
             Security(**kwargs)
     manager = Users({"plc": h})
@@ -462,42 +477,337 @@ def test_users_file_and_security_settings_are_checked(tmp_path: Path) -> None:
     assert manager.get_user(None, "plc", "wrong") is None
     assert manager.get_user(None, "nobody", "s3cret") is None
     assert manager.get_user(None).role.name == "Anonymous"  # may read, not call
-    assert Users(None).get_user(None).role.name == "User"  # a lab bench: may call
+    assert Users(None).get_user(None).role.name == "Anonymous"  # secure by default
+    assert Users(None, allow_anonymous=True).get_user(None).role.name == "User"  # a lab bench
 
 
-def test_only_trusted_client_certificates_connect(tmp_path: Path) -> None:
-    """trusted_certs: a client whose certificate is in the folder connects, another is
-    refused (the server in process, a stand-in measurement)."""
-    from pneumatic_unload.plc import BridgeServer, Outcome, Security
+async def _stand_in(_part: str) -> Outcome:
+    """A measurement without a rig (the in-process servers' tests)."""
+    return Outcome("BadNoCommunication", "no rig here")
 
-    server_cert, server_key = _certificate(tmp_path, "bridge", APPLICATION_URI, True)
-    trusted = tmp_path / "trusted"
-    trusted.mkdir()
-    good = _certificate(tmp_path, "plc", "urn:pneumatic-unload:test-client", False)
-    (trusted / good[0].name).write_bytes(good[0].read_bytes())  # the certificate only
-    bad = _certificate(tmp_path, "intruder", "urn:pneumatic-unload:test-client", False)
-    url = f"opc.tcp://127.0.0.1:{_free_port()}/pneumatic_unload/"
 
-    async def never(_part: str) -> Outcome:
+def _url() -> str:
+    return f"opc.tcp://127.0.0.1:{_free_port()}/pneumatic_unload/"
+
+
+@contextlib.asynccontextmanager
+async def _server(url: str, security: Any, measure: Any = _stand_in
+                  ) -> AsyncIterator[Any]:
+    """A bridge server in this process (its event loop is the test's)."""
+    from pneumatic_unload.plc import BridgeServer
+
+    server = BridgeServer(url, measure, security)
+    await server.start()
+    try:
+        yield server
+    finally:
+        await server.stop()
+
+
+class _Plant:
+    """A plant's certificates: the server's, a trusted client's, an untrusted one's, an
+    expired and a not yet valid one (both in the trust folder), and a users file."""
+
+    def __init__(self, tmp: Path) -> None:
+        from pneumatic_unload.plc import Security
+
+        uri = "urn:pneumatic-unload:test-client"
+        self.server_cert, self.server_key = _certificate(tmp, "bridge", APPLICATION_URI, True)
+        self.trusted = tmp / "trusted"
+        self.trusted.mkdir()
+        self.good = _certificate(tmp, "plc", uri, False)
+        self.intruder = _certificate(tmp, "intruder", uri, False)
+        self.expired = _certificate(tmp, "expired", uri, False, valid=(-30.0, -1.0))
+        self.early = _certificate(tmp, "early", uri, False, valid=(1.0, 30.0))
+        for cert, _key in (self.good, self.expired, self.early):  # certificates only
+            (self.trusted / cert.name).write_bytes(cert.read_bytes())
+        self.password = "s3cret"
+        self.security = Security(
+            policy="Basic256Sha256", certificate=str(self.server_cert),
+            private_key=str(self.server_key), trusted_certs=str(self.trusted),
+            users={"plc": hash_password(self.password)})
+
+    def client(self, which: tuple[Path, Path] | None = None, **more: Any) -> dict[str, Any]:
+        cert, key = which or self.good
+        return {"certificate": str(cert), "private_key": str(key),
+                "server_certificate": str(self.server_cert), "retry": False, **more}
+
+
+def test_only_trusted_and_valid_client_certificates_get_a_session(tmp_path: Path) -> None:
+    """Plant mode validates the client's certificate: a trusted one gets a session; an
+    untrusted, an expired and a not yet valid one (the last two in the trust folder) are
+    refused; so is a client whose secure channel uses an untrusted certificate while its
+    CreateSession names the trusted one, or none (asyncua alone validates only the
+    certificate the request names)."""
+    plant = _Plant(tmp_path)
+    url = _url()
+
+    async def substituted(named: bytes | None) -> None:
+        """The intruder's channel, its CreateSession naming ``named``."""
+        c = Client(url, timeout=10)
+        c.application_uri = "urn:pneumatic-unload:test-client"
+        await c.set_security(SecurityPolicyBasic256Sha256, str(plant.intruder[0]),
+                             str(plant.intruder[1]), server_certificate=str(plant.server_cert))
+        create = c.uaclient.create_session
+
+        async def create_naming(params: Any) -> Any:
+            params.ClientCertificate = named
+            return await create(params)
+
+        c.uaclient.create_session = create_naming
+        try:
+            await c.connect()
+        finally:
+            with contextlib.suppress(Exception):
+                await c.disconnect()
+
+    async def main() -> None:
+        async with _server(url, plant.security):
+            async with _client(url, **plant.client()) as (_c, n):
+                assert await n.read("State") == "no estimator"
+                with pytest.raises(ua.uaerrors.BadUserAccessDenied):  # anonymous
+                    await n.call("Measure", "part-J")
+            for which, code in ((plant.intruder, ua.uaerrors.BadCertificateUntrusted),
+                                (plant.expired, ua.uaerrors.BadCertificateTimeInvalid),
+                                (plant.early, ua.uaerrors.BadCertificateTimeInvalid)):
+                with pytest.raises(code):
+                    async with _client(url, **plant.client(which)):
+                        pass
+            with pytest.raises(ua.uaerrors.BadCertificateInvalid):
+                await substituted(plant.good[0].read_bytes())
+            with pytest.raises(ua.uaerrors.BadCertificateUntrusted):
+                await substituted(None)
+            async with _client(url, **plant.client()) as (_c, n):  # still serving
+                assert await n.read("State") == "no estimator"
+
+    _run(main())
+
+
+def test_plant_mode_refuses_to_start_without_a_trust_list(tmp_path: Path) -> None:
+    """Basic256Sha256 without trusted_certs: the node does not start (its reason on the
+    console, exit 2), nor with its own certificate out of its validity dates."""
+    from pneumatic_unload.app.launch import NodeProcess
+    from pneumatic_unload.plc import Security, SecurityError
+
+    plant = _Plant(tmp_path)
+    with pytest.raises(SecurityError, match="needs a trust list"):
+        Security(policy="Basic256Sha256", certificate=str(plant.server_cert),
+                 private_key=str(plant.server_key))
+    node = NodeProcess("opcua", {"endpoint": _url(), "security_policy": "Basic256Sha256",
+                                 "certificate": str(plant.server_cert),
+                                 "private_key": str(plant.server_key)}, tmp_path,
+                       env={**os.environ, "ROS_DOMAIN_ID": str(free_domain_id())})
+    try:
+        node.proc.wait(timeout=60)
+        assert node.proc.returncode == 2, node.output()  # a startup error
+        assert "needs a trust list" in node.output()
+        assert "Traceback" not in node.output()
+    finally:
+        node.stop()
+    old_cert, old_key = _certificate(tmp_path, "old", APPLICATION_URI, True,
+                                     valid=(-30.0, -1.0))
+
+    async def main() -> None:
+        with pytest.raises(SecurityError, match=r"valid from .* not now"):
+            async with _server(_url(), Security(
+                    policy="Basic256Sha256", certificate=str(old_cert),
+                    private_key=str(old_key), trusted_certs=str(plant.trusted))):
+                pass
+
+    _run(main())
+
+
+def test_secure_by_default_loopback_and_no_anonymous_calls() -> None:
+    """The node's default endpoint and the launch file's bind loopback (the socket's
+    address is 127.0.0.1); with the default security an anonymous session may read but
+    its Measure and StartMeasure are refused (BadUserAccessDenied) and nothing is
+    measured; with allow_anonymous (a lab bench) the measurement is called."""
+    from pneumatic_unload.app.launch import load_launch
+    from pneumatic_unload.config.nodes import node_parameters
+    from pneumatic_unload.plc import Security
+
+    default = node_parameters("opcua")["endpoint"].default
+    assert default.startswith("opc.tcp://127.0.0.1:")
+    assert not node_parameters("opcua")["allow_anonymous"].default
+    launched = {n["name"]: n for n in load_launch(LAUNCH)}["opcua"]["params"]
+    assert launched["endpoint"] == default and launched["allow_anonymous"] is False
+    calls: list[str] = []
+
+    async def counted(part: str) -> Outcome:
+        calls.append(part)
         return Outcome("BadNoCommunication", "no rig here")
 
     async def main() -> None:
-        server = BridgeServer(url, never, Security(
-            policy="Basic256Sha256", certificate=str(server_cert),
-            private_key=str(server_key), trusted_certs=str(trusted)))
-        await server.start()
-        try:
-            sec = {"server_certificate": str(server_cert), "retry": False}
-            async with _client(url, certificate=str(good[0]), private_key=str(good[1]),
-                               **sec) as (_c, n):
-                assert await n.read("State") == "no estimator"
+        async with _server(default.replace(":4840/", ":0/"), Security(), counted) as server:
+            sockets = server.server.bserver._server.sockets
+            assert {s.getsockname()[0] for s in sockets} == {"127.0.0.1"}
+            url = f"opc.tcp://127.0.0.1:{server.port}/pneumatic_unload/"
+            async with _client(url) as (_c, n):
+                assert await n.read("State") == "no estimator"  # reading is allowed
+                for method in ("Measure", "StartMeasure"):
+                    with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                        await n.call(method, "part-K")
+                assert await n.read("PartId") == ""
+        assert calls == []
+        async with _server(_url(), Security(allow_anonymous=True), counted) as server:
+            url = f"opc.tcp://127.0.0.1:{server.port}/pneumatic_unload/"
+            async with _client(url) as (_c, n):
                 with pytest.raises(ua.uaerrors.BadNoCommunication):
-                    await n.call("Measure", "part-J")
-            with pytest.raises((ua.UaError, OSError, TimeoutError)):
-                async with _client(url, certificate=str(bad[0]), private_key=str(bad[1]),
-                                   **sec):
-                    pass
-        finally:
-            await server.stop()
+                    await n.call("Measure", "part-L")
+        assert calls == ["part-L"]
+
+    _run(main())
+
+
+def test_string_arguments_have_a_length_limit() -> None:
+    """A PartId longer than MAX_STRING characters, or with a control character, is
+    answered BadInvalidArgument and never measured; one of MAX_STRING is measured; a
+    request above MAX_MESSAGE bytes (a 2 MB PartId) is refused by the transport and the
+    bridge serves on."""
+    from pneumatic_unload.plc import Security
+    from pneumatic_unload.plc.security import MAX_MESSAGE, MAX_STRING
+
+    calls: list[str] = []
+
+    async def counted(part: str) -> Outcome:
+        calls.append(part)
+        return Outcome("BadNoCommunication", "no rig here")
+
+    async def main() -> None:
+        url = _url()
+        async with _server(url, Security(allow_anonymous=True), counted):
+            async with _client(url) as (_c, n):
+                for part in ("x" * (MAX_STRING + 1), "part\nforged log line", "a\x00b"):
+                    for method in ("Measure", "StartMeasure"):
+                        with pytest.raises(ua.uaerrors.BadInvalidArgument):
+                            await n.call(method, part)
+                assert calls == []
+                with pytest.raises(ua.uaerrors.BadNoCommunication):
+                    await n.call("Measure", "x" * MAX_STRING)
+                assert calls == ["x" * MAX_STRING]
+            with contextlib.suppress(Exception):
+                async with _client(url) as (_c, n):
+                    with pytest.raises((ua.UaError, TimeoutError, OSError)):
+                        await n.call("Measure", "x" * (2 * MAX_MESSAGE))
+            assert len(calls) == 1
+            async with _client(url) as (_c, n):  # serving on
+                assert await n.read("State") == "no estimator"
+
+    _run(main())
+
+
+def test_logins_cost_the_same_for_known_and_unknown_users(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """An unknown user name is checked by the same PBKDF2 (SHA-256, as many iterations as
+    the users' costliest hash) as a known one, compared in constant time."""
+    import hashlib
+    import hmac
+
+    from pneumatic_unload.plc import security
+
+    manager = security.Users({"plc": hash_password("s3cret"),
+                              "op": hash_password("x", iterations=150_000)})
+    seen: list[tuple[str, int]] = []
+    compared: list[int] = []
+    real, compare = hashlib.pbkdf2_hmac, hmac.compare_digest
+
+    def spy(name: str, password: bytes, salt: bytes, iterations: int) -> bytes:
+        seen.append((name, iterations))
+        return real(name, password, salt, iterations)
+
+    def spy_compare(a: Any, b: Any) -> bool:
+        compared.append(len(a))
+        return compare(a, b)
+
+    monkeypatch.setattr(security.hashlib, "pbkdf2_hmac", spy)
+    monkeypatch.setattr(security.hmac, "compare_digest", spy_compare)
+    assert manager.get_user(None, "op", "wrong") is None
+    assert manager.get_user(None, "nobody", "wrong") is None
+    assert manager.get_user(None, "plc", "s3cret").name == "plc"
+    assert seen == [("sha256", 150_000), ("sha256", 150_000),
+                    ("sha256", security.ITERATIONS)]
+    assert compared == [32, 32, 32]
+
+
+def test_repeated_failures_from_a_peer_slow_down() -> None:
+    """The delay before a peer's login: none for its first FREE_FAILURES failures in a
+    row, then doubling up to BACKOFF_MAX; another peer is not delayed; a success resets
+    the peer; failures are forgotten after BACKOFF_FORGET."""
+    from pneumatic_unload.plc import security
+
+    manager = security.Users({"plc": hash_password("s3cret", iterations=1)})
+    waits: list[float] = []
+
+    async def main() -> None:
+        for _ in range(security.FREE_FAILURES + 5):
+            waits.append(manager.delay("10.0.0.9"))
+            rec = manager._peer("10.0.0.9")
+            rec.failures += 1  # as a failed login counts it (without its wait)
+            rec.last = time.monotonic()
+        assert manager.delay("10.0.0.8") == 0.0
+        assert manager.delay("10.0.0.9", time.monotonic() + security.BACKOFF_FORGET + 1) == 0
+        manager._peer("10.0.0.7").failures = security.FREE_FAILURES
+        manager._peer("10.0.0.7").last = time.monotonic()
+        assert await manager.verify("10.0.0.7", "plc", "s3cret") is not None
+        assert manager.delay("10.0.0.7") == 0.0
+
+    _run(main())
+    first = security.BACKOFF_FIRST
+    assert waits == [0.0] * (security.FREE_FAILURES + 1) + [
+        min(first * 2 ** k, security.BACKOFF_MAX) for k in range(4)]
+
+
+def test_a_wrong_password_flood_leaves_the_loop_and_a_logged_in_session_alone(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """16 wrong-password logins at once (a plant's bridge, in this process): the
+    passwords are hashed off the event loop (never in its thread), a logged-in session
+    reads on through the flood (every read within a generous bound, far above a read's
+    milliseconds and below the seconds of 16 hashes in a row) and stays connected, and
+    the flooding peer is slowed down."""
+    import hashlib
+    import threading
+
+    from pneumatic_unload.plc import security
+
+    plant = _Plant(tmp_path)
+    url = _url()
+    threads: list[str] = []
+    real = hashlib.pbkdf2_hmac
+
+    def spy(*args: Any) -> bytes:
+        threads.append(threading.current_thread().name)
+        return real(*args)
+
+    monkeypatch.setattr(security.hashlib, "pbkdf2_hmac", spy)
+    loop_thread = threading.current_thread().name
+
+    async def bad_login() -> BaseException | None:
+        try:  # a short request timeout: the peer's later logins wait their backoff
+            async with _client(url, timeout=3.0,
+                               **plant.client(user="plc", password="wrong")):
+                return None
+        except Exception as exc:  # every refusal counts (a Bad status, a timeout)
+            return exc
+
+    async def main() -> None:
+        async with _server(url, plant.security) as server:
+            threads.clear()  # the server's start made its dummy hash: logins from here
+            async with _client(url, **plant.client(user="plc", password=plant.password)
+                               ) as (c, n):
+                assert threads and loop_thread not in threads
+                flood = asyncio.gather(*(bad_login() for _ in range(16)))
+                worst, reads = 0.0, 0
+                while not flood.done():
+                    t0 = time.monotonic()
+                    assert await n.read("State") == "no estimator"
+                    worst, reads = max(worst, time.monotonic() - t0), reads + 1
+                    await asyncio.sleep(0.05)
+                refused = await flood
+                assert all(r is not None for r in refused)  # no wrong password got in
+                assert reads >= 5 and worst < 1.5, (reads, worst)
+                assert c.uaclient.state == UaClientState.CONNECTED
+                assert await n.read("State") == "no estimator"
+            assert server._users is not None and server._users.delay("127.0.0.1") > 0.0
+        assert len(threads) > 1 and loop_thread not in threads
 
     _run(main())

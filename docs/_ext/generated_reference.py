@@ -321,7 +321,25 @@ def json_page() -> str:
     lines += heading("Keys added by unload_json", "~")
     rows = [[literal(k), esc(v)] for k, v in output.UNLOAD_JSON_KEYS.items()]
     lines += list_table(["Key", "Meaning"], rows, "25 75")
+    lines += status_section()
     return "\n".join(lines) + "\n"
+
+
+def status_section() -> list[str]:
+    """The status words of a result with their meaning, and the former words read as them."""
+    from pneumatic_unload.estimation import types
+
+    lines = [".. _json-statuses:", "", *heading("Statuses", "~"),
+             "The ``status`` of a result (the text output's first line of each unload, the "
+             "``UnloadEstimate`` message's ``STATUS_*`` value, the results database), from "
+             ":data:`pneumatic_unload.estimation.types.STATUS_MEANINGS`:", ""]
+    rows = [[literal(k), esc(types.STATUS_MEANINGS[k])] for k in types.STATUSES]
+    lines += list_table(["Status", "Meaning"], rows, "18 82")
+    lines += ["Former words, read as the current one from results databases written by "
+              "older versions: " + ", ".join(f"{literal(old)} (now {literal(new)})"
+                                             for old, new in types.STATUS_ALIASES.items())
+              + ".", ""]
+    return lines
 
 
 # ------------------------------------------------------------------------------- the API

@@ -91,7 +91,7 @@ UNLOAD_JSON_KEYS: dict[str, str] = {
 def gives_c(r: UnloadResult) -> bool:
     """The result carries an estimate of C: its recommended C (:func:`recommended`) is
     finite and positive and its status is not 'bad_data' (e.g. 'ok', 'aborted_sse', or
-    'not_choked' with its curve-fit C)."""
+    'ok_subsonic' with its curve-fit C)."""
     c = recommended(r)["conductance"]
     return r.status != "bad_data" and math.isfinite(c) and c > 0
 
@@ -151,6 +151,50 @@ def json_default(o: object) -> object:
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
+#: m^3/(s Pa) per dm^3/(s bar) (1 dm^3 = 1e-3 m^3, 1 bar = 1e5 Pa).
+DM3_PER_S_BAR = 1e-8
+#: Significant digits of a printed C: four (0.02 % steps at C's first digit's 1), finer
+#: than any C's uncertainty and coarse enough to read.
+C_DIGITS = 4
+
+
+def c_si(c: float) -> str:
+    """C [m^3/(s Pa)] in SI with :data:`C_DIGITS` significant digits ('3.012e-09',
+    '3.000e-09'; trailing zeros kept); 'n/a' when not finite."""
+    return f"{c:.{C_DIGITS - 1}e}" if math.isfinite(c) else "n/a"
+
+
+def c_dm3(c: float) -> str:
+    """C [m^3/(s Pa)] in dm^3/(s bar) with :data:`C_DIGITS` significant digits ('0.3012',
+    '0.8000', '12.34'), without the unit; 'n/a' when not finite."""
+    if not math.isfinite(c):
+        return "n/a"
+    return f"{c / DM3_PER_S_BAR:#.{C_DIGITS}g}".rstrip(".")
+
+
+def two_digits(x: float) -> str:
+    """An uncertainty with two significant digits, in fixed point where that is short
+    ('0.0021', '0.000052', '12'); 'n/a' when not finite."""
+    if not math.isfinite(x):
+        return "n/a"
+    if x == 0 or not 1e-6 <= abs(x) < 1e4:
+        return f"{x:.2g}"
+    return f"{x:.{max(0, 1 - math.floor(math.log10(abs(x))))}f}"
+
+
+def c_both(c: float, std: float = math.nan, note: str = "") -> str:
+    """C in SI and in dm^3/(s bar), each with :data:`C_DIGITS` significant digits and
+    with ``std`` (two significant digits; words when not known): '3.012e-09 +- 2.1e-11
+    m^3/(s Pa) = 0.3012 +- 0.0021 dm^3/(s bar)'. ``note`` follows the SI unit (e.g.
+    ' (k = 2)')."""
+    if not math.isfinite(c):
+        return "n/a"
+    if math.isfinite(std):
+        return (f"{c_si(c)} +- {std:.1e} m^3/(s Pa){note} = {c_dm3(c)} +- "
+                f"{two_digits(std / DM3_PER_S_BAR)} dm^3/(s bar)")
+    return f"{c_si(c)} m^3/(s Pa) (uncertainty not known) = {c_dm3(c)} dm^3/(s bar)"
+
+
 def with_uncertainty(value: str, std: float, unit: str = "", fmt: str = ".2g") -> str:
     """'value +- std unit' for a finite standard uncertainty, else 'value unit (uncertainty
     not known)': an uncertainty that is not known is never printed as nan or inf."""
@@ -161,23 +205,19 @@ def with_uncertainty(value: str, std: float, unit: str = "", fmt: str = ".2g") -
 
 
 def format_result(r: UnloadResult) -> str:
-    """Human-readable summary of one unload (trade units alongside SI)."""
-    def dm3(c: float) -> str:
-        return f"{c / 1e-8:.4f} dm^3/(s bar)" if math.isfinite(c) else "n/a"
-
+    """Human-readable summary of one unload (trade units alongside SI; C with
+    :data:`C_DIGITS` significant digits in both)."""
     lines = [f"unload {r.index}: {r.status} ({r.status_text})"]
     if math.isfinite(r.tau_exp):
         tau_u = f"+- {r.tau_exp_std:.2g} s" if math.isfinite(r.tau_exp_std) else \
             "uncertainty not known"
         lines.append(f"  tau_exp        = {r.tau_exp:.6f} s  ({tau_u})")
         lines.append(f"  p10 / p_atm / p* = {r.p10:.0f} / {r.p_atm:.0f} / {r.p_star:.0f} Pa")
-    lines.append(f"  C (eq 39)      = {r.conductance:.5g} m^3/(s Pa) = {dm3(r.conductance)}")
+    lines.append(f"  C (eq 39)      = {c_si(r.conductance)} m^3/(s Pa) = "
+                 f"{c_dm3(r.conductance)} dm^3/(s bar)")
     if math.isfinite(r.conductance_model):
-        lines.append(
-            "  C (model)      = "
-            + with_uncertainty(f"{r.conductance_model:.5g}", r.conductance_model_std,
-                               "m^3/(s Pa)")
-            + f" = {dm3(r.conductance_model)}  [{r.method}]")
+        lines.append(f"  C (model)      = {c_both(r.conductance_model, r.conductance_model_std)}"
+                     f"  [{r.method}]")
         lines.append(f"  eq 39 - model  = {100 * r.bias:+.2f} %")
     cf = r.extra.get("curve_fit", {})
     if math.isfinite(r.critical_ratio):
@@ -223,10 +263,8 @@ def report_line(r: UnloadResult) -> list[str]:
     rec = recommended(r)
     if not math.isfinite(rec["conductance"]):
         return []
-    dm3 = rec["conductance"] / 1e-8
-    c = with_uncertainty(f"{rec['conductance']:.5g}", rec["expanded"], "m^3/(s Pa)")
-    k = " (k = 2)" if math.isfinite(rec["expanded"]) else ""
-    return [f"  REPORT C       = {c}{k} = {dm3:.4f} dm^3/(s bar)  [{rec['source']}]"]
+    c = c_both(rec["conductance"], rec["expanded"], " (k = 2)")
+    return [f"  REPORT C       = {c}  [{rec['source']}]"]
 
 
 def format_inputs(inputs: dict[str, Any]) -> str:

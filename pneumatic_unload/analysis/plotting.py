@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pneumatic_unload.analysis.output import budget_lines, report_line
+from pneumatic_unload.analysis.output import budget_lines, c_dm3, report_line
 from pneumatic_unload.estimation import EstimatorSettings, UnloadResult
 
 
@@ -125,8 +125,8 @@ def analysis_figure(t: NDArray[np.float64], p: NDArray[np.float64],
             ax.plot(t[sel] - t0, pm / 1e5, color="tab:purple", lw=1.3, ls="-",
                     label="fitted model" if first else None)
             axr.plot(t[sel] - t0, (p[sel] - pm) / 1e3, lw=0.6, color="tab:purple")
-        c39 = f"{r.conductance / 1e-8:.4g}" if math.isfinite(r.conductance) else "n/a"
-        cm = (f"{r.conductance_model / 1e-8:.4g} +- {r.conductance_model_std / 1e-8:.2g}"
+        c39 = c_dm3(r.conductance)
+        cm = (f"{c_dm3(r.conductance_model)} +- {r.conductance_model_std / 1e-8:.2g}"
               if math.isfinite(r.conductance_model) else "n/a")
         b = (f", b = {r.critical_ratio:.3f}" if math.isfinite(r.critical_ratio) else "")
         diff = (f" ({100 * r.bias:+.1f} %)" if math.isfinite(r.conductance)

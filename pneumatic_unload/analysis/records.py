@@ -206,9 +206,9 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
 def settings_for(cfg: dict[str, Any], given: dict[str, Any]) -> EstimatorSettings:
     """Estimator settings of a record: the values ``given`` first [SI], then the live
     estimator's settings recorded in a bag (so that the analysis reproduces what it
-    published), then the bag's rig configuration (tank and gas; a CSV's temperature column
-    for T10), then the defaults of :class:`~pneumatic_unload.config.estimator.
-    EstimatorSettings`.
+    published), then the bag's rig configuration (tank, gas and the flow's direction; a
+    CSV's temperature column for T10), then the defaults of
+    :class:`~pneumatic_unload.config.estimator.EstimatorSettings`.
 
     Raises
     ------
@@ -226,7 +226,9 @@ def settings_for(cfg: dict[str, Any], given: dict[str, Any]) -> EstimatorSetting
             raise RecordError(f"the estimator settings stored in the bag are invalid: {exc}"
                               ) from exc
         return dataclasses.replace(base, **given)
-    kw = TankSpec.fields_of(cfg)  # the bag's rig: tank and gas
+    kw = TankSpec.fields_of(cfg)  # the bag's rig: tank and gas, and the flow's direction
+    if cfg.get("direction") in ("discharge", "charge"):
+        kw["direction"] = cfg["direction"]
     if "initial_temperature" not in kw and "measured_initial_temperature" in cfg:
         kw["initial_temperature"] = cfg["measured_initial_temperature"]
     kw.update(given)

@@ -86,9 +86,17 @@ def options_from(args: argparse.Namespace) -> InputOptions:
 
 
 def _fmt_c(c: Any) -> str:
-    from pneumatic_unload.testline.spec import DM3_PER_S_BAR
+    """C [m^3/(s Pa)] in dm^3/(s bar), four significant digits; '-' when there is none."""
+    from pneumatic_unload.analysis.output import c_dm3
 
-    return "-" if c is None else f"{c / DM3_PER_S_BAR:.4f}"
+    return "-" if c is None else c_dm3(c)
+
+
+def _fmt_s(s: Any) -> str:
+    """A standard deviation of C [m^3/(s Pa)] in dm^3/(s bar), two significant digits."""
+    from pneumatic_unload.analysis.output import DM3_PER_S_BAR, two_digits
+
+    return "-" if s is None else two_digits(s / DM3_PER_S_BAR)
 
 
 def parts_text(parts: list[dict[str, Any]]) -> str:
@@ -100,7 +108,7 @@ def parts_text(parts: list[dict[str, Any]]) -> str:
         why = f" ({p['verdict_reason']})" if p["verdict"] == "fail" else ""
         lines.append(f"{p['part_id'][:24]:24s} {p['part_type'][:14]:14s} {p['n']:3d} "
                      f"{_fmt_c(p['conductance_mean']):>9s} "
-                     f"{_fmt_c(p['conductance_std']):>9s} {v}{why}")
+                     f"{_fmt_s(p['conductance_std']):>9s} {v}{why}")
     return "\n".join(lines)
 
 

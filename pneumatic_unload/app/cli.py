@@ -8,7 +8,7 @@ recover BAG      make a bag whose writer was killed readable again
 
 Exit status of ``analyze`` (:data:`pneumatic_unload.analysis.output.EXIT_STATUS`): 0 when at
 least one unload gives C (a finite recommended C and a status other than 'bad_data': 'ok',
-'aborted_sse', 'not_choked' with its curve-fit C; other unloads of the record may have
+'aborted_sse', 'ok_subsonic' with its curve-fit C; other unloads of the record may have
 failed, each says why); 1 when the record gives no estimate: no unload
 found, every unload failed (e.g. all 'bad_data': a stuck or saturated sensor, a clock step),
 or the readings look like gauge pressures taken as absolute; the reason is on stderr and in
@@ -285,7 +285,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_recover(args: argparse.Namespace) -> int:
     """Recover a bag whose writer died."""
-    from pneumatic_unload.io.bag import BagError, recover
+    from pneumatic_unload.io.bag import TOPIC_PRESSURE, BagError, recover
 
     try:
         report = recover(Path(args.bag))
@@ -294,6 +294,9 @@ def cmd_recover(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise CliError(f"recover {args.bag}: {exc}") from exc
     print(report)
+    if not report.messages.get(TOPIC_PRESSURE):
+        raise CliError(f"recover {args.bag}: no pressure sample ({TOPIC_PRESSURE}) is left in "
+                       "the bag: there is nothing to analyse")
     return 0
 
 

@@ -22,6 +22,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from pneumatic_unload.analysis.output import c_both, c_dm3
 from pneumatic_unload.app.launch import free_domain_id, load_launch, package_share, start_launch
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.physics import orifice_conductance
@@ -37,10 +38,11 @@ _RIG_PARAMS = ("volume", "length_diameter_ratio", "initial_pressure", "conductan
 
 
 def _fmt(est: dict[str, float | int | str]) -> str:
-    c, cm, sd = (float(est[k]) / 1e-8 for k in ("conductance", "conductance_model",
-                                                 "conductance_model_std"))
+    """One published estimate: C with four significant digits in dm^3/(s bar) and SI."""
+    c, cm, sd = (float(est[k]) for k in ("conductance", "conductance_model",
+                                         "conductance_model_std"))
     b = float(est["critical_ratio"])
-    return (f"C (eq 39) = {c:.4f}   model C = {cm:.4f} ± {sd:.4f} dm^3/(s bar)   "
+    return (f"C (eq 39) = {c_dm3(c)}   model C = {c_both(cm, sd)}   "
             f"b = {'n/a' if b != b else f'{b:.3f}'}   tau_exp = {float(est['tau_exp']):.4f} s"
             f"   [{est['method']}]")
 
@@ -61,7 +63,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     env.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
     logs = out.parent / f"{out.name}-logs"
     print(f"simulated rig: V = {cfg.volume * 1e3:g} L, p10 = {cfg.initial_pressure / 1e5:g} "
-          f"bar abs, true C = {cfg.conductance / 1e-8:.4f} dm^3/(s bar), b = "
+          f"bar abs, true C = {c_dm3(cfg.conductance)} dm^3/(s bar), b = "
           f"{cfg.critical_ratio}, effects: {', '.join(cfg.effects)}; "
           f"nodes on ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}")
     t0 = time.monotonic()

@@ -163,8 +163,9 @@ def _replay() -> list[ParameterSpec]:
 
 def _opcua() -> list[ParameterSpec]:
     return [
-        _str("endpoint", "opc.tcp://0.0.0.0:4840/pneumatic_unload/",
-             "OPC UA endpoint the server listens on (opc.tcp://HOST:PORT/PATH)"),
+        _str("endpoint", "opc.tcp://127.0.0.1:4840/pneumatic_unload/",
+             "OPC UA endpoint the server listens on (opc.tcp://HOST:PORT/PATH; HOST "
+             "127.0.0.1: this machine only, 0.0.0.0: every interface)"),
         _str("estimator", "/estimator", "the estimator node: its ~/measure action and "
              "~/estimate topic"),
         _double("measure_timeout", 60.0, "a measurement's timeout (the ~/measure goal's); "
@@ -184,11 +185,15 @@ def _opcua() -> list[ParameterSpec]:
              "(SignAndEncrypt; needs certificate and private_key)", ("None", "Basic256Sha256")),
         _str("certificate", "", "the server's certificate file (DER or PEM)"),
         _str("private_key", "", "the server's private key file (PEM)"),
-        _str("users_file", "", "users who may call Measure/StartMeasure: 'name:HASH' lines "
-             "(python -m pneumatic_unload.plc.security NAME); '': every session may"),
-        _bool("allow_anonymous", True, "anonymous sessions may connect (with users_file: "
-              "browse, read and subscribe only)"),
-        _str("trusted_certs", "", "folder of the client certificates accepted ('': any)"),
+        _str("users_file", "", "users who may call the methods: 'name:HASH' lines (python "
+             "-m pneumatic_unload.plc.security NAME; needs Basic256Sha256); '': none"),
+        _bool("allow_anonymous", False, "anonymous sessions may call the methods (a lab "
+              "bench: whoever reaches the endpoint can open the valve); false: they may "
+              "browse, read and subscribe only"),
+        _str("trusted_certs", "", "folder of the trusted client certificates or their CAs "
+             "(DER or PEM); required by Basic256Sha256"),
+        _str("revoked_certs", "", "folder of certificate revocation lists (DER or PEM; '' "
+             "none)"),
     ]
 
 

@@ -72,7 +72,7 @@ class Problem:
         # the estimator's results locate the unload and give the fit its starting values;
         # one it called bad data for a reason of its own timing (e.g. a start it could not
         # time on a leaking plateau), not a sensor fault, still locates it
-        results = [r for r in every if r.status in ("ok", "not_choked") or (
+        results = [r for r in every if r.status in ("ok", "ok_subsonic") or (
             r.status == "bad_data" and not r.status_text.startswith(SENSOR_FAULT_TEXTS)
             and all(math.isfinite(x) and x > 0 for x in (
                 r.tau_exp, r.p10, r.p_atm, r.conductance)) and math.isfinite(r.t_start))]

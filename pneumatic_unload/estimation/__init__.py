@@ -54,22 +54,29 @@ from pneumatic_unload.estimation.streaming import StreamingEstimator
 from pneumatic_unload.estimation.tail import FinalFit
 from pneumatic_unload.estimation.two_way import TwoWayEstimator, stream_estimator
 from pneumatic_unload.estimation.types import (
+    ESTIMATE_STATUSES,
     SENSOR_FAULT_TEXTS,
+    STATUS_ALIASES,
+    STATUS_MEANINGS,
     STATUSES,
     STUCK_TEXT,
     Analysis,
     Diagnostic,
     FloatArray,
     UnloadResult,
+    canonical_status,
     estimate_fields,
     recommended,
 )
 
 __all__ = [
+    "ESTIMATE_STATUSES",
     "RESULTS_KEPT",
     "SENSOR_FAULT_TEXTS",
     "SSE_MODEL_REL_STD",
     "STATUSES",
+    "STATUS_ALIASES",
+    "STATUS_MEANINGS",
     "STUCK_TEXT",
     "Analysis",
     "ChunkedAnalysis",
@@ -87,6 +94,7 @@ __all__ = [
     "UnloadResult",
     "analyze",
     "analyze_chunks",
+    "canonical_status",
     "corner_fit",
     "crossing_fit",
     "estimate_fields",

@@ -64,7 +64,7 @@ STUCK_RUN = 2 * PERIOD
 #: measure; wider than a transducer's zero offset of a few kPa. A transducer low-passed
 #: below its logging rate wanders by its marginal deviation, which a plateau's first
 #: second cannot show: at p_atm after a tail, or an idle stream's start, that gave
-#: 'aborted' and 'not_choked' phantoms.)
+#: 'aborted' and 'ok_subsonic' phantoms.)
 END_GAP_MIN = 0.05
 
 

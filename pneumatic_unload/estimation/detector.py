@@ -35,6 +35,41 @@ from pneumatic_unload.estimation.state import (
 from pneumatic_unload.estimation.types import UnloadResult
 from pneumatic_unload.estimation.unloading import start_unloading
 
+#: Absolute pressures that an ambient atmosphere takes anywhere a rig stands [Pa]: from
+#: 50 kPa (about 5.5 km above sea level) to 110 kPa (above the highest sea-level pressure
+#: recorded, 108.4 kPa). A discharge's live stream whose first plateau lies in this band,
+#: with p_atm not given, starts on a tank that is already vented.
+AMBIENT_RANGE = (50e3, 110e3)
+
+
+def check_stream_start(st: EstimatorState, i: int) -> None:
+    """A live stream's first periodic check (index i [-]): its first samples' mean on the
+    end pressure (within END_GAP_MIN of a given p_atm or supply; for a discharge with p_atm
+    not given, within :data:`AMBIENT_RANGE`) means the tank was already unloaded when the
+    stream began: an unload before it (a node started after the valve opened) was missed,
+    or the tank is not charged yet; that is said once, not left to silence."""
+    st.start_checked = True
+    s = st.settings
+    level = st.to_pa(st.buf.mean(0, i + 1))
+    end = s.end_pressure
+    if end is not None:
+        near = abs(level - end) < END_GAP_MIN * end
+        where = (f"within {END_GAP_MIN:.0%} of the {'supply' if s.charge else 'atmosphere'}"
+                 f" ({end:.0f} Pa)")
+    elif not s.charge:
+        near = AMBIENT_RANGE[0] <= level <= AMBIENT_RANGE[1]
+        where = (f"an ambient pressure ({AMBIENT_RANGE[0] / 1e3:.0f}-"
+                 f"{AMBIENT_RANGE[1] / 1e3:.0f} kPa absolute)")
+    else:
+        return
+    if near:
+        what = "charged" if s.charge else "vented"
+        st.diag("warn", f"missed unload? the stream starts at {level:.0f} Pa, {where}: the "
+                f"tank is already {what}: an unload that began before the estimator "
+                "started was missed (analyse its record offline, e.g. pneumatic-unload "
+                "analyze BAG --start-time T), or the tank is not charged yet; waiting for "
+                "the next unload", float(st.buf.t[i]))
+
 
 def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
     """Periodic plateau update with a block-mean test at a check, or a single-sample
@@ -43,6 +78,8 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
     buf, s = st.buf, st.settings
     if math.isnan(st.dt_nominal) and n >= 8:
         st.set_period(nominal_period(buf.views(n)[0], n))
+    if i == st.next_check and not st.start_checked:
+        check_stream_start(st, i)
     if i == st.next_check:
         st.next_check = i + PERIOD
         c = plateau_check(buf.cs, buf.cq, buf.p, i, arm=st.arm_index,
@@ -123,6 +160,8 @@ def scan_waiting(st: EstimatorState, i: int, end: int) -> int:
     j = first_below(pv, i, min(end, nc), st.level)
     if j < min(end, nc):
         return j
+    if not st.start_checked:  # a live stream's first check: a step (check_stream_start)
+        return nc if nc < end else end
     ks = check_indices(nc, end)
     if ks.size == 0:
         return end

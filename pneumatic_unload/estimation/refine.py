@@ -401,7 +401,7 @@ def refine_with_curve_fit(
     UnloadResult or None
         A copy with ``final=True`` and the fitted values, or None when the fit failed.
     """
-    if res.status not in ("ok", "not_choked") or not math.isfinite(res.conductance_model):
+    if res.status not in ("ok", "ok_subsonic") or not math.isfinite(res.conductance_model):
         return None
 
     try:
@@ -493,11 +493,11 @@ def refine_with_curve_fit(
     elif math.isfinite(b) and b > 0:
         # the fit measured b: whether the flow stayed choked down to p* is now known
         limit = res.p_atm / b
-        if res.p_star >= limit and status == "not_choked":
+        if res.p_star >= limit and status == "ok_subsonic":
             status, text = "ok", (f"choked down to p* with the fitted b = {b:.3f} (p* = "
                                   f"{res.p_star:.0f} Pa >= p_atm/b = {limit:.0f} Pa)")
         elif res.p_star < limit and status == "ok":
-            status, text = "not_choked", (
+            status, text = "ok_subsonic", (
                 f"flow subsonic before p* with the fitted b = {b:.3f} (p* = {res.p_star:.0f}"
                 f" Pa < p_atm/b = {limit:.0f} Pa): eq 39 assumes choked flow")
     if why is not None:  # never silent: the status text carries it to every output

@@ -338,7 +338,7 @@ def _crossing(s: EstimatorSettings, *, tau: float, tau_std: float, p10: float,
     if s.charge and est.problem is not None:
         status, text = "bad_data", est.problem
     if plan.subsonic is not None:
-        status, text = "not_choked", text + "; " + plan.subsonic
+        status, text = "ok_subsonic", text + "; " + plan.subsonic
     c39, c_isen, c_model = est.conductance, est.conductance_isentropic, \
         est.conductance_model
     c39_std, c_model_std, budgets, method = est.conductance_std, \

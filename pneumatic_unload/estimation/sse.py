@@ -16,6 +16,7 @@ import numpy as np
 from pneumatic_unload import physics
 from pneumatic_unload.config import RigConfig
 from pneumatic_unload.estimation.decisions import (
+    LAG,
     PERIOD,
     PLATEAU,
     block_mean,
@@ -140,10 +141,46 @@ def recovery_events(st: EstimatorState, k: Any, high: Any) -> tuple[Any, Any, An
     return fell, charged, m
 
 
+def recharged_at(st: EstimatorState, i: int) -> int:
+    """First index [-] after the closing where the block mean is back at p10 (within the
+    recovery's rise threshold, :func:`recovery_events`), up to index i; -1 when it never
+    is. An isochoric re-heating stays below p10 (gas has left the tank): a pressure back
+    at p10 is a tank charged again (a rig restarted mid-unload), and a fall from there is
+    a new unload from that plateau."""
+    u = st.unload
+    if not u.refined:
+        return -1
+    first = u.i_close + PERIOD - 1
+    if i < first:
+        return -1
+    cs = st.buf.sums()[0]
+    ks = np.arange(first, i + 1)
+    dp = u.dp_guess if math.isfinite(u.dp_guess) else 0.0
+    thr = max(10.0 * st.sigma / math.sqrt(PERIOD), 0.02 * dp)
+    back = np.flatnonzero(block_mean(cs, ks) >= u.p10 - thr)
+    return int(ks[back[0]]) - PERIOD + 1 if back.size else -1
+
+
 def interrupt_recovery(st: EstimatorState, i: int, fell: bool) -> list[UnloadResult]:
     """End the recovery at index i [-] without an SSE value: the pressure fell again
-    (``fell``: skip the rest of that unload) or the tank is being charged (re-arm)."""
+    (``fell``: skip the rest of that unload, unless it fell from a plateau back at p10,
+    :func:`recharged_at`: the tank was charged again, the fall is the next unload, re-arm
+    on that plateau) or the tank is being charged (re-arm)."""
     u = st.unload
+    back = recharged_at(st, i) if fell else -1
+    if back >= 0 and i - back - LAG >= st.settings.min_plateau:
+        why = ("the pressure rose back to p10 (the tank charged again: a rig restarted "
+               "mid-unload?) and fell again")
+        text = f"valve closed before p*; {why}: no SSE value; the fall is the next unload"
+        st.diag("warn", text, float(st.buf.t[i]))
+        st.mode = SKIP  # abort_result: no recovery fit over the interrupted record
+        res = abort_result(st, i, recovered=False, text=text)
+        res.final = True
+        # the plateau from where the pressure was back at p10: the waiting phase's next
+        # check (the next index) finds the fall below it and starts the next unload
+        st.to_waiting(back)
+        st.next_check = i + 1
+        return [res]
     why = ("the pressure fell again (valve open again, or the stall was no closing)"
            if fell else "the tank is being charged again")
     text = f"valve closed before p*; {why} during the recovery: no SSE value"

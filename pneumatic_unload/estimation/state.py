@@ -233,6 +233,9 @@ class EstimatorState:
         self.to_waiting(0)
         #: The current plateau began with the stream's first sample (no re-arm yet).
         self.stream_start = True
+        #: A live stream's first plateau was checked for a tank already unloaded (a node
+        #: that started after the opening: :func:`~.detector.check_stream_start`).
+        self.start_checked = not live
 
     # -------------------------------------------------------------- transitions
     def to_waiting(self, n: int) -> None:

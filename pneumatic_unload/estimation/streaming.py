@@ -22,7 +22,7 @@ from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation import decisions, detector, follow, sse, tail, unloading
 from pneumatic_unload.estimation.buffer import ReadingLog, SampleBuffer
 from pneumatic_unload.estimation.crossing import rehearse_crossing
-from pneumatic_unload.estimation.decisions import SCAN_HORIZON
+from pneumatic_unload.estimation.decisions import PERIOD, SCAN_HORIZON
 from pneumatic_unload.estimation.history import DiagnosticLog, recent_results
 from pneumatic_unload.estimation.regression import block_steps, first_below_in
 from pneumatic_unload.estimation.state import (
@@ -43,6 +43,14 @@ MAX_ABS_STAMP = 9.2e9
 #: Smallest stamp step accepted [s] (ROS stamps are whole nanoseconds): a closer stamp is
 #: a duplicate (and the estimator's rates 1/dt stay finite).
 MIN_STAMP_STEP = 0.5e-9
+#: Consecutive samples after a clock step back that must follow one another on the new
+#: clock (each one stamp step of at least MIN_STAMP_STEP and at most the gap limit after
+#: the one before) before the stream re-syncs on that clock [-]. A transport that reorders
+#: (best effort, two publishers) displaces a sample or a few, never hundreds in a row on
+#: one time base; 256 samples are a quarter of a second at 1 kHz, so that a clock stepped
+#: back (NTP, a PLC's clock set) costs that and not the whole step (an hour of samples
+#: dropped for a 1 h step).
+CLOCK_RESYNC = 256
 
 #: Decision step of each phase at one buffer index.
 STEPS: dict[str, Callable[[EstimatorState, int], list[UnloadResult]]] = {
@@ -153,6 +161,11 @@ class StreamingEstimator:
         #: out of order, or the first of a clock step; the next stamp decides
         #: (:meth:`_resolve_suspect`).
         self._suspect: float | None = None
+        #: After a clock step back: the samples (t [s], p) that have followed one another
+        #: on the new clock since (CLOCK_RESYNC of them re-sync the stream on it,
+        #: :meth:`_hold`); None: no clock step pending.
+        self._held: list[tuple[float, float]] | None = None
+        self._suspect_p = math.nan  # the suspect sample's value
         self._append = self._st.buf.append  # hot path (trimming keeps the buffer object)
 
     # ------------------------------------------------------------------ public API
@@ -234,6 +247,8 @@ class StreamingEstimator:
         """:meth:`push` of a sample in the core's sign (a charge's mirrored)."""
         if self._suspect is not None:
             return self._push_after_suspect(t, p)
+        if self._held is not None:
+            return self._push_after_step(t, p)
         st = self._st
         if not (t - st.last_t >= MIN_STAMP_STEP and abs(t) <= MAX_ABS_STAMP):  # and NaN
             return self._reject(t, p)
@@ -282,6 +297,8 @@ class StreamingEstimator:
             return []
         if self._suspect is not None and t[0] == t[0] and abs(t[0]) <= MAX_ABS_STAMP:
             return self._resolve_suspect(float(t[0])) + self._push_block(t, p)
+        if self._held is not None:  # after a clock step: sample by sample until re-synced
+            return self._push_slow(t, p)
         st = self._st
         # validity: finite, each stamp at least MIN_STAMP_STEP after the one before (the
         # last accepted stamp for the first): then the steps are the gaps too; one compiled
@@ -435,10 +452,13 @@ class StreamingEstimator:
                     "in ns or us read as s?)", math.nan)
         elif abs(t - st.last_t) < MIN_STAMP_STEP:
             st.diag("warn", f"duplicate stamp t={t:.9f} s ignored", t)
+        elif self._held is not None:
+            return self._hold(t, p)
         else:
             accepted = len(st.buf) + st.buf.shift
             if st.last_t - t > st.gap_limit and accepted != st.clock_step_at:
-                self._suspect = t  # one sample out of order, or a clock step: the next decides
+                # one sample out of order, or a clock step: the next decides
+                self._suspect, self._suspect_p = t, p
                 return []
             st.diag("warn", f"stamp going backwards ({t:.9f} s after {st.last_t:.9f} s)"
                     " ignored", t)
@@ -467,12 +487,70 @@ class StreamingEstimator:
                     f"{st.last_t - ts:.6g} s (t={ts:.9f} s after {st.last_t:.9f} s), the "
                     "next stamp continues the time base", ts)
             return []
-        st.diag("warn", f"stamp going backwards ({ts:.9f} s after {st.last_t:.9f} s)"
-                " ignored", ts)
         st.clock_step_at = len(st.buf) + st.buf.shift
         # the step: from the expected next stamp (one nominal period on) to ts
         out = self._on_clock_step(st.last_t + st.dt_nominal - ts, ts)
         self._emit(out)
+        self._held = [(ts, self._suspect_p)]  # the new clock's first sample
+        return out
+
+    def _push_after_step(self, t: float, p: float) -> list[UnloadResult]:
+        """:meth:`push` of a sample after a clock step back: a stamp past the last accepted
+        one (the clock came back to the old time base) is taken as usual, the samples
+        held on the new clock dropped; an earlier one is held (:meth:`_hold`)."""
+        st = self._st
+        if t == t and abs(t) <= MAX_ABS_STAMP and t - st.last_t >= MIN_STAMP_STEP:
+            held = self._held
+            self._held = None
+            if held:
+                st.diag("warn", f"the clock came back past {st.last_t:.6f} s: the "
+                        f"{len(held)} samples held on the stepped clock are dropped", t)
+            return self._push(t, p)
+        return self._reject(t, p)
+
+    def _hold(self, t: float, p: float) -> list[UnloadResult]:
+        """A sample (valid stamp t [s], behind the last accepted one) after a clock step
+        back: held while the samples follow one another on the new clock; CLOCK_RESYNC of
+        them re-sync the stream on it (:meth:`_resync`). A stamp that does not follow the
+        one before starts the run again (no warning each: the step was reported once)."""
+        held = self._held
+        assert held is not None
+        if not MIN_STAMP_STEP <= t - held[-1][0] <= self._st.gap_limit:
+            held.clear()
+        held.append((t, p))
+        return self._resync() if len(held) >= CLOCK_RESYNC else []
+
+    def _resync(self) -> list[UnloadResult]:
+        """CLOCK_RESYNC samples have followed one another on the stepped clock: the stream
+        goes on on that clock. The old time base's samples are dropped (no decision
+        spans the step); the rest of an unload reported at the step is skipped, else the
+        estimator waits for a new plateau as at a stream's start (live: an unload it joins
+        mid-way is skipped); then the held samples are fed."""
+        st = self._st
+        held = self._held
+        assert held is not None
+        self._held = None
+        t_new = held[0][0]
+        st.diag("ok", f"re-synced on the stepped clock: {len(held)} samples follow one "
+                f"another from t={t_new:.6f} s (the last before the step: "
+                f"{st.last_t:.6f} s); the stream goes on from there", t_new)
+        st.buf.trim(len(st.buf))
+        st.temperature = ReadingLog()  # its stamps are the old time base's
+        if st.mode == SKIP:
+            # the unload under way at the step was reported (its result names the step):
+            # the rest of it is skipped on the new clock as it was on the old one
+            u = st.unload
+            u.trigger = u.skip_since = 0
+            st.next_check = PERIOD - 1
+        else:
+            st.to_waiting(0)
+            st.stream_start = True  # live: an unload joined mid-way is skipped
+            st.start_checked = not st.live
+        st.last_t = t_new - st.dt  # the first held sample is no gap
+        st.clock_step_at = -1
+        out: list[UnloadResult] = []
+        for ti, pi in held:
+            out += self._push(ti, pi)
         return out
 
     def _on_clock_step(self, step: float, t: float) -> list[UnloadResult]:
@@ -483,8 +561,9 @@ class StreamingEstimator:
         st = self._st
         last = len(st.buf) - 1
         where = f"clock stepped back {step:.6g} s at t={st.last_t:.6f} s (next stamp {t:.6f} s)"
-        st.diag("warn", f"{where}: samples are dropped until the clock passes "
-                f"{st.last_t:.6f} s again", t)
+        st.diag("warn", f"{where}: the stream re-syncs on the new clock once "
+                f"{CLOCK_RESYNC} samples follow one another on it (those are kept; the "
+                f"clock passing {st.last_t:.6f} s again ends the wait)", t)
         mode = st.mode
         if mode in (CONFIRM, UNLOADING):
             return st.bad(last, f"{where} during the unload: its time base has a hole, "

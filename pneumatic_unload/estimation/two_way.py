@@ -59,6 +59,9 @@ class TwoWayEstimator:
                      for d in DIRECTIONS}
         for d, est in self._one.items():
             est.on_result = self._forwarder(d)
+            # both ways in turn: a stream may start at either end pressure (no unload
+            # missed: the other direction's comes next)
+            est._st.start_checked = True
         self._number: dict[tuple[str, int], int] = {}
         #: Called with each result as soon as it is complete (see the one-way estimator's).
         self.on_result: Callable[[UnloadResult], None] | None = None

@@ -24,11 +24,41 @@ STUCK_TEXT = "sensor stuck at"
 #: the physics): a model must not be fitted through them.
 SENSOR_FAULT_TEXTS = (STUCK_TEXT, "sensor saturated", "clock stepped")
 
-#: Statuses of an :class:`UnloadResult` (same order as the message's STATUS_* constants).
-STATUSES = ("ok", "aborted_sse", "aborted", "not_choked", "bad_data")
+#: Statuses of an :class:`UnloadResult` (same order as the message's STATUS_* constants:
+#: a bag stores the index). Their meaning, and whether the result carries a C, is in
+#: :data:`STATUS_MEANINGS`.
+STATUSES = ("ok", "aborted_sse", "aborted", "ok_subsonic", "bad_data")
+
+#: What each status word says, one line each (the docs' table of statuses is this one).
+STATUS_MEANINGS: dict[str, str] = {
+    "ok": "a good estimate: the flow stayed choked down to p*, as eq 39 assumes",
+    "aborted_sse": "a good estimate: the valve closed before p*; C by the SSE method "
+                   "(eq 23) from the pressure recovery after the closing",
+    "aborted": "no estimate: the valve closed before p* and the recovery gives no C "
+               "(status_text says why)",
+    "ok_subsonic": "a good estimate: the flow turned subsonic before p* (p* < p_atm / b), "
+                   "which eq 39 does not assume; the model-based C, which models the "
+                   "subsonic flow, is the one to report",
+    "bad_data": "no estimate: the record cannot be analysed (status_text says why)",
+}
+
+#: Former status words and the word that replaced them: a results database written by an
+#: older version reads with the new word (``testline.db.unload_rows``; any other reader of
+#: stored words calls :func:`canonical_status`). Bags store the index, not the word: they
+#: need no alias.
+STATUS_ALIASES: dict[str, str] = {"not_choked": "ok_subsonic"}
+
+#: Statuses of a result that carries a C (see :func:`recommended`).
+ESTIMATE_STATUSES = ("ok", "aborted_sse", "ok_subsonic")
 #: The status of a result that gives no C (unusable data, or a C the record does not
 #: determine: :mod:`.vetting`); its status text says why.
 NO_RESULT_STATUS = "bad_data"
+
+
+def canonical_status(word: str) -> str:
+    """The current status word for ``word`` (a former word through :data:`STATUS_ALIASES`,
+    any other word as it is)."""
+    return STATUS_ALIASES.get(word, word)
 
 
 @dataclass
@@ -44,8 +74,8 @@ class UnloadResult:
     #: Sequence number of this unload in the record or since the estimator started (0, 1,
     #: ...).
     index: int
-    #: One of :data:`STATUSES` ('ok', 'aborted_sse', 'aborted', 'not_choked', 'bad_data');
-    #: ``status_text`` gives the reason.
+    #: One of :data:`STATUSES` ('ok', 'aborted_sse', 'aborted', 'ok_subsonic', 'bad_data':
+    #: :data:`STATUS_MEANINGS`); ``status_text`` gives the reason.
     status: str
     #: Why the status, in words (and what else was noticed: a gap in the samples, ...).
     status_text: str

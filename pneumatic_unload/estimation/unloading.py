@@ -546,7 +546,7 @@ def crossing_result(st: EstimatorState, i: int, t_cross: float, tau_std: float,
         st.diag("error", est.problem, t_cross)
         status, text, quality = "bad_data", est.problem, 0.0
     elif plan.subsonic is not None:
-        status, text, quality = "not_choked", plan.subsonic, 0.5
+        status, text, quality = "ok_subsonic", plan.subsonic, 0.5
     if gap or st.gap_in_unload:
         text += "; gap in the samples during the unload"
         quality = min(quality, 0.5)

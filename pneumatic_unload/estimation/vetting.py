@@ -2,7 +2,7 @@
 
 Every result of the estimator (crossing and final, streaming, deferred or from a given
 start) passes :func:`vet` once it is complete. A result that gives C (status in
-:data:`ESTIMATE_STATUSES`) is
+:data:`~.types.ESTIMATE_STATUSES`) is
 
 * flagged when its tank's pressure lies where the real gas departs from the model's ideal
   gas by more than :data:`REAL_GAS_DEPARTURE` (a second virial estimate of the gas,
@@ -24,11 +24,14 @@ from typing import Any
 
 from pneumatic_unload import physics
 from pneumatic_unload.config.estimator import EstimatorSettings
-from pneumatic_unload.estimation.types import NO_RESULT_STATUS, UnloadResult, recommended
+from pneumatic_unload.estimation.types import (
+    ESTIMATE_STATUSES,
+    NO_RESULT_STATUS,
+    UnloadResult,
+    recommended,
+)
 from pneumatic_unload.uncertainty.budget import BudgetTerm, with_terms
 
-#: The statuses of a result that gives C (the others give none).
-ESTIMATE_STATUSES = ("ok", "aborted_sse", "not_choked")
 #: Opening of the status text of a result whose standard uncertainty leaves no C.
 UNCERTAIN_TEXT = "no result: the standard uncertainty of C"
 #: Opening of the note of a result that has no model-based C.

@@ -84,7 +84,7 @@ from pneumatic_unload.estimation import (
 from pneumatic_unload.nodes import common
 from pneumatic_unload.testline import ResultsDBError, SpecError, load_spec
 from pneumatic_unload.testline.job import result_row
-from pneumatic_unload.testline.live import LiveResults
+from pneumatic_unload.testline.live import LiveResults, PendingWrite, ResultWriter
 
 #: Node states reported on /diagnostics and in the action's feedback.
 STATES = ("waiting", "unloading", "done", "error")
@@ -95,6 +95,20 @@ MAX_BATCH = 4096
 #: temperature readings of its span (a slower topic; a topic that stopped is not waited
 #: for longer) [s].
 TEMPERATURE_WAIT = 2.0
+#: Longest wait at shutdown [s] for the queued samples, the final fits (of the unload under
+#: way, closed as at the end of a record, included) and the results database's writes:
+#: what is not done by then is logged with its numbers. Within the 5 s ros2 launch gives a
+#: node between SIGINT/SIGTERM and SIGKILL on two cores shared with a bench.
+SHUTDOWN_WAIT = 4.0
+#: The same warning's text start is logged at most once per this interval [s] (every one
+#: goes on /diagnostics); another warning is logged at once.
+LOG_THROTTLE = 1.0
+#: Note of a crossing estimate in the results database when a final estimate (its curve
+#: fit) follows and replaces it: a node that dies before leaves the crossing's numbers.
+CROSSING_NOTE = "crossing estimate (the final curve fit follows and replaces it)"
+#: Note of an estimate in the results database whose unload was closed at the node's
+#: shutdown (its tail, or its fall before p*, cut there).
+STOPPED_NOTE = "closed at the estimator's shutdown (SIGINT/SIGTERM): the record ends there"
 
 _OK, _WARN, _ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 #: The node's estimator: a stream's (one way, or both ways in turn) or a start time's.
@@ -158,6 +172,17 @@ class EstimatorNode(Node):
                                            self._spec) if self._p("results_db") else None
         except (SpecError, ResultsDBError) as exc:
             raise common.StartupError("estimator", str(exc)) from exc
+        #: The database's writes, off the callback and fit threads (a database that hangs
+        #: stalls no estimate); drained at shutdown within SHUTDOWN_WAIT.
+        self._writer = None if self._results_db is None else ResultWriter(
+            self._results_db, self._written, self._write_failed)
+        #: Warning texts' starts -> when last logged [s, monotonic] (LOG_THROTTLE).
+        self._logged: dict[str, float] = {}
+        #: Publishers on the pressure topic when last counted, and when [s, monotonic].
+        self._pub_count: tuple[int, list[str]] = (0, [])
+        self._pub_count_at = -math.inf
+        #: The node is stopping with an unload under way (closed there: STOPPED_NOTE).
+        self._stopping = False
         self._goal_part = ""  # the part id of the running ~/measure goal
         self._unload_parts: dict[int, str] = {}  # unload index -> a goal's part id
         if not common.stopping():  # a node stopped during its start does not warm up
@@ -433,9 +458,14 @@ class EstimatorNode(Node):
         if est.diagnostics.total > self._n_diag:
             for dg in est.diagnostics.since(self._n_diag):
                 level = {"ok": _OK, "warn": _WARN}.get(dg.level, _ERROR)
+                message = dg.message
                 if level != _OK:
                     self._rejected += 1
-                self._diagnose(level, dg.message)
+                    if "going backwards" in message or "out of order" in message:
+                        message += self._sources_note()
+                    if self._state == "waiting":  # the periodic report says it too
+                        self._why = message
+                self._diagnose(level, message)
             self._n_diag = est.diagnostics.total
 
     def _new_core(self) -> Core:
@@ -472,6 +502,34 @@ class EstimatorNode(Node):
             return self._arrived
         return arrivals[min(max(index - self._base, 0), len(arrivals) - 1)]
 
+    def _count_publishers(self) -> tuple[int, list[str]]:
+        """(publishers on the pressure topic, their node names), counted at most once a
+        second (a graph query; the stamps' warnings come per sample)."""
+        now = time.monotonic()
+        if now - self._pub_count_at >= 1.0:
+            self._pub_count_at = now
+            topic = self._p("block_topic" if self._p("input") == "block"
+                            else "pressure_topic")
+            try:
+                infos = self.get_publishers_info_by_topic(topic)
+                names = sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}"
+                               for i in infos)
+                self._pub_count = (len(infos), names)
+            except Exception:  # the graph is advisory: keep the last count
+                pass
+        return self._pub_count
+
+    def _sources_note(self) -> str:
+        """What a stamp going backwards means when more than one node publishes the
+        pressure topic ('' when one does)."""
+        n, names = self._count_publishers()
+        if n <= 1:
+            return ""
+        topic = self._p("block_topic" if self._p("input") == "block" else "pressure_topic")
+        return (f"; {n} publishers on {topic} ({', '.join(names)}): two sources interleave "
+                "their stamps (e.g. a simulator or a replay beside the rig); stop all but "
+                "one")
+
     def _end_of_stream(self) -> None:
         """Start-time mode: an unload past p* that has not settled is closed (its final job
         queued) once no sample has arrived for ``end_timeout`` s, or at shutdown."""
@@ -481,6 +539,30 @@ class EstimatorNode(Node):
                 return
             est.finish()
             jobs = est.take_final_fits()
+        if jobs:
+            self._fits.extend((job, time.monotonic()) for job in jobs)
+            self._wake.set()
+
+    def _finish_stream(self) -> None:
+        """Shutdown of a streaming estimator with an unload under way: it is closed as a
+        record's end closes it (the crossing's final fit queued on the tail so far; before
+        p*, an 'aborted' result), published and written, and said in the log."""
+        with self._lock:
+            est = self._est
+            if isinstance(est, OpeningStartEstimator) or est.state in ("waiting",
+                                                                        "skipping"):
+                return
+            state = est.state
+            self._stopping = True
+            self.get_logger().warn(f"stopping with an unload under way ({state}): it is "
+                                   "closed as at the end of a record")
+            try:
+                est.finish()  # its results published through on_result
+                jobs = est.take_final_fits()
+            except Exception as exc:  # never lose the shutdown to it
+                self.get_logger().error(f"stopping: the unload under way could not be "
+                                        f"closed: {type(exc).__name__}: {exc}")
+                return
         if jobs:
             self._fits.extend((job, time.monotonic()) for job in jobs)
             self._wake.set()
@@ -616,26 +698,55 @@ class EstimatorNode(Node):
         verdict; a failing database is reported, never fatal (the estimate is published)."""
         last = r.final or not self._settings.curve_fit or r.status in (
             "aborted", "aborted_sse", "bad_data")
-        if self._results_db is None or not last:
+        if self._writer is None:
             return
-        part = self._unload_parts.pop(r.index, "") or self._goal_part or self._p("part_id")
-        try:
-            verdict = self._results_db.write(r, self._settings, part)
-        except ResultsDBError as exc:
-            # the message names the database (a URL without its password)
-            self._diagnose(_ERROR, f"results_db: estimate of unload {r.index} not written: "
-                                   f"{exc}")
-            return
-        if verdict is not None:
-            self.get_logger().info(f"unload {r.index} of part {part}: {verdict[0]} "
-                                   f"({verdict[1]})")
+        if last:
+            part = self._unload_parts.pop(r.index, "")
+        else:
+            # a crossing estimate, replaced by its final one: written at once, so that a
+            # node that dies before its final fit leaves the crossing's numbers
+            part = self._unload_parts.get(r.index, "")
+            r = dataclasses.replace(r, status_text=f"{r.status_text}; {CROSSING_NOTE}")
+        if self._stopping:
+            r = dataclasses.replace(r, status_text=f"{r.status_text}; {STOPPED_NOTE}")
+        part = part or self._goal_part or self._p("part_id")
+        self._writer.submit(PendingWrite(r, self._settings, part, last))
+
+    def _written(self, w: PendingWrite, verdict: tuple[str, str] | None) -> None:
+        """A results database write done (the writer's thread): its verdict logged."""
+        if verdict is not None and w.last:
+            self.get_logger().info(f"unload {w.result.index} of part {w.part_id}: "
+                                   f"{verdict[0]} ({verdict[1]})")
+
+    def _write_failed(self, w: PendingWrite, exc: Exception) -> None:
+        """A results database write failed (the writer's thread): reported, never fatal
+        (the estimate is published; the message names the database, a URL without its
+        password)."""
+        why = str(exc) if isinstance(exc, ResultsDBError) else f"{type(exc).__name__}: {exc}"
+        self._diagnose(_ERROR, f"results_db: estimate of unload {w.result.index} not "
+                               f"written: {why}; {self._numbers(w.result)}")
+
+    @staticmethod
+    def _numbers(r: UnloadResult) -> str:
+        """A result's numbers in one line (a log keeps what a database did not take)."""
+        return (f"unload {r.index} ({'final' if r.final else 'crossing'}): status "
+                f"{r.status}, C={r.conductance:.6g} m^3/(s Pa) (eq 39), model "
+                f"{r.conductance_model:.6g} +- {r.conductance_model_std:.3g}, "
+                f"tau_exp={r.tau_exp:.6g} s, p10={r.p10:.6g} Pa, t_start={r.t_start!r} s")
 
     # ------------------------------------------------------------------ diagnostics
     def _diagnose(self, level: bytes, message: str) -> None:
         if level == _OK:
             self.get_logger().info(message)
         else:
-            self.get_logger().warn(message, throttle_duration_sec=1.0)
+            # a repeated warning (one per sample) at most once a LOG_THROTTLE, another
+            # at once (rclpy's throttle is one for the call site: it hid a second kind)
+            key, now = message[:32], time.monotonic()
+            if now - self._logged.get(key, -math.inf) >= LOG_THROTTLE:
+                if len(self._logged) > 256:
+                    self._logged.clear()
+                self._logged[key] = now
+                self.get_logger().warn(message)
         self._send(level, message)
 
     def _report(self) -> None:
@@ -664,6 +775,7 @@ class EstimatorNode(Node):
             "samples": str(self.received), "queued": str(len(self._samples)),
             "fits_queued": str(len(self._fits)),
             "rejected": str(self._rejected),
+            "publishers": str(self._pub_count[0]),
             "samples_missing": str(self._loss.missing),
             "unloads": str(self._n_unloads),
             "latency_p50_ms": f"{np.percentile(lat, 50):.3f}" if lat.size else "",
@@ -808,12 +920,30 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ shutdown
     def close(self) -> None:
-        """Feed the samples queued and run the final fits queued (at most 5 s), then stop
-        the worker (start-time mode: the stream ends, an unsettled unload is closed)."""
+        """Shutdown (SIGINT, SIGTERM, or an error that ends the node): feed the samples
+        queued, close the unload under way as at the end of a record (its final fit
+        queued; before p*: an 'aborted' result), run the final fits queued and write the
+        results database's queue, within SHUTDOWN_WAIT s in all; an estimate that could
+        not be finished or written by then is logged with its numbers."""
+        deadline = time.monotonic() + SHUTDOWN_WAIT
+        while self._samples and self._worker.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.01)  # the worker feeds them
         self._end_of_stream()
+        self._finish_stream()
         self._stop.set()
         self._wake.set()
-        self._worker.join(timeout=5.0)
+        self._worker.join(timeout=max(deadline - time.monotonic(), 0.0))
+        if self._worker.is_alive():
+            for job, _arrived in list(self._fits):
+                r = job.crossing
+                self.get_logger().error(
+                    f"stopping: the final fit of unload {r.index} was not done within "
+                    f"{SHUTDOWN_WAIT:g} s; its crossing estimate stands: {self._numbers(r)}")
+        if self._writer is not None:
+            for w in self._writer.close(max(deadline - time.monotonic(), 0.5)):
+                self.get_logger().error(
+                    f"stopping: results_db did not take this estimate within "
+                    f"{SHUTDOWN_WAIT:g} s (not written): {self._numbers(w.result)}")
         stats = {"received": self.received, "rejected": self._rejected,
                  "missing": self._loss.missing,
                  "results": self.n_results,

@@ -100,7 +100,8 @@ class OpcUaNode(Node):
                 policy=p("security_policy"), certificate=p("certificate"),
                 private_key=p("private_key"),
                 users=load_users(p("users_file")) if p("users_file") else None,
-                allow_anonymous=p("allow_anonymous"), trusted_certs=p("trusted_certs"))
+                allow_anonymous=p("allow_anonymous"), trusted_certs=p("trusted_certs"),
+                revoked_certs=p("revoked_certs"))
         except SecurityError as exc:
             raise common.StartupError("opcua", str(exc)) from exc
         self._spec = None
@@ -140,16 +141,21 @@ class OpcUaNode(Node):
         try:
             asyncio.run_coroutine_threadsafe(self._bridge.start(), self._loop).result(
                 START_TIMEOUT)
+        except SecurityError as exc:
+            self._stop_loop()
+            raise common.StartupError("opcua", str(exc)) from exc
         except Exception as exc:
             self._stop_loop()
             raise common.StartupError(
                 "opcua", f"cannot serve {p('endpoint')}: {type(exc).__name__}: {exc}"
             ) from exc
         users = len(security.users or {})
+        who = ("anonymous sessions may measure (allow_anonymous)" if security.allow_anonymous
+               else f"{users} user(s) may measure, anonymous sessions may only read" if users
+               else "nobody may measure (set allow_anonymous on a lab bench, or users_file)")
         self.get_logger().info(
             f"OPC UA server on {p('endpoint')} (port {self._bridge.port}), security "
-            f"{security.policy}, {users} user(s){'' if users else ' (anyone may measure)'}; "
-            f"measurements through {self._action}")
+            f"{security.policy}, {who}; measurements through {self._action}")
 
     def _p(self, name: str) -> Any:
         return self.get_parameter(name).value

@@ -78,6 +78,7 @@ from pneumatic_unload.io.bag import (
     cdr_header_stamp_ns,
     make_typestore,
 )
+from pneumatic_unload.io.bag.recorder import DISK_FULL_ERRNOS, BagDiskFullError
 
 TOPIC_DIAGNOSTICS = "/diagnostics"
 MSGTYPE_DIAGNOSTICS = "diagnostic_msgs/msg/DiagnosticArray"
@@ -188,6 +189,9 @@ class RecordingSession:
         self._prev_index: int | None = None
         self._carried: dict[str, tuple[str, bytes]] = {}  # topic -> (type, last message)
         self._closed = False
+        #: Why recording stopped (the disk, a quota or the file-size limit is full), or
+        #: None: the node then closes its bags and exits (:func:`main`).
+        self.stopped: str | None = None
         self._rec = self._open_bag()
 
     # ------------------------------------------------------------------ bag handling
@@ -242,6 +246,16 @@ class RecordingSession:
             self._rec.write_raw(topic, msgtype, log_ns, data)
             self.counts[topic] += 1
 
+    def summary_written(self) -> bool:
+        """The current bag, closed, has its MCAP summary (see
+        :attr:`BagRecorder.summary_written`)."""
+        return self._rec.summary_written
+
+    def bag_counts(self) -> dict[str, int]:
+        """Messages per topic in the current bag (after a stop for lack of room: those
+        that reached the disk, not those received)."""
+        return self._rec.message_counts
+
     @property
     def current_bag(self) -> Path:
         """Directory of the bag being written."""
@@ -269,6 +283,8 @@ class RecordingSession:
         try:
             self._on_message(topic, msgtype, data, recv_ns, has_header)
         except Exception as err:
+            if self._out_of_room(err):
+                return
             self.errors += 1
             if self.errors <= 20 or self.errors % 1000 == 0:
                 self._report(
@@ -276,10 +292,21 @@ class RecordingSession:
                     f"{self.errors} error(s) so far"
                 )
 
+    def _out_of_room(self, err: Exception) -> bool:
+        """True when ``err`` means the disk is full (:data:`DISK_FULL_ERRNOS`): recording
+        stops (:attr:`stopped`, reported once), later messages are dropped uncounted."""
+        if not (isinstance(err, BagDiskFullError)
+                or (isinstance(err, OSError) and err.errno in DISK_FULL_ERRNOS)):
+            return False
+        if self.stopped is None:
+            self.stopped = str(err)
+            self._report(f"recorder: {err}")
+        return True
+
     def _on_message(
         self, topic: str, msgtype: str, data: bytes, recv_ns: int, has_header: bool
     ) -> None:
-        if self._closed:
+        if self._closed or self.stopped is not None:
             return
         log_ns = recv_ns
         if self.log_time == "header" and has_header:
@@ -344,7 +371,7 @@ class RecordingSession:
 
     def flush(self) -> None:
         """Hand pending data to the operating system (call at least every flush_interval)."""
-        if self._closed:
+        if self._closed or self.stopped is not None:
             return
         for rec in (self._rec, self._prev):
             if rec is None:
@@ -352,6 +379,8 @@ class RecordingSession:
             try:
                 rec.flush()
             except Exception as err:
+                if self._out_of_room(err):
+                    return
                 self.errors += 1
                 self._report(f"recorder: flush failed: {err}")
 
@@ -533,7 +562,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             # a SIGINT/SIGTERM of the start stops the node here: the bag is completed below
             common.running()
-            while common.ok():
+            while common.ok() and session.stopped is None:
                 executor.spin_once(timeout_sec=min(0.05, session.flush_interval / 2))
                 now = time.monotonic()
                 if now >= next_flush:
@@ -548,12 +577,32 @@ def main(argv: list[str] | None = None) -> int:
             # Completing the bag must not be interrupted by a second Ctrl-C.
             signal.signal(signal.SIGINT, signal.SIG_IGN)
             signal.signal(signal.SIGTERM, signal.SIG_IGN)
-            session.close()
+            try:
+                session.close()
+                closed = ""
+            except BagError as err:  # said in one line below, no traceback
+                closed = str(err)
             with contextlib.suppress(Exception):
                 executor.shutdown(timeout_sec=1.0)
         counts = ", ".join(f"{t}: {n}" for t, n in sorted(session.counts.items())) or "none"
         print(f"recorder: wrote {len(session.bags)} bag(s) ({', '.join(map(str, session.bags))});"
               f" messages {counts}; errors {session.errors}", file=sys.stderr, flush=True)
+        if session.stopped is not None:
+            held = ", ".join(f"{t}: {n}" for t, n in sorted(session.bag_counts().items()))
+            done = (f"could not be completed: {closed}" if closed else
+                    "completed with what reached the disk at its last flush (metadata.yaml "
+                    f"written; it holds {held or 'no message'})")
+            if not closed and not session.summary_written():
+                done += ("; no room for its MCAP summary either: run `pneumatic-unload "
+                         f"recover {session.current_bag}` before reading it")
+            print(f"recorder: error: recording stopped, no room left: {session.stopped}; "
+                  f"{session.current_bag} {done}; messages received after the stop were "
+                  "not recorded. Free space (or raise the quota) and start a new recording",
+                  file=sys.stderr, flush=True)
+            return 1
+        if closed:
+            print(f"recorder: error: {closed}", file=sys.stderr, flush=True)
+            return 1
         return 0
     finally:
         if node is not None:

@@ -24,19 +24,29 @@ function (the ROS node's: the estimator's ``~/measure`` action), run in the serv
 from __future__ import annotations
 
 import asyncio
+import datetime
 import logging
 import math
+import unicodedata
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from asyncua import Server, ua
+from asyncua.crypto import uacrypto
 from asyncua.crypto.truststore import TrustStore
 from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
 
 from pneumatic_unload.plc import calls
-from pneumatic_unload.plc.security import CallRules, Security, Users
+from pneumatic_unload.plc.security import (
+    MAX_MESSAGE,
+    MAX_STRING,
+    CallRules,
+    Security,
+    SecurityError,
+    Users,
+)
 
 #: The namespace of the bridge's nodes.
 NAMESPACE = "urn:pneumatic-unload"
@@ -105,7 +115,7 @@ class Estimate:
     final : bool
         The full-curve fit's estimate (else the p* crossing's).
     status, status_text : str
-        'ok', 'aborted_sse', 'aborted', 'not_choked' or 'bad_data', and why.
+        'ok', 'aborted_sse', 'aborted', 'ok_subsonic' or 'bad_data', and why.
     conductance, conductance_std : float
         The recommended C and its combined standard uncertainty [m^3/(s Pa)].
     critical_ratio, subsonic_index : float
@@ -163,6 +173,18 @@ def _bad(code: str, arguments: list[ua.StatusCode] | None = None) -> ua.CallMeth
     return res
 
 
+def _string(arg: Any) -> str | ua.CallMethodResult:
+    """A String input argument's value, or the BadInvalidArgument result refusing it (its
+    argument's result BadTypeMismatch: not a scalar String; BadOutOfRange: longer than
+    :data:`MAX_STRING` characters or a control character in it)."""
+    if not isinstance(arg, ua.Variant) or arg.VariantType != _String or arg.is_array:
+        return _bad("BadInvalidArgument", [ua.StatusCode(ua.StatusCodes.BadTypeMismatch)])
+    text = arg.Value or ""
+    if len(text) > MAX_STRING or any(unicodedata.category(ch) == "Cc" for ch in text):
+        return _bad("BadInvalidArgument", [ua.StatusCode(ua.StatusCodes.BadOutOfRange)])
+    return str(text)
+
+
 @dataclass
 class BridgeServer:
     """The OPC UA server (see the module docstring).
@@ -186,25 +208,37 @@ class BridgeServer:
     _estimator: bool = False
     _last: Outcome | None = None
     _tasks: set[asyncio.Task[Any]] = field(default_factory=set)
+    _users: Users | None = None
 
     async def start(self) -> None:
         """Build the address space and listen (asyncua's errors raised: a port in use,
-        bad certificate files)."""
+        bad certificate files; :class:`SecurityError`: the server's certificate out of its
+        validity dates)."""
         calls.install()
         sec = self.security
-        server = Server(user_manager=Users(sec.users))
+        self._users = Users(sec.users, sec.allow_anonymous)
+        server = Server(user_manager=self._users)
         await server.init()
+        server.limits.max_message_size = MAX_MESSAGE
+        server.limits.max_chunk_count = -(-MAX_MESSAGE // server.limits.max_recv_buffer)
         server.set_endpoint(self.endpoint)
         server.set_server_name("pneumatic_unload OPC UA bridge")
         await server.set_application_uri(APPLICATION_URI)
-        server.set_security_policy(sec.policy_types(),
-                                   permission_ruleset=CallRules(bool(sec.users)))
+        server.set_security_policy(sec.policy_types(), permission_ruleset=CallRules())
         server.set_identity_tokens(sec.identity_tokens())
         if sec.certificate:
+            own = await uacrypto.load_certificate(sec.certificate)
+            now = datetime.datetime.now(datetime.UTC)
+            if not own.not_valid_before_utc <= now <= own.not_valid_after_utc:
+                raise SecurityError(
+                    f"certificate {sec.certificate} is valid from {own.not_valid_before_utc} "
+                    f"to {own.not_valid_after_utc}, not now ({now:%Y-%m-%d %H:%M} UTC)")
             await server.load_certificate(sec.certificate)
             await server.load_private_key(sec.private_key)
-        if sec.trusted_certs:
-            store = TrustStore([Path(sec.trusted_certs)], [])
+        if sec.policy != "None":  # a trust list (Security requires it): every client's
+            # certificate validated at its session's creation (calls.ConcurrentCalls)
+            store = TrustStore([Path(sec.trusted_certs)],
+                               [Path(sec.revoked_certs)] if sec.revoked_certs else [])
             await store.load()
             server.set_certificate_validator(CertificateValidator(
                 CertificateValidatorOptions.TRUSTED_VALIDATION
@@ -245,6 +279,8 @@ class BridgeServer:
         if self.server is not None:
             await self.server.stop()
             self.server = None
+        if self._users is not None:
+            self._users.close()
 
     @property
     def port(self) -> int:
@@ -271,17 +307,13 @@ class BridgeServer:
     # ------------------------------------------------------------------ methods
     def _part_id(self, args: tuple[Any, ...]) -> str | ua.CallMethodResult:
         """The PartId of a call's input arguments, or the Bad result of a malformed
-        call."""
+        call (BadInvalidArgument: not one String, longer than :data:`MAX_STRING`, or a
+        control character in it, which would forge a log line)."""
         if not args:
             return _bad("BadArgumentsMissing")
         if len(args) > 1:
             return _bad("BadTooManyArguments")
-        arg = args[0]
-        if not isinstance(arg, ua.Variant) or arg.VariantType != _String \
-                or arg.is_array:
-            return _bad("BadInvalidArgument",
-                        [ua.StatusCode(ua.StatusCodes.BadTypeMismatch)])
-        return arg.Value or ""
+        return _string(args[0])
 
     def _refuse(self) -> ua.CallMethodResult | None:
         """The answer of a call that cannot start a measurement now, else None."""

@@ -1,14 +1,28 @@
 """Security of the OPC UA bridge: who may connect, and who may start a measurement.
 
-Two set-ups, chosen by :class:`Security`:
+Secure by default: the bridge listens on loopback unless told another address (the
+node's ``endpoint``), and an anonymous session may browse, read and subscribe but its Call
+requests (every method: a measurement opens the rig's valve) are answered
+``BadUserAccessDenied`` unless ``allow_anonymous`` is set (a lab bench). Two set-ups,
+chosen by :class:`Security`:
 
-* a lab bench: policy ``None`` (no certificates), anonymous sessions, every session may
-  call ``Measure``/``StartMeasure``;
+* a lab bench: policy ``None`` (no certificates), ``allow_anonymous`` true: every session
+  may call the methods;
 * a plant: policy ``Basic256Sha256`` with ``SignAndEncrypt`` (the server's certificate and
-  private key given), user names with passwords from a users file; anonymous sessions
-  (when allowed) may browse, read and subscribe, only a configured user may call a method
-  (any other session's Call request is answered ``BadUserAccessDenied``); optionally only
-  client certificates of a trust folder are accepted.
+  private key given), a trust list (``trusted_certs``: the client certificates, or the CAs
+  of the client certificates, accepted; the bridge does not start without one), user names
+  with passwords from a users file: only a configured user may call a method. A client's
+  certificate is validated when it creates its session (the one its secure channel was
+  opened with): within its validity dates, trusted, not revoked, its URI, key usage and
+  client role (asyncua's :class:`~asyncua.crypto.validator.CertificateValidator`); an
+  expired, not yet valid or untrusted certificate gets no session.
+
+A login costs the same for a known and an unknown user name (an unknown one is checked
+against a dummy hash of as many PBKDF2 iterations, compared in constant time); the hash
+runs in a worker thread (:data:`HASH_WORKERS`), never on the server's event loop, and a
+peer's logins are taken one at a time, each after a delay that doubles with the peer's
+consecutive failures (:data:`FREE_FAILURES`, :data:`BACKOFF_FIRST`, :data:`BACKOFF_MAX`):
+a wrong-password flood slows itself down and cannot stall the sessions already open.
 
 Passwords are never stored: the users file holds one ``name:HASH`` line per user, the hash
 made by :func:`hash_password` (PBKDF2-HMAC-SHA256, salted)::
@@ -18,13 +32,18 @@ made by :func:`hash_password` (PBKDF2-HMAC-SHA256, salted)::
 
 from __future__ import annotations
 
+import asyncio
+import contextvars
 import getpass
 import hashlib
 import hmac
 import secrets
 import sys
+import time
+from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +54,28 @@ from asyncua.crypto.permission_rules import USER_TYPES, PermissionRuleset, User,
 POLICIES = ("None", "Basic256Sha256")
 #: Iterations of PBKDF2 of a new hash [-].
 ITERATIONS = 100_000
+#: Longest string argument of a method (PartId) [characters]: a part's id, a serial
+#: number or a DMC code is tens of characters; a longer one is answered BadInvalidArgument
+#: (it would go to the log and the results database as it is).
+MAX_STRING = 256
+#: Largest OPC UA request the server accepts [bytes] (asyncua's default is 100 MiB): the
+#: bridge's requests (reads, browses, a method call with its PartId) are a few kB; a larger
+#: one is refused by the transport before it is decoded.
+MAX_MESSAGE = 1 << 20
+#: Threads that hash passwords (PBKDF2 off the server's event loop) [-].
+HASH_WORKERS = 2
+#: Consecutive failed logins of a peer (its IP address) answered without delay (typing
+#: errors) [-].
+FREE_FAILURES = 3
+#: Delay before a peer's next login after its first failure beyond FREE_FAILURES, doubled
+#: with each further failure [s].
+BACKOFF_FIRST = 0.5
+#: Longest delay before a peer's login [s].
+BACKOFF_MAX = 8.0
+#: A peer's failures are forgotten this long after its last one [s].
+BACKOFF_FORGET = 300.0
+#: Peers whose failures are kept (the oldest forgotten first) [-].
+PEERS_KEPT = 1024
 _SCHEME = "pbkdf2_sha256"
 _CALL = ua.NodeId(ua.ObjectIds.CallRequest_Encoding_DefaultBinary)
 _SESSION_TYPES = frozenset(ua.NodeId(t) for t in USER_TYPES)
@@ -62,7 +103,19 @@ def check_password(password: str, stored: str) -> bool:
                                    int(iterations))
     except ValueError:
         return False
-    return hmac.compare_digest(mine.hex(), digest)
+    try:
+        theirs = bytes.fromhex(digest)
+    except ValueError:
+        return False
+    return hmac.compare_digest(mine, theirs)
+
+
+def _iterations(stored: str) -> int:
+    """The PBKDF2 iteration count of a stored hash (:data:`ITERATIONS` when unreadable)."""
+    try:
+        return int(stored.split("$")[1])
+    except (IndexError, ValueError):
+        return ITERATIONS
 
 
 def load_users(path: str | Path) -> dict[str, str]:
@@ -102,25 +155,30 @@ class Security:
     Attributes
     ----------
     policy : str
-        'None' (a lab bench) or 'Basic256Sha256' (SignAndEncrypt only).
+        'None' (a lab bench) or 'Basic256Sha256' (SignAndEncrypt only: a plant).
     certificate, private_key : str
         The server's certificate (DER or PEM) and private key (PEM) files; required by
         Basic256Sha256.
     users : dict
-        User name -> password hash (:func:`hash_password`); empty: every session may call
-        the methods.
+        User name -> password hash (:func:`hash_password`): the users who may call the
+        methods.
     allow_anonymous : bool
-        Anonymous sessions may connect (with users configured: browse, read, subscribe).
+        Anonymous sessions may call the methods (a lab bench; else they may browse, read
+        and subscribe only).
     trusted_certs : str
-        Folder of the client certificates accepted ('' accepts any client certificate).
+        Folder of the trusted client certificates (or of their CAs), DER or PEM; required
+        by Basic256Sha256.
+    revoked_certs : str
+        Folder of certificate revocation lists (DER or PEM; '' none).
     """
 
     policy: str = "None"
     certificate: str = ""
     private_key: str = ""
     users: dict[str, str] | None = None
-    allow_anonymous: bool = True
+    allow_anonymous: bool = False
     trusted_certs: str = ""
+    revoked_certs: str = ""
 
     def __post_init__(self) -> None:
         if self.policy not in POLICIES:
@@ -137,10 +195,22 @@ class Security:
             raise SecurityError("users need an encrypted channel (security_policy "
                                 "Basic256Sha256): with 'None' their passwords would cross "
                                 "the network in clear")
-        if not self.users and not self.allow_anonymous:
-            raise SecurityError("allow_anonymous false needs users (users_file)")
-        if self.trusted_certs and not Path(self.trusted_certs).is_dir():
-            raise SecurityError(f"trusted_certs {self.trusted_certs}: no such folder")
+        if self.policy == "None" and (self.trusted_certs or self.revoked_certs):
+            raise SecurityError("trusted_certs and revoked_certs need security_policy "
+                                "Basic256Sha256 (with 'None' no client certificate is "
+                                "exchanged)")
+        if self.policy != "None" and not self.trusted_certs:
+            raise SecurityError(f"security_policy {self.policy} needs a trust list: "
+                                "trusted_certs, the folder of the client certificates (or "
+                                "their CAs) accepted (OPC UA Part 4, 6.1.3)")
+        for what, path in (("trusted_certs", self.trusted_certs),
+                           ("revoked_certs", self.revoked_certs)):
+            if path and not Path(path).is_dir():
+                raise SecurityError(f"{what} {path}: no such folder")
+        if self.trusted_certs and not any(
+                f.suffix.lower() in (".der", ".pem") for f in Path(self.trusted_certs).iterdir()):
+            raise SecurityError(f"trusted_certs {self.trusted_certs}: no certificate (.der "
+                                "or .pem) in it")
 
     def policy_types(self) -> list[ua.SecurityPolicyType]:
         """The endpoints' policies: exactly the one chosen (never None beside a secure
@@ -150,50 +220,133 @@ class Security:
         return [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
 
     def identity_tokens(self) -> list[type]:
-        """The identity token types offered: anonymous (when allowed), user names (with
-        users)."""
-        tokens: list[type] = [ua.AnonymousIdentityToken] if self.allow_anonymous else []
+        """The identity token types offered: anonymous (its sessions may call the methods
+        only with allow_anonymous), user names (with users)."""
+        tokens: list[type] = [ua.AnonymousIdentityToken]
         return tokens + ([ua.UserNameIdentityToken] if self.users else [])
+
+
+#: The verdict of the login being activated in this task: (user name, password, the user
+#: or None) of :meth:`Users.verify`, set by the bridge's request processor
+#: (:mod:`.calls`) around asyncua's synchronous activation, read by :meth:`Users.get_user`.
+LOGIN_VERDICT: contextvars.ContextVar[tuple[str, str, User | None] | None] = \
+    contextvars.ContextVar("pneumatic_unload_login", default=None)
+
+
+@dataclass
+class _Peer:
+    """A peer's failed logins: how many in a row, the last one [s, monotonic], and the
+    lock that takes its logins one at a time."""
+
+    failures: int = 0
+    last: float = 0.0
+    lock: asyncio.Lock = field(default_factory=asyncio.Lock)
 
 
 class Users:
     """The asyncua user manager of :class:`Security`: a configured user with the right
-    password is a ``User`` (who may call methods); an anonymous session is a ``User``
-    without configured users (the lab bench), else ``Anonymous``; anything else (a wrong
-    password, an unknown name, a user certificate) is refused."""
+    password is a ``User`` (who may call methods); an anonymous session is a ``User`` with
+    ``allow_anonymous`` (the lab bench), else ``Anonymous`` (browse, read, subscribe);
+    anything else (a wrong password, an unknown name, a user certificate) is refused.
 
-    def __init__(self, users: dict[str, str] | None) -> None:
+    :meth:`verify` checks a password in a worker thread with the peer's backoff (the
+    bridge's request processor awaits it before asyncua activates the session, see
+    :mod:`.calls`); :meth:`get_user`, asyncua's synchronous hook, takes its verdict."""
+
+    def __init__(self, users: dict[str, str] | None, allow_anonymous: bool = False) -> None:
         self._users = dict(users or {})
+        self._anonymous = UserRole.User if allow_anonymous else UserRole.Anonymous
+        #: The hash an unknown user name is checked against: as many iterations as the
+        #: costliest configured hash, so that both cost the same.
+        self._dummy = hash_password(secrets.token_hex(16), iterations=max(
+            (_iterations(h) for h in self._users.values()), default=ITERATIONS))
+        self._peers: OrderedDict[str, _Peer] = OrderedDict()
+        self._executor: ThreadPoolExecutor | None = None
+
+    def _check(self, username: str, password: str) -> User | None:
+        """The user of a user name and password, else None; an unknown name costs a
+        known one's check (the dummy hash)."""
+        stored = self._users.get(username)
+        ok = check_password(password, self._dummy if stored is None else stored)
+        return User(role=UserRole.User, name=username) if ok and stored is not None else None
+
+    def delay(self, peer: str, now: float | None = None) -> float:
+        """The wait before ``peer``'s next login [s]: 0 for its first
+        :data:`FREE_FAILURES` failures in a row, then :data:`BACKOFF_FIRST` doubled per
+        further failure, at most :data:`BACKOFF_MAX`."""
+        rec = self._peers.get(peer)
+        now = time.monotonic() if now is None else now
+        if rec is None or now - rec.last > BACKOFF_FORGET:
+            return 0.0
+        over = rec.failures - FREE_FAILURES
+        return 0.0 if over <= 0 else min(BACKOFF_FIRST * 2.0 ** (over - 1), BACKOFF_MAX)
+
+    def _peer(self, peer: str) -> _Peer:
+        rec = self._peers.get(peer)
+        if rec is None:
+            rec = self._peers[peer] = _Peer()
+            while len(self._peers) > PEERS_KEPT:  # the oldest idle peer forgotten
+                old = next((k for k, v in self._peers.items() if not v.lock.locked()), None)
+                if old is None or old == peer:
+                    break
+                del self._peers[old]
+        self._peers.move_to_end(peer)
+        return rec
+
+    async def verify(self, peer: str, username: str, password: str) -> User | None:
+        """The user of a login from ``peer`` (its IP address), else None: after the
+        peer's backoff (:meth:`delay`), one login of a peer at a time, the hash in a
+        worker thread."""
+        rec = self._peer(peer)
+        async with rec.lock:
+            if time.monotonic() - rec.last > BACKOFF_FORGET:
+                rec.failures = 0
+            wait = self.delay(peer)
+            if wait > 0:
+                await asyncio.sleep(wait)
+            if self._executor is None:
+                self._executor = ThreadPoolExecutor(HASH_WORKERS, "opcua-login")
+            user = await asyncio.get_running_loop().run_in_executor(
+                self._executor, self._check, username, password)
+            if user is None:
+                rec.failures += 1
+                rec.last = time.monotonic()
+            else:
+                rec.failures = 0
+        return user
+
+    def close(self) -> None:
+        """Stop the hashing threads."""
+        if self._executor is not None:
+            self._executor.shutdown(wait=False, cancel_futures=True)
+            self._executor = None
 
     def get_user(self, iserver: Any, username: str | None = None,
                  password: str | None = None, certificate: Any = None) -> User | None:
         """asyncua's hook at a session's activation (None refuses it). ``certificate`` is
         the secure channel's client certificate (user certificates are not among the
-        identity tokens offered: asyncua refuses them before)."""
+        identity tokens offered: asyncua refuses them before). A user name's verdict is
+        :meth:`verify`'s when it checked this login (the bridge's processor), else the
+        check runs here."""
         if username is None:
-            return User(role=UserRole.User if not self._users else UserRole.Anonymous)
-        stored = self._users.get(username)
-        if stored is None:
-            check_password(password or "", hash_password("", iterations=1))  # same cost
-            return None
-        if not check_password(password or "", stored):
-            return None
-        return User(role=UserRole.User, name=username)
+            return User(role=self._anonymous)
+        verdict = LOGIN_VERDICT.get()
+        if verdict is not None and verdict[:2] == (username, password or ""):
+            return verdict[2]
+        return self._check(username, password or "")
 
 
 class CallRules(PermissionRuleset):
     """Requests a session may make: the session services (read, browse, subscribe...) for
-    every activated session; Call (the methods) only for a configured user when users are
-    configured; never the address-space changes (add or delete nodes and references)."""
-
-    def __init__(self, users_required: bool) -> None:
-        self._users_required = users_required
+    every activated session; Call (the methods) only for a ``User`` (a configured user, or
+    an anonymous session with ``allow_anonymous``); never the address-space changes (add
+    or delete nodes and references)."""
 
     def check_validity(self, user: User, action_type_id: ua.NodeId, body: Any) -> bool:
         """asyncua's hook before each request of a session."""
         if action_type_id not in _SESSION_TYPES:
             return False
-        if action_type_id == _CALL and self._users_required:
+        if action_type_id == _CALL:
             return user is not None and user.role in (UserRole.User, UserRole.Admin)
         return True
 

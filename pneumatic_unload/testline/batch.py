@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pneumatic_unload.estimation.types import ESTIMATE_STATUSES
 from pneumatic_unload.testline.accounting import (
     Accounting,
     cpu_delta,
@@ -38,7 +39,13 @@ from pneumatic_unload.testline.accounting import (
     timed_chunk,
     worker_snapshot,
 )
-from pneumatic_unload.testline.db import FileRecord, known_contents, open_db, write_files
+from pneumatic_unload.testline.db import (
+    FileRecord,
+    ResultsDBError,
+    known_contents,
+    open_db,
+    write_files,
+)
 from pneumatic_unload.testline.job import InputOptions, options_hash
 
 #: Suffixes of the inputs a batch picks up in a folder (plus bag folders).
@@ -282,6 +289,7 @@ def run_batch(paths: Sequence[str], options: InputOptions, *, db_path: str | Pat
     res = BatchResult()
     acc = res.accounting
     cpu0 = thread_cpu()
+    db_failed = False
     try:
         try:
             if workers <= 1 and not scheduler:
@@ -295,8 +303,12 @@ def run_batch(paths: Sequence[str], options: InputOptions, *, db_path: str | Pat
                 acc.client = cpu_delta(cpu0, thread_cpu())
             else:
                 _on_dask(items, options, known, force, workers, scheduler, out.add, res)
+        except ResultsDBError:
+            db_failed = True  # the database's error stands; no second wait on it below
+            raise
         finally:
-            out.flush(everything=True)
+            if not db_failed:
+                out.flush(everything=True)
     except KeyboardInterrupt:
         res.interrupted = True
     finally:
@@ -326,11 +338,19 @@ def _on_dask(items: list[tuple[int, str]], options: InputOptions, known: frozens
         known_arg: Any = client.scatter([known], broadcast=True)[0] if known else known
         futs = {client.submit(timed_chunk, chunk, options, known_arg, force, pure=False):
                 chunk for chunk in chunks(items, n_workers or workers)}
-        for fut in as_completed(futs):
+        running = as_completed(futs)
+        for fut in running:
             try:
                 done, stamp = fut.result()
                 acc.tasks.append(stamp)
-            except Exception as exc:  # a worker died: each input's row says so
+            except Exception as exc:  # the task failed (its worker died)
+                if len(futs[fut]) > 1:  # each input again alone: only the culprit fails
+                    for one in futs[fut]:
+                        again = client.submit(timed_chunk, [one], options, known_arg, force,
+                                              pure=False)
+                        futs[again] = [one]
+                        running.add(again)
+                    continue
                 ohash = options_hash(options)
                 done = [(k, FileRecord(
                     path=path, content_hash=f"failed:{k}", settings_hash=ohash, part_id="",
@@ -383,7 +403,7 @@ def part_summary(unloads: Sequence[dict[str, Any]],
         cs = [u["recommended_conductance"] for u in us
               if u.get("recommended_conductance") is not None
               and math.isfinite(u["recommended_conductance"])
-              and u.get("status") in ("ok", "aborted_sse", "not_choked")]
+              and u.get("status") in ESTIMATE_STATUSES]
         verdicts = [u.get("verdict") for u in us]
         if all(v is None for v in verdicts):
             verdict, why = None, None
@@ -413,7 +433,7 @@ def by_direction(unloads: Sequence[dict[str, Any]]) -> dict[str, dict[str, float
     for d in ("discharge", "charge"):
         cs = [(u["recommended_conductance"], u["recommended_std"]) for u in unloads
               if (u.get("direction") or "discharge") == d
-              and u.get("status") in ("ok", "aborted_sse", "not_choked")
+              and u.get("status") in ESTIMATE_STATUSES
               and u.get("recommended_conductance") is not None
               and u.get("recommended_std") is not None
               and math.isfinite(u["recommended_conductance"])

@@ -21,19 +21,26 @@ one. SI units in every column (m^3/(s Pa), s, Pa).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import datetime as _dt
 import json
 import math
 import numbers
+import os
+import socket
+import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+import weakref
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import sqlalchemy as sa
 
+from pneumatic_unload.estimation.types import canonical_status
+from pneumatic_unload.testline.redact import redact
 from pneumatic_unload.testline.schema import (
     BUSY_TIMEOUT,
     FILES,
@@ -51,10 +58,11 @@ from pneumatic_unload.testline.schema import (
     one_line,
 )
 
-__all__ = ["BUSY_TIMEOUT", "EXPORT_COLUMNS", "SCHEMA_VERSION", "UNLOAD_COLUMNS", "V1_COLUMNS",
-           "V2_COLUMNS", "V3_COLUMNS", "FileRecord", "ResultsDB", "ResultsDBError", "export",
-           "file_rows", "has_file", "hide_password", "known_contents", "open_db",
-           "unload_rows", "write_file", "write_files", "write_table"]
+__all__ = ["ANSWER_TIMEOUT", "BUSY_TIMEOUT", "EXPORT_COLUMNS", "SCHEMA_VERSION",
+           "UNLOAD_COLUMNS", "V1_COLUMNS", "V2_COLUMNS", "V3_COLUMNS", "FileRecord",
+           "ResultsDB", "ResultsDBError", "export", "file_rows", "has_file",
+           "hide_password", "known_contents", "open_db", "unload_rows", "write_file",
+           "write_files", "write_table"]
 
 #: SQLSTATEs of a PostgreSQL transaction worth running again: serialization failure,
 #: deadlock detected.
@@ -103,9 +111,77 @@ class FileRecord:
     package_version: str = ""
 
 
+#: Longest one operation of :class:`ResultsDB` (a query, a write with its retries) waits
+#: for a PostgreSQL server's answers [s] before it fails with a ResultsDBError, plus at
+#: most CONNECT_TIMEOUT for a new connection. A server whose processes are stopped
+#: (SIGSTOP, a frozen virtual machine) never answers while its host's kernel still
+#: acknowledges every packet, so neither TCP keepalives nor ``statement_timeout`` end the
+#: wait: this deadline does, by shutting the connections' sockets down. Above
+#: :data:`BUSY_TIMEOUT` (a write's retries) and the server's STATEMENT_TIMEOUT.
+ANSWER_TIMEOUT = 90.0
+
+
+class _Watchdog:
+    """The DBAPI connections of an engine (each registered as it connects) and a deadline
+    that shuts their sockets down when an operation outlives it: a call blocked on a
+    server that does not answer then returns with an error."""
+
+    def __init__(self, engine: sa.Engine) -> None:
+        self.conns: weakref.WeakSet[Any] = weakref.WeakSet()
+        self.lock = threading.Lock()
+        if engine.dialect.name == "postgresql":
+            sa.event.listen(engine, "connect", self._on_connect)
+
+    def _on_connect(self, dbapi_con: Any, _record: Any) -> None:
+        with self.lock:
+            self.conns.add(dbapi_con)
+
+    def _shut_down(self) -> None:
+        with self.lock:
+            conns = list(self.conns)
+        for c in conns:
+            with contextlib.suppress(Exception):  # closed meanwhile: nothing to wake
+                fd = os.dup(c.fileno())
+                with socket.socket(fileno=fd) as sock:
+                    sock.shutdown(socket.SHUT_RDWR)
+
+    @contextlib.contextmanager
+    def deadline(self, seconds: float | None, label: str, what: str,
+                 target: str) -> Iterator[None]:
+        """Run the block within ``seconds`` (None: no deadline); past it, a ResultsDBError
+        saying that the server did not answer (``target``'s password masked)."""
+        if seconds is None:
+            yield
+            return
+        fired = threading.Event()
+
+        def fire() -> None:
+            fired.set()
+            self._shut_down()
+
+        timer = threading.Timer(seconds, fire)
+        timer.daemon = True
+        timer.start()
+        try:
+            yield
+        except Exception as exc:
+            if fired.is_set():
+                raise ResultsDBError(redact(
+                    f"results database {label}: no answer from the server within "
+                    f"{seconds:g} s while {what} (the server stopped, or the network to it "
+                    f"is gone): {one_line(exc)}", target)) from exc
+            raise
+        finally:
+            timer.cancel()
+
+
 class ResultsDB:
     """An open results database (returned by :func:`open_db`; close it, or use it in a
     ``with``): its engine and its name in messages (a URL's password hidden).
+
+    Every operation on a PostgreSQL server ends within :attr:`timeout` seconds (see
+    :data:`ANSWER_TIMEOUT`; SQLite: :data:`BUSY_TIMEOUT` for a lock), and every message
+    goes through :func:`~.redact.redact` with the URL it was opened with.
 
     Attributes
     ----------
@@ -113,11 +189,26 @@ class ResultsDB:
         The connections (a small pool).
     label : str
         The file's path, or the server's URL without its password.
+    timeout : float or None
+        Longest an operation waits for a PostgreSQL server [s] (None: no limit).
     """
 
-    def __init__(self, engine: sa.Engine, label: str) -> None:
+    def __init__(self, engine: sa.Engine, label: str, *, target: str | Path = "",
+                 timeout: float | None = ANSWER_TIMEOUT,
+                 watchdog: _Watchdog | None = None) -> None:
         self.engine = engine
         self.label = label
+        self.target = str(target)
+        self.timeout = timeout if engine.dialect.name == "postgresql" else None
+        self.watchdog = watchdog or _Watchdog(engine)
+
+    def error(self, text: str) -> ResultsDBError:
+        """A ResultsDBError of ``text``, the URL's password masked."""
+        return ResultsDBError(redact(text, self.target))
+
+    def _deadline(self, what: str, timeout: float | None = None) -> Any:
+        return self.watchdog.deadline(self.timeout if timeout is None else timeout,
+                                      self.label, what, self.target)
 
     @property
     def backend(self) -> str:
@@ -136,24 +227,33 @@ class ResultsDB:
 
     def rows(self, stmt: Any) -> list[dict[str, Any]]:
         """The rows of a query (a read transaction; SQLite's WAL readers never wait)."""
-        try:
-            with self.engine.connect() as conn:
-                return [dict(r._mapping) for r in conn.execute(stmt)]
-        except sa.exc.SQLAlchemyError as exc:
-            raise ResultsDBError(f"results database {self.label}: {one_line(exc)}") from exc
+        with self._deadline("reading"):
+            try:
+                with self.engine.connect() as conn:
+                    return [dict(r._mapping) for r in conn.execute(stmt)]
+            except sa.exc.SQLAlchemyError as exc:
+                raise self.error(f"results database {self.label}: {one_line(exc)}") from exc
 
     def column(self, stmt: Any) -> list[Any]:
         """The first column of a query's rows (see :meth:`rows`)."""
-        try:
-            with self.engine.connect() as conn:
-                return list(conn.execute(stmt).scalars())
-        except sa.exc.SQLAlchemyError as exc:
-            raise ResultsDBError(f"results database {self.label}: {one_line(exc)}") from exc
+        with self._deadline("reading"):
+            try:
+                with self.engine.connect() as conn:
+                    return list(conn.execute(stmt).scalars())
+            except sa.exc.SQLAlchemyError as exc:
+                raise self.error(f"results database {self.label}: {one_line(exc)}") from exc
 
-    def write(self, body: Callable[[sa.Connection], Any]) -> Any:
+    def write(self, body: Callable[[sa.Connection], Any], *,
+              timeout: float | None = None) -> Any:
         """Run ``body(connection)`` in one write transaction (SQLite: the write lock taken
         up front), again while SQLite is locked or PostgreSQL aborted it for a deadlock or
-        a serialization failure, up to :data:`BUSY_TIMEOUT` s; returns its value."""
+        a serialization failure, up to :data:`BUSY_TIMEOUT` s; returns its value. On
+        PostgreSQL the whole ends within ``timeout`` s (None: :attr:`timeout`), else a
+        ResultsDBError (the transaction is not committed)."""
+        with self._deadline("writing", timeout):
+            return self._write(body)
+
+    def _write(self, body: Callable[[sa.Connection], Any]) -> Any:
         deadline = time.monotonic() + BUSY_TIMEOUT
         while True:
             try:
@@ -169,7 +269,8 @@ class ResultsDB:
                 time.sleep(0.05)
 
 
-def open_db(target: str | Path, *, create: bool = True) -> ResultsDB:
+def open_db(target: str | Path, *, create: bool = True,
+            timeout: float | None = ANSWER_TIMEOUT) -> ResultsDB:
     """Open (creating or migrating) the results database ``target``: a file path (SQLite)
     or a URL ``postgresql://USER@HOST:PORT/DB`` (see :mod:`~.schema`).
 
@@ -179,13 +280,17 @@ def open_db(target: str | Path, *, create: bool = True) -> ResultsDB:
         Where the database is.
     create : bool
         Create a missing SQLite file or the tables on an empty server (False: refuse).
+    timeout : float or None
+        Longest one operation (this opening, then each query or write) waits for a
+        PostgreSQL server's answers [s] (:data:`ANSWER_TIMEOUT`; None: no limit).
 
     Raises
     ------
     ResultsDBError
         The file is not a database, is from a newer package version, or its folder is
         missing or not writable; the server cannot be reached, refuses the user or has no
-        such database; an unknown scheme or a bad URL; the driver is missing.
+        such database, or does not answer within ``timeout``; an unknown scheme or a bad
+        URL; the driver is missing. No message shows the URL's password.
     """
     url = database_url(target)
     if url.get_backend_name() == "sqlite":
@@ -198,24 +303,34 @@ def open_db(target: str | Path, *, create: bool = True) -> ResultsDB:
     else:
         label = hide_password(target)  # as given (postgresql://...), without a password
     engine = make_engine(url)
+    watchdog = _Watchdog(engine)
+    pg_timeout = timeout if url.get_backend_name() != "sqlite" else None
     try:
-        if url.get_backend_name() == "sqlite":
-            raw = engine.raw_connection()  # outside a transaction, as WAL mode needs
-            try:
-                mode = raw.cursor().execute("PRAGMA journal_mode = WAL").fetchone()[0]
-            finally:
-                raw.close()
-            if str(mode).lower() != "wal":
-                raise ResultsDBError(f"results database {p}: WAL mode refused ({mode})")
-        migrate(engine, label, create)
-    except ResultsDBError:
+        with watchdog.deadline(pg_timeout, label, "opening", str(target)):
+            _prepare(engine, url, label, create)
+    except ResultsDBError as exc:
         engine.dispose()
-        raise
+        raise ResultsDBError(redact(str(exc), target)) from exc
     except (sa.exc.SQLAlchemyError, engine.dialect.loaded_dbapi.Error, OSError) as exc:
         engine.dispose()
         orig = getattr(exc, "orig", None)
-        raise ResultsDBError(f"results database {label}: {one_line(orig or exc)}") from exc
-    return ResultsDB(engine, label)
+        raise ResultsDBError(redact(f"results database {label}: {one_line(orig or exc)}",
+                                    target)) from exc
+    return ResultsDB(engine, label, target=target, timeout=timeout, watchdog=watchdog)
+
+
+def _prepare(engine: sa.Engine, url: sa.URL, label: str, create: bool) -> None:
+    """SQLite's WAL mode, then the schema created or migrated (see :func:`open_db`)."""
+    if url.get_backend_name() == "sqlite":
+        p = Path(url.database or "")
+        raw = engine.raw_connection()  # outside a transaction, as WAL mode needs
+        try:
+            mode = raw.cursor().execute("PRAGMA journal_mode = WAL").fetchone()[0]
+        finally:
+            raw.close()
+        if str(mode).lower() != "wal":
+            raise ResultsDBError(f"results database {p}: WAL mode refused ({mode})")
+    migrate(engine, label, create)
 
 
 def has_file(con: ResultsDB, content_hash: str, settings_hash: str) -> bool:
@@ -317,9 +432,12 @@ def _replace(c: sa.Connection, prepared: list[tuple[dict[str, Any], list[dict[st
 
 
 def write_files(con: ResultsDB, recs: Sequence[FileRecord], *,
-                replace: bool = False) -> list[bool]:
+                replace: bool = False, timeout: float | None = None) -> list[bool]:
     """Write inputs with their unloads, in the order given, in one transaction: each input
-    whole or not at all, and one commit (one sync to disk) for many inputs.
+    whole or not at all, and one commit (one sync to disk) for many inputs. On PostgreSQL
+    it returns or fails within ``timeout`` s (None: the database's
+    :attr:`ResultsDB.timeout`), plus at most CONNECT_TIMEOUT for a new connection: a
+    caller that must not block (a node's callback) passes its own.
 
     Returns
     -------
@@ -338,14 +456,16 @@ def write_files(con: ResultsDB, recs: Sequence[FileRecord], *,
     now = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     prepared = [_prepared(r, now) for r in recs]
     try:
-        return list(con.write(lambda c: (_replace if replace else _insert_new)(c, prepared)))
+        return list(con.write(lambda c: (_replace if replace else _insert_new)(c, prepared),
+                              timeout=timeout))
     except sa.exc.SQLAlchemyError as exc:
-        raise ResultsDBError(f"results database {con.label}: writing {recs[0].path}"
-                             + (f" and {len(recs) - 1} more" if len(recs) > 1 else "")
-                             + f": {one_line(exc)}") from exc
+        raise con.error(f"results database {con.label}: writing {recs[0].path}"
+                        + (f" and {len(recs) - 1} more" if len(recs) > 1 else "")
+                        + f": {one_line(exc)}") from exc
 
 
-def write_file(con: ResultsDB, rec: FileRecord, *, replace: bool = False) -> bool:
+def write_file(con: ResultsDB, rec: FileRecord, *, replace: bool = False,
+               timeout: float | None = None) -> bool:
     """Write one input with its unloads in one transaction (see :func:`write_files`).
 
     Returns
@@ -354,7 +474,7 @@ def write_file(con: ResultsDB, rec: FileRecord, *, replace: bool = False) -> boo
         True when written; False when the same content and settings are already there
         and ``replace`` is False (nothing changed).
     """
-    return write_files(con, [rec], replace=replace)[0]
+    return write_files(con, [rec], replace=replace, timeout=timeout)[0]
 
 
 def unload_rows(con: ResultsDB, part_id: str | None = None) -> list[dict[str, Any]]:
@@ -365,7 +485,10 @@ def unload_rows(con: ResultsDB, part_id: str | None = None) -> list[dict[str, An
         UNLOADS, FILES, UNLOADS.c.file_id == f.id)
     if part_id is not None:
         q = q.where(UNLOADS.c.part_id == part_id)
-    return con.rows(q.order_by(f.id, UNLOADS.c.unload_index))
+    rows = con.rows(q.order_by(f.id, UNLOADS.c.unload_index))
+    for r in rows:  # a database written by an older version: its status words read as now
+        r["status"] = canonical_status(r["status"])
+    return rows
 
 
 def file_rows(con: ResultsDB) -> list[dict[str, Any]]:

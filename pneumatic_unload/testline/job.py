@@ -23,12 +23,9 @@ from pneumatic_unload.analysis.output import finite_or_none, unload_json
 from pneumatic_unload.analysis.records import RecordError, analyze_input, open_record
 from pneumatic_unload.config import ConfigError
 from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
+from pneumatic_unload.estimation.types import ESTIMATE_STATUSES
 from pneumatic_unload.testline.db import FileRecord
 from pneumatic_unload.testline.spec import Spec
-
-#: Statuses of a result that carry a C (see :func:`~pneumatic_unload.estimation.types.
-#: recommended`).
-ESTIMATE_STATUSES = ("ok", "aborted_sse", "not_choked")
 
 
 @dataclass(frozen=True)
@@ -152,7 +149,8 @@ def analyze_file(path: str, options: InputOptions, chash: str | None = None
     judge its unloads against the specification of its part type.
 
     Never raises for a bad input: the record's ``status`` is 'error' (unreadable, invalid
-    settings: ``reason`` says which) or 'no_estimate' (``reason`` says why).
+    settings: ``reason`` says which; an unexpected exception: its type and message) or
+    'no_estimate' (``reason`` says why), so that one bad input is one row of a batch.
 
     Parameters
     ----------
@@ -168,6 +166,17 @@ def analyze_file(path: str, options: InputOptions, chash: str | None = None
     shash = options_hash(options)
     base = {"path": str(path), "part_id": pid, "part_type": ptype or "",
             "package_version": __version__, "settings_hash": shash}
+    try:
+        return _analyze_file(path, options, chash, pid, base)
+    except Exception as exc:  # a fault of this input's analysis: its row says which
+        return FileRecord(content_hash=chash or f"failed:{path}", status="error",
+                          reason=f"{path}: the analysis failed: {type(exc).__name__}: "
+                                 f"{exc}", **base)
+
+
+def _analyze_file(path: str, options: InputOptions, chash: str | None, pid: str,
+                  base: dict[str, Any]) -> FileRecord:
+    """:func:`analyze_file`'s work (which turns what it raises into an error row)."""
     if chash is None:
         try:
             chash = content_hash(path)

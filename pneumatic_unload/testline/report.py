@@ -21,9 +21,10 @@ from pathlib import Path
 from typing import Any
 
 from pneumatic_unload import __version__
+from pneumatic_unload.analysis.output import DM3_PER_S_BAR, c_dm3, two_digits
+from pneumatic_unload.estimation.types import ESTIMATE_STATUSES
 from pneumatic_unload.testline.batch import part_summary
 from pneumatic_unload.testline.db import file_rows, hide_password, open_db, unload_rows
-from pneumatic_unload.testline.spec import DM3_PER_S_BAR
 
 #: d2 of a moving range of two: sigma = average moving range / D2 [-].
 D2 = 1.128
@@ -75,53 +76,126 @@ document.body.dataset.ready = String(document.querySelectorAll('tr.unload').leng
 """
 
 
-def _c(v: Any, digits: int = 4) -> str:
+def _c(v: Any) -> str:
+    """C [m^3/(s Pa)] in dm^3/(s bar) with four significant digits; '-' when unknown."""
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return "-"
-    return f"{v / DM3_PER_S_BAR:.{digits}f}"
+    return c_dm3(v)
+
+
+def _s(v: Any) -> str:
+    """An uncertainty of C [m^3/(s Pa)] in dm^3/(s bar), two significant digits."""
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    return two_digits(v / DM3_PER_S_BAR)
 
 
 def _e(v: Any) -> str:
     return html.escape("" if v is None else str(v))
 
 
+#: Half-height of a chart's C axis when its values do not spread it (one unload, or all
+#: equal), relative to their centre [-]: 2 % shows a part's C to its fourth digit.
+FLAT_HALF_SPAN = 0.02
+#: The most part labels under a chart's x axis (more points: every k-th labelled).
+MAX_X_LABELS = 30
+
+
+def nice_ticks(lo: float, hi: float, target: int = 5) -> list[float]:
+    """Round tick values (1, 2 or 5 x 10^k apart, about ``target`` of them) within
+    [lo, hi]; lo < hi."""
+    mag = 10.0 ** math.floor(math.log10((hi - lo) / target))
+    step = min((m * mag for m in (1.0, 2.0, 5.0, 10.0)),
+               key=lambda st: abs((hi - lo) / st - target))
+    first = math.ceil(lo / step - 1e-9) * step
+    n = int(math.floor((hi - first) / step + 1e-9)) + 1
+    return [first + k * step for k in range(n)]
+
+
+def _tick_text(v: float, step: float) -> str:
+    """A tick value with the decimals its step needs."""
+    return f"{v:.{max(0, -math.floor(math.log10(step) + 1e-9))}f}"
+
+
 def control_chart(points: Sequence[tuple[float, float, str]], title: str) -> str:
     """An individuals control chart as inline SVG: points (x [s or index], C
-    [m^3/(s Pa)], label) in order, centre line and centre +- 3 sigma with sigma = average
-    moving range / :data:`D2`; points beyond the limits in red."""
-    w, h, m = 760, 240, 50
+    [m^3/(s Pa)], label: the part and its input) in order, centre line and centre +- 3
+    sigma with sigma = average moving range / :data:`D2` (two points or more; points
+    beyond the limits in red); a C axis in dm^3/(s bar) with its values, the points' part
+    labels under the x axis. Values that do not spread (one point, all equal) get an axis
+    of +- :data:`FLAT_HALF_SPAN` about them and no limits."""
+    w, h = 760, 310
+    left, right, top, bottom = 78, 20, 44, 80
     if not points:
         return "<p>no C to chart</p>"
     ys = [p[1] / DM3_PER_S_BAR for p in points]
     centre = statistics.fmean(ys)
     mr = [abs(a - b) for a, b in zip(ys[1:], ys[:-1], strict=False)]
     sigma = statistics.fmean(mr) / D2 if mr else 0.0
+    limits = sigma > 0
     lo, hi = centre - 3 * sigma, centre + 3 * sigma
-    y0, y1 = min(min(ys), lo), max(max(ys), hi)
-    pad = 0.05 * ((y1 - y0) or abs(centre) or 1.0)
-    y0, y1 = y0 - pad, y1 + pad
+    y0, y1 = min(*ys, lo), max(*ys, hi)
+    if y1 - y0 <= 1e-12 * max(abs(centre), 1e-300):  # nothing spreads the axis
+        half = FLAT_HALF_SPAN * (abs(centre) or 1.0)
+        y0, y1 = centre - half, centre + half
+    else:
+        pad = 0.08 * (y1 - y0)
+        y0, y1 = y0 - pad, y1 + pad
     n = len(points)
 
     def px(i: int) -> float:
-        return m + (w - 2 * m) * (i / (n - 1) if n > 1 else 0.5)
+        return left + (w - left - right) * ((i + 0.5) / n)
 
     def py(v: float) -> float:
-        return h - m - (h - 2 * m) * (v - y0) / (y1 - y0)
+        return h - bottom - (h - top - bottom) * (v - y0) / (y1 - y0)
 
-    out = [f'<svg width="{w}" height="{h}" class="chart"><text x="{m}" y="16" '
-           f'font-size="13">{_e(title)}: C [dm^3/(s bar)], centre {centre:.4f}, '
-           f'limits {lo:.4f} .. {hi:.4f} (3 sigma, sigma = MR/{D2})</text>']
-    for v, col, dash in ((centre, "#444", ""), (lo, "#d62728", "4"), (hi, "#d62728", "4")):
-        out.append(f'<line x1="{m}" x2="{w - m}" y1="{py(v):.1f}" y2="{py(v):.1f}" '
-                   f'stroke="{col}" stroke-dasharray="{dash}"/>')
-    out.append('<polyline fill="none" stroke="#999" points="' + " ".join(
-        f"{px(i):.1f},{py(v):.1f}" for i, v in enumerate(ys)) + '"/>')
+    if limits:
+        head = (f"centre {_c(centre * DM3_PER_S_BAR)}, limits {_c(lo * DM3_PER_S_BAR)} .. "
+                f"{_c(hi * DM3_PER_S_BAR)} (3 sigma, sigma = MR/{D2})")
+    elif n == 1:
+        head = f"one unload, {_c(centre * DM3_PER_S_BAR)}: no limits (a moving range needs two)"
+    else:
+        head = f"all {n} equal, {_c(centre * DM3_PER_S_BAR)}: no limits (no moving range)"
+    out = [f'<svg width="{w}" height="{h}" class="chart" role="img"><text x="{left}" '
+           f'y="16" font-size="13" class="chart-title">{_e(title)}: C [dm^3/(s bar)]</text>'
+           f'<text x="{left}" y="32" font-size="11">{_e(head)}</text>']
+    # the axes, the C axis's values and its name
+    out.append(f'<line class="axis" x1="{left}" x2="{left}" y1="{top}" y2="{h - bottom}" '
+               f'stroke="#444"/><line class="axis" x1="{left}" x2="{w - right}" '
+               f'y1="{h - bottom}" y2="{h - bottom}" stroke="#444"/>')
+    ticks = nice_ticks(y0, y1)
+    step = ticks[1] - ticks[0] if len(ticks) > 1 else (y1 - y0)
+    for v in ticks:
+        out.append(f'<line x1="{left - 4}" x2="{w - right}" y1="{py(v):.1f}" y2="{py(v):.1f}" '
+                   f'stroke="#eee"/><text class="y-tick" x="{left - 6}" y="{py(v) + 4:.1f}" '
+                   f'font-size="11" text-anchor="end">{_tick_text(v, step)}</text>')
+    mid = (top + h - bottom) / 2
+    out.append(f'<text class="y-label" x="14" y="{mid:.1f}" font-size="12" '
+               f'text-anchor="middle" transform="rotate(-90 14 {mid:.1f})">'
+               "C [dm^3/(s bar)]</text>")
+    if limits:
+        for v, col, dash, name in ((centre, "#444", "", "centre"), (lo, "#d62728", "4", "LCL"),
+                                   (hi, "#d62728", "4", "UCL")):
+            out.append(f'<line class="limit" x1="{left}" x2="{w - right}" y1="{py(v):.1f}" '
+                       f'y2="{py(v):.1f}" stroke="{col}" stroke-dasharray="{dash}"/>'
+                       f'<text x="{w - right}" y="{py(v) - 3:.1f}" font-size="10" '
+                       f'text-anchor="end" fill="{col}">{name}</text>')
+    if n > 1:
+        out.append('<polyline fill="none" stroke="#999" points="' + " ".join(
+            f"{px(i):.1f},{py(v):.1f}" for i, v in enumerate(ys)) + '"/>')
+    every = max(1, math.ceil(n / MAX_X_LABELS))
     for i, (v, p) in enumerate(zip(ys, points, strict=True)):
-        col = "#d62728" if (sigma > 0 and not lo <= v <= hi) else "#1f77b4"
-        out.append(f'<circle cx="{px(i):.1f}" cy="{py(v):.1f}" r="3" fill="{col}">'
-                   f"<title>{_e(p[2])}: {v:.4f}</title></circle>")
-    out.append(f'<text x="{m}" y="{h - 10}" font-size="11">unloads in time order '
-               f"(n = {n})</text></svg>")
+        col = "#d62728" if (limits and not lo <= v <= hi) else "#1f77b4"
+        out.append(f'<circle class="point" cx="{px(i):.1f}" cy="{py(v):.1f}" r="3" '
+                   f'fill="{col}"><title>{_e(p[2])}: {_c(v * DM3_PER_S_BAR)} dm^3/(s bar)'
+                   "</title></circle>")
+        if i % every == 0:
+            x, y = px(i), h - bottom + 12
+            out.append(f'<text class="x-label" x="{x:.1f}" y="{y}" font-size="10" '
+                       f'text-anchor="end" transform="rotate(-40 {x:.1f} {y})">'
+                       f"{_e(p[2].split(' ')[0][:18])}</text>")
+    out.append(f'<text x="{w - right}" y="{h - 6}" font-size="11" text-anchor="end">'
+               f"part of each unload, in time order (n = {n})</text></svg>")
     return "".join(out)
 
 
@@ -134,7 +208,7 @@ def _directions(part: dict[str, Any]) -> str:
     for k in ("discharge", "charge"):
         x = d.get(k)
         cells.append("-" if x is None else f"{_c(x['conductance'])} &plusmn; "
-                                           f"{_c(x['std'], 5)} (n {x['n']})")
+                                           f"{_s(x['std'])} (n {x['n']})")
     if "discharge" in d and "charge" in d:
         a, b = d["discharge"], d["charge"]
         diff = b["conductance"] - a["conductance"]
@@ -185,18 +259,25 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
         f"{len(parts)} part(s), {len(failing)} failing; written {now} by pneumatic_unload "
         f"{__version__}. C in dm^3/(s bar) (1 dm^3/(s bar) = 1e-8 m^3/(s Pa)); click an "
         "unload to see its pressure curve.</p>",
-        "<h2>Parts</h2><table id='parts'><tr><th class='l'>part</th><th class='l'>type</th>"
-        "<th>n</th><th>C mean</th><th>s(C)</th><th>s/mean</th><th>min</th><th>max</th>"
-        "<th>C discharge</th><th>C charge</th><th>charge - discharge</th>"
-        "<th class='l'>verdict</th><th class='l'>reason</th></tr>"]
+        "<h2>Parts</h2>"]
+    # a part's C by direction: columns only when some unload of the database is a charge
+    two_way = any(u.get("direction") == "charge" for u in unloads)
+    if not two_way:
+        h.append("<p>Every unload is a discharge (no charge measured): C by direction is "
+                 "not shown.</p>")
+    h.append("<table id='parts'><tr><th class='l'>part</th><th class='l'>type</th>"
+             "<th>n</th><th>C mean</th><th>s(C)</th><th>s/mean</th><th>min</th><th>max</th>"
+             + ("<th>C discharge</th><th>C charge</th><th>charge - discharge</th>"
+                if two_way else "")
+             + "<th class='l'>verdict</th><th class='l'>reason</th></tr>")
     for p in parts:
         rel = (f"{100 * p['conductance_std'] / p['conductance_mean']:.2f} %"
                if p["conductance_std"] is not None and p["conductance_mean"] else "-")
         h.append(f"<tr class='{_e(p['verdict'] or '')}'><td class='l'>{_e(p['part_id'])}</td>"
                  f"<td class='l'>{_e(p['part_type'])}</td><td>{p['n']}</td>"
-                 f"<td>{_c(p['conductance_mean'])}</td><td>{_c(p['conductance_std'])}</td>"
+                 f"<td>{_c(p['conductance_mean'])}</td><td>{_s(p['conductance_std'])}</td>"
                  f"<td>{rel}</td><td>{_c(p['conductance_min'])}</td>"
-                 f"<td>{_c(p['conductance_max'])}</td>{_directions(p)}"
+                 f"<td>{_c(p['conductance_max'])}</td>{_directions(p) if two_way else ''}"
                  f"<td class='l'>{_e(p['verdict'] or '-')}"
                  f"</td><td class='l'>{_e(p['verdict_reason'] or '')}</td></tr>")
     h.append("</table><h2>Control charts of C</h2>")
@@ -205,7 +286,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
         pts = [(u["t_start"] or 0.0, u["recommended_conductance"], f"{u['part_id']} "
                 f"{Path(u['path']).name}#{u['unload_index']}") for u in unloads
                if (u["part_type"] or "") == t and u["recommended_conductance"] is not None
-               and u["status"] in ("ok", "aborted_sse", "not_choked")]
+               and u["status"] in ESTIMATE_STATUSES]
         h.append(control_chart(pts, t or "parts without a type"))
     h.append("<h2>Repeatability</h2><table><tr><th class='l'>part type</th><th>parts</th>"
              "<th>pooled s(C)</th></tr>")
@@ -213,7 +294,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
         pool = pooled_repeatability([p for p in parts if (p["part_type"] or "") == t])
         h.append(f"<tr><td class='l'>{_e(t or '-')}</td><td>"
                  f"{sum(1 for p in parts if (p['part_type'] or '') == t)}</td>"
-                 f"<td>{_c(pool)}</td></tr>")
+                 f"<td>{_s(pool)}</td></tr>")
     h.append("</table><h2>Failures</h2><ul>")
     bad_files = [f for f in files if f["status"] != "ok"]
     for f in bad_files:
@@ -243,7 +324,7 @@ def html_report(db: str | Path, out: str | Path, title: str = "") -> dict[str, i
                  f"<td class='l'>{_e(u.get('direction') or 'discharge')}</td>"
                  f"<td class='l'>{_e(u['status'])}</td>"
                  f"<td>{_c(u['recommended_conductance'])}</td>"
-                 f"<td>{_c(u['recommended_std'], 5)}</td>"
+                 f"<td>{_s(u['recommended_std'])}</td>"
                  f"<td>{'-' if b is None else f'{b:.3f}'}</td>"
                  f"<td>{'-' if m is None else f'{m:.2f}'}</td>"
                  f"<td>{'-' if tau is None else f'{tau:.4f}'}</td>"

@@ -28,6 +28,8 @@ from typing import Any
 
 import sqlalchemy as sa
 
+from pneumatic_unload.testline.redact import redact
+
 #: Schema version written by this package [-] (SQLite's ``PRAGMA user_version``).
 SCHEMA_VERSION = 3
 #: Alembic revision of each schema version: REVISIONS[k - 1] is version k.
@@ -40,6 +42,17 @@ MIGRATIONS_DIR = Path(__file__).resolve().with_name("migrations")
 BUSY_TIMEOUT = 60.0
 #: How long a connection to a PostgreSQL server may take [s].
 CONNECT_TIMEOUT = 10
+#: Longest a statement may run on a PostgreSQL server, lock waits included [s]
+#: (``statement_timeout``, set for every connection): the server ends it with an error.
+STATEMENT_TIMEOUT = 30
+#: TCP keepalives of a PostgreSQL connection (libpq's ``keepalives_idle``,
+#: ``keepalives_interval``, ``keepalives_count``): probes after 10 s without traffic, every
+#: 5 s; 3 unanswered probes drop the connection (a host gone from the network: an error
+#: within 25 s), and data unacknowledged for :data:`TCP_USER_TIMEOUT` s drop it as well.
+KEEPALIVE_IDLE, KEEPALIVE_INTERVAL, KEEPALIVE_COUNT = 10, 5, 3
+#: Longest sent data may stay unacknowledged before the connection is dropped [s]
+#: (libpq's ``tcp_user_timeout``).
+TCP_USER_TIMEOUT = 25
 #: Key of the PostgreSQL advisory lock held while the schema is checked and migrated [-].
 SCHEMA_LOCK_KEY = 0x706E_756E_6C6F_6164  # "pnunload"
 #: URL schemes of a PostgreSQL server (all through psycopg 3).
@@ -131,8 +144,8 @@ def database_url(target: str | Path) -> sa.URL:
     try:
         url = sa.make_url(s)
     except (sa.exc.ArgumentError, ValueError) as exc:
-        raise ResultsDBError(f"results database {hide_password(s)}: not a database URL "
-                             f"({one_line(exc)})") from exc
+        raise ResultsDBError(redact(f"results database {s}: not a database URL "
+                                    f"({one_line(exc)})", s)) from exc
     if scheme == "sqlite":
         if not url.database or url.database == ":memory:":
             raise ResultsDBError(f"results database {s}: give the SQLite file's path "
@@ -149,20 +162,17 @@ def database_url(target: str | Path) -> sa.URL:
 
 
 def hide_password(target: str | Path) -> str:
-    """``target`` as shown in messages and reports: a URL's password as ***."""
-    s = str(target)
-    if "://" not in s:
-        return s
-    try:
-        return sa.make_url(s).render_as_string(hide_password=True)
-    except (sa.exc.ArgumentError, ValueError):
-        return s.split("://", 1)[0] + "://..."
+    """``target`` as shown in messages and reports: a URL's password as *** whatever the
+    URL's form (:func:`~.redact.redact`)."""
+    return redact(str(target), target)
 
 
 def make_engine(url: sa.URL) -> sa.Engine:
     """An engine of ``url`` (see :func:`database_url`): SQLite with the write lock taken up
     front for a connection with the execution option ``write`` (``BEGIN IMMEDIATE``),
-    foreign keys on and :data:`BUSY_TIMEOUT`; PostgreSQL with :data:`CONNECT_TIMEOUT`.
+    foreign keys on and :data:`BUSY_TIMEOUT`; PostgreSQL with :data:`CONNECT_TIMEOUT`,
+    :data:`STATEMENT_TIMEOUT` and TCP keepalives (:data:`KEEPALIVE_IDLE`,
+    :data:`TCP_USER_TIMEOUT`).
 
     Raises
     ------
@@ -172,11 +182,16 @@ def make_engine(url: sa.URL) -> sa.Engine:
     if url.get_backend_name() != "sqlite":
         try:
             return sa.create_engine(url, pool_pre_ping=True, connect_args={
-                "connect_timeout": CONNECT_TIMEOUT, "application_name": "pneumatic_unload"})
+                "connect_timeout": CONNECT_TIMEOUT, "application_name": "pneumatic_unload",
+                "keepalives": 1, "keepalives_idle": KEEPALIVE_IDLE,
+                "keepalives_interval": KEEPALIVE_INTERVAL,
+                "keepalives_count": KEEPALIVE_COUNT,
+                "tcp_user_timeout": TCP_USER_TIMEOUT * 1000,
+                "options": f"-c statement_timeout={STATEMENT_TIMEOUT * 1000}"})
         except ImportError as exc:
-            raise ResultsDBError(f"results database {url.render_as_string()}: the "
-                                 f"PostgreSQL driver is missing ({exc}): pip install "
-                                 "'psycopg[binary]'") from exc
+            shown = hide_password(url.render_as_string(hide_password=False))
+            raise ResultsDBError(f"results database {shown}: the PostgreSQL driver is "
+                                 f"missing ({exc}): pip install 'psycopg[binary]'") from exc
     eng = sa.create_engine(url, connect_args={"timeout": BUSY_TIMEOUT,
                                               "check_same_thread": False})
 

@@ -25,9 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pneumatic_unload.analysis.output import finite_or_none
-
-DM3_PER_S_BAR = 1e-8  # 1 dm^3/(s bar) in m^3/(s Pa)
+from pneumatic_unload.analysis.output import DM3_PER_S_BAR, finite_or_none
+from pneumatic_unload.estimation.types import ESTIMATE_STATUSES
 
 
 class SpecError(Exception):
@@ -64,7 +63,7 @@ class PartType:
         """('pass' | 'fail', reason) of one unload given as its result's JSON."""
         c = u.get("recommended_conductance")
         sd = u.get("recommended_std")
-        if u.get("status") not in ("ok", "aborted_sse", "not_choked") or c is None:
+        if u.get("status") not in ESTIMATE_STATUSES or c is None:
             return "fail", f"no C: {u.get('status')}: {u.get('status_text')}"
         why = []
         if not self.c_min <= c <= self.c_max:

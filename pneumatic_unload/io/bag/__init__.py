@@ -26,6 +26,8 @@ Modules, each importing only those above it:
 - :mod:`.schema`: topic and message-type constants, units, the typestore and ``.msg`` lookup.
 - :mod:`.records`: the MCAP record layout this package reads and writes itself.
 - :mod:`.cdr`: numpy CDR encoding/decoding of header-stamped pairs, timestamp checks.
+- :mod:`.inflate`: bounded chunk decompression (a cap per chunk and per file), also
+  installed in rosbags' MCAP reader's table of decompressors.
 - :mod:`.writer`: rosbags' rosbag2/MCAP writer extended (the only module using rosbags
   internals and subclassing its classes).
 - :mod:`.source`: opening a bag for reading (path checks, rosbags' Reader, error mapping).

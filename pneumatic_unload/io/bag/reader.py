@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import os
 import struct
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Collection, Iterator
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -26,6 +26,7 @@ from rosbags.rosbag2 import Reader
 
 from .cdr import NotFastDecodable, decode_stamped_pairs, gather
 from .errors import BagFormatError, TopicNotFoundError
+from .inflate import InflateBudget, inflate
 from .records import MSG_HEAD_SIZE, OP_CHUNK, OP_MESSAGE, OP_MESSAGE_INDEX, RECORD_HEAD
 from .schema import (
     CONFIG_METADATA_KEY,
@@ -64,20 +65,6 @@ __all__ = [
 ]
 
 
-def _decompressor(compression: str) -> Callable[[bytes, int], bytes]:
-    if compression == "":
-        return lambda data, _size: data
-    if compression == "zstd":
-        import zstandard
-
-        return lambda data, size: zstandard.ZstdDecompressor().decompress(data, size)
-    if compression == "lz4":
-        import lz4.frame
-
-        return lambda data, _size: lz4.frame.decompress(data)
-    raise NotFastDecodable
-
-
 def fast_chunk_pairs(
     mcap_file: Path, topic: str, msgtype: str
 ) -> Iterator[tuple[npt.NDArray[np.uint64], npt.NDArray[np.int64], npt.NDArray[np.float64],
@@ -86,7 +73,9 @@ def fast_chunk_pairs(
     messages were written. Whether the file can take this path (a summary with chunk indexes,
     message indexes that count every message of the topic) is checked before the first chunk
     is yielded (NotFastDecodable then, so that a caller can read the file another way);
-    NotFastDecodable later means a chunk that does not decode.
+    NotFastDecodable later means a chunk that does not decode. Decompression is bounded
+    (:mod:`.inflate`): a chunk that claims more than MAX_CHUNK_BYTES, expands past its
+    claim, or a file whose chunks exceed its budget raises BagFormatError.
     """
     from mcap.reader import make_reader
 
@@ -128,6 +117,7 @@ def fast_chunk_pairs(
                 counted += nbytes // 16
         if counted != expected:
             raise NotFastDecodable  # message indexes incomplete: let the generic path read it
+        budget = InflateBudget(mcap_file, size)
         for index, wanted in indexes:
             f.seek(index.chunk_start_offset)
             blob = f.read(index.chunk_length + index.message_index_length)
@@ -135,13 +125,16 @@ def fast_chunk_pairs(
             if op != OP_CHUNK:
                 raise NotFastDecodable
             _start, _end, usize, _crc, clen = struct.unpack_from("<QQQII", blob, 9)
-            compression = blob[41 : 41 + clen].decode()
+            compression = blob[41 : 41 + clen].decode(errors="replace")
+            if compression not in ("", "zstd", "lz4"):
+                raise NotFastDecodable
             (dsize,) = struct.unpack_from("<Q", blob, 41 + clen)
             dstart = 49 + clen
-            raw = blob[dstart : dstart + dsize]
-            records = _decompressor(compression)(raw, usize)
-            if len(records) != usize:
-                raise NotFastDecodable
+            raw = memoryview(blob)[dstart : dstart + dsize]
+            # bounded: the claimed size capped, the output never past it (see .inflate)
+            records = inflate(compression, raw, usize,
+                              f"{mcap_file}: the chunk at byte {index.chunk_start_offset}")
+            budget.take(usize)
             buf = np.frombuffer(records, np.uint8)
             for cid in wanted:
                 mpos = index.message_index_offsets[cid] - index.chunk_start_offset

@@ -11,6 +11,7 @@ import contextlib
 import os
 import shutil
 import struct
+import zlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +28,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from .errors import BagError, BagFormatError, BagNotFoundError
+from .inflate import InflateBudget, inflate
 from .records import MCAP_MAGIC, OP_CHUNK, OP_MESSAGE, RECORD_HEAD
 from .schema import CONFIG_METADATA_KEY, MSGTYPE_CONFIG, TOPIC_CONFIG, make_typestore
 from .summary import bag_summary
@@ -53,6 +55,9 @@ class RecoverReport:
     dropped_bytes: int
     skipped_messages: int  #: intact messages dropped (channel or schema record lost)
     kept_originals: tuple[Path, ...]  #: where the original files were moved
+    #: chunks dropped: failing their CRC, not decompressing, or claiming or expanding past
+    #: the limits of :mod:`.inflate`
+    dropped_chunks: int = 0
 
     @property
     def total(self) -> int:
@@ -71,6 +76,8 @@ class RecoverReport:
                     "record; its intact messages were kept)"
                 )
         lines = [head] + [f"  {t}: {n}" for t, n in sorted(self.messages.items())]
+        if self.dropped_chunks:
+            lines.append(f"  dropped {self.dropped_chunks} corrupt or oversized chunks")
         if self.skipped_messages:
             lines.append(f"  skipped {self.skipped_messages} messages without channel/schema")
         if self.kept_originals:
@@ -78,28 +85,26 @@ class RecoverReport:
         return "\n".join(lines)
 
 
-def _salvage_torn_chunk(tail: bytes) -> list[Any]:
-    """Intact Schema/Channel/Message records at the start of a torn uncompressed chunk.
+#: Opcodes of the records an MCAP chunk may hold (schema, channel, message).
+_CHUNK_OPS: Final = (0x03, 0x04, OP_MESSAGE)
 
-    ``tail`` holds the file bytes after the last complete record. A kill during a chunk
-    write leaves a prefix of the chunk; its complete inner records are still good.
-    """
+
+def _chunk_records(data: bytes) -> list[Any]:
+    """Schema/Channel/Message records of a chunk's uncompressed records, up to the first
+    torn record or one that a chunk may not hold (the rest of the chunk is not trusted:
+    zeros, for one, would be millions of empty records)."""
     out: list[Any] = []
-    if len(tail) < 41 or tail[0] != OP_CHUNK:
-        return out
-    (clen,) = struct.unpack_from("<I", tail, 37)
-    if clen != 0:  # compressed: a prefix cannot be decompressed
-        return out
-    data = tail[49:]
     pos = 0
     while pos + 9 <= len(data):
         op, length = RECORD_HEAD.unpack_from(data, pos)
         end = pos + 9 + length
-        if end > len(data):
+        if op not in _CHUNK_OPS or end > len(data):
             break
         body = data[pos + 9 : end]
         try:
-            if op == OP_MESSAGE and length >= 22:
+            if op == OP_MESSAGE:
+                if length < 22:
+                    break
                 cid, seq, log_time, pub_time = struct.unpack_from("<HIQQ", body, 0)
                 out.append(
                     McapMessage(
@@ -110,7 +115,7 @@ def _salvage_torn_chunk(tail: bytes) -> list[Any]:
                         data=body[22:],
                     )
                 )
-            elif op in (0x03, 0x04):  # schema, channel
+            else:  # schema, channel: mcap's own parser
                 sub = McapChunk(
                     compression="",
                     data=data[pos:end],
@@ -126,47 +131,84 @@ def _salvage_torn_chunk(tail: bytes) -> list[Any]:
     return out
 
 
-def _expand_record(record: Any) -> list[Any]:
-    """Schema/Channel/Message records of one complete stream record (chunks CRC-checked)."""
+def _salvage_torn_chunk(tail: bytes) -> list[Any]:
+    """Intact Schema/Channel/Message records at the start of a torn uncompressed chunk.
+
+    ``tail`` holds the file bytes after the last complete record. A kill during a chunk
+    write leaves a prefix of the chunk; its complete inner records are still good.
+    """
+    if len(tail) < 41 or tail[0] != OP_CHUNK:
+        return []
+    (clen,) = struct.unpack_from("<I", tail, 37)
+    if clen != 0:  # compressed: a prefix cannot be decompressed
+        return []
+    return _chunk_records(tail[49:])
+
+
+@dataclass
+class _Reading:
+    """What reading one file's records found besides the records."""
+
+    good_end: int = 0  #: end of the last complete record [byte]
+    bad_chunks: int = 0  #: chunks dropped: corrupt, or too large (see .inflate)
+
+
+def _expand_record(record: Any, budget: InflateBudget, state: _Reading, where: str
+                   ) -> list[Any]:
+    """Schema/Channel/Message records of one complete stream record (chunks decompressed
+    with a bounded output, see :mod:`.inflate`, and CRC-checked)."""
     if isinstance(record, McapChunk):
         try:
-            return list(breakup_chunk(record, validate_crc=True))
-        except Exception:
-            return []  # corrupt chunk: skip it
+            data = inflate(record.compression, record.data, record.uncompressed_size, where)
+        except BagFormatError:
+            state.bad_chunks += 1
+            return []  # corrupt chunk, or one claiming or expanding past the limit: skip it
+        budget.take(len(data))
+        if record.uncompressed_crc and zlib.crc32(data) != record.uncompressed_crc:
+            state.bad_chunks += 1
+            return []
+        return _chunk_records(data)
     if isinstance(record, McapSchema | McapChannel | McapMessage):
         return [record]
     return []
 
 
-def _mcap_records(mcap_file: Path) -> tuple[Iterator[Any], Callable[[], int]]:
-    """Intact inner records of a possibly truncated MCAP file, and a function giving the size
-    of the torn tail [bytes] (after the last complete record) once the iterator is exhausted.
+def _mcap_records(mcap_file: Path) -> tuple[Iterator[Any], _Reading, Callable[[], int]]:
+    """Intact inner records of a possibly truncated MCAP file, what was dropped, and a
+    function giving the size of the torn tail [bytes] (after the last complete record)
+    once the iterator is exhausted.
 
     mcap's stream reader yields only records whose full declared length was read, so every
-    record it yields is complete; the torn tail ends the iteration with an exception.
+    record it yields is complete; the torn tail ends the iteration with an exception. The
+    chunks' decompressed bytes together stay within the file's budget (:mod:`.inflate`:
+    BagFormatError past it).
     """
     size = mcap_file.stat().st_size
-    state = {"good_end": 0}
+    state = _Reading()
+    budget = InflateBudget(mcap_file, size)
 
     def gen() -> Iterator[Any]:
         with mcap_file.open("rb") as f:
             if f.read(8) != MCAP_MAGIC:
                 raise BagFormatError(f"{mcap_file} is not an MCAP file (bad magic)")
             f.seek(0)
-            state["good_end"] = 8
+            state.good_end = 8
             reader = StreamReader(f, emit_chunks=True, record_size_limit=1 << 32)
             try:
                 for record in reader.records:
                     end = f.tell()
-                    yield from _expand_record(record)
-                    state["good_end"] = end
+                    where = f"{mcap_file}: the chunk ending at byte {end}"
+                    yield from _expand_record(record, budget, state, where)
+                    state.good_end = end
+            except BagFormatError:
+                raise
             except Exception:  # torn tail: EndOfFile, struct.error, ... from the library
-                f.seek(state["good_end"])
+                f.seek(state.good_end)
                 yield from _salvage_torn_chunk(f.read())
                 return
-            state["good_end"] = size
+            state.good_end = size
 
-    return gen(), lambda: max(0, size - state["good_end"])
+    return gen(), state, lambda: max(0, size - state.good_end)
 
 
 def _rihs01(msgtype: str, msgdef: str, fallback: Typestore) -> str:
@@ -234,6 +276,7 @@ def recover(path: str | os.PathLike[str], *, keep_original: bool = True) -> Reco
     fallback = make_typestore()
     dropped = 0
     skipped = 0
+    bad_chunks = 0
     try:
         try:
             writer = Rosbag2Writer(tmp_root / bag.name, version=9,
@@ -245,7 +288,7 @@ def recover(path: str | os.PathLike[str], *, keep_original: bool = True) -> Reco
         config_text: str | None = None
         try:
             for mcap_file in mcaps:
-                records, tail = _mcap_records(mcap_file)
+                records, reading, tail = _mcap_records(mcap_file)
                 schemas: dict[int, McapSchema] = {}
                 channels: dict[int, Connection] = {}
                 for rec in records:
@@ -285,6 +328,7 @@ def recover(path: str | os.PathLike[str], *, keep_original: bool = True) -> Reco
                                 msg = fallback.deserialize_cdr(rec.data, MSGTYPE_CONFIG)
                                 config_text = msg.data
                 dropped += tail()
+                bad_chunks += reading.bad_chunks
             if config_text is not None:
                 writer.set_custom_data(CONFIG_METADATA_KEY, config_text)
             writer.close()
@@ -318,4 +362,4 @@ def recover(path: str | os.PathLike[str], *, keep_original: bool = True) -> Reco
     counts = _bag_is_readable(bag)
     if counts is None:  # pragma: no cover - would be a bug in the writer above
         raise BagFormatError(f"recovered bag {bag} does not open")
-    return RecoverReport(bag, counts, False, dropped, skipped, tuple(kept))
+    return RecoverReport(bag, counts, False, dropped, skipped, tuple(kept), bad_chunks)

@@ -28,7 +28,16 @@ from .errors import (
     TopicNotFoundError,
     WrongMessageTypeError,
 )
+from .inflate import (
+    ChunkSizeError,
+    check_compressed_file,
+    check_mcap_file,
+    install_rosbags_bounds,
+)
 from .schema import make_typestore
+
+# rosbags' MCAP reader decompresses through the bounded inflate (see .inflate)
+install_rosbags_bounds()
 
 __all__ = [
     "METADATA_LAYOUT",
@@ -49,6 +58,7 @@ class BagSource:
     reader_path: Path  # what rosbags' Reader opens (directory or single file)
     mcap_files: tuple[Path, ...]  # MCAP files for the numpy fast path (may be empty)
     custom_data: dict[str, str]
+    storage_files: tuple[Path, ...] = ()  # every storage file of the bag
 
 
 def resolve_bag(path: str | os.PathLike[str]) -> BagSource:
@@ -58,7 +68,7 @@ def resolve_bag(path: str | os.PathLike[str]) -> BagSource:
         raise BagNotFoundError(f"bag {bag} does not exist")
     if bag.is_file():
         if bag.suffix == ".mcap":
-            return BagSource(bag, bag, (bag,), {})
+            return BagSource(bag, bag, (bag,), {}, (bag,))
         if bag.suffix == ".db3":
             return BagSource(bag, bag, (), {})
         raise BagFormatError(f"{bag} is neither a rosbag2 directory nor an .mcap file")
@@ -75,7 +85,7 @@ def resolve_bag(path: str | os.PathLike[str]) -> BagSource:
     compression = str(info.get("compression_mode") or "").lower()
     custom = {str(k): str(v) for k, v in (info.get("custom_data") or {}).items()}
     fast = () if compression not in ("", "none") else tuple(f for f in files if f.suffix == ".mcap")
-    return BagSource(bag, bag, fast, custom)
+    return BagSource(bag, bag, fast, custom, tuple(files))
 
 
 #: What a rosbag2 ``metadata.yaml`` must hold (the keys rosbags' Reader and this package use).
@@ -223,10 +233,20 @@ def read_metadata(meta_path: Path) -> dict[str, Any]:
 
 @contextlib.contextmanager
 def open_reader(src: BagSource) -> Iterator[Reader]:
-    """rosbags' Reader on ``src``; every library error becomes a :class:`BagFormatError`."""
+    """rosbags' Reader on ``src``; every library error becomes a :class:`BagFormatError`.
+    The chunk sizes its MCAP files declare are checked first (:func:`.inflate.
+    check_mcap_file`; a compressed file's expansion: :func:`.inflate.
+    check_compressed_file`), and rosbags decompresses with a bounded output."""
+    for storage in src.storage_files:
+        if storage.suffix == ".mcap" and storage.is_file():
+            check_mcap_file(storage)
+        elif storage.suffix == ".zstd" and storage.is_file():
+            check_compressed_file(storage)
     try:
         reader = Reader(src.reader_path)
         reader.open()
+    except ChunkSizeError as err:
+        raise BagFormatError(f"cannot read bag {src.path}: {err}") from err
     except BagError:
         raise
     except Exception as err:
@@ -236,6 +256,8 @@ def open_reader(src: BagSource) -> Iterator[Reader]:
         ) from err
     try:
         yield reader
+    except ChunkSizeError as err:  # raised inside rosbags: name the bag
+        raise BagFormatError(f"cannot read bag {src.path}: {err}") from err
     except BagError:
         raise
     except Exception as err:

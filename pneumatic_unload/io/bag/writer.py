@@ -12,11 +12,13 @@ internals (``rosbags.rosbag2.storage_mcap.McapWriter`` and ``PendingChunk``,
 from __future__ import annotations
 
 import array
+import contextlib
 import os
 import struct
 import zlib
 from collections import defaultdict
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
 from typing import Any, ClassVar, Final
@@ -43,6 +45,23 @@ __all__ = [
 DEFAULT_CHUNK_SIZE: Final = 1 << 20
 
 
+@dataclass
+class Synced:
+    """What an MCAP writer had handed to the operating system at its last flush: the file's
+    length [bytes], its chunks, per-channel message counts and time span [ns]; and the
+    rosbag2 writer's message counts and time span [ns] then (a bag cut back there, after
+    a write that failed, is consistent: :meth:`Rosbag2Writer.rewind`)."""
+
+    end: int
+    chunks: int
+    channel_stats: dict[int, int] = field(default_factory=dict)
+    message_start_time: int = 2**63 - 1
+    message_end_time: int = 0
+    counts: dict[int, int] = field(default_factory=dict)
+    min_timestamp: int = 2**63 - 1
+    max_timestamp: int = 0
+
+
 class FlushingMcapWriter(McapWriter):
     """rosbags' MCAP storage writer with a byte-size chunk limit, flushes and block writes.
 
@@ -57,6 +76,8 @@ class FlushingMcapWriter(McapWriter):
         """Open ``<path>/<path.name>.mcap`` and write the MCAP header (see McapWriter)."""
         super().__init__(path, compression)
         self._index: dict[int, tuple[array.array, array.array]] = {}
+        #: The state at the last flush that reached the operating system (None: none yet).
+        self.synced: Synced | None = None
 
     def _add_index(self, cid: int) -> tuple[array.array, array.array]:
         entry = self._index.get(cid)
@@ -198,6 +219,38 @@ class FlushingMcapWriter(McapWriter):
         self.bio.flush()
         if fsync:
             os.fsync(self.bio.fileno())
+        self.synced = Synced(self.bio.tell(), len(self.chunks), dict(self.channel_stats),
+                             self.message_start_time, self.message_end_time)
+
+    def rewind(self) -> None:
+        """Cut the file back to its last flush (:attr:`synced`) after a write that failed
+        (a full disk: the buffered rest may be torn): the chunks, counts and time span
+        since are dropped, the pending chunk too, and the file is reopened at that length
+        (the old file object's unwritten buffer is discarded, never written later)."""
+        synced = self.synced
+        if synced is None:
+            raise BagWriteError(f"{self.path}: nothing was written before the failure")
+        new = self.path.open("r+b")  # opened before the old one is closed: another fd
+        old = self.bio
+        with contextlib.suppress(OSError, ValueError):
+            os.close(old.fileno())
+        with contextlib.suppress(OSError, ValueError):
+            old.close()  # its flush fails on the closed descriptor: the buffer is dropped
+        new.truncate(synced.end)
+        new.seek(synced.end)
+        self.bio = new
+        del self.chunks[synced.chunks:]
+        self.channel_stats = {cid: synced.channel_stats.get(cid, 0)
+                              for cid in self.channel_stats}
+        self.message_start_time = synced.message_start_time
+        self.message_end_time = synced.message_end_time
+        self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+        self._index = {}
+
+    def close_data_only(self) -> None:
+        """Close the file as it is, without a summary (its data section is what a reader
+        recovers: ``pneumatic-unload recover``)."""
+        self.bio.close()
 
 
 class Rosbag2Writer(Writer):
@@ -207,6 +260,39 @@ class Rosbag2Writer(Writer):
         **Writer.STORAGE_PLUGINS,
         StoragePlugin.MCAP: FlushingMcapWriter,
     }
+
+    def sync(self, *, fsync: bool = False) -> None:
+        """Flush the MCAP file (:meth:`FlushingMcapWriter.flush`) and note the message
+        counts and time span it holds then (:meth:`rewind` goes back there)."""
+        mcap = self.mcap
+        mcap.flush(fsync=fsync)
+        assert mcap.synced is not None
+        mcap.synced.counts = dict(self.counts)
+        mcap.synced.min_timestamp = self.min_timestamp
+        mcap.synced.max_timestamp = self.max_timestamp
+
+    def rewind(self) -> None:
+        """Back to the last :meth:`sync` after a write that failed: the file cut there
+        (:meth:`FlushingMcapWriter.rewind`), the counts and time span of the metadata
+        too, so that a bag closed now is consistent."""
+        mcap = self.mcap
+        mcap.rewind()
+        synced = mcap.synced
+        assert synced is not None
+        self.counts = {cid: synced.counts.get(cid, 0) for cid in self.counts}
+        self.min_timestamp, self.max_timestamp = synced.min_timestamp, synced.max_timestamp
+
+    def close_without_summary(self) -> None:
+        """Write ``metadata.yaml`` and close the MCAP file without its summary (a disk
+        with no room for it): the bag's data section and metadata are complete up to
+        the last :meth:`sync`."""
+        mcap = self.mcap
+
+        def close(_version: int, _metadata: str) -> None:
+            mcap.close_data_only()
+
+        mcap.close = close  # type: ignore[method-assign]
+        self.close()
 
     @property
     def mcap(self) -> FlushingMcapWriter:
