@@ -566,7 +566,7 @@ class VirialGas:
         return self.second_virial(t) * p / (R_UNIVERSAL * t)
 
     def pressure_at(self, departure: float, t: float) -> float:
-        """The pressure where |Z - 1| reaches ``departure`` [-] at t [K] [Pa absolute]
+        """The pressure where abs(Z - 1) reaches ``departure`` [-] at t [K] [Pa absolute]
         (inf where B is 0)."""
         b = abs(self.second_virial(t))
         return departure * R_UNIVERSAL * t / b if b > 0.0 else math.inf

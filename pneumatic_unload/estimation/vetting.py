@@ -40,7 +40,7 @@ NO_MODEL_C_TEXT = "no model-based C"
 REAL_GAS_TEXT = "real gas"
 #: Name of the real gas's line in a budget.
 REAL_GAS_TERM = "real gas (the model's ideal gas)"
-#: The compressibility's departure |Z - 1| at the tank's highest pressure above which a
+#: The compressibility's departure abs(Z - 1) at the tank's highest pressure above which a
 #: record is flagged [-]: the ideal gas's density, and with it the tank's capacity, is then
 #: off by more than 1 %.
 REAL_GAS_DEPARTURE = 0.01
@@ -79,7 +79,7 @@ def vet(r: UnloadResult, settings: EstimatorSettings) -> UnloadResult:
 def real_gas_departure(r: UnloadResult, settings: EstimatorSettings
                        ) -> tuple[float, float, str] | None:
     """The real gas at the tank's highest pressure (p10 of a discharge, the supply of a
-    charge) and T10: (Z - 1 [-], the pressure where |Z - 1| reaches
+    charge) and T10: (Z - 1 [-], the pressure where abs(Z - 1) reaches
     :data:`REAL_GAS_DEPARTURE` [Pa absolute], the gas's name); None when the gas is not
     one of :data:`~pneumatic_unload.physics.VIRIAL_GASES` or the state is not known."""
     gas = physics.virial_gas(settings.gas)
@@ -93,7 +93,7 @@ def real_gas_departure(r: UnloadResult, settings: EstimatorSettings
 def real_gas_term(c: float, departure: float, name: str) -> BudgetTerm:
     """The budget line of the real gas for C = c [m^3/(s Pa)], the compressibility's
     departure Z - 1 [-] at the tank's highest pressure: rectangular, of half-width
-    2 |Z - 1| C (to first order the tank's capacity d(rho)/dp moves by 2 (Z - 1) and the
+    2 abs(Z - 1) C (to first order the tank's capacity d(rho)/dp moves by 2 (Z - 1) and the
     choked flow by (Z - 1)/2 there, less further down the discharge)."""
     return BudgetTerm(REAL_GAS_TERM, "model", departure, math.nan, "-",
                       2.0 * abs(departure) * abs(c) / math.sqrt(3.0),
