@@ -29,8 +29,9 @@ def tank_5l():
 @pytest.mark.parametrize("cut_s", [0.03, 1.0, 2.8])
 def test_a_record_cut_after_its_opening_is_refused_with_what_to_pass(tank_5l, cut_s):
     """Its first 30, 1000 or 2800 rows after the opening cut: it gave 'ok' with C -0.2 %,
-    -4.5 % (final; p10 563 kPa) and 'not_choked' -15.6 %. Now one 'bad_data' result that
-    says the fall is under way at the first sample and names --start-time."""
+    -4.5 % (final; p10 563 kPa) and 'not_choked' (now 'ok_subsonic') -15.6 %. Now one
+    'bad_data' result that says the fall is under way at the first sample and names
+    --start-time."""
     cfg, sim = tank_5l
     k = int(np.searchsorted(sim.t, sim.t_open + cut_s))
     got = analyze(sim.t[k:], sim.measured[k:], settings_for(cfg))
@@ -118,3 +119,94 @@ def test_a_simulated_hydrogen_or_helium_record_gets_eq39_near_c(r_gas, gamma):
     assert r.status == "ok"
     assert r.conductance == pytest.approx(C_TRUE, rel=0.05)
     assert r.conductance_model == pytest.approx(C_TRUE, rel=0.01)
+
+
+def _with_line(real, factor: float):
+    """``final_budget`` with a model-form line of ``factor`` times C added (a fit whose
+    heat laws' spread leaves C undetermined: the published nitrogen blowdown's 3.2e7)."""
+    import math
+
+    from pneumatic_unload.uncertainty.budget import BudgetTerm, with_terms
+
+    def budget(res, settings, *, c, **kw):
+        return with_terms(real(res, settings, c=c, **kw), [BudgetTerm(
+            "model form (heat laws)", "model", math.nan, math.nan, "", factor * c)])
+    return budget
+
+
+def test_a_standard_uncertainty_larger_than_c_is_no_result(tank_5l, monkeypatch):
+    """A final fit whose budget's model-form line is 3.2e7 times C: it was 'ok' with that
+    C to report; now no result ('bad_data', nothing to report, exit 1), saying why."""
+    from pneumatic_unload.analysis.output import exit_status, gives_c
+    from pneumatic_unload.estimation import merge_final, recommended, refine
+
+    cfg, sim = tank_5l
+    monkeypatch.setattr(refine, "final_budget", _with_line(refine.final_budget, 3.2e7))
+    got = analyze(sim.t, sim.measured, settings_for(cfg))
+    cross, fin = got
+    assert cross.status == "ok" and fin.final
+    assert fin.status == "bad_data" and not gives_c(fin)
+    assert fin.status_text.startswith("no result: the standard uncertainty of C")
+    assert "3.2e+07 times C" in fin.status_text and "model form" in fin.status_text
+    assert np.isnan(recommended(fin)["conductance"])
+    assert exit_status(merge_final(got), None) == 1
+
+
+def test_an_uncertainty_not_known_is_no_result(tank_5l, monkeypatch):
+    """A model inversion that gives C without its uncertainty: it was 'ok' (the C printed
+    with 'uncertainty not known'); now no result."""
+    from pneumatic_unload.estimation import crossing
+
+    cfg, sim = tank_5l
+    real = crossing.crossing_inversion
+    monkeypatch.setattr(crossing, "crossing_inversion", lambda *a, **k: (
+        real(*a, **k)[0], float("nan"), "eq39+model-inversion(test)", float("nan")))
+    st = dataclasses.replace(settings_for(cfg), curve_fit=False)
+    (r,) = analyze(sim.t, sim.measured, st)
+    assert r.status == "bad_data" and "is not known, for C = " in r.status_text
+
+
+def test_a_missing_model_c_says_why(tank_5l, monkeypatch):
+    """A model inversion that finds no C (as a 700 bar helium blowdown's did): the result
+    was 'ok' with no model C and no reason, REPORT C eq 39's; now its text says that there
+    is no model-based C, why, and that the C to report is eq 39's."""
+    from pneumatic_unload.estimation import crossing, recommended
+
+    cfg, sim = tank_5l
+    monkeypatch.setattr(crossing, "crossing_inversion", lambda *a, **k: (
+        float("nan"), float("nan"), "eq39+model-inversion(test)", float("nan")))
+    got = analyze(sim.t, sim.measured, settings_for(cfg))
+    assert got and all(np.isnan(r.conductance_model) for r in got)
+    for r in got:
+        assert "no model-based C (eq39+model-inversion(test) gave C = nan" in r.status_text
+        assert "the C to report is eq 39's" in r.status_text
+        assert recommended(r)["source"].startswith("eq 39")
+
+
+@pytest.mark.parametrize("gas,r_gas,gamma,p10,flagged", [
+    ("nitrogen", 296.8, 1.4, 1.5e7, True), ("helium", 2077.1, 1.667, 5e7, True),
+    ("air", 287.05, 1.4, 7e5, False)])
+def test_a_record_where_the_ideal_gas_departs_is_flagged(gas, r_gas, gamma, p10, flagged):
+    """An 89 L tank through a 6.35 mm orifice: nitrogen from 150 bar (Z 0.97), helium from
+    500 bar (Z 1.25) were 'ok' with nothing said; now the status text says so and the
+    budgets carry a real-gas line of 2 |Z - 1| / sqrt(3); air from 7 bar (Z 0.998) is not
+    flagged."""
+    from pneumatic_unload import physics
+    from pneumatic_unload.estimation.vetting import REAL_GAS_TERM
+
+    c = physics.orifice_conductance(6.35e-3)
+    cfg = RigConfig(volume=0.089, conductance=c, initial_pressure=p10, noise_std=1e-4 * p10,
+                    rate=100.0, pre_time=1.0, seed=3, gas_constant=r_gas, gamma=gamma)
+    sim = simulate(cfg)
+    got = analyze(sim.t, sim.measured, settings_for(cfg))
+    assert got and all(r.status == "ok" for r in got)
+    z1 = physics.VIRIAL_GASES[gas].departure(p10, cfg.initial_temperature)
+    for r in got:
+        terms = [t for t in r.extra["budget"]["terms"] if t["name"] == REAL_GAS_TERM]
+        assert ("real gas: Z = " in r.status_text) is flagged
+        assert len(terms) == int(flagged)
+        if flagged:
+            assert f"Z = {1 + z1:.3f} for {gas}" in r.status_text
+            assert terms[0]["std"] == pytest.approx(
+                2 * abs(z1) * r.conductance_model / 3 ** 0.5, rel=1e-9)
+            assert r.conductance_model_std >= terms[0]["std"]

@@ -84,7 +84,7 @@ UNLOAD_JSON_KEYS: dict[str, str] = {
     "model_inadequate": "why the model does not describe the record, or '' when it does",
     "recommended": "the C to report: conductance, std, expanded (k = 2) [m^3/(s Pa)], "
                    "coverage_factor and its source (model-based C, or eq 39's when there "
-                   "is none)",
+                   "is none; null for a result that gives no C, status 'bad_data')",
 }
 
 

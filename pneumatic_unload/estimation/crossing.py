@@ -241,6 +241,10 @@ def crossing_estimate(plan: CrossingPlan, tau: float, tau_std: float) -> Crossin
             atmosphere_measured=s.atmosphere is None, wall_std=wall_std).to_dict()
         extra["budget"] = bm
         c_model_std = combined_std_of(bm)
+    else:  # said in the result's status text (vetting.vet)
+        extra["model_c_missing"] = (
+            f"{method} gave C = {c_model:.3g} +- {c_model_std:.3g} m^3/(s Pa) at tau_exp = "
+            f"{tau:.6g} s, p10 = {p10:.6g} Pa, p* = {p_star:.6g} Pa")
     return CrossingEstimate(None, c39, c39_std, c_isen, c_model, c_model_std, method, extra)
 
 

@@ -42,6 +42,7 @@ from pneumatic_unload.config.estimator import EstimationError, EstimatorSettings
 from pneumatic_unload.estimation.crossing import HEAT_NOT_SEEN, crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.refine import refine_with_curve_fit
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult, end_fields
+from pneumatic_unload.estimation.vetting import vet
 from pneumatic_unload.uncertainty.budget import MODEL_FORM_TERM, BudgetTerm, with_terms
 
 #: Fewest samples from the opening on [-].
@@ -322,6 +323,8 @@ def analyze_from_start(t: ArrayLike, p: ArrayLike, settings: EstimatorSettings, 
                 extra["budget"] = with_terms(extra["budget"], more)
                 std = extra["budget"]["combined_std"]
             out.append(dataclasses.replace(final, extra=extra, conductance_model_std=std))
+    for r in out:
+        vet(r, s)
     return out
 
 

@@ -35,6 +35,7 @@ from pneumatic_unload.estimation.state import (
     EstimatorState,
 )
 from pneumatic_unload.estimation.types import FloatArray, UnloadResult
+from pneumatic_unload.estimation.vetting import vet
 
 #: Largest stamp magnitude accepted [s]: a stamp must fit ROS's int64 nanoseconds (year
 #: 2262); larger ones (a clock in ns or us read as s, garbage) are ignored with a diagnostic.
@@ -402,7 +403,10 @@ class StreamingEstimator:
         return out
 
     def _emit(self, out: list[UnloadResult]) -> None:
-        """Results just completed: kept in :attr:`results`, handed to :attr:`on_result`."""
+        """Results just completed: vetted (:func:`~.vetting.vet`), kept in
+        :attr:`results`, handed to :attr:`on_result`."""
+        for r in out:
+            vet(r, self._st.settings)
         self.results += out
         if self.on_result is not None:
             for r in out:

@@ -35,6 +35,7 @@ from pneumatic_unload.estimation.reduction import fit_window, reduce_due, reduce
 from pneumatic_unload.estimation.refine import final_curve_fit
 from pneumatic_unload.estimation.state import EstimatorState
 from pneumatic_unload.estimation.types import STUCK_TEXT, FloatArray, UnloadResult
+from pneumatic_unload.estimation.vetting import vet
 from pneumatic_unload.fit.reduced import Reducer
 
 
@@ -103,6 +104,7 @@ class FinalFit:
                               temperature=self.temperature)
         if fin is not None:
             fin.i_complete, fin.t_complete = self.i_complete, self.t_complete
+            vet(fin, self.settings)
         return fin
 
 

@@ -50,6 +50,9 @@ STATUS_ALIASES: dict[str, str] = {"not_choked": "ok_subsonic"}
 
 #: Statuses of a result that carries a C (see :func:`recommended`).
 ESTIMATE_STATUSES = ("ok", "aborted_sse", "ok_subsonic")
+#: The status of a result that gives no C (unusable data, or a C the record does not
+#: determine: :mod:`.vetting`); its status text says why.
+NO_RESULT_STATUS = "bad_data"
 
 
 def canonical_status(word: str) -> str:
@@ -268,7 +271,11 @@ def end_fields(settings: Any, end: float) -> dict[str, Any]:
 def recommended(r: UnloadResult) -> dict[str, Any]:
     """The one C to report for a result, with its combined and expanded (k = 2)
     uncertainty [m^3/(s Pa)] and where it comes from: the model-based C (curve fit or
-    crossing inversion) when known, else eq 39's (biased by design: said so)."""
+    crossing inversion) when known, else eq 39's (biased by design: said so); none (NaN)
+    for a result that gives no C (:data:`NO_RESULT_STATUS`)."""
+    if r.status == NO_RESULT_STATUS:
+        return {"conductance": math.nan, "std": math.nan, "expanded": math.nan,
+                "coverage_factor": 2.0, "source": "no result (see the status text)"}
     if math.isfinite(r.conductance_model):
         source = "model-based C, full-curve fit" if r.final and not (
             r.extra or {}).get("curve_fit_error") else \
