@@ -40,6 +40,15 @@ that the receiving thread keeps up with the message rate. The final curve fit of
 unload (tens of ms) is taken off the stream as a job (``defer_final_fit``) and run by the
 worker, so it never blocks the reception of samples (none is dropped at 10 kHz with the
 EventsExecutor) and gives the result the offline analysis gives.
+
+Results database (``results_db``): each result is written by a thread of its own
+(:class:`~pneumatic_unload.testline.live.ResultWriter`: a database that hangs stalls
+neither the callbacks nor the fits), a crossing estimate at once (its final estimate
+replaces it: a node killed before its final fit leaves the crossing's numbers).
+Shutdown (SIGINT, SIGTERM, an error that ends the node): the queued samples are fed, an
+unload under way is closed as at the end of a record (its final fit on the tail so far;
+before p*, an 'aborted' result), published and written, marked as closed at shutdown;
+what is not done within :data:`SHUTDOWN_WAIT` s is logged with its numbers.
 """
 
 from __future__ import annotations
