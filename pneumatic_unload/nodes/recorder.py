@@ -82,7 +82,7 @@ from pneumatic_unload.io.bag import (
     cdr_header_stamp_ns,
     make_typestore,
 )
-from pneumatic_unload.io.bag.recorder import DISK_FULL_ERRNOS, BagDiskFullError
+from pneumatic_unload.io.bag.errors import DISK_FULL_ERRNOS, BagDiskFullError
 
 TOPIC_DIAGNOSTICS = "/diagnostics"
 MSGTYPE_DIAGNOSTICS = "diagnostic_msgs/msg/DiagnosticArray"
