@@ -178,9 +178,13 @@ def test_a_stop_after_the_crossing_leaves_the_unload_in_the_results_database(
     if stop == "kill":
         assert "crossing estimate (the final curve fit follows" in text
     else:
-        assert "closed at the estimator's shutdown" in text
-        assert "stopping with an unload under way (tail)" in est.output()
-        assert row.get("final", True) is True
+        # its final fit done within the shutdown's bound (a loaded machine: not done, the
+        # crossing's numbers then, said so in the row and the log)
+        log = est.output()
+        assert "stopping with an unload under way (tail)" in log
+        if "closed at the estimator's shutdown" not in text:
+            assert "the final curve fit was not done at the estimator's shutdown" in text
+            assert "stopping: the final fit of unload 0 was not done" in log
     c = [v for k, v in rows[0].items() if k == "recommended_conductance"]
     assert c and math.isfinite(c[0]) and c[0] == pytest.approx(C_TRUE, rel=0.1)
 
@@ -230,11 +234,13 @@ def test_a_vented_start_two_publishers_and_a_clock_step_are_said_and_ridden_out(
     # two publishers named as the cause of the stamps going backwards
     assert "2 publishers on /tank/pressure" in text and "two sources interleave" in text
     assert "2 publishers on /tank/pressure" in log
+    assert log.count("out of order") < 20  # 1 000 of them: logged once a second
     # the clock step: one warning and a re-sync; both unloads measured
     assert [m.unload_index for m in got] == [0, 1] and all(m.status == 0 for m in got)
     for m in got:
         assert m.conductance_model == pytest.approx(C_TRUE, rel=0.05)
-    assert text.count("clock stepped back") >= 1 and "re-synced on the stepped clock" in log
+    # (in the log: /diagnostics keeps the last 10 of a burst of warnings)
+    assert log.count("clock stepped back 3600") == 1 and "re-synced on the stepped clock" in log
     stats = json.loads(est.wait_output(r"stats (\{.*\})", 10.0).group(1))
     # before: every sample after the step rejected (4 000 here, 6 002 in the issue); now the
     # 1 000 samples of the second publisher, the step and the vented start

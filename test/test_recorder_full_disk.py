@@ -31,7 +31,8 @@ LIMIT = 200_000
 _WRITER = textwrap.dedent("""
     import json, resource, signal, sys
     import numpy as np
-    from pneumatic_unload.io.bag.recorder import BagDiskFullError, BagRecorder
+    from pneumatic_unload.io.bag.errors import BagDiskFullError
+    from pneumatic_unload.io.bag.recorder import BagRecorder
     from pneumatic_unload.io.bag import writer
     out, limit, summary_fits = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "1"
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)

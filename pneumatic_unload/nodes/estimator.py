@@ -40,6 +40,15 @@ that the receiving thread keeps up with the message rate. The final curve fit of
 unload (tens of ms) is taken off the stream as a job (``defer_final_fit``) and run by the
 worker, so it never blocks the reception of samples (none is dropped at 10 kHz with the
 EventsExecutor) and gives the result the offline analysis gives.
+
+Results database (``results_db``): each result is written by a thread of its own
+(:class:`~pneumatic_unload.testline.live.ResultWriter`: a database that hangs stalls
+neither the callbacks nor the fits), a crossing estimate at once (its final estimate
+replaces it: a node killed before its final fit leaves the crossing's numbers).
+Shutdown (SIGINT, SIGTERM, an error that ends the node): the queued samples are fed, an
+unload under way is closed as at the end of a record (its final fit on the tail so far;
+before p*, an 'aborted' result), published and written, marked as closed at shutdown;
+what is not done within :data:`SHUTDOWN_WAIT` s is logged with its numbers.
 """
 
 from __future__ import annotations
@@ -48,6 +57,7 @@ import dataclasses
 import gc
 import json
 import math
+import re
 import sys
 import threading
 import time
@@ -100,12 +110,18 @@ TEMPERATURE_WAIT = 2.0
 #: what is not done by then is logged with its numbers. Within the 5 s ros2 launch gives a
 #: node between SIGINT/SIGTERM and SIGKILL on two cores shared with a bench.
 SHUTDOWN_WAIT = 4.0
-#: The same warning's text start is logged at most once per this interval [s] (every one
-#: goes on /diagnostics); another warning is logged at once.
+#: A warning of one kind (its text's start, numbers aside) is logged at most once per this
+#: interval [s] (every one goes on /diagnostics); another kind is logged at once.
 LOG_THROTTLE = 1.0
+#: Digits of a message (its kind, for LOG_THROTTLE, is its text without them).
+_DIGITS = re.compile(r"\d+")
 #: Note of a crossing estimate in the results database when a final estimate (its curve
 #: fit) follows and replaces it: a node that dies before leaves the crossing's numbers.
 CROSSING_NOTE = "crossing estimate (the final curve fit follows and replaces it)"
+#: Note of a crossing estimate in the results database whose final fit was not done when
+#: the node stopped (SHUTDOWN_WAIT).
+UNFITTED_NOTE = ("crossing estimate: the final curve fit was not done at the estimator's "
+                 "shutdown")
 #: Note of an estimate in the results database whose unload was closed at the node's
 #: shutdown (its tail, or its fall before p*, cut there).
 STOPPED_NOTE = "closed at the estimator's shutdown (SIGINT/SIGTERM): the record ends there"
@@ -183,6 +199,8 @@ class EstimatorNode(Node):
         self._pub_count_at = -math.inf
         #: The node is stopping with an unload under way (closed there: STOPPED_NOTE).
         self._stopping = False
+        #: The final fit the worker runs now (None: none).
+        self._fitting: FinalFit | OpeningFinal | None = None
         self._goal_part = ""  # the part id of the running ~/measure goal
         self._unload_parts: dict[int, str] = {}  # unload index -> a goal's part id
         if not common.stopping():  # a node stopped during its start does not warm up
@@ -610,6 +628,7 @@ class EstimatorNode(Node):
                 self._wake.clear()
                 continue
             job, arrived = self._fits.popleft()  # with the readings of its span
+            self._fitting = job
             try:
                 cpu = time.thread_time()
                 r = job.run()
@@ -618,6 +637,8 @@ class EstimatorNode(Node):
                 self._diagnose(_ERROR, f"final curve fit of unload {job.crossing.index} "
                                        f"failed: {type(exc).__name__}: {exc}")
                 continue
+            finally:
+                self._fitting = None
             if r is not None:
                 self._publish_result(r, arrived)
 
@@ -741,7 +762,7 @@ class EstimatorNode(Node):
         else:
             # a repeated warning (one per sample) at most once a LOG_THROTTLE, another
             # at once (rclpy's throttle is one for the call site: it hid a second kind)
-            key, now = message[:32], time.monotonic()
+            key, now = _DIGITS.sub("#", message)[:48], time.monotonic()
             if now - self._logged.get(key, -math.inf) >= LOG_THROTTLE:
                 if len(self._logged) > 256:
                     self._logged.clear()
@@ -934,11 +955,18 @@ class EstimatorNode(Node):
         self._wake.set()
         self._worker.join(timeout=max(deadline - time.monotonic(), 0.0))
         if self._worker.is_alive():
-            for job, _arrived in list(self._fits):
+            fitting = self._fitting
+            for job in ([] if fitting is None else [fitting]) + [j for j, _a in self._fits]:
                 r = job.crossing
                 self.get_logger().error(
                     f"stopping: the final fit of unload {r.index} was not done within "
                     f"{SHUTDOWN_WAIT:g} s; its crossing estimate stands: {self._numbers(r)}")
+                if self._writer is not None:  # the crossing's row, marked as such
+                    part = self._unload_parts.pop(r.index, "") or self._goal_part \
+                        or self._p("part_id")
+                    self._writer.submit(PendingWrite(dataclasses.replace(
+                        r, status_text=f"{r.status_text}; {UNFITTED_NOTE}"),
+                        self._settings, part))
         if self._writer is not None:
             for w in self._writer.close(max(deadline - time.monotonic(), 0.5)):
                 self.get_logger().error(

@@ -44,7 +44,11 @@ not a JSON object is reported and not stored.
 Shutdown: SIGINT or SIGTERM ends the node with exit code 0 and a complete bag
 (``metadata.yaml`` written), at any moment, its start included (stopped before it made its
 bag, it leaves none). A bad message or a bad topic never ends the node: it is logged
-and counted. Invalid parameters end it at start with exit code 2 and the reason.
+and counted. Invalid parameters end it at start with exit code 2 and the reason. A disk
+with no room left (ENOSPC, EDQUOT, or EFBIG at a file-size limit) stops the recording at
+the first write that fails: the bag is completed with what reached the disk at its last
+flush (``metadata.yaml`` written; when even the MCAP summary does not fit, the line says
+to run ``pneumatic-unload recover``) and the node exits 1 with one line that says so.
 """
 
 from __future__ import annotations
@@ -78,7 +82,7 @@ from pneumatic_unload.io.bag import (
     cdr_header_stamp_ns,
     make_typestore,
 )
-from pneumatic_unload.io.bag.recorder import DISK_FULL_ERRNOS, BagDiskFullError
+from pneumatic_unload.io.bag.errors import DISK_FULL_ERRNOS, BagDiskFullError
 
 TOPIC_DIAGNOSTICS = "/diagnostics"
 MSGTYPE_DIAGNOSTICS = "diagnostic_msgs/msg/DiagnosticArray"

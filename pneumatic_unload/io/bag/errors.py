@@ -7,11 +7,14 @@ TypeError) so that generic handlers keep working.
 
 from __future__ import annotations
 
+import errno
 from pathlib import Path
 from typing import Final
 
 __all__ = [
+    "DISK_FULL_ERRNOS",
     "RECOVER_HINT",
+    "BagDiskFullError",
     "BagError",
     "BagFormatError",
     "BagNotFoundError",
@@ -86,3 +89,13 @@ class WrongMessageTypeError(BagError, TypeError):
         super().__init__(
             f"topic {topic!r} in bag {path} has type {', '.join(found)}, expected {expected}"
         )
+
+
+#: OS errors that mean no more room: the disk or the quota is full, or the file reached
+#: the process's file-size limit (RLIMIT_FSIZE).
+DISK_FULL_ERRNOS: Final = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+
+
+class BagDiskFullError(BagWriteError):
+    """The bag cannot grow (:data:`DISK_FULL_ERRNOS`): its writer stopped writing; closing
+    it completes the bag with what reached the disk at its last flush."""

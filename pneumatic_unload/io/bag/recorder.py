@@ -12,13 +12,11 @@ nanoseconds.
 
 from __future__ import annotations
 
-import contextlib
-import errno
 import json
 import os
 import threading
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Literal
@@ -52,17 +50,7 @@ from .schema import (
 )
 from .writer import DEFAULT_CHUNK_SIZE, Rosbag2Writer
 
-__all__ = ["DISK_FULL_ERRNOS", "BagDiskFullError", "BagRecorder"]
-
-#: OS errors that mean no more room: the disk or the quota is full, or the file reached
-#: the process's file-size limit (RLIMIT_FSIZE).
-DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
-
-
-class BagDiskFullError(BagWriteError):
-    """The bag cannot grow (:data:`DISK_FULL_ERRNOS`): the recorder stopped writing; its
-    :meth:`BagRecorder.close` completes the bag with what reached the disk at the last
-    flush."""
+__all__ = ["BagRecorder"]
 
 
 class BagRecorder:
@@ -131,15 +119,13 @@ class BagRecorder:
         except (WriterError, OSError) as err:
             raise BagWriteError(f"cannot create bag {self.path}: {err}") from err
         self._writer.mcap.chunk_size = int(chunk_size)
-        self._full: str | None = None  # why the bag stopped growing (a full disk)
         #: False once a bag that ran out of room was closed without its MCAP summary
         #: (``metadata.yaml`` alone: ``pneumatic-unload recover`` makes it readable).
         self.summary_written = True
         try:
             self._writer.sync()  # MCAP magic and header are on disk from the start
-        except OSError as err:
-            cls = BagDiskFullError if err.errno in DISK_FULL_ERRNOS else BagWriteError
-            raise cls(f"cannot create bag {self.path}: {err}") from err
+        except OSError as err:  # a full disk's: BagDiskFullError
+            raise BagWriteError(f"cannot create bag {self.path}: {err}") from err
         if self._config_text is not None:
             self._writer.set_custom_data(CONFIG_METADATA_KEY, self._config_text)
         self._config_pending = self._config_text is not None
@@ -212,30 +198,8 @@ class BagRecorder:
             self._writer.sync(fsync=self.fsync)
             self._last_flush = now
 
-    @contextlib.contextmanager
-    def _writing(self) -> Iterator[None]:
-        """The lock, and a write that runs out of room (:data:`DISK_FULL_ERRNOS`) stops the
-        bag: this and every later write raise :class:`BagDiskFullError`."""
-        with self._lock:
-            if self._full is not None:
-                raise BagDiskFullError(self._full)
-            try:
-                yield
-            except OSError as err:
-                if err.errno not in DISK_FULL_ERRNOS:
-                    raise
-                self._full = (f"bag {self.path}: {err.strerror or err} (errno "
-                              f"{errno.errorcode.get(err.errno or 0, err.errno)}): no more "
-                              "room, recording stopped")
-                raise BagDiskFullError(self._full) from None
-
-    @property
-    def disk_full(self) -> str | None:
-        """Why the bag stopped growing (a full disk or file-size limit), or None."""
-        return self._full
-
     def _write(self, topic: str, msgtype: str, log_time: int, data: bytes | memoryview) -> None:
-        with self._writing():
+        with self._lock:
             self._before_write(log_time)
             self._writer.write(self._connection(topic, msgtype), log_time, data)
             self._after_write()
@@ -319,7 +283,7 @@ class BagRecorder:
         stamp = (
             None if config_stamp_ns is None else check_t_ns(config_stamp_ns, "config_stamp_ns")
         )
-        with self._writing():
+        with self._lock:
             self._check_open()
             self._config_text = text
             self._writer.set_custom_data(CONFIG_METADATA_KEY, text)
@@ -457,7 +421,7 @@ class BagRecorder:
         )
         if logs_u.size == 0:
             return
-        with self._writing():
+        with self._lock:
             self._before_write(int(logs_u.min()))
             self._writer.write_block(self._connection(topic, msgtype), logs_u, payloads)
             self._after_write()
@@ -517,7 +481,7 @@ class BagRecorder:
 
     def flush(self) -> None:
         """Write the pending chunk now (a live node may call this from an idle timer)."""
-        with self._writing():
+        with self._lock:
             self._check_open()
             self._writer.sync(fsync=self.fsync)
             self._last_flush = time.monotonic()
@@ -530,8 +494,13 @@ class BagRecorder:
         with self._lock:
             if self._closed:
                 return
-            if self._full is not None:
-                self._close_full()
+            if self._writer.full is not None:  # cut back to the last flush, completed
+                self._closed = True
+                try:
+                    self.summary_written = self._writer.close_cut_back()
+                except (WriterError, OSError) as err:
+                    raise BagWriteError(f"cannot close bag {self.path} after it ran out "
+                                        f"of room: {err}") from err
                 return
             try:
                 if self._config_pending:
@@ -545,23 +514,3 @@ class BagRecorder:
                 raise BagWriteError(f"cannot close bag {self.path}: {err}") from err
             finally:
                 self._closed = True
-
-    def _close_full(self) -> None:
-        """:meth:`close` of a bag that ran out of room: cut back to the last flush, then
-        the MCAP summary and ``metadata.yaml``; when the summary does not fit either, cut
-        back again and write ``metadata.yaml`` alone (the data section then is what
-        ``pneumatic-unload recover`` reads)."""
-        self._closed = True
-        writer = self._writer
-        try:
-            writer.rewind()
-            try:
-                writer.close()
-                return
-            except (WriterError, OSError):
-                writer.rewind()
-            self.summary_written = False
-            writer.close_without_summary()
-        except (WriterError, OSError) as err:
-            raise BagWriteError(f"cannot close bag {self.path} after it ran out of room: "
-                                f"{err}") from err

@@ -13,11 +13,12 @@ from __future__ import annotations
 
 import array
 import contextlib
+import errno
 import os
 import struct
 import zlib
 from collections import defaultdict
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
@@ -26,11 +27,11 @@ from typing import Any, ClassVar, Final
 import numpy as np
 import numpy.typing as npt
 from rosbags.interfaces import Connection
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.rosbag2.metadata import parse_qos
 from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
 
-from .errors import BagWriteError
+from .errors import DISK_FULL_ERRNOS, BagDiskFullError, BagWriteError
 from .records import MSG_HEAD, OP_CHUNK, OP_MESSAGE, OP_MESSAGE_INDEX, RECORD_HEAD
 
 __all__ = [
@@ -254,7 +255,34 @@ class FlushingMcapWriter(McapWriter):
 
 
 class Rosbag2Writer(Writer):
-    """rosbags' rosbag2 writer using :class:`FlushingMcapWriter` for MCAP storage."""
+    """rosbags' rosbag2 writer using :class:`FlushingMcapWriter` for MCAP storage; a write
+    or flush that runs out of room (:data:`~.errors.DISK_FULL_ERRNOS`) stops it: that one
+    and every later one raise :class:`~.errors.BagDiskFullError` (:attr:`full` says why),
+    and :meth:`close_cut_back` completes the bag with what reached the disk."""
+
+    #: Why the bag stopped growing (a full disk, quota or file-size limit), or None.
+    full: str | None = None
+
+    @contextlib.contextmanager
+    def _room(self) -> Iterator[None]:
+        """Run a write; one that runs out of room stops the bag (see the class doc)."""
+        if self.full is not None:
+            raise BagDiskFullError(self.full)
+        try:
+            yield
+        except OSError as err:
+            if err.errno not in DISK_FULL_ERRNOS:
+                raise
+            code = errno.errorcode.get(err.errno or 0, str(err.errno))
+            self.full = (f"bag {self.path}: {err.strerror or err} (errno {code}): no more "
+                         "room, recording stopped")
+            raise BagDiskFullError(self.full) from None
+
+    def write(self, connection: Connection, timestamp: int, data: bytes | memoryview
+              ) -> None:
+        """rosbags' write, stopped by a full disk (:meth:`_room`)."""
+        with self._room():
+            super().write(connection, timestamp, data)
 
     STORAGE_PLUGINS: ClassVar[Mapping[StoragePlugin, Any]] = {
         **Writer.STORAGE_PLUGINS,
@@ -265,7 +293,8 @@ class Rosbag2Writer(Writer):
         """Flush the MCAP file (:meth:`FlushingMcapWriter.flush`) and note the message
         counts and time span it holds then (:meth:`rewind` goes back there)."""
         mcap = self.mcap
-        mcap.flush(fsync=fsync)
+        with self._room():
+            mcap.flush(fsync=fsync)
         assert mcap.synced is not None
         mcap.synced.counts = dict(self.counts)
         mcap.synced.min_timestamp = self.min_timestamp
@@ -281,6 +310,20 @@ class Rosbag2Writer(Writer):
         assert synced is not None
         self.counts = {cid: synced.counts.get(cid, 0) for cid in self.counts}
         self.min_timestamp, self.max_timestamp = synced.min_timestamp, synced.max_timestamp
+
+    def close_cut_back(self) -> bool:
+        """Close after a write that ran out of room: cut back to the last :meth:`sync`,
+        then the MCAP summary and ``metadata.yaml``; when the summary does not fit either,
+        cut back again and write ``metadata.yaml`` alone (the data section then is what
+        ``pneumatic-unload recover`` reads). Returns whether the summary was written."""
+        self.rewind()
+        try:
+            self.close()
+            return True
+        except (WriterError, OSError):
+            self.rewind()
+        self.close_without_summary()
+        return False
 
     def close_without_summary(self) -> None:
         """Write ``metadata.yaml`` and close the MCAP file without its summary (a disk
@@ -334,7 +377,8 @@ class Rosbag2Writer(Writer):
         """Write N equal-size messages [log times in ns] to ``connection``."""
         if log_times.size == 0:
             return
-        self.mcap.write_block(connection.id, log_times, payloads)
+        with self._room():
+            self.mcap.write_block(connection.id, log_times, payloads)
         self.counts[connection.id] += int(log_times.size)
         self.min_timestamp = min(self.min_timestamp, int(log_times.min()))
         self.max_timestamp = max(self.max_timestamp, int(log_times.max()))
