@@ -55,9 +55,7 @@ from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
 )
-from pneumatic_unload.io.csvheader import TEMPERATURE_UNITS, TIME_UNITS
-
-PRESSURE_UNITS = {"Pa": 1.0, "kPa": 1e3, "bar": 1e5, "MPa": 1e6, "psi": 6894.757293168361}
+from pneumatic_unload.io.csvheader import PRESSURE_UNITS, TEMPERATURE_UNITS, TIME_UNITS
 
 
 class CliError(Exception):
@@ -171,12 +169,13 @@ def input_sources(args: argparse.Namespace, cfg: dict[str, Any], settings: Estim
 
 
 def csv_options(args: argparse.Namespace) -> dict[str, Any]:
-    """How to read a CSV input: its columns, units and gauge zero (see
-    :func:`~pneumatic_unload.io.csvlog.read_csv_trace`)."""
+    """How to read a CSV input: its columns, units and gauge zero, hints in the command
+    line's words (see :func:`~pneumatic_unload.io.csvlog.read_csv_trace`)."""
     return {k: getattr(args, k) for k in (
         "time_column", "pressure_column", "temperature_column", "pressure_unit",
         "time_unit", "temperature_unit")} | {"gauge": args.gauge or None,
-                                             "atmosphere": gauge_atmosphere(args)}
+                                             "atmosphere": gauge_atmosphere(args),
+                                             "hints": "cli"}
 
 
 def gauge_atmosphere(args: argparse.Namespace, given: dict[str, Any] | None = None
@@ -206,6 +205,12 @@ def open_input(args: argparse.Namespace) -> Record:
     return rec
 
 
+def print_notes(args: argparse.Namespace, rec: Record) -> None:
+    """What reading the rows found (e.g. a time counter unwrapped), as warnings on stderr."""
+    for w in rec.notes:
+        print(f"pneumatic-unload: warning: {args.path}: {w}", file=sys.stderr)
+
+
 def cmd_analyze(args: argparse.Namespace) -> int:
     """Run the unloading-time analysis and print the estimates (exit status 1 when no unload
     was found, with the reason, or when the readings look like gauge pressures). A CSV log
@@ -223,6 +228,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         ana = analyze_input(rec, given)
     except (RecordError, EstimationError, ConfigError) as exc:
         raise CliError(str(exc)) from exc
+    print_notes(args, rec)
     run, settings, unloads, t10_column = ana.run, ana.settings, ana.unloads, ana.t10_column
     published, why, problem = run.published, ana.no_unload, ana.input_problem
     no_estimate = None if problem is not None else no_estimate_reason(unloads)
@@ -234,7 +240,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
                "published": [unload_json(r) for r in published],
                "no_unload_reason": why, "no_estimate_reason": no_estimate,
                "input_problem": problem, "exit_status": exit_status(unloads, problem),
-               "input_warnings": list(rec.warnings)}
+               "input_warnings": [*rec.warnings, *rec.notes]}
         print(json.dumps(out, indent=2, allow_nan=False, default=json_default))
     else:
         print(f"{args.path}: {run.samples} samples, {len(unloads)} unload(s)")
@@ -432,23 +438,42 @@ def config_from_args(args: argparse.Namespace) -> RigConfig:
     return RigConfig(**adapters.given_options(args, RigConfig))
 
 
+def _unit_name(table: dict[str, float]) -> Callable[[str], str]:
+    """An option type: a unit of ``table`` in its own spelling, case-insensitive ('kpa' ->
+    'kPa'); another word is left as given for the option's choices to refuse."""
+    def name(text: str) -> str:
+        return next((u for u in table if u.lower() == text.strip().lower()), text)
+    return name
+
+
 def add_input_options(parser: argparse.ArgumentParser) -> None:
     """Options that say how to read the input (bag topic, CSV columns and units)."""
     parser.add_argument("--atmosphere-auto", action="store_true",
                         help="take p_atm from the final plateau (as --atmosphere 0 would not: "
                              "0 is a value)")
     parser.add_argument("--topic", default="/tank/pressure", help="pressure topic of a bag")
-    parser.add_argument("--time-column", help="CSV time column [s]")
-    parser.add_argument("--pressure-column", help="CSV pressure column")
+    parser.add_argument("--time-column",
+                        help="CSV time column (default: found by its name, e.g. 'Time [s]', "
+                             "'Timestamp', 'Zeit'): numbers in --time-unit, epoch seconds or "
+                             "milliseconds, ISO 8601 date-times (with or without a zone), a "
+                             "date and a time of day, or times of day")
+    parser.add_argument("--pressure-column",
+                        help="CSV pressure column (default: found by its name, e.g. "
+                             "'P_Tank [bar]', 'p_tank', 'Druck (bar)', 'pressure [kPa]'; a "
+                             "unit in brackets or parentheses is its unit)")
     parser.add_argument("--temperature-column",
                         help="CSV gas-temperature column (default: found by its name, e.g. "
                              "'Temp [C]', 'gas_temperature_c'; its value at the unload start "
                              "is T10)")
     parser.add_argument("--pressure-unit", choices=tuple(PRESSURE_UNITS), default=None,
+                        type=_unit_name(PRESSURE_UNITS),
                         help="CSV pressure unit (default: from the header, else Pa)")
     parser.add_argument("--time-unit", choices=tuple(TIME_UNITS), default=None,
-                        help="CSV time unit (default: from the header, else s)")
+                        type=_unit_name(TIME_UNITS),
+                        help="CSV time unit (default: from the header; epoch stamps by "
+                             "their magnitude; else s)")
     parser.add_argument("--temperature-unit", choices=tuple(TEMPERATURE_UNITS), default=None,
+                        type=_unit_name(TEMPERATURE_UNITS),
                         help="CSV gas-temperature unit (default: from the header, else C)")
     parser.add_argument("--gauge", action="store_true",
                         help="CSV pressures are gauge: add --atmosphere to every reading")
