@@ -72,11 +72,16 @@ def test_iso_date_times_round_trip(tmp_path_factory, start, steps_ms, zone, sep,
     stamps = [start + dt.timedelta(seconds=float(s)) for s in offsets]
     rows = "".join(f"{s.isoformat(sep=sep, timespec=spec)},{7e5 - k}\n"
                    for k, s in enumerate(stamps))
-    path = _write(tmp_path_factory.mktemp("iso") / "log.csv", "Timestamp,p [Pa]\n" + rows)
+    folder = tmp_path_factory.mktemp("iso")
+    path = _write(folder / "log.csv", "Timestamp,p [Pa]\n" + rows)
     trace = read_csv_trace(path)
     np.testing.assert_allclose(trace.t, offsets, rtol=0, atol=2e-6)
     assert trace.source.time_form == "date-time"
     assert trace.source.time_origin == stamps[0].isoformat(sep=sep, timespec=spec)
+    # blank lines send the rows through the row-by-row parser: the same times
+    gaps = _write(folder / "gaps.csv", "Timestamp,p [Pa]\n" + rows.replace("\n", "\n\n"))
+    np.testing.assert_allclose(read_csv_trace(gaps, chunk_bytes=64).t, offsets, rtol=0,
+                               atol=2e-6)
 
 
 _LOGGER_FORMS = {
@@ -119,6 +124,9 @@ def test_date_and_time_columns_round_trip(tmp_path_factory, form, start, steps_m
         return
     np.testing.assert_allclose(trace.t, offsets, rtol=0, atol=2e-6)
     assert trace.source.time_form == "time of day" and trace.source.date_column is not None
+    gaps = _write(path.with_name("gaps.csv"), path.read_text().replace("\n", "\n\n"))
+    np.testing.assert_allclose(read_csv_trace(gaps, chunk_bytes=64).t, offsets, rtol=0,
+                               atol=2e-6)
 
 
 @pytest.mark.parametrize("kind", ["iso", "iso-zone", "german"])

@@ -237,9 +237,9 @@ class CsvStream:
         axis = TimeAxis(lay.time_form, lay.time_scale, from_first_row=lay.from_first_row,
                         where=self._where)
         try:
-            for text in self._text.row_chunks(self._data_offset, self.chunk_bytes):
-                lines = text.splitlines()
-                del text
+            fmt = self._text.format
+            for box in self._text.row_chunks(self._data_offset, self.chunk_bytes):
+                lines = fmt.decode_rows(box.pop()).splitlines()
                 vals = self._parse(lines, line, n_rows)
                 line += len(lines)
                 if vals.shape[0] == 0:
@@ -280,6 +280,10 @@ class CsvStream:
         cols = lay.columns
         # fast path: every line has the header's number of fields and all cells parse
         self._rows_at = (row0, line0, None)
+        if lines and all(lines) and lay.time_form.text:
+            vals = self._parse_text_fast(lines)
+            if vals is not None:
+                return vals
         if lines and all(lines) and not lay.time_form.text:
             fast = [ln.replace(",", ".") for ln in lines] if d != "," else lines
             if sum(ln.count(d) for ln in fast) == len(fast) * (len(self.header) - 1):
@@ -292,6 +296,33 @@ class CsvStream:
                         and np.isfinite(vals).all()):
                     return vals
         return self._parse_slow(lines, line0, row0)
+
+    def _parse_text_fast(self, lines: list[str]) -> FloatArray | None:
+        """Rows of a text time column, all at once: every line with the header's number of
+        fields, no quotes, the time cells laid out alike and the other cells numbers; None
+        otherwise (the rows are then read one by one, with the message of a bad one)."""
+        lay = self.layout
+        d = lay.source.delimiter
+        n = len(self.header)
+        if any('"' in ln for ln in lines):
+            return None
+        rows = [ln.split(d) for ln in lines]
+        if any(len(r) != n for r in rows):
+            return None
+        date_cells = [r[lay.i_date] for r in rows] if lay.i_date is not None else None
+        t = self._clock.parse_many([r[lay.i_time] for r in rows], date_cells)
+        if t is None:
+            return None
+        others = lay.columns[1:]
+        fast = [ln.replace(",", ".") for ln in lines] if d != "," else lines
+        try:
+            vals = np.loadtxt(fast, delimiter=d, usecols=others, dtype=float,
+                              comments=None, ndmin=2)
+        except ValueError:
+            return None
+        if vals.shape != (len(lines), len(others)) or not np.isfinite(vals).all():
+            return None
+        return np.column_stack((t, vals))
 
     def _parse_slow(self, lines: list[str], line0: int, row0: int) -> FloatArray:
         """Row by row, with the message of the first bad row."""
@@ -424,7 +455,7 @@ def read_csv_trace(
 
     Columns are found by header name unless given (time: 'time...', 't', 'timestamp',
     'zeit...', 'Date/Time'; with a time of day, a 'date' or 'datum' column is its date;
-    pressure: 'p', 'p1', 'P_...', '...pressure...', '...druck...', not 'p_atm', 'P_amb';
+    pressure: 'p', 'p1', ``P_...``, '...pressure...', '...druck...', not 'p_atm', 'P_amb';
     temperature: 'temp...', 'T_Gas'; the temperature column is optional; several columns
     that fit are an error listing them). The time column holds numbers in a time unit,
     epoch seconds or milliseconds (told by their magnitude,

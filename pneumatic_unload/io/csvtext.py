@@ -147,10 +147,12 @@ class CsvText:
         """Close the file."""
         self._fh.close()
 
-    def row_chunks(self, start: int, chunk_bytes: int) -> Iterator[str]:
-        """The text from file offset ``start`` to :attr:`data_end` in pieces of about
-        ``chunk_bytes`` that each end at a line end (whole lines), decoded. Opens the file
-        anew (one pass)."""
+    def row_chunks(self, start: int, chunk_bytes: int) -> Iterator[list[bytes]]:
+        """The bytes from file offset ``start`` to :attr:`data_end` in pieces of about
+        ``chunk_bytes`` that each end at a line end (whole lines), each as a one-item list
+        that the caller empties (so that no reference to a piece stays here while it is
+        parsed; decode it with :meth:`TextFormat.decode_rows`). Opens the file anew (one
+        pass)."""
         fmt, nl = self.format, self.format.newline
         size = max(fmt.unit, chunk_bytes // fmt.unit * fmt.unit)
         with _open(self.path) as fh:
@@ -167,10 +169,11 @@ class CsvText:
                 if cut < 0:
                     carry = raw  # no line end yet: a line longer than the chunk
                     continue
-                carry = raw[cut:]
-                yield fmt.decode_rows(raw[:cut])
+                box, carry = [raw[:cut]], raw[cut:]
+                del raw
+                yield box
             if carry:
-                yield fmt.decode_rows(carry)
+                yield [carry]
 
 
 def _open(path: Path) -> BinaryIO:

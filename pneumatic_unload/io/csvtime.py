@@ -208,10 +208,10 @@ class ClockParser:
         if not self._order and own:
             self._order = own
         if self._first_date is None:
-            self._first_date = text
-            self._days[text] = 0
             if self._order:
                 self._day0 = self._checked_ordinal(date, self._order, text)
+            self._first_date = text
+            self._days[text] = 0
             return 0
         if not self._order:
             # 03/04/2026 then 03/05/2026: the order under which the date is the next day
@@ -279,6 +279,76 @@ class ClockParser:
                                  "first row's")
             return self._day(d, text) * 86_400.0 + secs
         return secs
+
+    def parse_many(self, cells: list[str], date_cells: list[str] | None
+                   ) -> FloatArray | None:
+        """Seconds of consecutive rows' time cells (and date cells) [s], all at once, when
+        every cell is laid out as the first one (the same length, its digits where the
+        first one has digits, its other characters the same: a logger's fixed-width stamps);
+        None otherwise (:meth:`parse` then reads them row by row, with its messages)."""
+        if not cells:
+            return np.empty(0)
+        template = cells[0]
+        m = self._pattern.match(template)
+        if m is None or m["ampm"] or (m["z"] is not None) != self.form.zoned:
+            return None
+        width = len(template)
+        try:
+            raw = "".join(cells).encode("ascii")
+        except UnicodeEncodeError:
+            return None
+        if len(raw) != width * len(cells):
+            return None
+        arr = np.frombuffer(raw, dtype=np.uint8).reshape(len(cells), width)
+        digit = np.frombuffer(template.encode("ascii"), dtype=np.uint8)
+        is_digit = (digit >= 48) & (digit <= 57)
+        if m["z"] is not None:  # a zone's digits are the zone: the same in every row
+            is_digit[m.start("z"):] = False
+        if not (np.all(arr[:, ~is_digit] == digit[~is_digit])
+                and np.all(arr[:, is_digit] - 48 <= 9)):
+            return None
+        d = arr.astype(np.int64) - 48
+
+        def number(group: str) -> npt.NDArray[np.int64]:
+            lo, hi = m.span(group)
+            out = np.zeros(len(cells), dtype=np.int64)
+            for k in range(lo, hi):
+                out = out * 10 + d[:, k]
+            return out
+
+        h, mi, sec = number("h"), number("mi"), number("s")
+        if np.any(h > 23) or np.any(mi > 59) or np.any(sec > 60):
+            return None
+        secs = h * 3600.0 + mi * 60.0 + sec
+        if m["f"]:
+            if len(m["f"]) > 15:
+                return None
+            secs = secs + number("f") / 10.0 ** len(m["f"])
+        secs = secs - _zone_seconds(m["z"])
+        if self.form.kind == "date-time":
+            lo, hi = m.span("date")
+            dates = np.ascontiguousarray(arr[:, lo:hi]).view(f"S{hi - lo}").ravel()
+        elif self.form.with_date_column:
+            if date_cells is None:
+                return None
+            dates = np.asarray([c.strip() for c in date_cells])
+        else:
+            return secs
+        uniq, first, inverse = np.unique(dates, return_index=True, return_inverse=True)
+        days = np.zeros(uniq.size)
+        state = (self._order, self._day0, self._first_date, dict(self._days))
+        for j in np.argsort(first, kind="stable"):  # in the order of the rows
+            text = uniq[j].decode("ascii") if isinstance(uniq[j], bytes) else str(uniq[j])
+            dm = _DATE_RE.match(text)
+            try:
+                if dm is None:
+                    raise TimeError(text)
+                days[j] = self._day(dm, text)
+            except TimeError:
+                # the row-by-row pass, from the state before these rows, names the row
+                self._order, self._day0, self._first_date, self._days = state
+                return None
+        return days[inverse.ravel()] * 86_400.0 + secs
 
     def _not_like(self, cell: str) -> str:
         what = "an empty cell" if not cell.strip() else repr(cell.strip())
