@@ -56,6 +56,7 @@ from pneumatic_unload.estimation import (
     EstimatorSettings,
 )
 from pneumatic_unload.io.csvheader import PRESSURE_UNITS, TEMPERATURE_UNITS, TIME_UNITS
+from pneumatic_unload.io.csvnames import unit_spelling
 
 
 class CliError(Exception):
@@ -205,12 +206,6 @@ def open_input(args: argparse.Namespace) -> Record:
     return rec
 
 
-def print_notes(args: argparse.Namespace, rec: Record) -> None:
-    """What reading the rows found (e.g. a time counter unwrapped), as warnings on stderr."""
-    for w in rec.notes:
-        print(f"pneumatic-unload: warning: {args.path}: {w}", file=sys.stderr)
-
-
 def cmd_analyze(args: argparse.Namespace) -> int:
     """Run the unloading-time analysis and print the estimates (exit status 1 when no unload
     was found, with the reason, or when the readings look like gauge pressures). A CSV log
@@ -228,7 +223,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         ana = analyze_input(rec, given)
     except (RecordError, EstimationError, ConfigError) as exc:
         raise CliError(str(exc)) from exc
-    print_notes(args, rec)
+    for w in rec.notes:  # what reading the rows found (a time counter unwrapped)
+        print(f"pneumatic-unload: warning: {args.path}: {w}", file=sys.stderr)
     run, settings, unloads, t10_column = ana.run, ana.settings, ana.unloads, ana.t10_column
     published, why, problem = run.published, ana.no_unload, ana.input_problem
     no_estimate = None if problem is not None else no_estimate_reason(unloads)
@@ -438,42 +434,30 @@ def config_from_args(args: argparse.Namespace) -> RigConfig:
     return RigConfig(**adapters.given_options(args, RigConfig))
 
 
-def _unit_name(table: dict[str, float]) -> Callable[[str], str]:
-    """An option type: a unit of ``table`` in its own spelling, case-insensitive ('kpa' ->
-    'kPa'); another word is left as given for the option's choices to refuse."""
-    def name(text: str) -> str:
-        return next((u for u in table if u.lower() == text.strip().lower()), text)
-    return name
-
-
 def add_input_options(parser: argparse.ArgumentParser) -> None:
     """Options that say how to read the input (bag topic, CSV columns and units)."""
     parser.add_argument("--atmosphere-auto", action="store_true",
                         help="take p_atm from the final plateau (as --atmosphere 0 would not: "
                              "0 is a value)")
     parser.add_argument("--topic", default="/tank/pressure", help="pressure topic of a bag")
-    parser.add_argument("--time-column",
-                        help="CSV time column (default: found by its name, e.g. 'Time [s]', "
-                             "'Timestamp', 'Zeit'): numbers in --time-unit, epoch seconds or "
-                             "milliseconds, ISO 8601 date-times (with or without a zone), a "
-                             "date and a time of day, or times of day")
-    parser.add_argument("--pressure-column",
-                        help="CSV pressure column (default: found by its name, e.g. "
-                             "'P_Tank [bar]', 'p_tank', 'Druck (bar)', 'pressure [kPa]'; a "
-                             "unit in brackets or parentheses is its unit)")
+    parser.add_argument("--time-column", help="CSV time column (default: by its name, e.g. "
+                        "'Time [s]', 'Timestamp'): numbers, epoch s or ms, ISO 8601 date-times, "
+                        "a date and a time of day")
+    parser.add_argument("--pressure-column", help="CSV pressure column (default: by its name, "
+                        "e.g. 'P_Tank [bar]', 'p_tank', 'Druck (bar)')")
     parser.add_argument("--temperature-column",
                         help="CSV gas-temperature column (default: found by its name, e.g. "
                              "'Temp [C]', 'gas_temperature_c'; its value at the unload start "
                              "is T10)")
     parser.add_argument("--pressure-unit", choices=tuple(PRESSURE_UNITS), default=None,
-                        type=_unit_name(PRESSURE_UNITS),
+                        type=unit_spelling(PRESSURE_UNITS),
                         help="CSV pressure unit (default: from the header, else Pa)")
     parser.add_argument("--time-unit", choices=tuple(TIME_UNITS), default=None,
-                        type=_unit_name(TIME_UNITS),
+                        type=unit_spelling(TIME_UNITS),
                         help="CSV time unit (default: from the header; epoch stamps by "
                              "their magnitude; else s)")
     parser.add_argument("--temperature-unit", choices=tuple(TEMPERATURE_UNITS), default=None,
-                        type=_unit_name(TEMPERATURE_UNITS),
+                        type=unit_spelling(TEMPERATURE_UNITS),
                         help="CSV gas-temperature unit (default: from the header, else C)")
     parser.add_argument("--gauge", action="store_true",
                         help="CSV pressures are gauge: add --atmosphere to every reading")

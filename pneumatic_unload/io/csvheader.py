@@ -10,7 +10,9 @@ are read by :mod:`pneumatic_unload.io.csvlog`. SI units: s, Pa absolute, K.
 
 Every hint names the reader's options in one wording, chosen by the caller (``hints``):
 the library's keyword arguments (``pressure_column=``) or the command line's options
-(``--pressure-column NAME``); :data:`OPTION_WORDS` holds both, :func:`say` picks one.
+(``--pressure-column NAME``), from :mod:`pneumatic_unload.io.csvnames`, which also holds the
+column-name rules; what the time column holds is decided by
+:mod:`pneumatic_unload.io.csvtime`.
 """
 
 from __future__ import annotations
@@ -22,7 +24,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final, Literal
 
-from pneumatic_unload.io.csvtime import TimeForm, detect_form, epoch_unit
+from pneumatic_unload.io.csvnames import (
+    ARGUMENT,
+    OPTION_WORDS,
+    HintWords,
+    is_date,
+    is_pressure,
+    is_temperature,
+    is_time,
+    named,
+    said,
+    say,
+)
+from pneumatic_unload.io.csvtime import TimeForm, detect_form, epoch_iso, epoch_unit
 
 __all__ = [
     "OPTION_WORDS",
@@ -61,56 +75,6 @@ TIME_UNITS: Final[dict[str, float]] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "min": 
 #: Where a unit came from: the caller, the header's bracket, the default, or the column's
 #: values (epoch stamps told by their magnitude; date-times, in s by themselves).
 UnitSource = Literal["argument", "header", "default", "values"]
-#: Whose words a hint uses: the library's keyword arguments or the command line's options.
-HintWords = Literal["library", "cli"]
-
-
-@dataclass(frozen=True)
-class OptionWords:
-    """How one reader option is named in hints."""
-
-    keyword: str  #: the library's keyword argument
-    flag: str  #: the command line's option
-    metavar: str  #: the command line's value placeholder ('' for a flag alone)
-
-
-#: Every reader option as the library and the command line name it.
-OPTION_WORDS: Final[dict[str, OptionWords]] = {
-    "time_column": OptionWords("time_column", "--time-column", "NAME"),
-    "pressure_column": OptionWords("pressure_column", "--pressure-column", "NAME"),
-    "temperature_column": OptionWords("temperature_column", "--temperature-column", "NAME"),
-    "time_unit": OptionWords("time_unit", "--time-unit", "UNIT"),
-    "pressure_unit": OptionWords("pressure_unit", "--pressure-unit", "UNIT"),
-    "temperature_unit": OptionWords("temperature_unit", "--temperature-unit", "UNIT"),
-    "gauge": OptionWords("gauge", "--gauge", ""),
-    "atmosphere": OptionWords("atmosphere", "--atmosphere", "PA"),
-}
-
-
-def say(name: str, words: HintWords) -> str:
-    """How to pass option ``name`` in a hint: 'pressure_column=' (library) or
-    '--pressure-column NAME' (command line); 'gauge=True' or '--gauge'."""
-    w = OPTION_WORDS[name]
-    if words == "cli":
-        return f"{w.flag} {w.metavar}" if w.metavar else w.flag
-    return f"{w.keyword}=True" if not w.metavar else f"{w.keyword}="
-
-
-def said(name: str, words: HintWords, value: object) -> str:
-    """Option ``name`` as given with ``value``: "pressure_unit='torr'" (library) or
-    '--pressure-unit torr' (command line); a flag: 'gauge=True' or '--gauge'."""
-    w = OPTION_WORDS[name]
-    if words == "cli":
-        return f"{w.flag} {value}" if w.metavar else w.flag
-    return f"{w.keyword}={value!r}"
-
-
-def named(name: str, words: HintWords) -> str:
-    """Option ``name`` alone: 'time_unit' (library) or '--time-unit' (command line)."""
-    w = OPTION_WORDS[name]
-    return w.flag if words == "cli" else w.keyword
-
-
 def check_words(hints: object) -> HintWords:
     """``hints`` if it is a :data:`HintWords` value; raises CsvOptionError otherwise."""
     if hints not in ("library", "cli"):
@@ -274,46 +238,6 @@ def _find(column: str, names: list[tuple[str, str | None]], header: list[str]) -
     return hits[0] if len(hits) == 1 else None
 
 
-#: Words of a pressure column's name that make it another pressure than the tank's.
-_OTHER_PRESSURE_WORDS: Final = ("atm", "amb", "baro", "umgeb", "luftdruck", "setpoint",
-                                "soll")
-#: Names of a time column that holds date-times (besides names beginning 'time' or 'zeit').
-_TIME_NAMES: Final = frozenset((
-    "t", "time", "timestamp", "elapsed", "seconds", "datetime", "date time", "date/time",
-    "date_time", "date-time", "date & time", "uhrzeit", "datum/uhrzeit", "datum uhrzeit",
-    "datum_uhrzeit", "datum/zeit", "datum zeit", "datum_zeit", "zeitstempel"))
-
-
-def _is_time(name: str) -> bool:
-    """A time column by its name: 't', 'time...', 'timestamp', 'elapsed', 'zeit...',
-    'datetime', 'Date/Time', 'Datum/Uhrzeit'."""
-    return name in _TIME_NAMES or name.startswith(("time", "zeit"))
-
-
-def _is_date(name: str) -> bool:
-    """A date column (read with a time of day) by its name: 'date', 'datum'."""
-    return name in ("date", "datum", "day")
-
-
-def _is_pressure(name: str) -> bool:
-    """A pressure column by its name: 'p', 'p1', 'P_Tank', 'p tank', '...pressure...',
-    '...druck...' (Druck, Tankdruck), not the atmosphere's, a barometer's or a set
-    point's ('p_atm', 'P_amb', 'Luftdruck')."""
-    if any(w in name for w in _OTHER_PRESSURE_WORDS):
-        return False
-    return (name in ("p", "pres", "press") or re.fullmatch(r"p\d+", name) is not None
-            or name.startswith(("p_", "p-", "p ", "p.")) or "pressure" in name
-            or "druck" in name or "pression" in name)
-
-
-def _is_temperature(name: str) -> bool:
-    """A gas-temperature column by its name: 'temp...', 't_gas', or any name with
-    'temperature' in it that is not the wall's, the room's or the ambient's."""
-    other = any(w in name for w in ("wall", "room", "ambient", "amb_", "outside"))
-    return (name.startswith("temp") or name in ("t_gas", "gas temperature")
-            or "temperatur" in name) and not other
-
-
 def _unit(
     what: str,
     given: str | None,
@@ -339,13 +263,11 @@ def _unit(
     if from_header and from_header != unit:
         raise CsvOptionError(
             f"{said(option, words, given)} contradicts the header of column {column!r} "
-            f"({header_unit!r}); fix the header or the {_ARGUMENT[words]}"
+            f"({header_unit!r}); fix the header or the {ARGUMENT[words]}"
         )
     return unit, "argument"
 
 
-#: What the caller's settings are called in a hint.
-_ARGUMENT: Final[dict[str, str]] = {"library": "argument", "cli": "option"}
 #: The unit of each kind shown in a hint's example header.
 _EXAMPLE_UNIT: Final = {"time": "s", "pressure": "kPa", "temperature": "C"}
 
@@ -373,18 +295,6 @@ def _first_number(cell: str, decimal_comma: bool) -> float | None:
     except ValueError:
         return None
     return value if math.isfinite(value) else None
-
-
-def _epoch_origin(first: float, unit: str) -> str:
-    """An epoch stamp as ISO 8601 UTC (the first row's instant, for the note)."""
-    import datetime as dt
-
-    seconds = first * TIME_UNITS[unit]
-    try:
-        when = dt.datetime.fromtimestamp(seconds, tz=dt.UTC)
-    except (OverflowError, OSError, ValueError):
-        return f"{seconds:.6g} s since 1970-01-01 UTC"
-    return when.isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 def resolve_layout(
@@ -450,18 +360,18 @@ def resolve_layout(
             )
         return idx
 
-    dates = [i for i, (name, _) in enumerate(names) if _is_date(name.lower())]
+    dates = [i for i, (name, _) in enumerate(names) if is_date(name.lower())]
     i_date = dates[0] if len(dates) == 1 else None
     try:
-        i_time = locate("time", time_column, _is_time, True)
+        i_time = locate("time", time_column, is_time, True)
     except CsvFormatError:
         if i_date is None or first_row is None or len(first_row) <= i_date or \
                 detect_form(first_row[i_date], None, decimal_comma=False).kind != \
                 "date-time":
             raise
         i_time, i_date = i_date, None  # a 'Date' column holding whole date-times
-    i_press = locate("pressure", pressure_column, _is_pressure, True)
-    i_temp = locate("temperature", temperature_column, _is_temperature, False)
+    i_press = locate("pressure", pressure_column, is_pressure, True)
+    i_temp = locate("temperature", temperature_column, is_temperature, False)
     assert i_time is not None and i_press is not None
     used = [i for i in (i_time, i_press, i_temp) if i is not None]
     if len(set(used)) < len(used):
@@ -499,7 +409,7 @@ def resolve_layout(
         epoch = epoch_unit(first, stated) if first is not None else None
         if epoch is not None:
             form = TimeForm("epoch", example=cell.strip())
-            from_first, origin = True, _epoch_origin(first, epoch)  # type: ignore[arg-type]
+            from_first, origin = True, epoch_iso(first * TIME_UNITS[epoch])  # type: ignore[arg-type]
             if t_from == "default":
                 t_unit, t_from = epoch, "values"
             told = t_from == "values"
@@ -533,7 +443,7 @@ def resolve_layout(
             raise CsvOptionError(
                 f"{said('pressure_unit', words, pressure_unit)} contradicts the header of "
                 f"column {header[i_press]!r} ({p_header!r}); fix the header or the "
-                f"{_ARGUMENT[words]}"
+                f"{ARGUMENT[words]}"
             )
     g_from: UnitSource
     if gauge is None:

@@ -40,6 +40,7 @@ __all__ = [
     "TimeError",
     "TimeForm",
     "detect_form",
+    "epoch_iso",
     "epoch_unit",
 ]
 
@@ -172,6 +173,15 @@ def epoch_unit(first: float, unit: str | None) -> str | None:
         if lo * scale <= first <= hi * scale and unit in (None, name):
             return name
     return None
+
+
+def epoch_iso(seconds: float) -> str:
+    """An epoch stamp [s since 1970-01-01 UTC] as ISO 8601 UTC, to the millisecond."""
+    try:
+        when = _dt.datetime.fromtimestamp(seconds, tz=_dt.UTC)
+    except (OverflowError, OSError, ValueError):
+        return f"{seconds:.6g} s since 1970-01-01 UTC"
+    return when.isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 class ClockParser:
