@@ -240,7 +240,8 @@ def test_cli_says_why_there_is_no_unload(tmp_path, record):
     assert "never drops" in _one_line_error(_cli("analyze", flat, "--volume", "1L"), code=1)
     # a CSV log is checked when read: reversed rows and readings <= 0 are exit 2, one line
     rev = _write_csv(tmp_path / "reversed.csv", t[::-1], p)
-    assert "sort the rows by time" in _one_line_error(_cli("analyze", rev, "--volume", "1L"))
+    line = _one_line_error(_cli("analyze", rev, "--volume", "1L"))
+    assert "newest first? reverse their order" in line and "sort" not in line
     neg = _write_csv(tmp_path / "negative.csv", t, p - P_ATM)
     assert "--gauge --atmosphere PA" in _one_line_error(_cli("analyze", neg, "--volume", "1L"))
 

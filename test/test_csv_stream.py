@@ -108,7 +108,11 @@ def test_units_not_stated_are_named_as_assumed(tmp_path):
     assert len(warnings) == 3
     pressure = next(w for w in warnings if "(pressure)" in w)
     assert "'pressure'" in pressure and "Pa assumed" in pressure
-    assert "--pressure-unit" in pressure and "'pressure [kPa]'" in pressure
+    # the library's words from the library, the command line's with hints="cli"
+    assert "pressure_unit=" in pressure and "'pressure [kPa]'" in pressure
+    assert "--pressure-unit" not in pressure
+    cli = read_csv_trace(path, hints="cli").source.warnings
+    assert any("--pressure-unit UNIT" in w and "pressure_unit=" not in w for w in cli)
     assert any("(time)" in w and "s assumed" in w for w in warnings)
     assert any("(temperature)" in w and "C assumed" in w for w in warnings)
     # a stated unit (header or argument) is not warned about
@@ -127,6 +131,7 @@ def test_cli_warns_about_the_assumed_pressure_unit(tmp_path):
     assert "Traceback" not in proc.stderr
     warned = [ln for ln in proc.stderr.splitlines() if "(pressure)" in ln]
     assert len(warned) == 1 and "warning" in warned[0] and "Pa assumed" in warned[0]
+    assert "--pressure-unit UNIT" in warned[0] and "pressure_unit=" not in warned[0]
     doc = json.loads(proc.stdout)
     assert any("Pa assumed" in w for w in doc["input_warnings"])
     quiet = _cli("analyze", str(path), "--volume", repr(cfg.volume), "--atmosphere",

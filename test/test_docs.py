@@ -33,7 +33,7 @@ README_MAX_LINES = 150
 HAND_PAGES = (
     "tutorials/index", "tutorials/first_measurement", "tutorials/live_bench",
     "tutorials/test_line",
-    "howto/index", "howto/analyze", "howto/transducers", "howto/start_time",
+    "howto/index", "howto/analyze", "howto/logger_files", "howto/transducers", "howto/start_time",
     "howto/temperature", "howto/charge", "howto/discrepancy", "howto/cell",
     "explanation/index", "explanation/method", "explanation/budget",
     "explanation/validation", "explanation/architecture",

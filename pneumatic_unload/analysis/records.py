@@ -37,6 +37,12 @@ class RecordError(Exception):
     """The input cannot be read (a one-line message naming the file)."""
 
 
+def _naming(path: Path, exc: BaseException) -> str:
+    """The message of ``exc``, prefixed with ``path`` unless it names the file already."""
+    text = str(exc)
+    return text if str(path) in text else f"{path}: {text}"
+
+
 @dataclass
 class Record:
     """An input record: samples in chunks, and what the input says about the rig.
@@ -65,6 +71,12 @@ class Record:
     bag_topic: str | None = None
 
     @property
+    def notes(self) -> tuple[str, ...]:
+        """What the last pass over a CSV's rows found beyond :attr:`warnings` (a time
+        counter unwrapped); empty for a bag or before a pass."""
+        return self.stream.notes if self.stream is not None else ()
+
+    @property
     def has_temperature(self) -> bool:
         """The record holds a gas-temperature column."""
         return self.stream is not None and self.stream.layout.i_temp is not None
@@ -89,7 +101,7 @@ class Record:
                 elif ok.any():
                     yield c.t[ok], c.p[ok]
         except (CsvError, OSError) as exc:
-            raise RecordError(f"{self.path}: {exc}") from exc
+            raise RecordError(_naming(self.path, exc)) from exc
 
     def temperature_series(self) -> tuple[FloatArray, FloatArray] | None:
         """The gas temperature the record carries: (t [s], T [K]) at its own rate (a CSV's
@@ -115,7 +127,7 @@ class Record:
                 ts.append(c.t[ok])
                 vs.append(c.temperature[ok])
         except (CsvError, OSError) as exc:
-            raise RecordError(f"{self.path}: {exc}") from exc
+            raise RecordError(_naming(self.path, exc)) from exc
         return (np.concatenate(ts), np.concatenate(vs)) if ts else None
 
     def temperature_at(self, t: float) -> float:
@@ -136,7 +148,7 @@ class Record:
                 if ct.size:
                     prev_t, prev_v = ct[-1:], cv[-1:]
         except (CsvError, OSError) as exc:
-            raise RecordError(f"{self.path}: {exc}") from exc
+            raise RecordError(_naming(self.path, exc)) from exc
         return float(prev_v[-1]) if prev_v.size else float("nan")
 
 
@@ -179,7 +191,7 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
                         cfg["measured_initial_temperature"] = float(chunk.temperature[ok[0]])
                         break
         except (CsvError, ValueError, OSError) as exc:
-            raise RecordError(f"{p}: {exc}") from exc
+            raise RecordError(_naming(p, exc)) from exc
         return Record(path=p, cfg=cfg, warnings=stream.layout.source.warnings, stream=stream)
     from pneumatic_unload.io.bag import (
         TOPIC_SETTINGS,

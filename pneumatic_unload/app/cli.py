@@ -55,9 +55,8 @@ from pneumatic_unload.estimation import (
     EstimationError,
     EstimatorSettings,
 )
-from pneumatic_unload.io.csvheader import TEMPERATURE_UNITS, TIME_UNITS
-
-PRESSURE_UNITS = {"Pa": 1.0, "kPa": 1e3, "bar": 1e5, "MPa": 1e6, "psi": 6894.757293168361}
+from pneumatic_unload.io.csvheader import PRESSURE_UNITS, TEMPERATURE_UNITS, TIME_UNITS
+from pneumatic_unload.io.csvnames import unit_spelling
 
 
 class CliError(Exception):
@@ -171,12 +170,13 @@ def input_sources(args: argparse.Namespace, cfg: dict[str, Any], settings: Estim
 
 
 def csv_options(args: argparse.Namespace) -> dict[str, Any]:
-    """How to read a CSV input: its columns, units and gauge zero (see
-    :func:`~pneumatic_unload.io.csvlog.read_csv_trace`)."""
+    """How to read a CSV input: its columns, units and gauge zero, hints in the command
+    line's words (see :func:`~pneumatic_unload.io.csvlog.read_csv_trace`)."""
     return {k: getattr(args, k) for k in (
         "time_column", "pressure_column", "temperature_column", "pressure_unit",
         "time_unit", "temperature_unit")} | {"gauge": args.gauge or None,
-                                             "atmosphere": gauge_atmosphere(args)}
+                                             "atmosphere": gauge_atmosphere(args),
+                                             "hints": "cli"}
 
 
 def gauge_atmosphere(args: argparse.Namespace, given: dict[str, Any] | None = None
@@ -223,6 +223,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         ana = analyze_input(rec, given)
     except (RecordError, EstimationError, ConfigError) as exc:
         raise CliError(str(exc)) from exc
+    for w in rec.notes:  # what reading the rows found (a time counter unwrapped)
+        print(f"pneumatic-unload: warning: {args.path}: {w}", file=sys.stderr)
     run, settings, unloads, t10_column = ana.run, ana.settings, ana.unloads, ana.t10_column
     published, why, problem = run.published, ana.no_unload, ana.input_problem
     no_estimate = None if problem is not None else no_estimate_reason(unloads)
@@ -234,7 +236,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
                "published": [unload_json(r) for r in published],
                "no_unload_reason": why, "no_estimate_reason": no_estimate,
                "input_problem": problem, "exit_status": exit_status(unloads, problem),
-               "input_warnings": list(rec.warnings)}
+               "input_warnings": [*rec.warnings, *rec.notes]}
         print(json.dumps(out, indent=2, allow_nan=False, default=json_default))
     else:
         print(f"{args.path}: {run.samples} samples, {len(unloads)} unload(s)")
@@ -441,17 +443,24 @@ def add_input_options(parser: argparse.ArgumentParser) -> None:
                         help="take p_atm from the final plateau (as --atmosphere 0 would not: "
                              "0 is a value)")
     parser.add_argument("--topic", default="/tank/pressure", help="pressure topic of a bag")
-    parser.add_argument("--time-column", help="CSV time column [s]")
-    parser.add_argument("--pressure-column", help="CSV pressure column")
+    parser.add_argument("--time-column", help="CSV time column (default: by its name, e.g. "
+                        "'Time [s]', 'Timestamp'): numbers, epoch s or ms, ISO 8601 date-times, "
+                        "a date and a time of day")
+    parser.add_argument("--pressure-column", help="CSV pressure column (default: by its name, "
+                        "e.g. 'P_Tank [bar]', 'p_tank', 'Druck (bar)')")
     parser.add_argument("--temperature-column",
                         help="CSV gas-temperature column (default: found by its name, e.g. "
                              "'Temp [C]', 'gas_temperature_c'; its value at the unload start "
                              "is T10)")
     parser.add_argument("--pressure-unit", choices=tuple(PRESSURE_UNITS), default=None,
+                        type=unit_spelling(PRESSURE_UNITS),
                         help="CSV pressure unit (default: from the header, else Pa)")
     parser.add_argument("--time-unit", choices=tuple(TIME_UNITS), default=None,
-                        help="CSV time unit (default: from the header, else s)")
+                        type=unit_spelling(TIME_UNITS),
+                        help="CSV time unit (default: from the header; epoch stamps by "
+                             "their magnitude; else s)")
     parser.add_argument("--temperature-unit", choices=tuple(TEMPERATURE_UNITS), default=None,
+                        type=unit_spelling(TEMPERATURE_UNITS),
                         help="CSV gas-temperature unit (default: from the header, else C)")
     parser.add_argument("--gauge", action="store_true",
                         help="CSV pressures are gauge: add --atmosphere to every reading")
