@@ -355,3 +355,14 @@ def test_cli_reads_a_utf16_logger_file(tmp_path, discharge):
     assert _final_c(doc) == pytest.approx(cfg.conductance, rel=0.01)
     assert doc["inputs"]["initial_temperature"]["source"] == \
         "temperature column at the unload start"
+
+
+@pytest.mark.parametrize("encoding", ["utf-8", "utf-16"])
+def test_a_whole_last_row_without_a_line_end_is_kept(tmp_path, encoding):
+    """A finished file that lacks only its final line end (its last row has the shape of the
+    row before it) keeps that row and says nothing; a row cut inside a number is left out."""
+    path = _write(tmp_path / "w.csv", "time [s],p [kPa]\n0,10.50\n1,9.40\n2,10.31", encoding)
+    trace = read_csv_trace(path)
+    assert trace.p.tolist() == [10.5e3, 9.4e3, 10.31e3] and trace.source.warnings == ()
+    cut = _write(tmp_path / "c.csv", "time [s],p [kPa]\n0,10.50\n1,9.40\n2,10.3", encoding)
+    assert read_csv_trace(cut).source.rows == 2

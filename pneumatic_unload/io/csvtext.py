@@ -3,8 +3,10 @@
 :func:`open_text` finds the encoding from the first bytes (a byte-order mark: UTF-8, UTF-16
 LE/BE, UTF-32 LE/BE; UTF-16 without one by its zero bytes; else ASCII-compatible: each
 header line UTF-8, else latin-1) and the end of the last complete line: a last line without
-a line end (a file still being written, its last number maybe cut: ``10`` for ``10.3``) is
-left out, and :attr:`CsvText.torn_tail` holds it for the reader's note. Every pass over the
+a line end is kept where it has the shape of the line before it (:func:`row_shape`: a file
+that merely lacks its final line end) and otherwise left out (a file still being written, its
+last number cut: ``10`` for ``10.3``), with :attr:`CsvText.torn_tail` holding it for the
+reader's note. Every pass over the
 rows reads the bytes up to that end, so that passes over a file that is still growing read
 the same rows.
 """
@@ -12,6 +14,7 @@ the same rows.
 from __future__ import annotations
 
 import codecs
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +28,38 @@ _BLOCK: Final = 1 << 16
 _SNIFF: Final = 256
 #: Characters of a left-out last line quoted in the note [-].
 _QUOTE: Final = 60
+
+
+_DIGITS = re.compile(r"\d+")
+
+
+def row_shape(line: str) -> str:
+    """A row's shape: every run of digits one ``D`` but the last, which keeps its length as
+    as many ``9``, and every other character itself. Loggers write a column with a fixed
+    number of decimals, so a row cut inside its last number (``10`` or ``10.`` for
+    ``10.31``) has another shape than the row before it, while values that gain an integer
+    digit (``9.50`` to ``10.50``) keep their shape.
+
+    >>> row_shape("12,10.31") == row_shape("13,9.05") != row_shape("14,10.3")
+    True
+    """
+    text = line.strip()
+    runs = list(_DIGITS.finditer(text))
+    if not runs:
+        return text
+    last = runs[-1]
+    return (_DIGITS.sub("D", text[:last.start()]) + "9" * (last.end() - last.start())
+            + text[last.end():])
+
+
+def _previous_line(fh: BinaryIO, fmt: TextFormat, data_end: int) -> str:
+    """The last complete line before ``data_end`` (without its line end), read back at most
+    :data:`_BLOCK` bytes; '' where none is found within them."""
+    lo = max(fmt.bom, data_end - _BLOCK)
+    lo -= lo % fmt.unit  # a code-unit boundary (the mark's length is one)
+    fh.seek(lo)
+    lines = fmt.decode_rows(fh.read(data_end - lo)).rstrip("\r\n").rsplit("\n", 1)
+    return lines[-1] if len(lines) == 2 or lo == fmt.bom else ""
 
 
 class CsvTextError(Exception):
@@ -211,9 +246,13 @@ def open_text(path: Path) -> CsvText:
         torn = ""
         if data_end < size:
             fh.seek(data_end)
-            tail = fh.read(min(size - data_end, 4 * _QUOTE * fmt.unit))
+            tail = fh.read(min(size - data_end, _BLOCK))
             torn = fmt.decode_rows(tail[: len(tail) // fmt.unit * fmt.unit]).strip()
-            if len(torn) > _QUOTE:
+            whole = size - data_end <= _BLOCK and (size - data_end) % fmt.unit == 0
+            if whole and torn and row_shape(torn) == row_shape(
+                    _previous_line(fh, fmt, data_end)):
+                data_end, torn = size, ""
+            elif len(torn) > _QUOTE:
                 torn = torn[:_QUOTE] + "..."
     except OSError as err:
         fh.close()
