@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
+import os
 import re
 import shutil
 import sqlite3
@@ -374,3 +375,43 @@ def test_two_benches_and_a_batch_write_at_once(bags: Path, pg_url: str, tmp_path
     assert sorted(Path(f["path"]).name for f in batch_files) == sorted(
         p.name for p in bags.iterdir())
     assert len(rows) == 2 * cycles + 8 == len(files)
+
+
+@pytest.mark.parametrize(("version", "refused"), [("1.4.54", True), ("1.3.24", True),
+                                                  ("2.0.0", False), ("2.1.0b1", False)])
+def test_an_sqlalchemy_below_the_floor_is_refused_with_what_to_install(
+        version: str, refused: bool) -> None:
+    """Ubuntu 24.04's python3-sqlalchemy is 1.4: the schema module imports (a node with
+    no results database starts), opening a database says which SQLAlchemy it needs."""
+    from pneumatic_unload.testline import schema
+
+    if refused:
+        with pytest.raises(schema.ResultsDBError, match=r"SQLAlchemy >= 2\.0.*pip install"):
+            schema.check_sqlalchemy(version)
+    else:
+        schema.check_sqlalchemy(version)
+
+
+def test_the_schema_imports_with_sqlalchemy_1_4(tmp_path: Path) -> None:
+    """The results layer imports under SQLAlchemy 1.4 (no ``sa.Double`` there): a stand-in
+    ``sqlalchemy`` module of the real one without ``Double`` and with ``__version__``
+    1.4.54; opening a database is refused with the floor's message."""
+    shim = tmp_path / "shim"
+    (shim / "sqlalchemy").mkdir(parents=True)
+    # the real package's modules under the stand-in name: only Double and the version differ
+    import sqlalchemy
+
+    real = Path(sqlalchemy.__file__).parent
+    (shim / "sqlalchemy" / "__init__.py").write_text(
+        f"__path__ = [{str(real)!r}]\n"
+        f"exec(compile(open({str(real / '__init__.py')!r}).read(), 'sqlalchemy', 'exec'))\n"
+        "del Double\n__version__ = '1.4.54'\n")
+    code = ("import pneumatic_unload.testline, pneumatic_unload.testline.live\n"
+            "from pneumatic_unload.testline.schema import ResultsDBError, database_url\n"
+            "try:\n    database_url('x.db')\nexcept ResultsDBError as e:\n    print(e)\n")
+    root = Path(__file__).resolve().parents[1]
+    env = {"PYTHONPATH": f"{shim}{os.pathsep}{root}", "PATH": os.environ.get("PATH", "")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "needs SQLAlchemy >= 2.0, this Python has 1.4.54" in out.stdout

@@ -218,9 +218,38 @@ def _condition(text: Any, args: dict[str, str], what: str) -> bool:
     raise LaunchError(f"{what}: {text!r} is {value!r}, not true or false")
 
 
-def _typed(text: Any) -> Any:
-    """A parameter value as ROS reads it from a launch file: YAML (a number, a bool, a
-    list), an empty string kept."""
+#: The ``type`` identifiers of a launch file's ``param`` (launch's frontend
+#: ``get_data_type_from_identifier``): the scalar types a value is coerced to.
+PARAM_TYPES = {"str": str, "int": int, "float": float, "bool": bool}
+
+
+def _typed(text: Any, type_id: str | None = None, what: str = "param") -> Any:
+    """A parameter value as launch_ros reads it from a launch file: without a ``type``,
+    the YAML type of its text (``2000`` an integer, ``2000.0`` a double: a node whose
+    parameter is a double refuses the integer, as under ``ros2 launch``); with ``type:
+    float`` both ``2000`` and ``2000.0`` are doubles, ``int`` and ``str`` likewise; an
+    empty string kept.
+
+    Raises
+    ------
+    LaunchError
+        A type identifier launch does not know, or a text that is not of the type."""
+    if type_id is not None and type_id != "yaml":
+        if type_id not in PARAM_TYPES:
+            raise LaunchError(f"{what}: type {type_id!r} is not one of "
+                              f"{', '.join(PARAM_TYPES)}, yaml")
+        kind = PARAM_TYPES[type_id]
+        if kind is str:
+            return str(text)
+        if kind in (int, float):
+            try:
+                return kind(str(text))
+            except ValueError:
+                raise LaunchError(f"{what}: {text!r} is not of type {type_id}") from None
+        value = {"1": "true", "0": "false"}.get(str(text), str(text)).strip().lower()
+        if value not in ("true", "false"):
+            raise LaunchError(f"{what}: {text!r} is not of type bool")
+        return value == "true"
     if not isinstance(text, str) or text == "":
         return text
     import yaml
@@ -233,7 +262,8 @@ def load_launch(path: str | Path, overrides: dict[str, str] | None = None
                 ) -> list[dict[str, Any]]:
     """The nodes of a ROS 2 YAML launch file, its arguments set from ``overrides``
     (``name:=value`` of the command line) or their defaults: per node its ``exec``,
-    ``name``, parameter files and parameter values (typed as ROS types them); a node whose
+    ``name``, parameter files and parameter values (typed as launch_ros types them: a
+    ``param``'s ``type`` if given, else the YAML type of its text); a node whose
     ``if`` is false (or ``unless`` true) is left out.
 
     Raises
@@ -278,7 +308,9 @@ def load_launch(path: str | Path, overrides: dict[str, str] | None = None
                 if "from" in p:
                     files.append(Path(_substitute(p["from"], args)))
                 else:
-                    values[str(p["name"])] = _typed(_substitute(p.get("value"), args))
+                    values[str(p["name"])] = _typed(_substitute(p.get("value"), args),
+                                                    p.get("type"),
+                                                    f"{what} param {p['name']}")
             nodes.append({"exec": body["exec"], "name": body.get("name", body["exec"]),
                           "files": files, "params": values})
         else:

@@ -22,11 +22,42 @@ A new revision: copy the last file of ``migrations/versions``, set ``revision`` 
 
 from __future__ import annotations
 
+import re
 import threading
 from pathlib import Path
 from typing import Any
 
 import sqlalchemy as sa
+
+#: The oldest SQLAlchemy the results database runs on (``sa.URL``, ``sa.Double``, 2.0
+#: style Core). The module imports with 1.4 (Ubuntu
+#: 24.04's python3-sqlalchemy): a node with no results database starts; opening one
+#: with an older SQLAlchemy is refused with :func:`check_sqlalchemy`'s message.
+SQLALCHEMY_FLOOR = (2, 0)
+#: An IEEE double column: DOUBLE PRECISION on PostgreSQL, REAL on SQLite (``sa.Double``
+#: of SQLAlchemy 2; ``Float(53)``, the same column, where it is missing).
+DOUBLE: Any = getattr(sa, "Double", None) or sa.Float(precision=53)
+
+
+def sqlalchemy_version(text: str = sa.__version__) -> tuple[int, int]:
+    """(major, minor) of a SQLAlchemy version text ('2.0.36', '1.4.50', '2.1.0b1')."""
+    parts = re.findall(r"\d+", text)[:2]
+    return (int(parts[0]), int(parts[1]) if len(parts) > 1 else 0)
+
+
+def check_sqlalchemy(text: str = sa.__version__) -> None:
+    """Refuse an SQLAlchemy older than :data:`SQLALCHEMY_FLOOR` with a message saying what
+    to install.
+
+    Raises
+    ------
+    ResultsDBError
+        SQLAlchemy ``text`` is older than the floor."""
+    if sqlalchemy_version(text) < SQLALCHEMY_FLOOR:
+        floor = ".".join(map(str, SQLALCHEMY_FLOOR))
+        raise ResultsDBError(f"the results database needs SQLAlchemy >= {floor}, this "
+                             f"Python has {text}: pip install 'SQLAlchemy>={floor}' "
+                             "(or run without a results database)")
 
 #: Schema version written by this package [-] (SQLite's ``PRAGMA user_version``).
 SCHEMA_VERSION = 3
@@ -49,25 +80,25 @@ POSTGRES_SCHEMES = ("postgresql", "postgresql+psycopg", "postgres")
 #: (:func:`~pneumatic_unload.analysis.output.unload_json`), with their types; units SI.
 V1_COLUMNS: tuple[tuple[str, Any], ...] = (
     ("status", sa.Text), ("status_text", sa.Text), ("final", sa.Integer),
-    ("t_start", sa.Double), ("tau_exp", sa.Double), ("tau_exp_std", sa.Double),
-    ("p10", sa.Double), ("p_atm", sa.Double), ("p_star", sa.Double),
-    ("initial_temperature", sa.Double), ("volume", sa.Double),
-    ("conductance", sa.Double), ("conductance_std", sa.Double),
-    ("conductance_model", sa.Double), ("conductance_model_std", sa.Double),
-    ("critical_ratio", sa.Double), ("critical_ratio_std", sa.Double),
-    ("recommended_conductance", sa.Double), ("recommended_std", sa.Double),
-    ("heat_law", sa.Text), ("method", sa.Text), ("quality", sa.Double),
+    ("t_start", DOUBLE), ("tau_exp", DOUBLE), ("tau_exp_std", DOUBLE),
+    ("p10", DOUBLE), ("p_atm", DOUBLE), ("p_star", DOUBLE),
+    ("initial_temperature", DOUBLE), ("volume", DOUBLE),
+    ("conductance", DOUBLE), ("conductance_std", DOUBLE),
+    ("conductance_model", DOUBLE), ("conductance_model_std", DOUBLE),
+    ("critical_ratio", DOUBLE), ("critical_ratio_std", DOUBLE),
+    ("recommended_conductance", DOUBLE), ("recommended_std", DOUBLE),
+    ("heat_law", sa.Text), ("method", sa.Text), ("quality", DOUBLE),
 )
 #: Columns added by version 2: the ISO 6358-1:2013 subsonic index m and its uncertainty [-],
 #: the transducer's fitted zero offset and its uncertainty [Pa].
 V2_COLUMNS: tuple[tuple[str, Any], ...] = (
-    ("subsonic_index", sa.Double), ("subsonic_index_std", sa.Double),
-    ("pressure_offset", sa.Double), ("pressure_offset_std", sa.Double),
+    ("subsonic_index", DOUBLE), ("subsonic_index_std", DOUBLE),
+    ("pressure_offset", DOUBLE), ("pressure_offset_std", DOUBLE),
 )
 #: Columns added by version 3: the flow's direction ('discharge' or 'charge'; NULL in rows
 #: of older versions: discharges) and a charge's supply pressure [Pa absolute].
 V3_COLUMNS: tuple[tuple[str, Any], ...] = (("direction", sa.Text),
-                                           ("supply_pressure", sa.Double))
+                                           ("supply_pressure", DOUBLE))
 #: Every column of ``unloads`` taken from a result's JSON.
 UNLOAD_COLUMNS = V1_COLUMNS + V2_COLUMNS + V3_COLUMNS
 
@@ -122,8 +153,10 @@ def database_url(target: str | Path) -> sa.URL:
     Raises
     ------
     ResultsDBError
-        An unknown scheme or a URL that cannot be parsed.
+        An unknown scheme or a URL that cannot be parsed; SQLAlchemy older than
+        :data:`SQLALCHEMY_FLOOR`.
     """
+    check_sqlalchemy()
     s = str(target)
     if "://" not in s:
         return sa.URL.create("sqlite", database=s)
