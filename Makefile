@@ -13,6 +13,8 @@ demo: setup
 
 # the tests not marked serial on every core, then the serial ones (node processes in real
 # time, servers, a browser: test/conftest.py) alone
+# (the PostgreSQL tests may install Debian's postgresql: test/pgserver.py)
+test: export PNEUMATIC_UNLOAD_TEST_INSTALL_POSTGRES = 1
 test: setup
 	@$(VENV)/bin/ruff check .
 	@$(PY) -m pytest -q -n auto --dist worksteal -m "not serial" --durations=10 test

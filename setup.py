@@ -1,6 +1,7 @@
 """ament_python package definition of pneumatic_unload (colcon and pip both use it)."""
 
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
@@ -23,9 +24,23 @@ setup(
         (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.yaml"))),
         # a Foxglove Studio layout: pressure, p*, the crossing and the estimates
         (f"share/{PACKAGE}/foxglove", sorted(glob("foxglove/*.json"))),
+        # the reference bags (bags/README.md): ros2 bag play, pneumatic-unload analyze
+        *[(f"share/{PACKAGE}/bags/{Path(d).name}", sorted(glob(f"{d}/*")))
+          for d in sorted(glob("bags/*/"))],
+        (f"share/{PACKAGE}/bags", ["bags/README.md"]),
+        (f"share/{PACKAGE}", ["LICENSE", "CHANGELOG.rst"]),
+        # the command line on PATH once a colcon workspace is sourced (the console
+        # scripts go to lib/{PACKAGE}, where ros2 run finds them)
+        ("bin", ["bin/pneumatic-unload"]),
     ],
-    install_requires=["setuptools", "numpy", "scipy", "rosbags", "mcap", "PyYAML"],
-    extras_require={"test": ["pytest"]},
+    install_requires=["setuptools", "numpy", "scipy", "PyYAML", "matplotlib", "rosbags",
+                      "mcap", "mcap-ros2-support", "SQLAlchemy>=2.0", "alembic", "psutil",
+                      "tqdm"],
+    # colcon test runs pytest with these (extras_require, not tests_require: colcon reads
+    # this one); package.xml's test_depend keys are the same
+    extras_require={"test": ["pytest", "hypothesis"],
+                    # the OPC UA bridge (no rosdep key: pip install asyncua)
+                    "opcua": ["asyncua"]},
     zip_safe=False,
     maintainer="pneumatic_unload maintainers",
     maintainer_email="maintainers@pneumatic-unload.invalid",

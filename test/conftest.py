@@ -42,6 +42,26 @@ def pytest_configure(config: pytest.Config) -> None:
         "processes, servers, a browser, timings)")
 
 
+def _suite_run(config: pytest.Config) -> bool:
+    """No ``-m`` given and only folders named (``pytest test``; colcon test's run of the
+    package): the run of the whole suite, whose serial tests ``make test`` runs on their
+    own."""
+    paths = [a.split("::")[0] for a in config.args]
+    return not config.option.markexpr and all(Path(p).is_dir() for p in paths)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    # a suite run without -m (colcon test) runs the tests not marked serial: those start
+    # node processes and servers in real time and need the machine alone (make test runs
+    # them after the rest, -m serial); a file or test named runs as asked
+    if not _suite_run(config):
+        return
+    serial = [it for it in items if it.get_closest_marker("serial")]
+    if serial:
+        config.hook.pytest_deselected(items=serial)
+        items[:] = [it for it in items if not it.get_closest_marker("serial")]
+
+
 def pytest_report_header(config: pytest.Config) -> str:
     return (
         f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '(unset)')} "

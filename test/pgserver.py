@@ -45,8 +45,18 @@ def _bin_dir() -> Path | None:
     return Path(cands[-1]).parent if cands else None
 
 
+#: The environment variable that lets the tests install Debian's postgresql (``1``): set
+#: by ``make test`` and ``.ci/run``; without it (``colcon test``, a user's container) no
+#: system package is installed and the PostgreSQL tests are skipped with the reason.
+INSTALL_ENV = "PNEUMATIC_UNLOAD_TEST_INSTALL_POSTGRES"
+
+
 def _install() -> str:
-    """Install Debian's postgresql; '' on success, else why not."""
+    """Install Debian's postgresql when :data:`INSTALL_ENV` asks; '' on success, else why
+    not."""
+    if os.environ.get(INSTALL_ENV) != "1":
+        return (f"PostgreSQL is not installed (set {INSTALL_ENV}=1 to let the tests "
+                "install Debian's postgresql with apt-get)")
     if os.geteuid() != 0:
         return "PostgreSQL is not installed and installing it needs root (apt-get)"
     if not shutil.which("apt-get"):

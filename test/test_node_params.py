@@ -28,7 +28,7 @@ def test_yaml_file_is_the_nodes_parameter_list(node):
         f"config/{node}.yaml drifted: regenerate it with pneumatic_unload.config.nodes."
         "yaml_text")
     specs = node_parameters(node)
-    params = yaml.safe_load(path.read_text())[node]["ros__parameters"]
+    params = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
     arrays = {n for n, s in specs.items() if s.kind == "string_array"}
     assert set(params) == set(specs) - arrays  # unset arrays are commented (no empty list)
     for name in arrays:

@@ -74,7 +74,7 @@ def test_ros_parameters_round_trip_and_optional_zero_means_none():
                                       ("simulator", RigConfig)])
 def test_node_yaml_lists_every_settings_parameter_with_its_default(repo_root, node, cls):
     params = yaml.safe_load((repo_root / "config" / f"{node}.yaml").read_text())
-    params = params[node]["ros__parameters"]
+    params = params["/**"]["ros__parameters"]
     for name, spec in adapters.parameter_specs(cls).items():
         assert name in params, f"{node}.yaml lacks {name}"
         if cls is EstimatorSettings:

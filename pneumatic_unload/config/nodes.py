@@ -257,12 +257,15 @@ def _yaml_value(s: ParameterSpec) -> str:
 
 def yaml_text(node: str) -> str:
     """The ``config/<node>.yaml`` parameter file of a node: every parameter at its default,
-    with its meaning, unit and range in a comment."""
+    with its meaning, unit and range in a comment, under ``/**`` (any node name, as a
+    renamed or namespaced node is launched)."""
     lines = [f"# Parameters of the {node} node, generated from the package's field metadata",
              "# (pneumatic_unload.config.nodes; a test checks this file against it):",
              f"#   ros2 run pneumatic_unload {node} --ros-args --params-file "
              f"share/pneumatic_unload/config/{node}.yaml",
-             f"# '{node} --help' lists the same. SI units.", f"{node}:", "  ros__parameters:"]
+             f"# '{node} --help' lists the same. SI units. Keyed by '/**' (every node",
+             "# name and namespace: a node launched under another name reads it too).",
+             "/**:", "  ros__parameters:"]
     for s in node_parameters(node).values():
         value = _yaml_value(s)
         if s.kind == "string_array":

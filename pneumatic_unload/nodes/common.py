@@ -161,10 +161,19 @@ def validating_callback(check: Callable[[dict[str, Any]], str]
 
 # --------------------------------------------------------------------------- spinning
 def make_executor(kind: str = "events") -> Any:
-    """'events' (rclpy.experimental.EventsExecutor: the one that holds 10 kHz) or 'single'."""
+    """'events' (rclpy.experimental.EventsExecutor: the one that holds 10 kHz) or 'single'.
+    An rclpy without ``rclpy.experimental`` (before 7.1.4) gets the SingleThreadedExecutor,
+    with a warning that it may drop samples above about 1 kHz."""
     if kind == "events":
-        from rclpy.experimental import EventsExecutor
+        try:
+            from rclpy.experimental import EventsExecutor
+        except ImportError as exc:
+            import warnings
 
+            warnings.warn(f"this rclpy has no EventsExecutor ({exc}; rclpy 7.1.4 or later "
+                          "has it): the SingleThreadedExecutor runs the node, which may drop "
+                          "samples above about 1 kHz", RuntimeWarning, stacklevel=2)
+            return rclpy.executors.SingleThreadedExecutor()
         return EventsExecutor()
     return rclpy.executors.SingleThreadedExecutor()
 

@@ -504,7 +504,6 @@ def main(argv: list[str] | None = None) -> int:
     import rclpy
     from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
-    from rclpy.experimental import EventsExecutor
 
     from pneumatic_unload.nodes import common
 
@@ -526,7 +525,7 @@ def main(argv: list[str] | None = None) -> int:
         session = node.session
         # The EventsExecutor keeps up with 10 kHz; its spin() ignores SIGINT and its timers
         # do not fire in this rclpy, so the loop below drives it and does the periodic work.
-        executor = EventsExecutor()
+        executor = common.make_executor("events")
         executor.add_node(node)
         next_flush = time.monotonic() + session.flush_interval
         next_poll = 0.0

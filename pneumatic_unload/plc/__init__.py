@@ -8,6 +8,13 @@ keeps a session alive through a method call of tens of seconds. The ROS node
 hands it the estimates and the measurements (the estimator's ``~/measure`` action).
 """
 
+try:  # no rosdep key: an optional dependency, named in the error when missing
+    import asyncua  # noqa: F401
+except ImportError as _exc:
+    raise ImportError("the OPC UA bridge needs asyncua, which has no rosdep key: "
+                      "pip install asyncua (or pip install 'pneumatic_unload[opcua]'; "
+                      "on Ubuntu 24.04 with PIP_BREAK_SYSTEM_PACKAGES=1)") from _exc
+
 from pneumatic_unload.plc.bridge import (
     APPLICATION_URI,
     NAMESPACE,
