@@ -186,3 +186,43 @@ def test_the_parameter_files_are_keyed_by_any_node_name() -> None:
 
     for f in sorted((ROOT / "config").glob("*.yaml")):
         assert list(yaml.safe_load(f.read_text())) == ["/**"], f
+
+
+def test_the_simulator_and_an_analysis_run_with_no_compiler_on_path(tmp_path: Path) -> None:
+    """ros-core images carry no C compiler: the kernel and the crossing fit were compiled
+    when the package was built (setup.py's extensions), so the simulated rig (the simulator
+    node's model) and ``pneumatic-unload analyze`` run with no cc, gcc or CC, and an empty
+    kernel cache."""
+    import os
+    import subprocess
+
+    from pneumatic_unload.estimation import regression
+    from pneumatic_unload.model import kernel
+
+    assert kernel.prebuilt() is not None, "the package's build left no compiled kernel"
+    assert kernel.prebuilt(Path(regression.__file__).with_name("regression.c")) is not None
+    bindir = tmp_path / "bin"  # PATH: an empty folder (the interpreter by its own path)
+    bindir.mkdir()
+    code = (
+        "import json, shutil\n"
+        "from pathlib import Path\n"
+        "assert shutil.which('cc') is None and shutil.which('gcc') is None\n"
+        "from pneumatic_unload.analysis.runs import write_simulated_bag\n"
+        "from pneumatic_unload.app.cli import main\n"
+        "from pneumatic_unload.config import RigConfig\n"
+        f"out = Path({str(tmp_path / 'bag')!r})\n"
+        "write_simulated_bag(RigConfig(volume=0.001, conductance=8e-9, rate=200.0), out,"
+        " analyze_live=True)\n"
+        "raise SystemExit(main(['analyze', str(out), '--json']))\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("CC", "PATH")}
+    env.update(PATH=str(bindir), PNEUMATIC_UNLOAD_KERNEL_DIR=str(tmp_path / "no-cache"),
+               PYTHONPATH=str(ROOT))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True,
+                         text=True, env=env, timeout=600)
+    assert out.returncode in (0, 1), (out.stdout[-2000:], out.stderr[-3000:])
+    import json
+
+    doc = json.loads(out.stdout[out.stdout.index("{"):])  # after the writer's own lines
+    final = [u for u in doc["unloads"] if u["final"]]
+    assert final and final[0]["conductance_model"] == pytest.approx(8e-9, rel=0.02)
+    assert not list((tmp_path / "no-cache").glob("*.so"))

@@ -241,3 +241,9 @@ long pu_first_below(const double *p, long i, long hi, double level)
             return k;
     return hi;
 }
+
+/* The hash of this source, compiled in by setup.py (PU_SOURCE_SHA): the Python side
+   loads the library built with the package only when it was built from this text. */
+#ifdef PU_SOURCE_SHA
+const char *pu_source_sha(void) { return PU_SOURCE_SHA; }
+#endif

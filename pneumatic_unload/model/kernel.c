@@ -715,3 +715,9 @@ void pu_lag(int n, const double *t, const double *u, double tau, double t_prev,
         tp = t[i];
     }
 }
+
+/* The hash of this source, compiled in by setup.py (PU_SOURCE_SHA): the Python side
+   loads the library built with the package only when it was built from this text. */
+#ifdef PU_SOURCE_SHA
+const char *pu_source_sha(void) { return PU_SOURCE_SHA; }
+#endif

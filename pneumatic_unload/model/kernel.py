@@ -5,13 +5,16 @@ the wall heat laws, the tank's mass and energy balance and the integrator: Dorma
 5(4) with its continuous extension, switching for the rest of a segment to the Rosenbrock
 2(3) W-method of Shampine & Reichelt (MATLAB's ode23s; finite-difference Jacobian) when
 Hairer's stiffness test fires (a pipe volume far smaller than the tank, a very fast heat
-exchange). This module builds that file into a shared library with the
-system's C compiler the first time it is needed (``cc -O2``, about 0.3 s; ``make setup``
-does it ahead), keeps it under a name that holds the hash of the source and the flags (an
-edited ``kernel.c`` is never run stale), and calls it through :mod:`ctypes`. The library is
-written beside the source when that folder is writable (the development tree), else in
-``$XDG_CACHE_HOME/pneumatic_unload`` (an installed package); ``PNEUMATIC_UNLOAD_KERNEL_DIR``
-overrides both.
+exchange). The package's build (setup.py: a setuptools extension, so
+``colcon build`` and ``pip install`` do it) compiles that file into a shared library beside
+it (``_kernel*.so``, with the hash of the source compiled in: :func:`prebuilt`); the
+installed package needs no compiler at run time. Where that library is missing or was
+built from another text (a source tree without a build, an edited ``kernel.c``), this
+module builds it with the system's C compiler the first time it is needed (``cc -O2``,
+about 0.3 s) under a name that holds the hash of the source and the flags (an edited
+``kernel.c`` is never run stale), written beside the source when that folder is writable,
+else in ``$XDG_CACHE_HOME/pneumatic_unload``; ``PNEUMATIC_UNLOAD_KERNEL_DIR`` overrides
+both. It calls the library through :mod:`ctypes`.
 
 Why compiled: a curve fit evaluates the model 30-60 times; the right-hand side as Python
 floats cost 2-4 ms per evaluation (the live final fit missed its 50 ms budget by 4x); this
@@ -116,6 +119,35 @@ def library_dirs(source: Path | None = None) -> list[Path]:
             cache / "pneumatic_unload"]
 
 
+def source_sha(source: Path | None = None) -> str:
+    """The hash of ``source`` (default: ``kernel.c``) that setup.py compiles into the
+    library it builds (``PU_SOURCE_SHA``): 16 hex digits of its SHA-256."""
+    return hashlib.sha256((SOURCE if source is None else source).read_bytes()).hexdigest()[:16]
+
+
+def prebuilt(source: Path | None = None) -> Path | None:
+    """The library the package's build compiled from ``source`` (default: ``kernel.c``;
+    setup.py's extension ``_<stem>`` beside it), if it was built from this very text
+    (its ``pu_source_sha``); None otherwise (a source tree without a build, an edited
+    source)."""
+    import importlib.machinery
+
+    source = SOURCE if source is None else source
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        path = source.with_name(f"_{source.stem}{suffix}")
+        if not path.is_file():
+            continue
+        try:
+            lib = ctypes.CDLL(str(path))
+            fn = lib.pu_source_sha
+        except (OSError, AttributeError):
+            continue
+        fn.restype = ctypes.c_char_p
+        if fn().decode() == source_sha(source):
+            return path
+    return None
+
+
 def build(folder: Path | None = None, source: Path | None = None) -> Path:
     """Compile ``source`` (default: ``kernel.c``; the package's other C source is the
     estimator's crossing fit, ``estimation/regression.c``) into ``folder`` (default: the
@@ -129,6 +161,10 @@ def build(folder: Path | None = None, source: Path | None = None) -> Path:
         writable.
     """
     source = SOURCE if source is None else source
+    if folder is None:
+        pre = prebuilt(source)
+        if pre is not None:  # compiled when the package was built or installed
+            return pre
     name = library_name(source)
     dirs = [folder] if folder is not None else library_dirs(source)
     for d in dirs:
