@@ -848,3 +848,22 @@ def test_a_chunk_index_pointing_past_the_file_is_read_without_the_fast_path(tmp_
     mcap.write_bytes(bytes(data))
     got = read_pressure(bag)
     assert np.array_equal(got.t_ns, t_ns) and np.array_equal(got.p, p)
+
+
+def test_the_bag_names_its_ros_distro_and_the_latched_topics_qos(full_bag):
+    """As rosbag2 writes them: ``ros_distro: jazzy`` and, for the latched /rig/config and
+    /estimator/estimate, a transient-local reliable offered QoS (``ros2 bag play``
+    republishes them latched); the sample topics carry none."""
+    info = yaml.safe_load((full_bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["ros_distro"] == "jazzy"
+    qos = {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
+           for t in info["topics_with_message_count"]}
+    for topic in ("/rig/config", "/estimator/estimate"):
+        (profile,) = yaml.safe_load(qos[topic]) if isinstance(qos[topic], str) else qos[topic]
+        assert (profile["durability"], profile["reliability"]) in (
+            (1, 1), ("transient_local", "reliable")), profile
+    assert qos["/tank/pressure"] in ("", [], "[]")
+    with AnyReader([full_bag], default_typestore=make_typestore()) as reader:
+        conns = {c.topic: c for c in reader.connections}
+        assert conns["/rig/config"].ext.offered_qos_profiles[0].durability.name == \
+            "TRANSIENT_LOCAL"

@@ -100,7 +100,7 @@ class SimulatorNode(Node):
         self.create_service(Trigger, "~/charge", self._on_charge)
         self._publish_config()
         self._valve_open = False
-        self._publish_valve(time.time_ns(), 0.0)
+        self._publish_valve(self.get_clock().now().nanoseconds, 0.0)
         self._stop = threading.Event()
         self.published = 0
         self._thread = threading.Thread(target=self._loop, name="rig-loop", daemon=True)
@@ -215,7 +215,7 @@ class SimulatorNode(Node):
             self.get_logger().info(
                 f"at {rate:g} Hz single FluidPressure messages outrun a small machine's "
                 f"receiver (7.9 % lost at 10 kHz on 2 cores): {advice}")
-        wall0 = time.time_ns()
+        wall0 = self.get_clock().now().nanoseconds  # the node's clock (use_sim_time: /clock)
         mono0 = time.monotonic()
         t_step = max(1, round(rate / self._p("temperature_rate"))) \
             if self._p("temperature_rate") > 0 else 0

@@ -48,7 +48,7 @@ from .schema import (
     make_typestore,
     missing_types,
 )
-from .writer import DEFAULT_CHUNK_SIZE, Rosbag2Writer
+from .writer import DEFAULT_CHUNK_SIZE, Rosbag2Writer, latched_qos
 
 __all__ = ["BagRecorder"]
 
@@ -168,7 +168,10 @@ class BagRecorder:
         if conn is None:
             if msgtype not in self._typestore.fielddefs:
                 raise UnknownMessageTypeError(msgtype)
-            conn = self._writer.add_connection(topic, msgtype, typestore=self._typestore)
+            # the latched topics' offered QoS, as rosbag2 records it (ros2 bag play latches)
+            qos = latched_qos() if topic in (TOPIC_CONFIG, TOPIC_ESTIMATE) else ()
+            conn = self._writer.add_connection(topic, msgtype, typestore=self._typestore,
+                                               offered_qos_profiles=qos)
             self._connections[key] = conn
         return conn
 

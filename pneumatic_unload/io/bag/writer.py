@@ -200,8 +200,39 @@ class FlushingMcapWriter(McapWriter):
             os.fsync(self.bio.fileno())
 
 
+#: The ROS distribution a bag's metadata.yaml names (rosbag2 writes the distribution it
+#: was built for; rosbags writes 'rosbags').
+ROS_DISTRO = "jazzy"
+#: The offered QoS of a latched topic as rosbag2 records it (reliable, transient local,
+#: keep last 10: nodes/common.py's LATCHED_QOS): ``ros2 bag play`` republishes the topic
+#: latched, so a late subscriber still gets the rig's configuration and the estimate.
+LATCHED_QOS_PROFILE: Final = {
+    "history": 1, "depth": 10, "reliability": 1, "durability": 1,
+    "deadline": {"sec": 0, "nsec": 0}, "lifespan": {"sec": 0, "nsec": 0},
+    "liveliness": 1, "liveliness_lease_duration": {"sec": 0, "nsec": 0},
+    "avoid_ros_namespace_conventions": False,
+}
+
+
+def latched_qos() -> Any:
+    """rosbags' QoS profiles of a latched topic (:data:`LATCHED_QOS_PROFILE`), for
+    ``Writer.add_connection(offered_qos_profiles=...)``."""
+    return parse_qos([dict(LATCHED_QOS_PROFILE)])
+
+
 class Rosbag2Writer(Writer):
-    """rosbags' rosbag2 writer using :class:`FlushingMcapWriter` for MCAP storage."""
+    """rosbags' rosbag2 writer using :class:`FlushingMcapWriter` for MCAP storage; its
+    metadata.yaml names :data:`ROS_DISTRO`, as rosbag2's does."""
+
+    def close(self) -> None:
+        """Close the storage and write metadata.yaml (``ros_distro``: :data:`ROS_DISTRO`)."""
+        super().close()
+        meta = Path(self.path) / "metadata.yaml"
+        if meta.is_file():
+            text = meta.read_text(encoding="utf-8")
+            fixed = text.replace("ros_distro: rosbags\n", f"ros_distro: {ROS_DISTRO}\n", 1)
+            if fixed != text:
+                meta.write_text(fixed, encoding="utf-8")
 
     STORAGE_PLUGINS: ClassVar[Mapping[StoragePlugin, Any]] = {
         **Writer.STORAGE_PLUGINS,
