@@ -17,8 +17,8 @@ demo: setup
 test: export PNEUMATIC_UNLOAD_TEST_INSTALL_POSTGRES = 1
 test: setup
 	@$(VENV)/bin/ruff check .
-	@$(PY) -m pytest -q -n auto --dist worksteal -m "not serial" --durations=10 test
-	@$(PY) -m pytest -q -m serial --durations=10 test
+	@$(PY) -m pytest -q -n auto --dist worksteal -m "not serial" --durations=10 pneumatic_unload/test
+	@$(PY) -m pytest -q -m serial --durations=10 pneumatic_unload/test
 
 lint: setup
 	@$(VENV)/bin/ruff check .
@@ -33,7 +33,7 @@ bench: setup
 	@for b in bench/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 bags: setup
-	@$(PY) bags/regenerate.py
+	@$(PY) pneumatic_unload/bags/regenerate.py
 
 lock:
 	@bash scripts/lock.sh

@@ -11,7 +11,7 @@ On ``builder-inited`` it writes ``docs/_generated/*.rst`` (not kept in git) from
   node's parameter file (:func:`~pneumatic_unload.config.nodes.yaml_text`);
 * ``interfaces.rst``: the package's topics
   (:data:`pneumatic_unload.nodes.recorder.PACKAGE_TOPICS`) and the ``.msg``/``.action``
-  files under ``msg_defs/``, included verbatim;
+  files under ``pneumatic_unload_msgs/``, included verbatim;
 * ``json.rst``: the document ``analyze --json`` prints
   (:data:`pneumatic_unload.analysis.output.ANALYZE_JSON_KEYS`), the fields of
   :class:`pneumatic_unload.estimation.UnloadResult` with their ``#:`` comments, and the keys
@@ -257,7 +257,7 @@ def interfaces_page(srcdir: Path) -> str:
     """The package's topics (from the recorder's table) and its messages and action."""
     from pneumatic_unload.nodes.recorder import PACKAGE_TOPICS
 
-    msg_root = srcdir.parent / "msg_defs"
+    msg_root = srcdir.parent / "pneumatic_unload_msgs"
     lines = [".. _interfaces:", "", *heading("Topics, messages and the action", "="),
              *heading("Topics", "-"),
              "The package's topics as :data:`pneumatic_unload.nodes.recorder.PACKAGE_TOPICS` "
@@ -270,11 +270,11 @@ def interfaces_page(srcdir: Path) -> str:
     for kind, title in (("msg", "Messages"), ("action", "Action")):
         lines += heading(title, "-")
         lines += [f"The ``.{kind}`` files of the ``pneumatic_unload_msgs`` package "
-                  f"(``msg_defs/{kind}/``), verbatim.", ""]
+                  f"(``pneumatic_unload_msgs/{kind}/``), verbatim.", ""]
         for path in sorted((msg_root / kind).glob(f"*.{kind}")):
             lines += [f".. _{kind}-{path.stem}:", "",
                       *heading(f"pneumatic_unload_msgs/{kind}/{path.stem}", "~"),
-                      f".. literalinclude:: ../../msg_defs/{kind}/{path.name}",
+                      f".. literalinclude:: ../../pneumatic_unload_msgs/{kind}/{path.name}",
                       "   :language: text", ""]
     return "\n".join(lines) + "\n"
 

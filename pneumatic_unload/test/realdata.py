@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 
 #: ``shared/real-data`` beside the checkout.
-REAL_DATA = Path(__file__).resolve().parents[2] / "shared" / "real-data"
+REAL_DATA = Path(__file__).resolve().parents[3] / "shared" / "real-data"
 
 
 def real_file(relative: str) -> Path:

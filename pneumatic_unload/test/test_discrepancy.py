@@ -35,7 +35,7 @@ from pneumatic_unload.fit.noise import (
 )
 from pneumatic_unload.model import integrate, simulate
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "real-data" / "aerolab"
+REAL = Path(__file__).resolve().parents[3] / "shared" / "real-data" / "aerolab"
 V = 2e-3
 C = 2e-8  # tau_exp about 0.6 s: short traces (about 4000 samples) keep the tests fast
 T10 = 293.15

@@ -26,7 +26,7 @@ from pneumatic_unload.estimation import UnloadResult
 #: run alone, after the parallel part of make test (see conftest.py)
 pytestmark = pytest.mark.serial
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]  # the repository (docs/, README.md)
 BUILD_TIMEOUT_S = 300
 README_MAX_LINES = 150
 #: the hand-written pages (issue #28): tutorials, how-to guides, explanation

@@ -54,7 +54,10 @@ def test_package_xml(repo_root):
 
 
 def test_msg_defs_package_xml(repo_root):
-    root = _manifest(repo_root / "msg_defs" / "package.xml")
+    # the interface package beside this one (colcon and rosdep find both: neither is
+    # inside the other's folder)
+    assert not (repo_root / "msg_defs").exists()
+    root = _manifest(repo_root.parent / MSGS_PKG / "package.xml")
     assert root.findtext("name") == MSGS_PKG
     assert root.findtext("export/build_type") == "ament_cmake"
     groups = [e.text for e in root.findall("member_of_group")]
@@ -214,17 +217,28 @@ def test_static_guard_variants(tmp_path, relpath, source):
 # --------------------------------------------------- colcon build + `ros2 run` lookup
 
 
-def _source_tree_artifacts(repo_root: Path) -> set[str]:
-    """Build products colcon could leave in the source folders."""
+def _source_tree_artifacts(src: Path) -> set[str]:
+    """Build products colcon could leave in the packages' source folders."""
     found = set()
-    for src in (repo_root, repo_root / "msg_defs"):
-        for child in src.iterdir():
-            if child.name.endswith(".egg-info") or child.name in ("install", "log"):
+    for pkg in (src / PKG, src / MSGS_PKG):
+        for child in pkg.iterdir():
+            if child.name.endswith(".egg-info") or child.name in ("install", "log", "build"):
                 found.add(str(child))
-    found |= {str(p) for p in (repo_root / "build").glob(f"{PKG}*")}
-    if (repo_root / "msg_defs" / "build").exists():
-        found.add(str(repo_root / "msg_defs" / "build"))
     return found
+
+
+def _clean_copy(repo_root: Path, src: Path) -> None:
+    """The repository's two packages as a user's clone has them under a workspace's src/:
+    the files git tracks (committed or not), none of the build products."""
+    top = repo_root.parent
+    listed = subprocess.run(["git", "-C", str(top), "ls-files", "-co", "--exclude-standard",
+                             PKG, MSGS_PKG], capture_output=True, text=True, check=True)
+    for rel in listed.stdout.splitlines():
+        if not (top / rel).is_file():
+            continue  # deleted, not yet committed
+        dest = src / "repo" / rel
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(top / rel, dest)
 
 
 def _run_group(cmd: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess:
@@ -257,9 +271,15 @@ _LOOKUP = textwrap.dedent(
 
 
 def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
+    """A workspace laid from a clean copy (src/repo/ holding both packages): colcon list
+    finds both with no --paths, colcon build builds them, and each installed executable
+    starts (``--help``, exit 0) and the simulator comes up over DDS; the CLI is on PATH."""
     prefix = Path(sys.prefix)
     colcon = prefix / "bin" / "colcon"
     assert colcon.is_file(), f"{colcon} missing: run scripts/setup_venv.sh"
+    src = tmp_path / "src"
+    _clean_copy(repo_root, src)
+    repo_root = src / "repo"
     build, install, log = tmp_path / "build", tmp_path / "install", tmp_path / "log"
     env = dict(
         os.environ,
@@ -269,9 +289,14 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
         COLCON_HOME=str(tmp_path / "colcon_home"),  # no user defaults.yaml / mixins
     )
     env.pop("COLCON_DEFAULTS_FILE", None)
+    listed = _run_group([str(colcon), "--log-base", str(log), "list", "--base-paths",
+                         str(src)], 60, cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                        stderr=subprocess.STDOUT)
+    assert listed.returncode == 0, listed.stdout
+    names = {line.split("\t")[0] for line in listed.stdout.splitlines() if "\t" in line}
+    assert names == {PKG, MSGS_PKG}, listed.stdout
     cmd = [
-        str(colcon), "--log-base", str(log), "build",
-        "--paths", str(repo_root), str(repo_root / "msg_defs"),
+        str(colcon), "--log-base", str(log), "build", "--base-paths", str(src),
         "--build-base", str(build), "--install-base", str(install),
         "--cmake-args", "-DBUILD_TESTING=OFF", f"-DPython3_EXECUTABLE={venv_python}",
     ]  # fmt: skip
@@ -313,6 +338,29 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
         assert (pkg_prefix / "share" / PKG / "config" / yaml_name).is_file()
     assert (msgs_prefix / "share" / MSGS_PKG / "msg" / "UnloadEstimate.msg").is_file()
     assert (pkg_prefix / "share" / PKG / "foxglove" / "pneumatic_unload.json").is_file()
+    assert list((pkg_prefix / "share" / PKG / "bags").glob("*/metadata.yaml"))
+
+    # each executable starts from the install (ros2 run's exec), the CLI from PATH
+    run_env = dict(os.environ, AMENT_PREFIX_PATH=str(prefix),
+                   ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "0"))
+    run_env.pop("PYTHONPATH", None)
+
+    def sourced(command: str, timeout: float = 120) -> subprocess.CompletedProcess:
+        return subprocess.run(["bash", "-c", f'source "$1/local_setup.bash" && {command}',
+                               "run", str(install)], cwd=tmp_path, env=run_env,
+                              capture_output=True, text=True, timeout=timeout, check=False)
+
+    for exe in EXECUTABLES:
+        proc = sourced(f'"{pkg_prefix / "lib" / PKG / exe}" --help')
+        assert proc.returncode == 0 and "--ros-args" in proc.stdout + proc.stderr, (
+            exe, proc.stdout[-1500:], proc.stderr[-1500:])
+    proc = sourced("command -v pneumatic-unload && pneumatic-unload --help")
+    assert proc.returncode == 0, proc.stderr[-1500:]
+    assert proc.stdout.splitlines()[0] == str(pkg_prefix / "bin" / "pneumatic-unload")
+    # the simulator comes up over DDS (its start line), stopped by SIGINT after 40 s
+    proc = sourced(f'timeout -s INT 40 "{pkg_prefix / "lib" / PKG / "simulator"}"',
+                   timeout=120)
+    assert "rig at" in proc.stdout + proc.stderr, (proc.stdout[-2000:], proc.stderr[-2000:])
 
 
 # ------------------------------------------------------------- layers, cycles and sizes

@@ -360,7 +360,7 @@ def test_foxglove_layout_plots_fields_the_nodes_publish():
     repo = Path(__file__).resolve().parents[1]
     layout = json.loads((repo / "foxglove" / "pneumatic_unload.json").read_text())
     fields = {"/tank/pressure": {"header", "fluid_pressure", "variance"},
-              "/estimator/estimate": _msg_fields(repo / "msg_defs" / "msg" /
+              "/estimator/estimate": _msg_fields(repo.parent / "pneumatic_unload_msgs" / "msg" /
                                                  "UnloadEstimate.msg")}
     assert {"p_star", "conductance_model", "tau_exp"} <= fields["/estimator/estimate"]
     plotted = []

@@ -7,7 +7,7 @@ launcher, each run as a program (no other part of the package imports them).
 * :mod:`~pneumatic_unload.app.demo` - ``make demo``: simulator, estimator and recorder as
   processes over DDS;
 * :mod:`~pneumatic_unload.app.launch` - a minimal process launcher for the nodes
-  (``python -m pneumatic_unload.app.launch launch/bench.launch.yaml``; ROS-free).
+  (``python -m pneumatic_unload.app.launch pneumatic_unload/launch/bench.launch.yaml``; ROS-free).
 """
 
 from pneumatic_unload import single_threaded_blas

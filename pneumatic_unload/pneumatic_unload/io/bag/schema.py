@@ -84,9 +84,9 @@ INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 def find_msg_dir() -> Path:
     """Directory holding the ``pneumatic_unload_msgs`` ``.msg`` files, found without rclpy.
 
-    Search order: the source tree (``<repo>/msg_defs/msg``), then ``share/pneumatic_unload_msgs
-    /msg`` under ``sys.prefix`` and under each entry of ``AMENT_PREFIX_PATH`` (colcon install
-    or ament index).
+    Search order: the source tree (``<repo>/pneumatic_unload_msgs/msg``), then
+    ``share/pneumatic_unload_msgs/msg`` under ``sys.prefix`` and under each entry of
+    ``AMENT_PREFIX_PATH`` (colcon install or ament index).
 
     Returns:
         The directory [path].
@@ -94,7 +94,7 @@ def find_msg_dir() -> Path:
     Raises:
         BagError: No candidate directory holds the message files.
     """
-    candidates = [Path(__file__).resolve().parents[3] / "msg_defs" / "msg"]
+    candidates = [Path(__file__).resolve().parents[4] / "pneumatic_unload_msgs" / "msg"]
     share = Path("share") / MSG_PACKAGE / "msg"
     prefixes = [sys.prefix, sys.base_prefix]
     prefixes += [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
