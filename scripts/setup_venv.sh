@@ -49,7 +49,8 @@ fi
 PKG_HASH="$(cat pneumatic_unload/setup.py pneumatic_unload/setup.cfg pneumatic_unload/package.xml | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$VENV/.pkg-installed" 2>/dev/null)" != "$PKG_HASH" ]; then
   echo "[setup] installing pneumatic_unload (editable)"
-  "$VPY" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e ./pneumatic_unload 2>&1 \
+  "$VPY" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation \
+    --config-settings editable_mode=compat -e ./pneumatic_unload 2>&1 \
     | { grep -v "is ignored: it is neither a file nor a directory" || true; }
   echo "$PKG_HASH" > "$VENV/.pkg-installed"
 fi
