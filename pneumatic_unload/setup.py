@@ -1,15 +1,17 @@
 """ament_python package definition of pneumatic_unload (colcon and pip both use it)."""
 
 import hashlib
+import os
 from glob import glob
 from pathlib import Path
 
 from setuptools import Extension, find_packages, setup
+from setuptools.command.build_ext import build_ext
 
 PACKAGE = "pneumatic_unload"
 
 def _kernel(source: str) -> Extension:
-    """The C source ``source`` built into ``_<stem>*.so`` beside it when the package is
+    """The C source ``source`` built into ``_<stem>.so.0`` beside it when the package is
     built or installed (loaded through ctypes, model/kernel.py), the hash of its text
     compiled in: nothing is compiled at run time."""
     path = Path(source)
@@ -20,8 +22,21 @@ def _kernel(source: str) -> Extension:
                      define_macros=[("PU_SOURCE_SHA", f'"{sha}"')])
 
 
+#: File name suffix of the compiled C libraries: a shared library's (loaded through
+#: ctypes), not a Python extension module's (pkgutil and importers do not list it).
+LIBRARY_SUFFIX = ".so.0"
+
+
+class BuildKernels(build_ext):
+    """build_ext naming the C libraries ``_<stem>.so.0`` (not importable modules)."""
+
+    def get_ext_filename(self, fullname: str) -> str:
+        return os.path.join(*fullname.split(".")) + LIBRARY_SUFFIX
+
+
 setup(
     name=PACKAGE,
+    cmdclass={"build_ext": BuildKernels},
     version="0.1.0",
     packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
     # the model's C kernel and the estimator's crossing fit: compiled by the build

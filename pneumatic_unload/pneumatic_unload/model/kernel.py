@@ -7,7 +7,7 @@ the wall heat laws, the tank's mass and energy balance and the integrator: Dorma
 Hairer's stiffness test fires (a pipe volume far smaller than the tank, a very fast heat
 exchange). The package's build (setup.py: a setuptools extension, so
 ``colcon build`` and ``pip install`` do it) compiles that file into a shared library beside
-it (``_kernel*.so``, with the hash of the source compiled in: :func:`prebuilt`); the
+it (``_kernel.so.0``, with the hash of the source compiled in: :func:`prebuilt`); the
 installed package needs no compiler at run time. Where that library is missing or was
 built from another text (a source tree without a build, an edited ``kernel.c``), this
 module builds it with the system's C compiler the first time it is needed (``cc -O2``,
@@ -127,14 +127,11 @@ def source_sha(source: Path | None = None) -> str:
 
 def prebuilt(source: Path | None = None) -> Path | None:
     """The library the package's build compiled from ``source`` (default: ``kernel.c``;
-    setup.py's extension ``_<stem>`` beside it), if it was built from this very text
+    setup.py's ``_<stem>.so.0`` beside it), if it was built from this very text
     (its ``pu_source_sha``); None otherwise (a source tree without a build, an edited
     source)."""
-    import importlib.machinery
-
     source = SOURCE if source is None else source
-    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        path = source.with_name(f"_{source.stem}{suffix}")
+    for path in [source.with_name(f"_{source.stem}.so.0")]:
         if not path.is_file():
             continue
         try:
