@@ -18,8 +18,8 @@ On ``builder-inited`` it writes ``docs/_generated/*.rst`` (not kept in git) from
   :func:`pneumatic_unload.analysis.output.unload_json` adds
   (:data:`~pneumatic_unload.analysis.output.UNLOAD_JSON_KEYS`);
 * ``api.rst``: ``automodule`` of the library's public modules (:data:`API_MODULES`);
-* ``architecture.rst``: the layers of ``test/test_layout.py`` (``LAYERS``, with its comments)
-  and the modules of each part.
+* ``architecture.rst``: the layers of ``pneumatic_unload/test/test_layout.py`` (``LAYERS``,
+  with its comments) and the modules of each part.
 
 A file is rewritten only when its text changes, so that an unchanged page is not rebuilt.
 """
@@ -344,7 +344,7 @@ def api_page() -> str:
 
 # ---------------------------------------------------------------------- the architecture
 def _load_layout(srcdir: Path) -> ModuleType:
-    path = srcdir.parent / "test" / "test_layout.py"
+    path = srcdir.parent / "pneumatic_unload" / "test" / "test_layout.py"
     spec = importlib.util.spec_from_file_location("_docs_test_layout", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
@@ -406,9 +406,10 @@ def architecture_page(srcdir: Path) -> str:
     """The layers of the package, lowest first, each part with its modules."""
     layout = _load_layout(srcdir)
     layers: dict[str, int] = layout.LAYERS
-    comments = layer_comments(srcdir.parent / "test" / "test_layout.py")
+    comments = layer_comments(srcdir.parent / "pneumatic_unload" / "test" / "test_layout.py")
     lines = [".. _architecture:", "", *heading("Architecture: the layers", "="),
-             "The package in layers, generated from ``LAYERS`` in ``test/test_layout.py`` "
+             "The package in layers, generated from ``LAYERS`` in "
+             "``pneumatic_unload/test/test_layout.py`` "
              "(with its comments), the test that enforces them: a module imports only from "
              "its own layer or lower ones, never from a higher one, and there is no import "
              "cycle. The ROS-free core never imports ``rclpy`` or a message package; only "
