@@ -341,8 +341,10 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
     assert list((pkg_prefix / "share" / PKG / "bags").glob("*/metadata.yaml"))
 
     # each executable starts from the install (ros2 run's exec), the CLI from PATH
+    # (python3 on PATH is the one with the dependencies, as rosdep makes the system's)
     run_env = dict(os.environ, AMENT_PREFIX_PATH=str(prefix),
-                   ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "0"))
+                   ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", "0"),
+                   PATH=f"{prefix / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}")
     run_env.pop("PYTHONPATH", None)
 
     def sourced(command: str, timeout: float = 120) -> subprocess.CompletedProcess:

@@ -12,6 +12,9 @@ from pathlib import Path
 
 import pytest
 
+#: run alone, after the parallel part of make test (an rclpy context; see conftest.py)
+pytestmark = pytest.mark.serial
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE_DIR = ROOT / "pneumatic_unload"
 
