@@ -13,10 +13,12 @@ demo: setup
 
 # the tests not marked serial on every core, then the serial ones (node processes in real
 # time, servers, a browser: test/conftest.py) alone
+# (the PostgreSQL tests may install Debian's postgresql: test/pgserver.py)
+test: export PNEUMATIC_UNLOAD_TEST_INSTALL_POSTGRES = 1
 test: setup
 	@$(VENV)/bin/ruff check .
-	@$(PY) -m pytest -q -n auto --dist worksteal -m "not serial" --durations=10 test
-	@$(PY) -m pytest -q -m serial --durations=10 test
+	@$(PY) -m pytest -q -n auto --dist worksteal -m "not serial" --durations=10 pneumatic_unload/test
+	@$(PY) -m pytest -q -m serial --durations=10 pneumatic_unload/test
 
 lint: setup
 	@$(VENV)/bin/ruff check .
@@ -31,7 +33,7 @@ bench: setup
 	@for b in bench/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 bags: setup
-	@$(PY) bags/regenerate.py
+	@$(PY) pneumatic_unload/bags/regenerate.py
 
 lock:
 	@bash scripts/lock.sh

@@ -32,7 +32,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))  # fuzzcases
+# fuzzcases
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pneumatic_unload" / "test"))
 
 import fuzzcases as fz
 import fuzzio as fio

@@ -127,7 +127,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pneumatic_unload" / "test"))
 from foreign.hyddown_data import DATA_DIR, Trace, record, traces
 
 from pneumatic_unload.estimation import EstimatorSettings, analyze, merge_final

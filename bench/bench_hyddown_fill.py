@@ -92,7 +92,8 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the working tree's package
+# the working tree's package
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pneumatic_unload"))
 
 import pneumatic_unload
 from pneumatic_unload.estimation import EstimatorSettings, analyze
@@ -309,8 +310,8 @@ def main(argv: list[str] | None = None) -> int:
     ``--json PATH``."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--traces", type=Path,
-                    default=Path(__file__).resolve().parent.parent / "test" / "data"
-                    / "hyddown_fill",
+                    default=Path(__file__).resolve().parent.parent / "pneumatic_unload" / "test"
+                    / "data" / "hyddown_fill",
                     help="folder of .npz fills made by bench/hyddown_fill_traces.py "
                          "(default: the six committed ones, test/data/hyddown_fill)")
     ap.add_argument("--seeds", type=int, default=2, help="noise seeds per trace")

@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[1] / "pneumatic_unload"  # the Python package's folder
 sys.path.insert(0, str(ROOT))
 
 from pneumatic_unload.config import RigConfig  # noqa: E402

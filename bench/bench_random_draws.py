@@ -102,7 +102,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pneumatic_unload" / "test"))
 import bench_foreign_laws as bfl
 import bench_temperature_records as btr
 from foreign.newton_tank import IsoLaw, Nozzle, Series

@@ -139,7 +139,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pneumatic_unload" / "test"))
 from foreign.newton_tank import IsoLaw, discharge, thermocouple
 
 P_ATM, WALL = 101325.0, 293.15  # [Pa abs], [K]: the room, the tank's wall

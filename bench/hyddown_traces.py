@@ -57,7 +57,7 @@ TAUS = 8.0  # run length in tau0 [-]
 #: Steel wall: thickness [m], heat capacity [J/(kg K)], density [kg/m^3].
 WALL = {"thickness": 0.005, "heat_capacity": 500.0, "density": 7800.0}
 H_OUTER = 10.0  # outside wall to room [W/(m^2 K)]
-SMALL_DIR = Path(__file__).resolve().parents[1] / "test" / "data" / "hyddown"
+SMALL_DIR = Path(__file__).resolve().parents[1] / "pneumatic_unload" / "test" / "data" / "hyddown"
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from sphinx.ext.napoleon.docstring import GoogleDocstring
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
 # this checkout's package first (not another one installed in editable mode)
-sys.path[:0] = [str(ROOT), str(DOCS / "_ext")]
+sys.path[:0] = [str(ROOT / "pneumatic_unload"), str(DOCS / "_ext")]
 
 project = "pneumatic_unload"
 author = "pneumatic_unload maintainers"

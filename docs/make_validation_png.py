@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 STATIC = ROOT / "docs" / "_static"
 #: (bench script, its arguments) per figure.
 FIGURES: tuple[tuple[str, list[str]], ...] = (
-    ("bench_hyddown.py", [str(ROOT / "test" / "data" / "hyddown"),
+    ("bench_hyddown.py", [str(ROOT / "pneumatic_unload" / "test" / "data" / "hyddown"),
                           "--plot", str(STATIC / "validation_hyddown.png")]),
     ("bench_hyddown_fill.py", ["--plot", str(STATIC / "validation_hyddown_fill.png")]),
 )

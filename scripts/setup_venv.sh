@@ -50,11 +50,11 @@ grep -rlZ --include='*.cmake' '/opt/python/cp3' "$VENV_ABS/share" 2>/dev/null | 
   || true
 
 # Build the interface package when its sources changed since the last build.
-MSG_HASH="$(cat msg_defs/package.xml msg_defs/CMakeLists.txt msg_defs/msg/* msg_defs/action/* | sha256sum | cut -d' ' -f1)"
+MSG_HASH="$(cat pneumatic_unload_msgs/package.xml pneumatic_unload_msgs/CMakeLists.txt pneumatic_unload_msgs/msg/* pneumatic_unload_msgs/action/* | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$VENV/.msgs-built" 2>/dev/null)" != "$MSG_HASH" ]; then
-  echo "[setup] building msg_defs (pneumatic_unload_msgs) into $VENV (1-3 min)"
+  echo "[setup] building pneumatic_unload_msgs into $VENV (1-3 min)"
   rm -rf build/msg_defs && mkdir -p build
-  AMENT_PREFIX_PATH="$VENV_ABS" cmake -S msg_defs -B build/msg_defs \
+  AMENT_PREFIX_PATH="$VENV_ABS" cmake -S pneumatic_unload_msgs -B build/msg_defs \
     -DCMAKE_PREFIX_PATH="$VENV_ABS" -DCMAKE_INSTALL_PREFIX="$VENV_ABS" \
     -DPython3_EXECUTABLE="$VENV_ABS/bin/python" -DBUILD_TESTING=OFF >build/msg_defs.log 2>&1 \
     || { cat build/msg_defs.log; exit 1; }
@@ -64,14 +64,15 @@ if [ "$(cat "$VENV/.msgs-built" 2>/dev/null)" != "$MSG_HASH" ]; then
   echo "$MSG_HASH" > "$VENV/.msgs-built"
 fi
 
-PKG_HASH="$(cat setup.py setup.cfg package.xml | sha256sum | cut -d' ' -f1)"
+PKG_HASH="$(cat pneumatic_unload/setup.py pneumatic_unload/setup.cfg pneumatic_unload/package.xml | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$VENV/.pkg-installed" 2>/dev/null)" != "$PKG_HASH" ]; then
-  echo "[setup] installing pneumatic_unload (editable, a few seconds)"
-  "$VPY" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e . 2>&1 \
+  echo "[setup] installing pneumatic_unload (editable, its C kernel compiled: a few seconds)"
+  "$VPY" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation \
+    --config-settings editable_mode=compat -e ./pneumatic_unload 2>&1 \
     | { grep -v "is ignored: it is neither a file nor a directory" || true; }
   echo "$PKG_HASH" > "$VENV/.pkg-installed"
 fi
-# The model's C kernel (pneumatic_unload/model/kernel.c) and the estimator's crossing fit
+# The model's C kernel (pneumatic_unload/pneumatic_unload/model/kernel.c) and the estimator's crossing fit
 # (estimation/regression.c), compiled once with cc: importing them does it too, but ahead
 # of time no test process races to build them.
 "$VPY" -c "from pneumatic_unload.model import kernel; kernel.build(); import pneumatic_unload.estimation.regression" \

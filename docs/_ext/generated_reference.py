@@ -11,15 +11,15 @@ On ``builder-inited`` it writes ``docs/_generated/*.rst`` (not kept in git) from
   node's parameter file (:func:`~pneumatic_unload.config.nodes.yaml_text`);
 * ``interfaces.rst``: the package's topics
   (:data:`pneumatic_unload.nodes.recorder.PACKAGE_TOPICS`) and the ``.msg``/``.action``
-  files under ``msg_defs/``, included verbatim;
+  files under ``pneumatic_unload_msgs/``, included verbatim;
 * ``json.rst``: the document ``analyze --json`` prints
   (:data:`pneumatic_unload.analysis.output.ANALYZE_JSON_KEYS`), the fields of
   :class:`pneumatic_unload.estimation.UnloadResult` with their ``#:`` comments, and the keys
   :func:`pneumatic_unload.analysis.output.unload_json` adds
   (:data:`~pneumatic_unload.analysis.output.UNLOAD_JSON_KEYS`);
 * ``api.rst``: ``automodule`` of the library's public modules (:data:`API_MODULES`);
-* ``architecture.rst``: the layers of ``test/test_layout.py`` (``LAYERS``, with its comments)
-  and the modules of each part.
+* ``architecture.rst``: the layers of ``pneumatic_unload/test/test_layout.py`` (``LAYERS``,
+  with its comments) and the modules of each part.
 
 A file is rewritten only when its text changes, so that an unchanged page is not rebuilt.
 """
@@ -257,7 +257,7 @@ def interfaces_page(srcdir: Path) -> str:
     """The package's topics (from the recorder's table) and its messages and action."""
     from pneumatic_unload.nodes.recorder import PACKAGE_TOPICS
 
-    msg_root = srcdir.parent / "msg_defs"
+    msg_root = srcdir.parent / "pneumatic_unload_msgs"
     lines = [".. _interfaces:", "", *heading("Topics, messages and the action", "="),
              *heading("Topics", "-"),
              "The package's topics as :data:`pneumatic_unload.nodes.recorder.PACKAGE_TOPICS` "
@@ -270,11 +270,11 @@ def interfaces_page(srcdir: Path) -> str:
     for kind, title in (("msg", "Messages"), ("action", "Action")):
         lines += heading(title, "-")
         lines += [f"The ``.{kind}`` files of the ``pneumatic_unload_msgs`` package "
-                  f"(``msg_defs/{kind}/``), verbatim.", ""]
+                  f"(``pneumatic_unload_msgs/{kind}/``), verbatim.", ""]
         for path in sorted((msg_root / kind).glob(f"*.{kind}")):
             lines += [f".. _{kind}-{path.stem}:", "",
                       *heading(f"pneumatic_unload_msgs/{kind}/{path.stem}", "~"),
-                      f".. literalinclude:: ../../msg_defs/{kind}/{path.name}",
+                      f".. literalinclude:: ../../pneumatic_unload_msgs/{kind}/{path.name}",
                       "   :language: text", ""]
     return "\n".join(lines) + "\n"
 
@@ -362,7 +362,7 @@ def api_page() -> str:
 
 # ---------------------------------------------------------------------- the architecture
 def _load_layout(srcdir: Path) -> ModuleType:
-    path = srcdir.parent / "test" / "test_layout.py"
+    path = srcdir.parent / "pneumatic_unload" / "test" / "test_layout.py"
     spec = importlib.util.spec_from_file_location("_docs_test_layout", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
@@ -424,9 +424,10 @@ def architecture_page(srcdir: Path) -> str:
     """The layers of the package, lowest first, each part with its modules."""
     layout = _load_layout(srcdir)
     layers: dict[str, int] = layout.LAYERS
-    comments = layer_comments(srcdir.parent / "test" / "test_layout.py")
+    comments = layer_comments(srcdir.parent / "pneumatic_unload" / "test" / "test_layout.py")
     lines = [".. _architecture:", "", *heading("Architecture: the layers", "="),
-             "The package in layers, generated from ``LAYERS`` in ``test/test_layout.py`` "
+             "The package in layers, generated from ``LAYERS`` in "
+             "``pneumatic_unload/test/test_layout.py`` "
              "(with its comments), the test that enforces them: a module imports only from "
              "its own layer or lower ones, never from a higher one, and there is no import "
              "cycle. The ROS-free core never imports ``rclpy`` or a message package; only "

@@ -1,0 +1,2 @@
+"""The fitting engine: parameters, likelihood, least squares and their uncertainty (no
+physics). A regular package, so that setup.py's find_packages installs it."""
