@@ -1,7 +1,8 @@
 """A live cycle of charges and discharges of one component over DDS: a script, not a test.
 
 Why: issue #26's acceptance asks that a cycle of 20 alternating charges and discharges give
-both directions' C within their sigma of the rig's. ``test/test_nodes_two_way.py`` runs four
+both directions' C within their sigma of the rig's. ``pneumatic_unload/test/test_nodes_two_way.py``
+runs four
 steps; this runs as many as asked (20 by default, about 7 minutes at the default timing).
 
 What: the simulator in mode 'alternate' (a 1 L tank, C 8e-9 m^3/(s Pa), b 0.45, natural

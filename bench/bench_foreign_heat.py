@@ -2,7 +2,8 @@
 
 ``python bench/bench_foreign_heat.py [--draws N] [--first K] [--laws a,b] [--jobs J]
 [--modes exact,defaults,record] [--rows FILE] [--speed]`` (project venv, ``PYTHONPATH`` at
-the repo root). The records are made by ``test/foreign/heat_laws.py`` (its own ideal-gas
+the repo root). The records are made by ``pneumatic_unload/test/foreign/heat_laws.py`` (its own
+ideal-gas
 energy balance, ISO 6358-1 flow law with m and its linear end above r = 0.999, Radau,
 300 Pa of white noise at 1 kHz, the opening between two samples; it imports nothing from
 the package), draw k of each law seeded by the law's name and k: a heat flow in the
@@ -56,7 +57,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "test"))
+sys.path.insert(0, str(ROOT / "pneumatic_unload" / "test"))
 from foreign.heat_laws import (  # noqa: E402
     GAMMA,
     LAWS,

@@ -2,7 +2,8 @@
 
 ``python bench/bench_foreign_laws.py [--quick] [--jobs N] [--seeds K] [--exact-inputs]
 [--family iso|nozzle|series]`` (project venv, ``PYTHONPATH`` at the repo root): discharges
-made by the independent model ``test/foreign/newton_tank.py`` (Newton cooling, Radau at
+made by the independent model ``pneumatic_unload/test/foreign/newton_tank.py`` (Newton cooling,
+Radau at
 rtol 1e-10; it imports nothing from the package) through three families of flow law:
 
 * ``iso``: the ISO 6358-1:2013 law with m in {0.25, 0.35, 0.5, 0.62, 0.75} x b in

@@ -5,7 +5,8 @@ is spent: ``analyze`` on plain random arrays and on simulated discharges with ra
 corruption (random settings), the settings classes with junk values, the CSV reader (and
 the CLI on the file), the bag reader (bags written by the package's writer, some damaged;
 and the CLI), and the discrepancy workflow (small inputs). The properties are those of
-``test/fuzzcases.py``: only typed errors, every example ends within its time bound, no
+``pneumatic_unload/test/fuzzcases.py``: only typed errors, every example ends within its time
+bound, no
 status "ok" with a non-finite or non-positive C, tau_exp or sigma.
 
 A failing example is not shrunk (that costs time): its signature (exception type, where it

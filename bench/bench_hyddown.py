@@ -3,9 +3,10 @@
 ``python bench/bench_hyddown.py [FOLDER] [--wall-assumed]`` (project venv, ``PYTHONPATH`` at
 the repo root; ``--wall-assumed``: the wall's uncertainty from the record, not 0): every
 ``FOLDER/*.npz`` written by ``bench/hyddown_traces.py`` (default: the committed small grid
-in ``test/data/hyddown``; the full grid is made in the HydDown venv with
+in ``pneumatic_unload/test/data/hyddown``; the full grid is made in the HydDown venv with
 ``/tmp/hyd-venv/bin/python bench/hyddown_traces.py --grid full --out DIR``) is resampled to
-1 kHz with a 0.2 s plateau and 1000 Pa white noise (as ``test/test_hyddown.py``), analysed,
+1 kHz with a 0.2 s plateau and 1000 Pa white noise (as ``pneumatic_unload/test/test_hyddown.py``),
+analysed,
 and printed as a Markdown table: V [L], L/D, orifice d [mm], Cd, p10 [bar abs], h_inner
 [W/(m^2 K)] or calc, truth C [dm^3/(s bar)], model-C error [%], z = error / sigma(C), eq 39
 error [%], the fitted b, the heat law the curve fit chose and whether the result says

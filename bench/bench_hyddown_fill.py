@@ -5,7 +5,8 @@ Why: issue #26's acceptance for the charge test asks, on fills the package did n
 and the room into a tank at 2-10 kPa, HydDown's heat-transfer models), sampled at 1 kHz with
 white noise of 0.1 % of full scale: the model-based C within 2 % of HydDown's orifice at
 every point, and |error| <= 2 sigma at 90-98 % of them (a sigma neither too small nor too
-wide). ``test/test_charge_analysis.py`` checks six committed fills on HydDown's own time grid;
+wide). ``pneumatic_unload/test/test_charge_analysis.py`` checks six committed fills on HydDown's
+own time grid;
 this script runs a whole folder of fills at 1 kHz, several noise seeds each, and prints the
 table and the summary the acceptance is judged on.
 
@@ -16,7 +17,8 @@ the last HydDown step), given Gaussian noise of sigma = 1e-3 p_s (0.1 % of a ful
 the supply) and analysed with :func:`pneumatic_unload.estimation.analyze` in the charge
 direction. The inputs are HydDown's own and exact (V, L/D, T10 = T_s, and in the start mode
 p10): their uncertainties are 0, the model's limits (``model_uncertainty``) stay in the
-budget, as ``test/test_charge_analysis.py`` does. The supply pressure is never given: the
+budget, as ``pneumatic_unload/test/test_charge_analysis.py`` does. The supply pressure is never
+given: the
 estimator takes it from the record's final plateau. Two modes:
 
 * ``start``: the record begins at the opening (``start_time`` = the first sample,
@@ -62,7 +64,8 @@ limits 0.26 %, the RMS error over both modes' 96 analyses):
 * blend shipped, start mode, 1 seed: worst 26.8 %, 0/24 within 2 %, median 17.8 % (the
   first seconds of HydDown's fills as shipped leave out the inflow's flow work: no model of
   the physics fits them; most say "model inadequate");
-* the committed six (``test/data/hyddown_fill``), 2 seeds at 1 kHz: start 12/12 within 2 %
+* the committed six (``pneumatic_unload/test/data/hyddown_fill``), 2 seeds at 1 kHz: start 12/12
+within 2 %
   (worst 0.57 %), 11/12 within 2 sigma (92 %); plateau 12/12 (worst 0.60 %), 11/12 (92 %).
 
 Then (0b38f7e + 1): the model-limits line of a charge re-derived as the maximum-likelihood
@@ -105,7 +108,7 @@ C_TOLERANCE = 0.02  # the acceptance's |C error| [-]
 Z_LIMIT = 2.0  # |z| counted as covered [-]
 Z_SHARE_TARGET = (0.90, 0.98)  # the acceptance's share of rows within Z_LIMIT [-]
 WORST_SHOWN = 8  # worst rows listed in the summary [-]
-#: The inputs are HydDown's own, exact (as ``test/test_charge_analysis.py``).
+#: The inputs are HydDown's own, exact (as ``pneumatic_unload/test/test_charge_analysis.py``).
 EXACT_INPUTS = {"volume_uncertainty": 0.0, "temperature_uncertainty": 0.0,
                 "pressure_uncertainty": 0.0, "wall_temperature_uncertainty": 0.0}
 MODES = ("start", "plateau")

@@ -11,7 +11,7 @@ that is consistent with 90-98 %, each miss a bound or a confident miss). The
 fixed grids of ``bench/bench_foreign_laws.py`` and ``bench/bench_temperature_records.py``
 cycle a few values of each factor; this draws every factor at random inside the issue's ranges, with
 the records made and analysed by those benches' own ``record`` and ``run`` (the
-independent model ``test/foreign/newton_tank.py``, default settings, V given):
+independent model ``pneumatic_unload/test/foreign/newton_tank.py``, default settings, V given):
 
 * ``foreign``: the ISO 6358-1:2013 law (60 %: m 0.25-0.75, b 0.1-0.6, C 1e-9 - 3e-8
   m^3/(s Pa) log-uniform), an isentropic nozzle (15 %: Cd 0.6-1.0) or two ISO

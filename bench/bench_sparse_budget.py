@@ -1,5 +1,5 @@
 """Sparse records that begin at the valve opening, on the independent Newton-cooling model
-(``test/foreign/newton_tank.py``): a script, not a test.
+(``pneumatic_unload/test/foreign/newton_tank.py``): a script, not a test.
 
     python bench/bench_sparse_budget.py [N [SEED]]
 

@@ -4,7 +4,8 @@
 [--record-only]``
 (project venv, ``PYTHONPATH`` at the repo root): multi-rate CSV logs (``time [s]``,
 ``pressure [kPa]`` at every row, ``gas temperature [C]`` at every k-th row, empty cells
-between) of discharges made by the independent model ``test/foreign/newton_tank.py``
+between) of discharges made by the independent model
+``pneumatic_unload/test/foreign/newton_tank.py``
 (Newton cooling, Radau at rtol 1e-10; it imports nothing from the package), each analysed
 as a bench user would, ``pneumatic-unload analyze log.csv --volume V --json`` (T10 and the
 wall not given), twice: with the temperature column and without it (the same pressure

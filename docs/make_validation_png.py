@@ -1,6 +1,7 @@
 """Remake the validation page's figures, ``docs/_static/validation_hyddown.png`` and
 ``docs/_static/validation_hyddown_fill.png``: the model C of HydDown's committed discharges
-and fills (``test/data/hyddown``, ``test/data/hyddown_fill``), each error drawn with its
+and fills (``pneumatic_unload/test/data/hyddown``, ``pneumatic_unload/test/data/hyddown_fill``),
+each error drawn with its
 2-sigma bar by the benches themselves::
 
     .venv/bin/python docs/make_validation_png.py

@@ -123,7 +123,7 @@ def test_a_record_is_reproducible_with_its_noise_and_opening() -> None:
 def test_the_bench_newton_fit_recovers_a_record_of_its_own_law() -> None:
     """The scipy fit the bench sets beside the package is sound on its own model (a
     constant hA: the decaying exchange with no jet), so a miss on a foreign law is the law's."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
     from bench_foreign_heat import newton_fit
 
     rig = Rig(volume=2e-3, conductance=8e-9, b=0.35, m=0.45, p10=6e5)

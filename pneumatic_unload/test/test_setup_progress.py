@@ -8,7 +8,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 #: A stand-in for the venv's python: ``-m pip install`` prints what pip prints (or fails
 #: with FAIL set; with GATE set it waits after its first package until that file exists),

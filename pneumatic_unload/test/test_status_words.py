@@ -18,7 +18,7 @@ from pneumatic_unload.estimation import (
     canonical_status,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_a_good_result_has_a_status_word_that_reads_as_good():
@@ -39,7 +39,7 @@ def test_a_good_result_has_a_status_word_that_reads_as_good():
 def test_message_constants_follow_the_status_table():
     """UnloadEstimate.msg's STATUS_<WORD> = index of <word> in STATUSES (a bag stores the
     index: an old bag's 3 reads as 'ok_subsonic'); a former name keeps its old value."""
-    text = (REPO / "msg_defs" / "msg" / "UnloadEstimate.msg").read_text()
+    text = (REPO / "pneumatic_unload_msgs" / "msg" / "UnloadEstimate.msg").read_text()
     consts = {m[1].lower(): int(m[2]) for m in re.finditer(r"^uint8 STATUS_(\w+)=(\d+)", text,
                                                           re.MULTILINE)}
     for word, value in consts.items():
