@@ -90,3 +90,18 @@ def test_batch_command_prints_the_notes(bags: Path, tmp_path: Path):
                        timeout=300)
     files = json.loads(r.stdout)["files"]
     assert all("--override uses the command line's" in f["settings_notes"] for f in files)
+
+
+def test_batch_hints_name_the_command_line_options(tmp_path: Path):
+    """A CSV the batch cannot read gets an error row whose hint names the command line's
+    option (``--pressure-column``), not the library's keyword (``pressure_column=``)."""
+    csv = tmp_path / "line" / "P-001.csv"
+    csv.parent.mkdir()
+    csv.write_text("time [s];flow [l/min]\n0;1\n0.001;1\n0.002;1\n", encoding="utf-8")
+    r = subprocess.run([sys.executable, "-m", "pneumatic_unload.app.cli", "batch",
+                        str(csv.parent), "--db", str(tmp_path / "r.sqlite"), "--workers",
+                        "1", "--volume", "2L", "--json"],
+                       capture_output=True, text=True, timeout=300)
+    (row,) = json.loads(r.stdout)["files"]
+    assert row["status"] == "error" and "--pressure-column" in row["reason"], row
+    assert "pressure_column=" not in row["reason"], row

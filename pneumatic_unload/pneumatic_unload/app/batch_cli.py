@@ -73,7 +73,9 @@ def options_from(args: argparse.Namespace) -> InputOptions:
                                      settings)
     except ConfigError as exc:
         raise BatchCliError(str(exc)) from exc
-    csv = {k: getattr(args, k) for k in CSV_OPTIONS if getattr(args, k) is not None}
+    csv: dict[str, Any] = {k: getattr(args, k) for k in CSV_OPTIONS
+                           if getattr(args, k) is not None}
+    csv["hints"] = "cli"  # a CSV's error hints name the command line's options
     if zero is not None:
         csv["gauge"] = True
         csv["atmosphere"] = zero
