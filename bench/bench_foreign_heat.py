@@ -32,7 +32,8 @@ m within 0.05, |error| <= 2 sigma for C / b / m, the median CPU seconds per reco
 analyze subprocess's, from its rusage; the fit's own process time) and the median wall
 seconds. ``--rows FILE``: every row as a JSON line. ``--speed``: the CPU seconds of
 ``analyze`` on a 400-sample 1 Hz record (a 20 L tank through C = 3e-9, the decaying
-exchange, 300 Pa noise), median of 3; the 10 kHz bag against rosbags' raw iteration is
+exchange, 300 Pa noise) and on the two real AeroLab runs where ``../shared/real-data``
+holds them, median of 3; the 10 kHz bag against rosbags' raw iteration is
 ``bench/bench_engine.py --part analyze``.
 """
 
@@ -79,6 +80,9 @@ EXACT = ("--initial-temperature", "293.15", "--atmosphere", "101325",
          "--volume-uncertainty", "0", "--temperature-uncertainty", "0",
          "--wall-temperature-uncertainty", "0", "--pressure-uncertainty", "0",
          "--atmosphere-uncertainty", "0")
+#: The real AeroLab runs (1 Hz, gauge kPa, a 125 L tank) and how they are read.
+AEROLAB = ROOT.parent / "shared" / "real-data" / "aerolab"
+AEROLAB_ARGS = ("--gauge", "--atmosphere", "101500", "--pressure-unit", "kPa")
 MODES: dict[str, tuple[str, ...]] = {"exact": EXACT,
                                      "record": (*EXACT, "--model-uncertainty", "0"),
                                      "defaults": ()}
@@ -90,11 +94,12 @@ def write_csv(rec: Record, path: Path) -> None:
                header="time [s],pressure [Pa]", comments="", fmt=["%.6f", "%.1f"])
 
 
-def analyze_cli(csv: Path, volume: float, mode: str) -> dict:
+def analyze_cli(csv: Path, volume: float, mode: str,
+                extra: tuple[str, ...] = ()) -> dict:
     """``pneumatic-unload analyze`` on ``csv`` in a subprocess: C, b, m and their sigma
     (NaN where absent), the status and wall [s] (the CPU: :func:`run_cli`)."""
     cmd = [sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(csv), "--json",
-           "--volume", repr(volume), *MODES[mode]]
+           "--volume", repr(volume), *MODES[mode], *extra]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     start = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
@@ -125,10 +130,10 @@ def _children_cpu() -> float:
     return t.children_user + t.children_system
 
 
-def run_cli(csv: Path, volume: float, mode: str) -> dict:
+def run_cli(csv: Path, volume: float, mode: str, extra: tuple[str, ...] = ()) -> dict:
     """:func:`analyze_cli` with the CPU taken as the difference of the children's times."""
     before = _children_cpu()
-    row = analyze_cli(csv, volume, mode)
+    row = analyze_cli(csv, volume, mode, extra)
     row["cpu"] = _children_cpu() - before
     return row
 
@@ -300,9 +305,21 @@ def speed_1hz(repeats: int = 3) -> str:
             cpus.append(row["cpu"])
             walls.append(row["wall"])
             status = f"C {row.get('c', math.nan) / rig.conductance - 1.0:+.2%}"
-    return (f"400-sample 1 Hz record (V 20 L, C 3e-9, tau0 {rig.tau0:.0f} s): analyze CPU "
-            f"median {statistics.median(cpus):.2f} s (runs {', '.join(f'{c:.2f}' for c in cpus)}"
-            f"), wall {statistics.median(walls):.2f} s; {status}")
+    lines = [f"400-sample 1 Hz record (V 20 L, C 3e-9, tau0 {rig.tau0:.0f} s): analyze CPU "
+             f"median {statistics.median(cpus):.2f} s (runs "
+             f"{', '.join(f'{c:.2f}' for c in cpus)}), wall {statistics.median(walls):.2f} s; "
+             f"{status}"]
+    for name in ("orifice_0.094in.csv", "orifice_0.125in.csv"):
+        path = AEROLAB / name
+        if not path.is_file():
+            lines.append(f"{path}: not present")
+            continue
+        cpus = [run_cli(path, 0.125, "defaults", AEROLAB_ARGS)["cpu"] for _ in range(repeats)]
+        samples = sum(1 for _ in path.open()) - 1
+        lines.append(f"AeroLab {name} ({samples} samples, 1 Hz; {' '.join(AEROLAB_ARGS)}): "
+                     f"analyze CPU median {statistics.median(cpus):.2f} s (runs "
+                     f"{', '.join(f'{c:.2f}' for c in cpus)})")
+    return "\n".join(lines)
 
 
 def main(argv: list[str]) -> int:
@@ -315,9 +332,17 @@ def main(argv: list[str]) -> int:
                     help="analyze modes, comma-separated: exact, record, defaults")
     ap.add_argument("--no-newton", action="store_true", help="skip the scipy Newton fit")
     ap.add_argument("--rows", type=Path, help="append every row as a JSON line here")
+    ap.add_argument("--skip", type=Path, nargs="*", default=[],
+                    help="skip the draws these --rows files already hold")
+    ap.add_argument("--summary", type=Path, nargs="*",
+                    help="run nothing: the summary table of these --rows files")
     ap.add_argument("--speed", action="store_true",
                     help="the 400-sample 1 Hz record's CPU seconds only")
     args = ap.parse_args(argv)
+    if args.summary:
+        rows = [r for path in args.summary for r in read_rows(path)]
+        print(table(rows, [x for x in LAWS if any(r["law"] == x for r in rows)]))
+        return 0
     if args.speed:
         print(speed_1hz())
         return 0
@@ -326,8 +351,11 @@ def main(argv: list[str]) -> int:
     bad = [x for x in laws if x not in LAWS] + [x for x in modes if x not in MODES]
     if bad or args.draws < 1:
         ap.error(f"unknown law or mode {bad}; laws {LAWS}, modes {tuple(MODES)}; draws >= 1")
-    jobs = [(law, k, modes, not args.no_newton) for law in laws
-            for k in range(args.first, args.first + args.draws)]
+    done = {(r["law"], r["k"]) for path in args.skip for r in read_rows(path)}
+    # draw-major: a run stopped early has as many draws of every law
+    jobs = [(law, k, modes, not args.no_newton)
+            for k in range(args.first, args.first + args.draws) for law in laws
+            if (law, k) not in done]
     print(f"Foreign heat laws: {', '.join(laws)}; draws {args.first}.."
           f"{args.first + args.draws - 1}; modes {', '.join(modes)}; 1 kHz, 300 Pa\n")
     print("| draw | fit | V [L] | p10 [bar] | C | b | m | cooling [K] | tau0 [s] | C err [%] | "
@@ -353,6 +381,37 @@ def main(argv: list[str]) -> int:
     print(f"\n{len(jobs)} records in {time.perf_counter() - start:.0f} s (wall)\n")
     print(summary(stats, laws))
     return 0
+
+
+def read_rows(path: Path) -> list[dict]:
+    """The rows a ``--rows`` file holds (one JSON object a line)."""
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def table(rows: list[dict], laws: list[str]) -> str:
+    """The summary of ``rows`` (the last row of a draw where a draw is held twice)."""
+    last = {(r["law"], r["k"]): r for r in rows}
+    stats: dict[tuple[str, str], list[dict]] = {}
+    for res in sorted(last.values(), key=lambda r: (r["law"], r["k"])):
+        fits = [(f"package {m}", f) for m, f in res["package"].items()]
+        if "newton" in res:
+            fits.append(("scipy Newton fit", res["newton"]))
+        for label, fit in fits:
+            stats.setdefault((res["law"], label), []).append(errors(res, fit))
+    draws = {law: sorted(k for (lw, k) in last if lw == law) for law in laws}
+    head = "; ".join(f"{law} {len(ks)} draws ({_ranges(ks)})" for law, ks in draws.items())
+    return head + "\n\n" + summary(stats, laws)
+
+
+def _ranges(ks: list[int]) -> str:
+    """0, 1, 2, 5 -> '0-2, 5'."""
+    out: list[str] = []
+    for k in ks:
+        if out and int(out[-1].split("-")[-1]) == k - 1:
+            out[-1] = f"{out[-1].split('-')[0]}-{k}"
+        else:
+            out.append(str(k))
+    return ", ".join(out)
 
 
 def summary(stats: dict[tuple[str, str], list[dict]], laws: list[str]) -> str:
