@@ -283,8 +283,9 @@ def row_text(res: dict, label: str, e: dict, fit: dict) -> str:
             f"{fit['cpu']:.1f} | {fit['wall']:.1f} |")
 
 
-def speed_1hz(repeats: int = 3) -> str:
-    """The CPU seconds of ``analyze`` on a 400-sample 1 Hz record (median of ``repeats``)."""
+def speed_1hz(repeats: int = 3) -> None:
+    """Print the CPU seconds of ``analyze`` on a 400-sample 1 Hz record and on the AeroLab
+    runs (median of ``repeats``)."""
     rig = Rig(20e-3, 3e-9, 0.35, 0.5, 7e5)
     law = DecayingExchange(4.0, 0.5 * rig.tau0, rig.p10 * rig.volume / (R_AIR * rig.t10)
                            * CV / rig.tau0)
@@ -305,21 +306,20 @@ def speed_1hz(repeats: int = 3) -> str:
             cpus.append(row["cpu"])
             walls.append(row["wall"])
             status = f"C {row.get('c', math.nan) / rig.conductance - 1.0:+.2%}"
-    lines = [f"400-sample 1 Hz record (V 20 L, C 3e-9, tau0 {rig.tau0:.0f} s): analyze CPU "
+    print(f"400-sample 1 Hz record (V 20 L, C 3e-9, tau0 {rig.tau0:.0f} s): analyze CPU "
              f"median {statistics.median(cpus):.2f} s (runs "
              f"{', '.join(f'{c:.2f}' for c in cpus)}), wall {statistics.median(walls):.2f} s; "
-             f"{status}"]
+             f"{status}", flush=True)
     for name in ("orifice_0.094in.csv", "orifice_0.125in.csv"):
         path = AEROLAB / name
         if not path.is_file():
-            lines.append(f"{path}: not present")
+            print(f"{path}: not present")
             continue
         cpus = [run_cli(path, 0.125, "defaults", AEROLAB_ARGS)["cpu"] for _ in range(repeats)]
         samples = sum(1 for _ in path.open()) - 1
-        lines.append(f"AeroLab {name} ({samples} samples, 1 Hz; {' '.join(AEROLAB_ARGS)}): "
+        print(f"AeroLab {name} ({samples} samples, 1 Hz; {' '.join(AEROLAB_ARGS)}): "
                      f"analyze CPU median {statistics.median(cpus):.2f} s (runs "
-                     f"{', '.join(f'{c:.2f}' for c in cpus)})")
-    return "\n".join(lines)
+                     f"{', '.join(f'{c:.2f}' for c in cpus)})", flush=True)
 
 
 def main(argv: list[str]) -> int:
@@ -332,6 +332,7 @@ def main(argv: list[str]) -> int:
                     help="analyze modes, comma-separated: exact, record, defaults")
     ap.add_argument("--no-newton", action="store_true", help="skip the scipy Newton fit")
     ap.add_argument("--rows", type=Path, help="append every row as a JSON line here")
+    ap.add_argument("--repeats", type=int, default=3, help="--speed: runs per record")
     ap.add_argument("--skip", type=Path, nargs="*", default=[],
                     help="skip the draws these --rows files already hold")
     ap.add_argument("--summary", type=Path, nargs="*",
@@ -344,7 +345,7 @@ def main(argv: list[str]) -> int:
         print(table(rows, [x for x in LAWS if any(r["law"] == x for r in rows)]))
         return 0
     if args.speed:
-        print(speed_1hz())
+        speed_1hz(args.repeats)
         return 0
     laws = [x.strip() for x in args.laws.split(",") if x.strip()]
     modes = tuple(x.strip() for x in args.modes.split(",") if x.strip())
