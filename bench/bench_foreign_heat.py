@@ -35,6 +35,25 @@ seconds. ``--rows FILE``: every row as a JSON line. ``--speed``: the CPU seconds
 exchange, 300 Pa noise) and on the two real AeroLab runs where ``../shared/real-data``
 holds them, median of 3; the 10 kHz bag against rosbags' raw iteration is
 ``bench/bench_engine.py --part analyze``.
+
+Measured on the package at 9b15680 (``--draws 30 --jobs 1``, the inputs stated exact; 2
+shared cores, load 5-18; medians per record, CPU / wall [s]):
+
+| law | fit | C 1 % | b 0.03 | m 0.05 | abs(err) <= 2 sigma C / b / m | CPU / wall |
+|---|---|---|---|---|---|---|
+| power-difference | package | 11/30 | 11/30 | 30/30 | 21 / 11 / 21 | 3.7 / 10.4 |
+| power-difference | Newton fit | 22/30 | 22/30 | 29/30 | 1 / 2 / 3 | 3.1 / 8.7 |
+| density-difference | package | 9/30 | 23/30 | 29/30 | 8 / 13 / 8 | 3.3 / 6.9 |
+| density-difference | Newton fit | 2/30 | 5/30 | 22/30 | 0 / 0 / 1 | 2.7 / 6.0 |
+| warming-wall | package | 16/30 | 15/30 | 23/30 | 22 / 12 / 9 | 3.4 / 9.3 |
+| warming-wall | Newton fit | 2/30 | 1/30 | 21/30 | 0 / 0 / 0 | 3.2 / 7.3 |
+| decaying-exchange | package | 7/30 | 5/30 | 11/30 | 21 / 15 / 12 | 3.2 / 11.1 |
+| decaying-exchange | Newton fit | 2/30 | 0/30 | 10/30 | 0 / 0 / 0 | 3.2 / 10.6 |
+| all | package | 43/120 | 54/120 | 93/120 | 72 / 51 / 50 | 3.4 / 9.1 |
+| all | Newton fit | 28/120 | 28/120 | 82/120 | 1 / 2 / 4 | 3.1 / 8.1 |
+
+``--speed``: the 400-sample 1 Hz record 1.6-2.0 s of CPU (median 1.82 s over seven
+runs), the AeroLab runs 18.0 s and 17.1 s.
 """
 
 from __future__ import annotations
