@@ -33,8 +33,28 @@ m within 0.05, |error| <= 2 sigma for C / b / m, the median CPU seconds per reco
 analyze subprocess's, from its rusage; the fit's own process time) and the median wall
 seconds. ``--rows FILE``: every row as a JSON line. ``--speed``: the CPU seconds of
 ``analyze`` on a 400-sample 1 Hz record (a 20 L tank through C = 3e-9, the decaying
-exchange, 300 Pa noise), median of 3; the 10 kHz bag against rosbags' raw iteration is
+exchange, 300 Pa noise) and on the two real AeroLab runs where ``../shared/real-data``
+holds them, median of 3; the 10 kHz bag against rosbags' raw iteration is
 ``bench/bench_engine.py --part analyze``.
+
+Measured on the package at 9b15680 (``--draws 30 --jobs 1``, the inputs stated exact; 2
+shared cores, load 5-18; medians per record, CPU / wall [s]):
+
+| law | fit | C 1 % | b 0.03 | m 0.05 | abs(err) <= 2 sigma C / b / m | CPU / wall |
+|---|---|---|---|---|---|---|
+| power-difference | package | 11/30 | 11/30 | 30/30 | 21 / 11 / 21 | 3.7 / 10.4 |
+| power-difference | Newton fit | 22/30 | 22/30 | 29/30 | 1 / 2 / 3 | 3.1 / 8.7 |
+| density-difference | package | 9/30 | 23/30 | 29/30 | 8 / 13 / 8 | 3.3 / 6.9 |
+| density-difference | Newton fit | 2/30 | 5/30 | 22/30 | 0 / 0 / 1 | 2.7 / 6.0 |
+| warming-wall | package | 16/30 | 15/30 | 23/30 | 22 / 12 / 9 | 3.4 / 9.3 |
+| warming-wall | Newton fit | 2/30 | 1/30 | 21/30 | 0 / 0 / 0 | 3.2 / 7.3 |
+| decaying-exchange | package | 7/30 | 5/30 | 11/30 | 21 / 15 / 12 | 3.2 / 11.1 |
+| decaying-exchange | Newton fit | 2/30 | 0/30 | 10/30 | 0 / 0 / 0 | 3.2 / 10.6 |
+| all | package | 43/120 | 54/120 | 93/120 | 72 / 51 / 50 | 3.4 / 9.1 |
+| all | Newton fit | 28/120 | 28/120 | 82/120 | 1 / 2 / 4 | 3.1 / 8.1 |
+
+``--speed``: the 400-sample 1 Hz record 1.6-2.0 s of CPU (median 1.82 s over seven
+runs), the AeroLab runs 18.0 s and 17.1 s.
 """
 
 from __future__ import annotations
@@ -80,6 +100,9 @@ EXACT = ("--initial-temperature", "293.15", "--atmosphere", "101325",
          "--volume-uncertainty", "0", "--temperature-uncertainty", "0",
          "--wall-temperature-uncertainty", "0", "--pressure-uncertainty", "0",
          "--atmosphere-uncertainty", "0")
+#: The real AeroLab runs (1 Hz, gauge kPa, a 125 L tank) and how they are read.
+AEROLAB = ROOT.parent / "shared" / "real-data" / "aerolab"
+AEROLAB_ARGS = ("--gauge", "--atmosphere", "101500", "--pressure-unit", "kPa")
 MODES: dict[str, tuple[str, ...]] = {"exact": EXACT,
                                      "record": (*EXACT, "--model-uncertainty", "0"),
                                      "defaults": ()}
@@ -91,11 +114,12 @@ def write_csv(rec: Record, path: Path) -> None:
                header="time [s],pressure [Pa]", comments="", fmt=["%.6f", "%.1f"])
 
 
-def analyze_cli(csv: Path, volume: float, mode: str) -> dict:
+def analyze_cli(csv: Path, volume: float, mode: str,
+                extra: tuple[str, ...] = ()) -> dict:
     """``pneumatic-unload analyze`` on ``csv`` in a subprocess: C, b, m and their sigma
     (NaN where absent), the status and wall [s] (the CPU: :func:`run_cli`)."""
     cmd = [sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(csv), "--json",
-           "--volume", repr(volume), *MODES[mode]]
+           "--volume", repr(volume), *MODES[mode], *extra]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     start = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
@@ -126,10 +150,10 @@ def _children_cpu() -> float:
     return t.children_user + t.children_system
 
 
-def run_cli(csv: Path, volume: float, mode: str) -> dict:
+def run_cli(csv: Path, volume: float, mode: str, extra: tuple[str, ...] = ()) -> dict:
     """:func:`analyze_cli` with the CPU taken as the difference of the children's times."""
     before = _children_cpu()
-    row = analyze_cli(csv, volume, mode)
+    row = analyze_cli(csv, volume, mode, extra)
     row["cpu"] = _children_cpu() - before
     return row
 
@@ -279,8 +303,9 @@ def row_text(res: dict, label: str, e: dict, fit: dict) -> str:
             f"{fit['cpu']:.1f} | {fit['wall']:.1f} |")
 
 
-def speed_1hz(repeats: int = 3) -> str:
-    """The CPU seconds of ``analyze`` on a 400-sample 1 Hz record (median of ``repeats``)."""
+def speed_1hz(repeats: int = 3) -> None:
+    """Print the CPU seconds of ``analyze`` on a 400-sample 1 Hz record and on the AeroLab
+    runs (median of ``repeats``)."""
     rig = Rig(20e-3, 3e-9, 0.35, 0.5, 7e5)
     law = DecayingExchange(4.0, 0.5 * rig.tau0, rig.p10 * rig.volume / (R_AIR * rig.t10)
                            * CV / rig.tau0)
@@ -301,9 +326,20 @@ def speed_1hz(repeats: int = 3) -> str:
             cpus.append(row["cpu"])
             walls.append(row["wall"])
             status = f"C {row.get('c', math.nan) / rig.conductance - 1.0:+.2%}"
-    return (f"400-sample 1 Hz record (V 20 L, C 3e-9, tau0 {rig.tau0:.0f} s): analyze CPU "
-            f"median {statistics.median(cpus):.2f} s (runs {', '.join(f'{c:.2f}' for c in cpus)}"
-            f"), wall {statistics.median(walls):.2f} s; {status}")
+    print(f"400-sample 1 Hz record (V 20 L, C 3e-9, tau0 {rig.tau0:.0f} s): analyze CPU "
+             f"median {statistics.median(cpus):.2f} s (runs "
+             f"{', '.join(f'{c:.2f}' for c in cpus)}), wall {statistics.median(walls):.2f} s; "
+             f"{status}", flush=True)
+    for name in ("orifice_0.094in.csv", "orifice_0.125in.csv"):
+        path = AEROLAB / name
+        if not path.is_file():
+            print(f"{path}: not present")
+            continue
+        cpus = [run_cli(path, 0.125, "defaults", AEROLAB_ARGS)["cpu"] for _ in range(repeats)]
+        samples = sum(1 for _ in path.open()) - 1
+        print(f"AeroLab {name} ({samples} samples, 1 Hz; {' '.join(AEROLAB_ARGS)}): "
+                     f"analyze CPU median {statistics.median(cpus):.2f} s (runs "
+                     f"{', '.join(f'{c:.2f}' for c in cpus)})", flush=True)
 
 
 def main(argv: list[str]) -> int:
@@ -316,19 +352,31 @@ def main(argv: list[str]) -> int:
                     help="analyze modes, comma-separated: exact, record, defaults")
     ap.add_argument("--no-newton", action="store_true", help="skip the scipy Newton fit")
     ap.add_argument("--rows", type=Path, help="append every row as a JSON line here")
+    ap.add_argument("--repeats", type=int, default=3, help="--speed: runs per record")
+    ap.add_argument("--skip", type=Path, nargs="*", default=[],
+                    help="skip the draws these --rows files already hold")
+    ap.add_argument("--summary", type=Path, nargs="*",
+                    help="run nothing: the summary table of these --rows files")
     ap.add_argument("--speed", action="store_true",
                     help="the 400-sample 1 Hz record's CPU seconds only")
     args = ap.parse_args(argv)
+    if args.summary:
+        rows = [r for path in args.summary for r in read_rows(path)]
+        print(table(rows, [x for x in LAWS if any(r["law"] == x for r in rows)]))
+        return 0
     if args.speed:
-        print(speed_1hz())
+        speed_1hz(args.repeats)
         return 0
     laws = [x.strip() for x in args.laws.split(",") if x.strip()]
     modes = tuple(x.strip() for x in args.modes.split(",") if x.strip())
     bad = [x for x in laws if x not in LAWS] + [x for x in modes if x not in MODES]
     if bad or args.draws < 1:
         ap.error(f"unknown law or mode {bad}; laws {LAWS}, modes {tuple(MODES)}; draws >= 1")
-    jobs = [(law, k, modes, not args.no_newton) for law in laws
-            for k in range(args.first, args.first + args.draws)]
+    done = {(r["law"], r["k"]) for path in args.skip for r in read_rows(path)}
+    # draw-major: a run stopped early has as many draws of every law
+    jobs = [(law, k, modes, not args.no_newton)
+            for k in range(args.first, args.first + args.draws) for law in laws
+            if (law, k) not in done]
     print(f"Foreign heat laws: {', '.join(laws)}; draws {args.first}.."
           f"{args.first + args.draws - 1}; modes {', '.join(modes)}; 1 kHz, 300 Pa\n")
     print("| draw | fit | V [L] | p10 [bar] | C | b | m | cooling [K] | tau0 [s] | C err [%] | "
@@ -354,6 +402,37 @@ def main(argv: list[str]) -> int:
     print(f"\n{len(jobs)} records in {time.perf_counter() - start:.0f} s (wall)\n")
     print(summary(stats, laws))
     return 0
+
+
+def read_rows(path: Path) -> list[dict]:
+    """The rows a ``--rows`` file holds (one JSON object a line)."""
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def table(rows: list[dict], laws: list[str]) -> str:
+    """The summary of ``rows`` (the last row of a draw where a draw is held twice)."""
+    last = {(r["law"], r["k"]): r for r in rows}
+    stats: dict[tuple[str, str], list[dict]] = {}
+    for res in sorted(last.values(), key=lambda r: (r["law"], r["k"])):
+        fits = [(f"package {m}", f) for m, f in res["package"].items()]
+        if "newton" in res:
+            fits.append(("scipy Newton fit", res["newton"]))
+        for label, fit in fits:
+            stats.setdefault((res["law"], label), []).append(errors(res, fit))
+    draws = {law: sorted(k for (lw, k) in last if lw == law) for law in laws}
+    head = "; ".join(f"{law} {len(ks)} draws ({_ranges(ks)})" for law, ks in draws.items())
+    return head + "\n\n" + summary(stats, laws)
+
+
+def _ranges(ks: list[int]) -> str:
+    """0, 1, 2, 5 -> '0-2, 5'."""
+    out: list[str] = []
+    for k in ks:
+        if out and int(out[-1].split("-")[-1]) == k - 1:
+            out[-1] = f"{out[-1].split('-')[0]}-{k}"
+        else:
+            out.append(str(k))
+    return ", ".join(out)
 
 
 def summary(stats: dict[tuple[str, str], list[dict]], laws: list[str]) -> str:
