@@ -120,7 +120,7 @@ def analyze_cli(csv: Path, volume: float, mode: str,
     (NaN where absent), the status and wall [s] (the CPU: :func:`run_cli`)."""
     cmd = [sys.executable, "-m", "pneumatic_unload.app.cli", "analyze", str(csv), "--json",
            "--volume", repr(volume), *MODES[mode], *extra]
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "pneumatic_unload")}
     start = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
                             text=True)
