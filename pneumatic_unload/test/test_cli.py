@@ -256,3 +256,13 @@ def test_analyze_does_not_load_the_test_line(tmp_path):
     # scipy.optimize cost analyze 0.3 s of import on bench_engine's bag (0.50 -> 0.66 of a
     # raw bag iteration): the flow curve's reduction runs on the package's own engine
     assert res["slow"] == [], res
+
+
+def test_demo_reads_the_samples_the_live_estimator_missed():
+    """The demo explains a live = offline gap by the samples the estimator node counted
+    missing (its stats line at shutdown), and finds none where the line is absent."""
+    from pneumatic_unload.app.demo import _samples_missed
+
+    log = '[INFO] [estimator]: stats {"received": 7454, "rejected": 0, "missing": 546}\n'
+    assert _samples_missed(log) == 546
+    assert _samples_missed("[INFO] [estimator]: unload 0 (final)") == 0

@@ -115,12 +115,37 @@ def main(argv: Sequence[str] | None = None) -> int:
         same = len(pub) == len(live) and all(
             abs(a["conductance_model"] - b["conductance_model"])
             <= 1e-9 * abs(b["conductance_model"]) for a, b in zip(pub, live, strict=True))
+    missed = _samples_missed(est.output())
     print(f"samples: {n_pub} published by the simulator, {n_bag} in the bag; offline "
           f"`pneumatic-unload analyze` {'reproduces' if same else 'DOES NOT reproduce'} "
           f"the live estimates")
+    explained = False
+    if not same and missed and offline.returncode == 0 and live:
+        # the live node saw fewer samples than the bag holds (its queue overflowed on a
+        # loaded machine): the two analyses differ by what those samples carry, which is
+        # within the estimate's own uncertainty or the run is a failure
+        a, b = json.loads(offline.stdout)["published"][-1], live[-1]
+        gap = abs(float(a["conductance_model"]) - float(b["conductance_model"]))
+        c, u = abs(float(b["conductance_model"])), float(b["conductance_model_std"])
+        explained = gap <= u
+        print(f"  the live estimator missed {missed} of the samples (a loaded machine); the "
+              f"complete bag's final model C differs by {gap / c:.2e} relative, "
+              f"{'within' if explained else 'OUTSIDE'} its standard uncertainty")
     print(f"bag written: {out}  ({wall:.1f} s wall time; node logs in {logs})")
     print(f"read back by rosbags: {bag_summary(out)}")
-    return 0 if live and same and n_pub == n_bag else 1
+    return 0 if live and (same or explained) and n_pub == n_bag else 1
+
+
+def _samples_missed(log: str) -> int:
+    """The samples the estimator node counted missing from its stream (its ``stats`` line at
+    shutdown; 0 where the line is absent)."""
+    import re
+
+    m = re.search(r"stats (\{.*\})", log)
+    try:
+        return int(json.loads(m.group(1)).get("missing", 0)) if m else 0
+    except (ValueError, TypeError):
+        return 0
 
 
 if __name__ == "__main__":
