@@ -33,9 +33,10 @@ BIC_k = n log(RSS_k / n) + k_k log n (n samples, k_k parameters). The treatments
 * ``D``: the lowest BIC among A, D1, D2;
 * ``C+D``: the BIC-weighted average over all five;
 * ``E``: the tempered average over all five: w_k ~ exp(-(BIC_k - BIC_min) / (2 T)), var =
-  sum w_k (T var_k + (x_k - xbar)^2), T = f tau0 (f the sampling rate: the samples in one
-  tau0, over which a wrong heat law's residual stays correlated), i.e. BIC and covariance
-  counted on n / T effective samples.
+  sum w_k (T var_k + (x_k - xbar)^2), T = 0.1 f tau0 (f the sampling rate: a tenth of the
+  samples in one tau0, the span over which a wrong heat law's residual is taken to stay
+  correlated), i.e. BIC and covariance counted on n / T effective samples (``--summary
+  FILE --temper X``: E recomputed from the stored fits with T = X f tau0).
 
 Coverage is |error| <= 2 sigma with sigma as above (``2 sigma``) and with the covariance
 multiplied by the residual's AR(1) variance factor (1 + r1) / (1 - r1), r1 the lag-1
@@ -84,7 +85,7 @@ TREATMENTS: dict[str, tuple[tuple[str, ...], str]] = {
 #: The tempered rule's correlation time of a heat law's misfit, in units of tau0: the
 #: residual a wrong heat law leaves is smooth on the scale of the discharge's time constant,
 #: so a record of n samples at a rate f holds about n / (f tau0 x this) independent looks at it.
-DISCREPANCY_TIME_TAU0 = 1.0
+DISCREPANCY_TIME_TAU0 = 0.1
 
 
 def phi(r: float, b: float, m: float) -> float:
@@ -253,9 +254,28 @@ def one(job: tuple[str, int]) -> dict:
            "treatments": {}}
     rate = (t.size - 1) / float(t[-1] - t[0])
     temper = max(1.0, rate * tau_ref * DISCREPANCY_TIME_TAU0)
-    out["temper"] = temper
+    out["temper"], out["time_tau0"] = temper, DISCREPANCY_TIME_TAU0
     for name, (names, rule) in TREATMENTS.items():
         out["treatments"][name] = combine(fits, names, rule, temper)
+    return out
+
+
+def tempered(row: dict, time_tau0: float) -> dict:
+    """Treatment E of a stored row, recomputed from its fits with T = f tau0 x time_tau0."""
+    names, fits = TREATMENTS["E"][0], row["fits"]
+    temper = max(1.0, row["temper"] / row["time_tau0"] * time_tau0)
+    bic = np.array([fits[k]["bic"] for k in names])
+    w = np.exp(-(bic - bic.min()) / (2.0 * temper))
+    w /= w.sum()
+    out: dict = {"weights": dict(zip(names, [float(v) for v in w], strict=True)),
+                 "cpu": sum(fits[k]["cpu"] for k in names)}
+    for i, key in enumerate(("c", "b", "m")):
+        xs = np.array([fits[k]["x"][i] for k in names])
+        mean = float(np.dot(w, xs))
+        var = temper * float(np.dot(w, [fits[k]["std"][i] ** 2 for k in names])) \
+            + float(np.dot(w, (xs - mean) ** 2))
+        out[key] = mean
+        out[f"{key}_std"] = out[f"{key}_std_ar1"] = math.sqrt(var)
     return out
 
 
@@ -332,6 +352,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--jobs", type=int, default=1, help="processes (default 1)")
     ap.add_argument("--rows", type=Path, help="append every record's row as a JSON line")
     ap.add_argument("--summary", type=Path, help="print the table from a --rows file")
+    ap.add_argument("--temper", type=float, default=DISCREPANCY_TIME_TAU0,
+                    help="with --summary: treatment E's T in f tau0 (default "
+                         f"{DISCREPANCY_TIME_TAU0})")
     args = ap.parse_args(argv)
     laws = [x.strip() for x in args.laws.split(",") if x.strip()]
     bad = [x for x in laws if x not in LAWS]
@@ -339,6 +362,8 @@ def main(argv: list[str]) -> int:
         ap.error(f"unknown law {bad}; laws {LAWS}; draws >= 1")
     if args.summary:
         rows = [json.loads(line) for line in args.summary.read_text().splitlines() if line]
+        for r in rows:
+            r["treatments"]["E"] = tempered(r, args.temper)
         print(summary([r for r in rows if r["law"] in laws], laws))
         return 0
     jobs = [(law, k) for k in range(args.first, args.first + args.draws) for law in laws]
