@@ -1,10 +1,11 @@
 """Heat exchange as a nuisance for C, b and m: treatments compared on the foreign heat laws.
 
 ``python bench/study_heat_exchange.py [--draws N] [--first K] [--laws a,b] [--jobs J]
-[--rows FILE]`` fits each record of ``test/foreign/heat_laws.py`` (draw k of each law, 1 kHz,
-300 Pa, the inputs stated exact: V, T10 = 293.15 K, p_atm = 101325 Pa) and prints, per law
-and over all laws, one line per treatment. ``--summary FILE`` prints the table again from
-the rows a run wrote with ``--rows``. It imports nothing from ``pneumatic_unload``.
+[--rows FILE]`` fits each record of ``pneumatic_unload/test/foreign/heat_laws.py`` (draw k
+of each law, 1 kHz, 300 Pa, the inputs stated exact: V, T10 = 293.15 K, p_atm = 101325 Pa)
+and prints, per law and over all laws, one line per treatment. ``--summary FILE`` prints the
+table again from the rows a run wrote with ``--rows``. It imports nothing from
+``pneumatic_unload``.
 
 The model: states p [Pa] and T [K] of an ideal gas in a rigid tank V,
 
