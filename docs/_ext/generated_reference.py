@@ -47,6 +47,7 @@ PKG = "pneumatic_unload"
 #: The library modules documented with ``automodule`` on the API page.
 API_MODULES: tuple[str, ...] = (
     "pneumatic_unload.physics",
+    "pneumatic_unload.real_gas",
     "pneumatic_unload.charge",
     "pneumatic_unload.io",
     "pneumatic_unload.estimation",

@@ -371,6 +371,7 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
 LAYERS: dict[str, int] = {
     "physics": 0,  # the flow law and the paper's closed forms (eq 38-40, the isentropic C)
     "charge": 0,  # the charge test's closed forms (the method mirrored, its bias)
+    "real_gas": 0,  # second virial coefficients: where the ideal gas departs from the real
     "config": 1,  # settings declared once: units, ranges, meanings
     "io": 2,  # bags and CSV files: data, no physics
     "fit": 2,  # the fitting engine: parameters, likelihood, least squares, uncertainty

@@ -191,7 +191,7 @@ def test_a_record_where_the_ideal_gas_departs_is_flagged(gas, r_gas, gamma, p10,
     500 bar (Z 1.25) were 'ok' with nothing said; now the status text says so and the
     budgets carry a real-gas line of 2 |Z - 1| / sqrt(3); air from 7 bar (Z 0.998) is not
     flagged."""
-    from pneumatic_unload import physics
+    from pneumatic_unload import physics, real_gas
     from pneumatic_unload.estimation.vetting import REAL_GAS_TERM
 
     c = physics.orifice_conductance(6.35e-3)
@@ -200,7 +200,7 @@ def test_a_record_where_the_ideal_gas_departs_is_flagged(gas, r_gas, gamma, p10,
     sim = simulate(cfg)
     got = analyze(sim.t, sim.measured, settings_for(cfg))
     assert got and all(r.status == "ok" for r in got)
-    z1 = physics.VIRIAL_GASES[gas].departure(p10, cfg.initial_temperature)
+    z1 = real_gas.VIRIAL_GASES[gas].departure(p10, cfg.initial_temperature)
     for r in got:
         terms = [t for t in r.extra["budget"]["terms"] if t["name"] == REAL_GAS_TERM]
         assert ("real gas: Z = " in r.status_text) is flagged

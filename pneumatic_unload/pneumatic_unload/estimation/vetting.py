@@ -6,7 +6,7 @@ start) passes :func:`vet` once it is complete. A result that gives C (status in
 
 * flagged when its tank's pressure lies where the real gas departs from the model's ideal
   gas by more than :data:`REAL_GAS_DEPARTURE` (a second virial estimate of the gas,
-  :data:`~pneumatic_unload.physics.VIRIAL_GASES`): a note in its status text and a line in
+  :data:`~pneumatic_unload.real_gas.VIRIAL_GASES`): a note in its status text and a line in
   its budgets (:data:`REAL_GAS_TERM`);
 * told why it has no model-based C when it has none (:data:`NO_MODEL_C_TEXT`: the C to
   report is then eq 39's, biased by design);
@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from pneumatic_unload import physics
+from pneumatic_unload import real_gas
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.estimation.types import (
     ESTIMATE_STATUSES,
@@ -81,8 +81,8 @@ def real_gas_departure(r: UnloadResult, settings: EstimatorSettings
     """The real gas at the tank's highest pressure (p10 of a discharge, the supply of a
     charge) and T10: (Z - 1 [-], the pressure where abs(Z - 1) reaches
     :data:`REAL_GAS_DEPARTURE` [Pa absolute], the gas's name); None when the gas is not
-    one of :data:`~pneumatic_unload.physics.VIRIAL_GASES` or the state is not known."""
-    gas = physics.virial_gas(settings.gas)
+    one of :data:`~pneumatic_unload.real_gas.VIRIAL_GASES` or the state is not known."""
+    gas = real_gas.virial_gas(settings.gas)
     p = max(x for x in (r.p10, r.supply_pressure, -math.inf) if x == x)
     t = r.initial_temperature
     if gas is None or not (math.isfinite(p) and math.isfinite(t) and t > 0):
