@@ -197,7 +197,7 @@ class EstimatorState:
         Tank, gas and detection settings.
     live : bool
         The stream may join an unload under way (see
-        :func:`~.unloading.first_unload_check`).
+        :func:`~.record_head.first_unload_check`).
     defer_final_fit : bool
         Keep each unload's final curve fit as a job in :attr:`final_fits` instead of
         running it inside the call that completes the unload.
