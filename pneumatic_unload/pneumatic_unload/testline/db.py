@@ -21,18 +21,13 @@ one. SI units in every column (m^3/(s Pa), s, Pa).
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import datetime as _dt
 import json
 import math
 import numbers
-import os
-import socket
-import threading
 import time
-import weakref
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -57,6 +52,7 @@ from pneumatic_unload.testline.schema import (
     migrate,
     one_line,
 )
+from pneumatic_unload.testline.watchdog import ANSWER_TIMEOUT, Watchdog
 
 __all__ = ["ANSWER_TIMEOUT", "BUSY_TIMEOUT", "EXPORT_COLUMNS", "SCHEMA_VERSION",
            "UNLOAD_COLUMNS", "V1_COLUMNS", "V2_COLUMNS", "V3_COLUMNS", "FileRecord",
@@ -116,70 +112,6 @@ class FileRecord:
     settings_notes: str = ""
 
 
-#: Longest one operation of :class:`ResultsDB` (a query, a write with its retries) waits
-#: for a PostgreSQL server's answers [s] before it fails with a ResultsDBError, plus at
-#: most CONNECT_TIMEOUT for a new connection. A server whose processes are stopped
-#: (SIGSTOP, a frozen virtual machine) never answers while its host's kernel still
-#: acknowledges every packet, so neither TCP keepalives nor ``statement_timeout`` end the
-#: wait: this deadline does, by shutting the connections' sockets down. Above
-#: :data:`BUSY_TIMEOUT` (a write's retries) and the server's STATEMENT_TIMEOUT.
-ANSWER_TIMEOUT = 90.0
-
-
-class _Watchdog:
-    """The DBAPI connections of an engine (each registered as it connects) and a deadline
-    that shuts their sockets down when an operation outlives it: a call blocked on a
-    server that does not answer then returns with an error."""
-
-    def __init__(self, engine: sa.Engine) -> None:
-        self.conns: weakref.WeakSet[Any] = weakref.WeakSet()
-        self.lock = threading.Lock()
-        if engine.dialect.name == "postgresql":
-            sa.event.listen(engine, "connect", self._on_connect)
-
-    def _on_connect(self, dbapi_con: Any, _record: Any) -> None:
-        with self.lock:
-            self.conns.add(dbapi_con)
-
-    def _shut_down(self) -> None:
-        with self.lock:
-            conns = list(self.conns)
-        for c in conns:
-            with contextlib.suppress(Exception):  # closed meanwhile: nothing to wake
-                fd = os.dup(c.fileno())
-                with socket.socket(fileno=fd) as sock:
-                    sock.shutdown(socket.SHUT_RDWR)
-
-    @contextlib.contextmanager
-    def deadline(self, seconds: float | None, label: str, what: str,
-                 target: str) -> Iterator[None]:
-        """Run the block within ``seconds`` (None: no deadline); past it, a ResultsDBError
-        saying that the server did not answer (``target``'s password masked)."""
-        if seconds is None:
-            yield
-            return
-        fired = threading.Event()
-
-        def fire() -> None:
-            fired.set()
-            self._shut_down()
-
-        timer = threading.Timer(seconds, fire)
-        timer.daemon = True
-        timer.start()
-        try:
-            yield
-        except Exception as exc:
-            if fired.is_set():
-                raise ResultsDBError(redact(
-                    f"results database {label}: no answer from the server within "
-                    f"{seconds:g} s while {what} (the server stopped, or the network to it "
-                    f"is gone): {one_line(exc)}", target)) from exc
-            raise
-        finally:
-            timer.cancel()
-
-
 class ResultsDB:
     """An open results database (returned by :func:`open_db`; close it, or use it in a
     ``with``): its engine and its name in messages (a URL's password hidden).
@@ -200,12 +132,12 @@ class ResultsDB:
 
     def __init__(self, engine: sa.Engine, label: str, *, target: str | Path = "",
                  timeout: float | None = ANSWER_TIMEOUT,
-                 watchdog: _Watchdog | None = None) -> None:
+                 watchdog: Watchdog | None = None) -> None:
         self.engine = engine
         self.label = label
         self.target = str(target)
         self.timeout = timeout if engine.dialect.name == "postgresql" else None
-        self.watchdog = watchdog or _Watchdog(engine)
+        self.watchdog = watchdog or Watchdog(engine)
 
     def error(self, text: str) -> ResultsDBError:
         """A ResultsDBError of ``text``, the URL's password masked."""
@@ -308,7 +240,7 @@ def open_db(target: str | Path, *, create: bool = True,
     else:
         label = hide_password(target)  # as given (postgresql://...), without a password
     engine = make_engine(url)
-    watchdog = _Watchdog(engine)
+    watchdog = Watchdog(engine)
     pg_timeout = timeout if url.get_backend_name() != "sqlite" else None
     try:
         with watchdog.deadline(pg_timeout, label, "opening", str(target)):
