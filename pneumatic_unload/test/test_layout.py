@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Package layout: manifests, the ROS-free core guard, and a real colcon build + ament lookup."""
 
 import ast

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Node parameters (issue 13): one list per node (pneumatic_unload.config.nodes) that the
 node declares, ``--help`` prints (exit 0, ROS not started, also after ``--ros-args``) and
 ``config/<node>.yaml`` holds with ranges in comments; the files cannot drift from it."""

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Simulator and estimator nodes over real DDS, each node in its own process.
 
 The end-to-end test runs simulator -> estimator -> recorder in three processes; the others

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Recorder and replay nodes over real DDS (each node in its own process), and their ROS-free
 parts (RecordingSession, ReplayPlan, pace, the bag helpers they use) in process.
 

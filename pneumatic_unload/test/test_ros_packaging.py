@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The package as a ROS 2 user gets it: package.xml declares by its rosdep key every
 third-party module the package imports at module level, modules without a key stay
 optional, the files a colcon build installs, the executor guard for old rclpy, and the

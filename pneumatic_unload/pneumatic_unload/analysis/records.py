@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Input records of the offline analysis: a CSV log read in chunks, or a bag.
 
 :func:`open_record` resolves the input (a CSV header is read and checked at once) and

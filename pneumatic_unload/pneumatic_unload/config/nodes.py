@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Every ROS parameter of every node, ROS-free: the one list the nodes declare, ``--help``
 prints and ``config/<node>.yaml`` holds (so the three cannot drift apart).
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``estimator`` node: the streaming unloading-time estimator on a live pressure topic.
 
 Subscribes

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``recorder`` node: the rig's topics into rosbag2 bags (MCAP storage), crash-safe.
 
 Records ``/tank/pressure``, ``/tank/pressure_block``, ``/tank/temperature``, ``/tank/valve``,

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``replay`` node: publishes a bag's topics with their original timing, scaled, or as fast
 as the subscribers take them, without loss.
 

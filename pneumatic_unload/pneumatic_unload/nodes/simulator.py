@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``simulator`` node: a simulated tank-discharge rig publishing at rig rates.
 
 Publishes

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Rosbag2 bags (MCAP storage) of tank discharges, read and written without ROS.
 
 This package never imports rclpy or a ROS message package: messages are (de)serialised with

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Reading tank-discharge data from bags, without ROS.
 
 Pressure and temperature series go through a numpy fast path (the MCAP summary's chunk

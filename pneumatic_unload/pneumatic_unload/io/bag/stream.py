@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A bag's pressure topic read in pieces, in memory bounded whatever the bag's length.
 
 :func:`iter_pressure` yields the samples of :func:`~.reader.read_pressure` (``order="write"``)
