@@ -78,8 +78,10 @@ def _estimator() -> list[ParameterSpec]:
         _str("pressure_topic", "/tank/pressure", "pressure topic (FluidPressure; input sample)"),
         _str("block_topic", "/tank/pressure_block",
              "pressure block topic (PressureBlock; input block)"),
-        _str("input", "sample", "'sample': FluidPressure per sample; 'block': PressureBlock",
-             ("sample", "block")),
+        _str("input", "sample", "'sample': FluidPressure per sample; 'block': PressureBlock; "
+             "'volts': Voltage per sample (an uncalibrated transducer, converted with "
+             "signal_gain and signal_offset)", ("sample", "block", "volts")),
+        _str("volts_topic", "/tank/pressure_volts", "voltage topic (Voltage; input volts)"),
         _str("qos", "sensor_data", "'sensor_data' (best effort) or 'reliable' (KEEP_ALL: "
              "lossless, e.g. replays)", ("sensor_data", "reliable")),
         _str("frame_id", "", "accept only this header frame_id ('' accepts any)"),
@@ -160,6 +162,8 @@ def _replay() -> list[ParameterSpec]:
         _int("min_subscribers", 1, "subscribers to wait for", 0, 1_000_000, enforce=False),
         _double("wait_timeout", 10.0, "longest wait for subscribers", "s", 0.0, 1e6,
                 dynamic=True),
+        _bool("publish_clock", False, "publish /clock (rosgraph_msgs/Clock) at the bag's log "
+              "times as they are replayed, for nodes run with use_sim_time"),
     ]
 
 

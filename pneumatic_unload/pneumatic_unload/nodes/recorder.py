@@ -73,12 +73,14 @@ from pneumatic_unload.io.bag import (
     MSGTYPE_PRESSURE,
     MSGTYPE_TEMPERATURE,
     MSGTYPE_VALVE,
+    MSGTYPE_VOLTAGE,
     TOPIC_CONFIG,
     TOPIC_ESTIMATE,
     TOPIC_PRESSURE,
     TOPIC_SETTINGS,
     TOPIC_TEMPERATURE,
     TOPIC_VALVE,
+    TOPIC_VOLTS,
     BagError,
     BagRecorder,
     cdr_header_stamp_ns,
@@ -97,6 +99,7 @@ MSGTYPE_PRESSURE_BLOCK = "pneumatic_unload_msgs/msg/PressureBlock"
 #: volatile writer, so publishers of these topics must be latched).
 PACKAGE_TOPICS: dict[str, tuple[str, str, int]] = {
     TOPIC_PRESSURE: (MSGTYPE_PRESSURE, "volatile", 1000),
+    TOPIC_VOLTS: (MSGTYPE_VOLTAGE, "volatile", 1000),
     TOPIC_PRESSURE_BLOCK: (MSGTYPE_PRESSURE_BLOCK, "volatile", 1000),
     TOPIC_TEMPERATURE: (MSGTYPE_TEMPERATURE, "volatile", 1000),
     TOPIC_VALVE: (MSGTYPE_VALVE, "transient_local", 10),
