@@ -4,9 +4,9 @@
 pass the project's ruff configuration (ruff.toml: pycodestyle, pyflakes, import order,
 bugbear, pyupgrade, annotations).
 
-The project's style is ruff's (100 columns, double quotes); ament_flake8's ROS
-configuration (99 columns, single quotes) would contradict it, so ``colcon test`` runs
-this instead.
+The project's style is ruff's (100 columns); ament_flake8's ROS
+configuration (99 columns; ament_pep257: the pep257 docstring rules) contradicts it, so
+``colcon test`` runs this instead (ament_copyright: test_copyright.py).
 """
 
 import shutil

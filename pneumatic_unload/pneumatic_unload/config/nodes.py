@@ -128,11 +128,14 @@ def _simulator() -> list[ParameterSpec]:
               "/tank/pressure"),
         _str("frame_id", "tank", "frame_id of the published headers"),
         _bool("output_volts", False, "publish the transducer's output in volts "
-              "(transducer_zero + transducer_sensitivity * p) instead of Pa: an "
-              "uncalibrated rig"),
+              "(transducer_zero + transducer_sensitivity * p), an uncalibrated rig: as "
+              "pneumatic_unload_msgs/Voltage on /tank/pressure_volts instead of a "
+              "FluidPressure on /tank/pressure (blocks carry the volts too; estimator: "
+              "input:=volts)"),
         _int("wait_for_subscribers", 0, "start streaming only when this many nodes "
-             "subscribe to the pressure topics published (/tank/pressure, "
-             "/tank/pressure_block; a node on both counts once)", 0, 100),
+             "subscribe to the pressure topics published (/tank/pressure or, with "
+             "output_volts, /tank/pressure_volts, and /tank/pressure_block; a node on "
+             "both counts once)", 0, 100),
     ]
 
 

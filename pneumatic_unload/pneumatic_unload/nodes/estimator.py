@@ -187,6 +187,13 @@ class EstimatorNode(Node):
             if self._p(name) not in allowed:
                 raise common.StartupError(
                     "estimator", f"{name} must be one of {allowed}, got {self._p(name)!r}")
+        if self._p("input") == "volts" and self._settings.signal_gain == 1.0 \
+                and self._settings.signal_offset == 0.0:
+            # gain 1, offset 0 is the Pa input: volts taken as pascals give a wrong C
+            raise common.StartupError(
+                "estimator", "input:=volts needs the transducer's calibration: signal_gain "
+                "[Pa/V] and signal_offset [Pa] (e.g. -p signal_gain:=1e5 -p signal_offset:=0.0 "
+                "for 0-10 V over 0-10 bar absolute)")
         self.add_on_set_parameters_callback(common.validating_callback(self._check))
         # the test line: verdicts against a specification, estimates into a results database
         try:

@@ -2,9 +2,10 @@
 # Copyright 2026 pneumatic_unload maintainers
 """``recorder`` node: the rig's topics into rosbag2 bags (MCAP storage), crash-safe.
 
-Records ``/tank/pressure``, ``/tank/pressure_block``, ``/tank/temperature``, ``/tank/valve``,
-``/estimator/estimate``, ``/estimator/settings``, ``/diagnostics`` and ``/rig/config`` (the
-package's topics; see :data:`PACKAGE_TOPICS` for their QoS) plus any extra topics named in the
+Records ``/tank/pressure``, ``/tank/pressure_volts`` (an uncalibrated rig's volts),
+``/tank/pressure_block``, ``/tank/temperature``, ``/tank/valve``, ``/estimator/estimate``,
+``/estimator/settings``, ``/diagnostics`` and ``/rig/config`` (the package's topics; see
+:data:`PACKAGE_TOPICS` for their QoS) plus any extra topics named in the
 ``topics`` parameter (their types are discovered from the ROS graph; the recorder waits for
 them to appear). Messages are received serialised (``raw=True``) and written to the bag as
 they came, through :class:`pneumatic_unload.io.bag.BagRecorder`: no per-message

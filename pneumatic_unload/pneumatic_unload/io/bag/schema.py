@@ -3,7 +3,8 @@
 """Topics, message types and the rosbags typestore of the tank-discharge bags.
 
 Topics (see the ``TOPIC_*`` / ``MSGTYPE_*`` constants): ``/tank/pressure``
-(sensor_msgs/msg/FluidPressure), ``/tank/temperature`` (sensor_msgs/msg/Temperature),
+(sensor_msgs/msg/FluidPressure) or an uncalibrated rig's ``/tank/pressure_volts``
+(pneumatic_unload_msgs/msg/Voltage), ``/tank/temperature`` (sensor_msgs/msg/Temperature),
 ``/tank/valve`` (pneumatic_unload_msgs/msg/ValveState), ``/estimator/estimate``
 (pneumatic_unload_msgs/msg/UnloadEstimate) and ``/rig/config`` (std_msgs/msg/String holding
 the JSON rig configuration; the first message of every bag written by
