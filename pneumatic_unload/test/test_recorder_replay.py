@@ -671,9 +671,9 @@ def test_replay_publishes_the_bags_time_on_clock(sim_bag, tmp_path, procs):
 
 
 def test_sim_clock_steps_follow_the_log_times():
-    """Which log times go out on /clock (ROS-free): the first, then one at least
-    CLOCK_STEP_NS later each time, a step back (a loop's new pass) at once, and the last
-    one of a pass by flush()."""
+    """Which log times go out on /clock (ROS-free): the first of each CLOCK_STEP_NS
+    interval, also at a spacing a little under the step, a step back (a loop's new pass)
+    at once, and the last one of a pass by flush()."""
     from pneumatic_unload.nodes.replay import CLOCK_STEP_NS, SimClock
 
     sent: list[int] = []
@@ -688,6 +688,10 @@ def test_sim_clock_steps_follow_the_log_times():
     clock.tick(step // 4)  # the next pass of a loop
     clock.flush()
     assert sent[-1] == step // 4
+    sent.clear()
+    for k in range(1, 11):  # a 1 kHz stream whose stamps are 64 ns short of 1 ms apart
+        clock.tick(10 * step + k * (step - 64))
+    assert len(sent) == 10
 
 
 def test_replay_loop_until_sigint(tool, sim_bag, tmp_path, procs):

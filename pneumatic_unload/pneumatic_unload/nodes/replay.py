@@ -75,8 +75,8 @@ ACK_POLL = 0.5
 MATCH_SETTLE = 0.2
 #: Time to wait for the last acknowledgements at the end [s].
 FINAL_ACK_TIMEOUT = 10.0
-#: Least bag time between two /clock messages [ns] (1 ms: a 1 kHz clock at rate 1, finer
-#: than any period the estimator's timers use).
+#: Interval of bag time with at most one /clock message [ns] (1 ms: a clock of at most
+#: 1 kHz at rate 1, finer than any period the estimator's timers use).
 CLOCK_STEP_NS = 1_000_000
 #: The topic of ROS time for ``use_sim_time`` nodes.
 TOPIC_CLOCK = "/clock"
@@ -182,9 +182,11 @@ def pace(
 
 
 class SimClock:
-    """Which replayed log times go out on ``/clock`` (ROS-free): a message's time when it is
-    ``CLOCK_STEP_NS`` or more after the last one sent, or before it (a new pass of a loop),
-    and by :meth:`flush` the last message's time at the end of a pass."""
+    """Which replayed log times go out on ``/clock`` (ROS-free): the first message's time in
+    each ``CLOCK_STEP_NS`` interval of bag time (so a 1 kHz bag's clock ticks with nearly
+    every sample even when the stamps' spacing is a little under 1 ms), a time before the
+    last one sent at once (a new pass of a loop), and by :meth:`flush` the last message's
+    time at the end of a pass."""
 
     def __init__(self, send: Callable[[int], None], step_ns: int = CLOCK_STEP_NS) -> None:
         self._send = send
@@ -196,7 +198,7 @@ class SimClock:
         """Called before the message of ``log_time_ns`` is published."""
         self._last = log_time_ns
         if self._sent is None or log_time_ns < self._sent \
-                or log_time_ns - self._sent >= self._step:
+                or log_time_ns // self._step != self._sent // self._step:
             self._send(log_time_ns)
             self._sent = log_time_ns
 
