@@ -287,12 +287,12 @@ def test_yaml_parameter_files_match_the_nodes(repo_root: Path, tmp_path: Path) -
     import dataclasses
 
     sim = yaml.safe_load((repo_root / "config/simulator.yaml").read_text())
-    sim_keys = set(sim["simulator"]["ros__parameters"])
+    sim_keys = set(sim["/**"]["ros__parameters"])
     assert {f.name for f in dataclasses.fields(RigConfig)} <= sim_keys
     # ROS parameter semantics (0 of an optional number: None), as the node reads them
     from pneumatic_unload.config import adapters
 
-    RigConfig(**adapters.from_parameters(RigConfig, sim["simulator"]["ros__parameters"]))
+    RigConfig(**adapters.from_parameters(RigConfig, sim["/**"]["ros__parameters"]))
     procs = [NodeProcess(name, {}, tmp_path,
                          extra=["--params-file", str(repo_root / f"config/{name}.yaml")])
              for name in ("simulator", "estimator")]

@@ -19,6 +19,7 @@ from pneumatic_unload.io.bag import (
     read_config,
     read_pressure,
 )
+from pneumatic_unload.io.bag.cdr import encode_stamped_pair
 
 ZERO, SENS = 0.5, 1e-5  # transducer zero [V] and sensitivity [V/Pa]
 CALIBRATION = ("--signal-gain", str(1.0 / SENS), "--signal-offset", str(-ZERO / SENS))
@@ -45,7 +46,9 @@ def bags(tmp_path_factory):
             if name == "pa":
                 rec.write_pressures(t_ns, p)
             elif name == "volts":
-                rec.write_volts(t_ns, ZERO + SENS * p)
+                for t, v in zip(t_ns.tolist(), (ZERO + SENS * p).tolist(), strict=True):
+                    rec.write_raw(TOPIC_VOLTS, MSGTYPE_VOLTAGE, t,
+                                  encode_stamped_pair(t, v, 0.0, frame_id="tank"))
             else:
                 rec.write_pressures(t_ns, ZERO + SENS * p)
         out[name] = d / name

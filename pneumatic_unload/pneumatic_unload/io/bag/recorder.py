@@ -40,13 +40,11 @@ from .schema import (
     MSGTYPE_PRESSURE,
     MSGTYPE_TEMPERATURE,
     MSGTYPE_VALVE,
-    MSGTYPE_VOLTAGE,
     TOPIC_CONFIG,
     TOPIC_ESTIMATE,
     TOPIC_PRESSURE,
     TOPIC_TEMPERATURE,
     TOPIC_VALVE,
-    TOPIC_VOLTS,
     ZERO_CELSIUS,
     find_msg_definition,
     make_typestore,
@@ -371,30 +369,6 @@ class BagRecorder:
         """
         self._write_pair_block(
             TOPIC_PRESSURE, MSGTYPE_PRESSURE, t_ns, p_pa, variance, frame_id, log_time_ns
-        )
-
-    def write_volts(
-        self,
-        t_ns: npt.ArrayLike,
-        volts: npt.ArrayLike,
-        *,
-        frame_id: str = "tank",
-        variance: npt.ArrayLike = 0.0,
-        log_time_ns: npt.ArrayLike | None = None,
-    ) -> None:
-        """Write N transducer output samples on ``/tank/pressure_volts``
-        (pneumatic_unload_msgs/msg/Voltage): an uncalibrated rig, whose volts the analysis
-        converts with signal_gain/signal_offset.
-
-        Args:
-            t_ns: sample instants (header stamps) [ns], integer array of shape (N,).
-            volts: transducer outputs [V], shape (N,).
-            frame_id: header frame id of the sensor.
-            variance: voltage variance [V^2], scalar or shape (N,).
-            log_time_ns: bag log times [ns], shape (N,); default ``t_ns``.
-        """
-        self._write_pair_block(
-            TOPIC_VOLTS, MSGTYPE_VOLTAGE, t_ns, volts, variance, frame_id, log_time_ns
         )
 
     def write_temperature(
