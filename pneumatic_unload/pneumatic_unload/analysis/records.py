@@ -205,6 +205,7 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
         TOPIC_SETTINGS,
         TOPIC_VOLTS,
         BagError,
+        TopicNotFoundError,
         bag_summary,
         iter_pressure,
         read_config,
@@ -212,16 +213,18 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
     )
 
     try:
-        if topic == TOPIC_PRESSURE:
-            # an uncalibrated rig's bag: its volts on a topic of their own, converted with
-            # the signal_gain/signal_offset given or recorded (the live estimator's settings)
-            have = bag_summary(p).topics
-            if TOPIC_PRESSURE not in have and TOPIC_VOLTS in have:
-                topic = TOPIC_VOLTS
         # write order (iter_pressure): a clock that steps back in the header stamps stays
         # visible to the estimator (log-time order may sort it away when log times are the
         # stamps); the topic is checked here, read in pieces by Record.chunks
-        iter_pressure(p, topic=topic)
+        try:
+            iter_pressure(p, topic=topic)
+        except TopicNotFoundError:
+            # an uncalibrated rig's bag: its volts on a topic of their own, converted with
+            # the signal_gain/signal_offset given or recorded (the live estimator's settings)
+            if topic != TOPIC_PRESSURE or TOPIC_VOLTS not in bag_summary(p).topics:
+                raise
+            topic = TOPIC_VOLTS
+            iter_pressure(p, topic=topic)
         cfg = read_config(p) or {}
         live = read_json_topic(p, TOPIC_SETTINGS)
     except BagError as exc:
