@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """ament_python package definition of pneumatic_unload (colcon and pip both use it)."""
 
 import hashlib

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Regenerate the committed reference bags of ``bags/`` and their README (``make bags``).
 
 Each bag is a simulated run written by the package itself (``pneumatic_unload.analysis.runs``, the

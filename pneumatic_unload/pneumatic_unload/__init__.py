@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """pneumatic_unload: sonic conductance of pneumatic components from a tank discharge or
 charge.
 

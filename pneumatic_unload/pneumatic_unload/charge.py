@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The charge test's closed forms: the unloading-time method mirrored, and its bias.
 
 A tank at p10 filled through the component from a supply held at p_s, T_s (ISO 6358-2's

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Gas properties, the ISO 6358 flow law and the closed forms of the unloading-time paper.
 
 Everything is SI: pressures in Pa absolute, temperatures in K, volumes in m^3, times in s,

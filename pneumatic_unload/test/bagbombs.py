@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Crafted bags whose compressed chunks expand far beyond what they hold (decompression
 bombs) or lie about their size, for the bounded-reading tests.
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Shared pytest setup for pneumatic_unload.
 
 At import time (before any test module can import rclpy) every test run gets its own

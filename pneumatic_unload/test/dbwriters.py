@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Writers of the results database in their own processes (multiprocessing spawn targets of
 test_results_db.py: a light module, so that each child imports little before it starts)."""
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Property-based fuzzing of the package's input boundary (issue #13): hypothesis strategies
 and the properties every input must satisfy, shared by ``test/test_fuzz.py`` (a short
 profile in ``make test``) and ``bench/bench_fuzz.py`` (the long run). This module: the

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Property-based fuzzing of the readers, the command line and the discrepancy workflow
 (issue #13): CSV files, bags written by the package's writer (some damaged), ``pneumatic-unload
 analyze`` in-process, and small discrepancy cases. Builds on :mod:`fuzzcases` (the analysis

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Helpers of the multi-process node tests (nodes run via :mod:`pneumatic_unload.app.launch`)."""
 
 from __future__ import annotations

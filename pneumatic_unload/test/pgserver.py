@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A throw-away PostgreSQL server for the tests, from Debian's ``postgresql`` package.
 
 :func:`pg_server` (session fixture, registered in conftest.py) installs the package when

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The real measurements in ``../shared/real-data`` (read in place, never copied).
 
 A clone without ``../shared/real-data`` skips the real-data tests; with it present, a file

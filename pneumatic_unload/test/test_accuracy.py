@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Accuracy of the estimation core on seeded synthetic discharges (issue 3), a fixed-seed
 subset of the sweeps in ``bench/bench_accuracy.py`` (1 kHz, 0.1 % of a 1 MPa full scale
 white noise, V 1-20 L, d 1-3 mm with C = 0.128 d^2 dm^3/(s bar), p10 4-8 bar abs,

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A model that does not describe the record at its noise level says so (issue #11): a
 residual that is not white (Ljung-Box) or larger than the noise (normalised RMS) inflates
 sigma(C) from the record and is reported as "model inadequate: <reason>" in the status text

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """analyze CLI on a data-logger CSV with a gas-temperature column: T10 comes from it."""
 
 import json

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Bad input gets a typed, specific status or diagnostic: never a crash or a wrong number."""
 
 import dataclasses

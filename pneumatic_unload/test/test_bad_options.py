@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Bad options and bad records: one clear line and the right exit status, never a traceback
 or a silent wrong number (unit suffixes, "did you mean", why there is no unload, gauge
 readings taken as absolute). SI units: s, Pa absolute, K, m^3."""

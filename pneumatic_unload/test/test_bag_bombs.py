@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Bounded bag reading (pneumatic_unload.io.bag.inflate): crafted chunks that claim or
 expand to gigabytes are refused with a BagFormatError before they are allocated, on every
 read path (the numpy fast path, rosbags' reader, recover) and in the CLI."""

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Bag io (pneumatic_unload.io.bag): round trips, numpy fast paths checked against rosbags,
 readability by rosbags and mcap, error classes, and crash recovery after a real kill -9.
 """

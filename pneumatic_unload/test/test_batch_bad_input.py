@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """One bad input is one error row of a batch, serial or on Dask: a crafted bag (a chunk
 claiming 1 TiB) among good ones, and an analysis that fails unexpectedly."""
 

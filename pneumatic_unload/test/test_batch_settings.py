@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A batch never silently overrides a bag (#55): a setting recorded in a bag wins over the
 command line unless ``--override`` (or the specification's per-file settings), and where a
 command-line value meets another recorded one the batch says so, per file, in its output

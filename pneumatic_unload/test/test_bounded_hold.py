@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Phases that hold samples until something happens are bounded: an aborted unload's
 recovery, and an unload whose p_atm is to come from its final plateau.
 

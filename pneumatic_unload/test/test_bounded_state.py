@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """What the streaming estimator keeps of its past stays bounded on an endless stream.
 
 Counts of retained objects (results, diagnostics, buffered samples), never timings: a

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The GUM budget of the final C, line by line: every input's line is there with its
 closed-form sensitivity, and the combined uncertainty is their root sum of squares.
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The charge test analysed (#26): C, b from a tank filled through the component.
 
 Data the package did not make: HydDown's fills (``test/data/hyddown_fill``, its u-to-h

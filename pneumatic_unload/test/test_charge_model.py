@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The kernel's charge: a tank filled through the component from a supply (closed forms).
 
 The same right-hand side as the discharge with the flow's direction: the component's

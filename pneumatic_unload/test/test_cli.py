@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The ``pneumatic-unload`` command line: analyze (bags, CSV, real data), simulate, errors."""
 
 import json

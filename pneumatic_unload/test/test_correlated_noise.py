@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The detector on correlated noise: a transducer low-passed below its sampling rate.
 
 AR(1) noise of lag-1 correlation rho has first differences sqrt(1 - rho) as large as

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The compiled p* crossing fit (``estimation/regression.c``) against references written here
 with numpy: the quadratic regression's crossing, slope and delta-method sigma (np.polyfit
 and np.linalg on the same window), the estimator's two-pass window (the first window, then

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The crossing estimate prepared half way to p* (issue #10's live latency) gives the numbers
 the formulae give at the crossing: the budgets scaled from a reference C equal the budgets
 computed at the crossing time (their lines are proportional to C at fixed pressures), one

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Data-logger CSV input (pneumatic_unload.io.csvlog): real AeroLab file and edge cases."""
 
 from pathlib import Path

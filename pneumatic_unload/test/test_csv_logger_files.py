@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Logger files as they come (issues 54 and 55): date-time time columns, epoch stamps,
 pressure columns by the names loggers write, hPa and mbar, a counter that wraps, a torn last
 row, UTF-16 and UTF-8 with a byte-order mark; hints in the caller's words."""

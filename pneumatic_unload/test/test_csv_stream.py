@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """CSV logs of any size (issue 13): decimal commas, rows wider than the header, assumed units,
 reading in chunks, streaming through the estimator with bounded memory."""
 

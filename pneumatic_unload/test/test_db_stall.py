@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A results database server that stalls, and passwords in messages: a stopped PostgreSQL
 (SIGSTOP: its kernel still acknowledges every packet) ends each operation with a clear
 error within the timeout; no message shows a URL's password, whatever the URL's form.

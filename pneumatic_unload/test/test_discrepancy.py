@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Discrepancy workflow (issue #5): fast CI subset of the acceptance harness.
 
 The full randomised harness is ``bench/bench_discrepancy.py``. Here: the building blocks

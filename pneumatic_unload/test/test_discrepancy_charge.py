@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The discrepancy workflow on charges (#26): the effect the model misses, named on data in
 which it is hidden, made by models that are not the package's.
 

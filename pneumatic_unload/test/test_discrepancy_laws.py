@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The discrepancy search against the engine's whole heat-law family, the further-effect
 bound rule and the model-limits term of the reported C (issue 12).
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Discrepancy workflow (issue #12): the report (Markdown and self-contained HTML, "What to do
 next", "Which C to report, and why"), progress lines, the time limit, and the engine pieces
 made faster for it (the stiff integrator's hand-back, the compiled sensor lag)."""

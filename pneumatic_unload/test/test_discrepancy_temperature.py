@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The discrepancy workflow weighs its models with a logged gas temperature.
 
 Traces from the independent model ``foreign/newton_tank.py`` (Newton cooling toward a wall

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The documentation site: it builds with warnings as errors, a headless Chromium opens its
 index, no internal link is broken, and it names every CLI command and option, every node and
 every node parameter, and every key of ``analyze --json``; the hand-written pages are in it; the

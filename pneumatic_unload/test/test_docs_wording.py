@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The documentation reads like a product's, not like a development log: no "session N",
 no commit hashes, no issue numbers, no test-case names or draw numbers in the pages a user
 follows; long commands wrap (docs/_static/wrap.css). A grep of the sources: fast, no build."""

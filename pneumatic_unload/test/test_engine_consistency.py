@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """One model, one engine: every path gives the same C (issue #10's consistency test).
 
 Over seeded traces of several kinds (adiabatic, natural-convection heat transfer, a flow

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Streaming estimator: recovery of known parameters, parity, relative signals, bad input."""
 
 import dataclasses

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Decisions of the streaming estimator: one function per decision, the same answer for one
 index (the per-sample path) and for many (the block path), and bit-identical results of
 push, push_block (random block sizes) and analyze on many seeded traces of every kind."""

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """An estimator started (or restarted) part way into an unload: live, no result for that
 unload, a warning that says why, and correct results from the next unload on; offline (a
 record that starts at or after the valve opening) the unload is analysed, with a warning

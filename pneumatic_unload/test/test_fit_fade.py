@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The engine's step for parameters whose effect fades at one end (``Parameter.fade``): a
 heat multiplier going to none, a thermal time constant going to infinity. Gauss-Newton
 along the log moves such a value by at most a factor e per step; along value^p it lands on

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The independent discharge model's flow laws (``test/foreign/newton_tank.py``) checked
 against closed forms: the generator of the foreign-law bench (``bench/bench_foreign_laws.py``)
 must itself be right before the package is judged on it. Nothing here runs the package.

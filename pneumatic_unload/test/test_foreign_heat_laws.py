@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The foreign heat laws' generators (``test/foreign/heat_laws.py``) checked against closed
 forms, so that the oracle of ``bench/bench_foreign_heat.py`` is itself checked: with the heat
 flow off a discharge is isentropic and its choked part is eq 24 of the paper, a charge's

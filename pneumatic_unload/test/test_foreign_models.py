@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The model-based C on data the package did not make: an independent discharge model with
 Newton cooling (constant hA) and the ISO flow law (``test/foreign/newton_tank.py``, which
 imports nothing from the package's model).

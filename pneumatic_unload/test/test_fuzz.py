@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Property-based fuzzing, short profile (issue #13): the long run is bench/bench_fuzz.py.
 
 Each property is that of ``fuzzcases``: only the package's typed errors, each example within

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A hot start: gas charged seconds before the opening cools toward the wall, and the
 closed tank's plateau decays. Made by the independent model of ``test/foreign/newton_tank.py``
 (T10 320 K, wall 293 K, thermal time constant 8 s, 10 L, 5e-9 m^3/(s Pa), a 2 s plateau,

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The model-based C on discharges simulated by HydDown, a peer code (real-gas air by
 CoolProp, its own wall heat transfer, the Yellow Book orifice law), not by the package.
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The package's charge against HydDown's fills (a peer code the package did not write).
 
 ``test/data/hyddown_fill/*.npz``: six fills made by HydDown 0.50.0 with

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Records with the gas temperature logged, a zero offset and a flow law whose m is not
 0.5, made by the independent model of ``test/foreign/newton_tank.py`` (Newton cooling at a
 constant hA, the law the package calls 'fixed'): draws 48 and 46 of

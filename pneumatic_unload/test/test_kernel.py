@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The compiled model kernel: its integrator against an independent one, its build rules."""
 
 import itertools

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The launch file ``launch/bench.launch.yaml`` (ROS 2 YAML launch format, #27's first
 part): the package's launcher reads and runs the very file ``ros2 launch`` would, over
 real DDS, and stops on Ctrl-C with every node's clean exit."""

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Leaks in both places (issue 12): upstream of the valve (always open) and downstream, in
 parallel with the component (opens with the valve), each laminar or orifice-law; the
 discrepancy workflow names them, or reports the C ambiguity with a range holding the truth.

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """One unload longer than the buffer may hold: its old samples reduced to bins on the fly.
 
 The thresholds of :mod:`pneumatic_unload.estimation.reduction` are lowered so that a

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Samples missing from a live stream, counted from its stamps (estimation.loss)."""
 
 from __future__ import annotations

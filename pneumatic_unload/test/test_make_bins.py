@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The binned likelihood's edges (:func:`pneumatic_unload.fit.likelihood.make_bins`),
 computed with the widths at once, are those of the rule stated bin by bin."""
 

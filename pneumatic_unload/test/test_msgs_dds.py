@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Messages over real DDS between separate processes (rclpy + Fast DDS, loopback).
 
 Each test writes small node scripts into tmp_path and runs them with the venv python. The

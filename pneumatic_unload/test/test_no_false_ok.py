@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """No 'ok' that is not (issue 54, finding 8): a record cut after its opening, eq 39 with
 the gas's own R, a standard uncertainty larger than C, a missing model C without a reason,
 and a record where the ideal gas departs from the real one."""

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The estimator node's faults over real DDS (issue 54 finding 9 and finding 7's stalled
 result write, issue 55 item 4), each node in its own process: SIGTERM (or kill -9) after
 the crossing leaves the unload in the results database; the database write runs off the

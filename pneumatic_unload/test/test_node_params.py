@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Node parameters (issue 13): one list per node (pneumatic_unload.config.nodes) that the
 node declares, ``--help`` prints (exit 0, ROS not started, also after ``--ros-args``) and
 ``config/<node>.yaml`` holds with ranges in comments; the files cannot drift from it."""
@@ -75,3 +77,14 @@ def test_recorder_and_replay_read_their_yaml_files(node, override, needle, tmp_p
          "--params-file", str(ROOT / "config" / f"{node}.yaml"), "-p", override],
         capture_output=True, text=True, timeout=60, env=ENV, cwd=tmp_path)
     assert proc.returncode == 2 and needle in proc.stderr, proc.stderr
+
+
+def test_estimator_volts_input_without_calibration_is_refused(tmp_path):
+    """input:=volts at signal_gain 1, signal_offset 0 (the Pa input) would take volts for
+    pascals: the estimator refuses to start and says what to set."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "pneumatic_unload.nodes.estimator", "--ros-args",
+         "-p", "input:=volts"],
+        capture_output=True, text=True, timeout=60, env=ENV, cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    assert "signal_gain" in proc.stderr and "Traceback" not in proc.stderr

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Every node stops on SIGINT at any moment of its start (issue "Two commands on any machine":
 the simulator given SIGINT within about 0.5 s of its start never exited).
 

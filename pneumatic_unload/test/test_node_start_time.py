@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The estimator node's start-time mode (issue #11): a record that begins at a given opening,
 analysed live with the library's opening-start path, equals ``analyze --start-time`` on
 the same bag; and the core of that mode (:class:`OpeningStartEstimator`) equals the offline

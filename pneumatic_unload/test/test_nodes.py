@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Simulator and estimator nodes over real DDS, each node in its own process.
 
 The end-to-end test runs simulator -> estimator -> recorder in three processes; the others
@@ -285,12 +287,12 @@ def test_yaml_parameter_files_match_the_nodes(repo_root: Path, tmp_path: Path) -
     import dataclasses
 
     sim = yaml.safe_load((repo_root / "config/simulator.yaml").read_text())
-    sim_keys = set(sim["simulator"]["ros__parameters"])
+    sim_keys = set(sim["/**"]["ros__parameters"])
     assert {f.name for f in dataclasses.fields(RigConfig)} <= sim_keys
     # ROS parameter semantics (0 of an optional number: None), as the node reads them
     from pneumatic_unload.config import adapters
 
-    RigConfig(**adapters.from_parameters(RigConfig, sim["simulator"]["ros__parameters"]))
+    RigConfig(**adapters.from_parameters(RigConfig, sim["/**"]["ros__parameters"]))
     procs = [NodeProcess(name, {}, tmp_path,
                          extra=["--params-file", str(repo_root / f"config/{name}.yaml")])
              for name in ("simulator", "estimator")]
@@ -409,16 +411,30 @@ def test_replay_of_reference_bag_into_live_estimator(tmp_path: Path, ros_node: A
 
 
 def test_uncalibrated_volts_input(tmp_path: Path, ros_node: Any) -> None:
-    """A rig publishing transducer volts is measured through signal_gain/signal_offset."""
+    """A rig publishing transducer volts does so on /tank/pressure_volts as Voltage
+    messages (none in pascals' FluidPressure), and the estimator (input:=volts) measures
+    through signal_gain/signal_offset."""
+    from pneumatic_unload_msgs.msg import Voltage
+    from sensor_msgs.msg import FluidPressure
+
+    from pneumatic_unload.nodes.common import PRESSURE_QOS
+
     node, ex = ros_node
     got = _estimates(node)
+    volts: list[float] = []
+    pascals: list[float] = []
+    node.create_subscription(Voltage, "/tank/pressure_volts",
+                             lambda m: volts.append(m.voltage), PRESSURE_QOS)
+    node.create_subscription(FluidPressure, "/tank/pressure",
+                             lambda m: pascals.append(m.fluid_pressure), PRESSURE_QOS)
     zero, sens = 0.5, 1e-5  # V, V/Pa
-    est = NodeProcess("estimator", {"volume": RIG["volume"], "signal_gain": 1.0 / sens,
+    est = NodeProcess("estimator", {"input": "volts", "volume": RIG["volume"],
+                                    "signal_gain": 1.0 / sens,
                                     "signal_offset": -zero / sens, "curve_fit": False},
                       tmp_path)
     sim = NodeProcess("simulator", {**RIG, "output_volts": True, "transducer_zero": zero,
                                     "transducer_sensitivity": sens, "start_delay": 1.5,
-                                    "wait_for_subscribers": 1, "duration": 3.0}, tmp_path)
+                                    "wait_for_subscribers": 2, "duration": 3.0}, tmp_path)
     try:
         assert spin_until(node, ex, lambda: len(got) >= 1, 40.0), est.output()[-2000:]
     finally:
@@ -426,6 +442,8 @@ def test_uncalibrated_volts_input(tmp_path: Path, ros_node: Any) -> None:
     assert codes == [0, 0]
     assert got[0].status == 0
     assert got[0].p10 == pytest.approx(7e5, rel=0.005)  # absolute Pa from volts
+    assert volts and not pascals
+    assert max(volts) == pytest.approx(zero + sens * 7e5, rel=0.01)  # [V]
     assert got[0].conductance_model == pytest.approx(C_TRUE, rel=0.05)
 
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A live cycle of charges and discharges over real DDS (#26): the simulator's 'alternate'
 mode (a charge through the component from a 6 bar supply, then its discharge to the room,
 in turn), the estimator with direction 'both' (the rig's temperature topic fitted beside

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The AR(1) noise model under strong correlation: plateau moments without detrending bias,
 and a normalised RMS whose spread does not grow with rho.
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The OPC UA bridge (#27): the launch file's bench, a real asyncua client over loopback.
 
 The bench is started by the package's launcher from ``launch/bench.launch.yaml`` (as

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The analysis plot shows the uncertainty budget line by line and the C to report, as the
 text output does (issue #11)."""
 

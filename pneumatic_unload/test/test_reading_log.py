@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The streaming estimator's log of a slower channel (a logged gas temperature): bounded,
 in order, and sliced by an unload's span as every final fit takes it."""
 

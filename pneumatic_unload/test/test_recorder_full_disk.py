@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A bag that runs out of room (issue 54 finding 9: the recorder on a full disk exited 1
 with a BagWriteError traceback and no metadata.yaml, after spamming one error per message).
 

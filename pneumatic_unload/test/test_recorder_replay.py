@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Recorder and replay nodes over real DDS (each node in its own process), and their ROS-free
 parts (RecordingSession, ReplayPlan, pace, the bag helpers they use) in process.
 
@@ -595,6 +597,101 @@ def test_replay_delivers_every_sample_with_original_stamps(tool, sim_bag, tmp_pa
             assert late < 0.5, f"late by {late:.0%} of the paced duration"
     else:
         assert received[-1] < span_bag  # faster than real time, and lossless (above)
+
+
+_CLOCK_TOOL = textwrap.dedent(
+    '''
+    """Subscribes to /tank/pressure (so that the replay starts) and /clock, in a node run
+    with use_sim_time; prints the /clock times and the node's own time at the end."""
+    import json, sys, time
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import FluidPressure
+
+    ARGS = json.loads(sys.argv[1])
+    rclpy.init()
+    node = rclpy.create_node("clock_tool", parameter_overrides=[
+        Parameter("use_sim_time", Parameter.Type.BOOL, True)])
+    clocks, stamps = [], []
+    node.create_subscription(
+        Clock, "/clock", lambda m: clocks.append(m.clock.sec * 10**9 + m.clock.nanosec),
+        QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE))
+    node.create_subscription(
+        FluidPressure, "/tank/pressure",
+        lambda m: stamps.append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec),
+        QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    print("ready", flush=True)
+    deadline = time.monotonic() + 25.0
+    while time.monotonic() < deadline and len(stamps) < ARGS["count"]:
+        ex.spin_once(timeout_sec=0.05)
+    linger = time.monotonic() + 0.5
+    while time.monotonic() < linger:
+        ex.spin_once(timeout_sec=0.05)
+    print(json.dumps({"clocks": clocks, "samples": len(stamps),
+                      "now": node.get_clock().now().nanoseconds}), flush=True)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    '''
+)
+
+
+def test_replay_publishes_the_bags_time_on_clock(sim_bag, tmp_path, procs):
+    """With publish_clock, a use_sim_time subscriber's /clock follows the bag's log times
+    as they are replayed: from the first to the last message, never backwards, each a
+    message's log time, and the node's ROS time is the bag's last time. (A keep-last
+    depth-1 clock writer may overwrite ticks a slow reader has not taken: their spacing is
+    covered by test_sim_clock_steps_follow_the_log_times.)"""
+    logs = np.array([m.log_time_ns for m in read_raw_messages(sim_bag)
+                     if m.topic != TOPIC_CONFIG], np.int64)
+    t_ref, _ = read_pressure(sim_bag)
+    script = tmp_path / "clock_tool.py"
+    script.write_text(_CLOCK_TOOL)
+    sub = start_tool(script, tmp_path, count=int(t_ref.size))
+    procs.append(sub)
+    wait_for_line(sub, "ready")
+    rep = start_node("replay", tmp_path, bag=str(sim_bag), rate=2.0, publish_clock=True)
+    procs.append(rep)
+    rc, _, rep_err = finish(rep)
+    assert rc == 0, rep_err
+    rc, out, err = finish(sub)
+    assert rc == 0, err
+    got = last_json(out)
+    clocks = np.array(got["clocks"], np.int64)
+    assert got["samples"] == t_ref.size
+    assert clocks.size > 1, "no /clock published"
+    assert clocks[0] == logs.min() and clocks[-1] == logs.max()
+    assert np.all(np.diff(clocks) >= 0), "/clock went backwards"
+    assert np.all(np.isin(clocks, logs)), "a /clock time that no message of the bag has"
+    assert got["now"] == logs.max()
+
+
+def test_sim_clock_steps_follow_the_log_times():
+    """Which log times go out on /clock (ROS-free): the first of each CLOCK_STEP_NS
+    interval, also at a spacing a little under the step, a step back (a loop's new pass)
+    at once, and the last one of a pass by flush()."""
+    from pneumatic_unload.nodes.replay import CLOCK_STEP_NS, SimClock
+
+    sent: list[int] = []
+    clock = SimClock(sent.append)
+    clock.flush()
+    assert sent == []
+    step = CLOCK_STEP_NS
+    for t in (0, step // 4, step // 2, step, step + 1, 2 * step, 2 * step + step // 2):
+        clock.tick(t)
+    clock.flush()
+    assert sent == [0, step, 2 * step, 2 * step + step // 2]
+    clock.tick(step // 4)  # the next pass of a loop
+    clock.flush()
+    assert sent[-1] == step // 4
+    sent.clear()
+    for k in range(1, 11):  # a 1 kHz stream whose stamps are 64 ns short of 1 ms apart
+        clock.tick(10 * step + k * (step - 64))
+    assert len(sent) == 10
 
 
 def test_replay_loop_until_sigint(tool, sim_bag, tmp_path, procs):

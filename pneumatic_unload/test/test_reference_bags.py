@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The committed reference bags of bags/: readable everywhere, analysable, reproducible."""
 
 from __future__ import annotations

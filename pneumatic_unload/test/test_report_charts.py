@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The test-line report's control charts read as charts (a C axis with values and its
 unit, the parts under the x axis, a scale for one point) and its parts table gives C by
 direction when the database holds charges (#55)."""

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Numerical reproducibility of the final curve fit: last-bit changes of the input move C and
 b by no more than the fit says (JSON 'reproducibility'), and C by at most 1e-10.
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The results database on a server (#27): one schema and its Alembic migrations for SQLite
 and PostgreSQL, double precision, results/report on a URL, clear errors, and many writers
 at once (processes, batches, two estimator nodes over DDS) losing and duplicating nothing.

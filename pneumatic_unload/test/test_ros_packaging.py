@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The package as a ROS 2 user gets it: package.xml declares by its rosdep key every
 third-party module the package imports at module level, modules without a key stay
 optional, the files a colcon build installs, the executor guard for old rclpy, and the
@@ -28,10 +30,13 @@ ROSDEP_KEYS = {
     "rclpy": "rclpy", "rcl_interfaces": "rcl_interfaces", "std_msgs": "std_msgs",
     "sensor_msgs": "sensor_msgs", "std_srvs": "std_srvs", "diagnostic_msgs": "diagnostic_msgs",
     "builtin_interfaces": "builtin_interfaces", "pneumatic_unload_msgs": "pneumatic_unload_msgs",
+    "rosgraph_msgs": "rosgraph_msgs",
 }
 #: Modules with no rosdep key: optional, imported only inside the functions (or the
 #: OPC UA bridge's own modules) that use them.
 OPTIONAL = {"asyncua": ("pneumatic_unload/plc/", "pneumatic_unload/nodes/opcua.py"),
+            # asyncua's own dependency (installed with it), used by the bridge's TLS checks
+            "cryptography": ("pneumatic_unload/plc/",),
             "dask": (), "distributed": (), "pyarrow": (), "lz4": (), "zstandard": (),
             "psycopg": ()}
 

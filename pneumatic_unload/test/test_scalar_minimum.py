@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The one-variable minimiser (fit.scalar): closed-form minima, the grid's bracket."""
 
 from __future__ import annotations

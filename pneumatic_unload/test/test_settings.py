@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Settings declared once: the tank and gas type, the adapters, the gas carried everywhere."""
 
 import argparse

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``make setup`` (scripts/setup_venv.sh) says what it does while pip installs the pinned
 set: a first run took 15 minutes with no line shown (pip ran with -q)."""
 

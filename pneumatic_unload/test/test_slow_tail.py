@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A slow discharge is one unload: its tail is not judged level while it still falls.
 
 Found on a 50 M-row discharge at 10 kHz (``bench/bench_memory.py``, stream case): the

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Records that begin at the valve opening (issue #11): sparse, uneven, no plateau."""
 
 import json

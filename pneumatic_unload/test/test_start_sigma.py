@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The detector's start fit and its (co)variance: the parts of tau_exp's sigma that come
 from the start (issue #11: tau_exp's sigma was ~10 % narrow with heavy tails).
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The status words of a result: one table (estimation.types), a word that says what it
 means, the message's STATUS_* constants in step with it, and older databases read with
 the current words."""

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Faults of a live stream the core rides out (issue 54 finding 9, issue 55 item 4): a
 clock stepped back by an hour re-syncs after CLOCK_RESYNC samples instead of dropping an
 hour of them; a rig restarted before p* (the tank charged again, then opened) has its next

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The subsonic index m of ISO 6358-1:2013 on data the package did not make: discharges of
 the independent model ``test/foreign/newton_tank.py`` through the ISO law with m != 0.5,
 an isentropic nozzle and two restrictions in series (1 kHz, 0.1 % FS noise, the subsonic

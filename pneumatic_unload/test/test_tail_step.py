@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A step at the end of a record, after its tail had settled, is not the discharge
 (:mod:`pneumatic_unload.estimation.endstep`).
 

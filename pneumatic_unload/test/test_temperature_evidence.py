@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The logged gas temperature as evidence on the final fit (JSON ``gas_temperature``): a
 multi-rate CSV (pressure at 1 kHz, a thermocouple at 5 Hz in the same file, empty cells
 between) made by the independent model of ``test/foreign/newton_tank.py``. The fitted

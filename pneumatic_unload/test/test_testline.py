@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The test line (#14): batch on Dask = serial, the results database (resume, concurrent
 writers, schema), specifications, the batch and results commands."""
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The thermometer's sensor model: its offset fitted where the wall is given, its lag given.
 
 Multi-rate CSV logs (pressure at 1 kHz, a thermocouple at 5 Hz, empty cells between) of

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Charges and discharges of one component in one stream (direction 'both', #26).
 
 The rig's alternate cycle (:func:`pneumatic_unload.model.rig.run_cycles` with ``alternate``: a

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The wall temperature in the budget of C (issue #11): a wall not given is assumed at T10
 with the uncertainty the record allows, and the budget's wall line says so with C's
 sensitivity; checked in closed form and on discharges of the independent Newton-cooling

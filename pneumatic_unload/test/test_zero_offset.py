@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A transducer's zero offset, on data the package did not make (the independent model of
 ``test/foreign/newton_tank.py``, 1 kHz, 0.1 % FS noise): with p_atm given, a record that
 settles away from it has the offset fitted and reported; gauge readings work with the final

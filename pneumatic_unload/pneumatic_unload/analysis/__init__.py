@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The offline analysis behind the command line and the test line: a record read and
 analysed, its result as text, JSON and plots, and simulated runs written as bags.
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Text and JSON output of the analysis: one result, the inputs used, the budget.
 
 Used by the command line (``analyze``); SI units in JSON, trade units (dm^3/(s bar))

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Plots for engineers: the trace, p10, p*, the crossing, tau_exp and the fitted model.
 
 Uses matplotlib's non-interactive Agg backend; no display needed. SI units on the axes

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Input records of the offline analysis: a CSV log read in chunks, or a bag.
 
 :func:`open_record` resolves the input (a CSV header is read and checked at once) and
@@ -35,6 +37,11 @@ from pneumatic_unload.io.csvlog import CHUNK_BYTES, CsvError, CsvStream
 
 class RecordError(Exception):
     """The input cannot be read (a one-line message naming the file)."""
+
+
+#: Key of a record's ``cfg``: its samples are volts with no recorded calibration (the
+#: settings must then give signal_gain).
+VOLTS_KEY = "pressure_in_volts"
 
 
 def _naming(path: Path, exc: BaseException) -> str:
@@ -194,8 +201,12 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
             raise RecordError(_naming(p, exc)) from exc
         return Record(path=p, cfg=cfg, warnings=stream.layout.source.warnings, stream=stream)
     from pneumatic_unload.io.bag import (
+        TOPIC_PRESSURE,
         TOPIC_SETTINGS,
+        TOPIC_VOLTS,
         BagError,
+        TopicNotFoundError,
+        bag_summary,
         iter_pressure,
         read_config,
         read_json_topic,
@@ -205,13 +216,23 @@ def open_record(path: str | Path, *, topic: str = "/tank/pressure",
         # write order (iter_pressure): a clock that steps back in the header stamps stays
         # visible to the estimator (log-time order may sort it away when log times are the
         # stamps); the topic is checked here, read in pieces by Record.chunks
-        iter_pressure(p, topic=topic)
+        try:
+            iter_pressure(p, topic=topic)
+        except TopicNotFoundError:
+            # an uncalibrated rig's bag: its volts on a topic of their own, converted with
+            # the signal_gain/signal_offset given or recorded (the live estimator's settings)
+            if topic != TOPIC_PRESSURE or TOPIC_VOLTS not in bag_summary(p).topics:
+                raise
+            topic = TOPIC_VOLTS
+            iter_pressure(p, topic=topic)
         cfg = read_config(p) or {}
         live = read_json_topic(p, TOPIC_SETTINGS)
     except BagError as exc:
         raise RecordError(str(exc)) from exc
     if live is not None:
         cfg = {**cfg, "estimator_settings": live}
+    if topic == TOPIC_VOLTS and "signal_gain" not in (live or {}):
+        cfg = {**cfg, VOLTS_KEY: True}
     return Record(path=p, cfg=cfg, bag_topic=topic)
 
 
@@ -229,6 +250,11 @@ def settings_for(cfg: dict[str, Any], given: dict[str, Any]) -> EstimatorSetting
     EstimationError, ConfigError
         A value out of range.
     """
+    if cfg.get(VOLTS_KEY) and "signal_gain" not in given:
+        raise RecordError(
+            "the bag's pressure is a transducer's volts (/tank/pressure_volts) and it holds "
+            "no estimator settings to convert them: give the calibration, signal_gain "
+            "[Pa/V] and signal_offset [Pa] (--signal-gain, --signal-offset)")
     live = cfg.get("estimator_settings")
     if live is not None:
         try:

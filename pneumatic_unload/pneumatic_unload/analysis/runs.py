@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Simulated runs written as bags: what ``pneumatic-unload simulate`` and the demo do.
 
 The simulator's samples go to ``/tank/pressure`` (header stamp = sample instant), the gas

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The applications: the ``pneumatic-unload`` command line, the demo and the process
 launcher, each run as a program (no other part of the package imports them).
 

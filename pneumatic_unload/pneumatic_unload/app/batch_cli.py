@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The test-line commands of ``pneumatic-unload``: ``batch`` and ``results``.
 
 batch PATH...        analyse many bags and CSV logs (on Dask), keep every result in the

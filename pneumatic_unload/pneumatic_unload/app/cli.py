@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``pneumatic-unload``: offline analysis, simulation and bag repair.
 
 Sub-commands

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``make demo``: simulator, estimator and recorder as separate processes over DDS.
 
 The embedded default rig: a 2 L tank (L/D = 2) at 7 bar absolute discharging through a

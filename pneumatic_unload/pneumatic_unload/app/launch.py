@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A minimal process launcher for the nodes (what a ROS 2 launch file does, without ROS).
 
 There is no ``ros2 launch`` on a PyPI-only machine, so ``make demo``, the benchmarks and the

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Settings, declared once with units, ranges and meanings (SI units).
 
 * :mod:`~pneumatic_unload.config.fields` - metadata-carrying fields and their validation;

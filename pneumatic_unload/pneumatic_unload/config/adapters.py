@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The only converters of settings: command-line options, ROS parameters and JSON.
 
 Everything is generated from the fields' metadata (:mod:`pneumatic_unload.config.fields`),

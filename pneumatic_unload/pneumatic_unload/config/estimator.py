@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The estimator's settings: the tank and gas (:class:`~pneumatic_unload.config.tank.TankSpec`)
 and how the unloads are detected and refined; declared here with the other settings so that
 the model-based fits below the estimator use them without importing it. SI units.

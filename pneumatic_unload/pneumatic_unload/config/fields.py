@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Settings fields that carry their unit, bounds and meaning.
 
 Every settings class of the package (the tank, the simulated rig, the estimator, the

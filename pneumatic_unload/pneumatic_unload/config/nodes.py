@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Every ROS parameter of every node, ROS-free: the one list the nodes declare, ``--help``
 prints and ``config/<node>.yaml`` holds (so the three cannot drift apart).
 
@@ -76,8 +78,10 @@ def _estimator() -> list[ParameterSpec]:
         _str("pressure_topic", "/tank/pressure", "pressure topic (FluidPressure; input sample)"),
         _str("block_topic", "/tank/pressure_block",
              "pressure block topic (PressureBlock; input block)"),
-        _str("input", "sample", "'sample': FluidPressure per sample; 'block': PressureBlock",
-             ("sample", "block")),
+        _str("input", "sample", "'sample': FluidPressure per sample; 'block': PressureBlock; "
+             "'volts': Voltage per sample (an uncalibrated transducer, converted with "
+             "signal_gain and signal_offset)", ("sample", "block", "volts")),
+        _str("volts_topic", "/tank/pressure_volts", "voltage topic (Voltage; input volts)"),
         _str("qos", "sensor_data", "'sensor_data' (best effort) or 'reliable' (KEEP_ALL: "
              "lossless, e.g. replays)", ("sensor_data", "reliable")),
         _str("frame_id", "", "accept only this header frame_id ('' accepts any)"),
@@ -124,11 +128,14 @@ def _simulator() -> list[ParameterSpec]:
               "/tank/pressure"),
         _str("frame_id", "tank", "frame_id of the published headers"),
         _bool("output_volts", False, "publish the transducer's output in volts "
-              "(transducer_zero + transducer_sensitivity * p) instead of Pa: an "
-              "uncalibrated rig"),
+              "(transducer_zero + transducer_sensitivity * p), an uncalibrated rig: as "
+              "pneumatic_unload_msgs/Voltage on /tank/pressure_volts instead of a "
+              "FluidPressure on /tank/pressure (blocks carry the volts too; estimator: "
+              "input:=volts)"),
         _int("wait_for_subscribers", 0, "start streaming only when this many nodes "
-             "subscribe to the pressure topics published (/tank/pressure, "
-             "/tank/pressure_block; a node on both counts once)", 0, 100),
+             "subscribe to the pressure topics published (/tank/pressure or, with "
+             "output_volts, /tank/pressure_volts, and /tank/pressure_block; a node on "
+             "both counts once)", 0, 100),
     ]
 
 
@@ -158,6 +165,8 @@ def _replay() -> list[ParameterSpec]:
         _int("min_subscribers", 1, "subscribers to wait for", 0, 1_000_000, enforce=False),
         _double("wait_timeout", 10.0, "longest wait for subscribers", "s", 0.0, 1e6,
                 dynamic=True),
+        _bool("publish_clock", False, "publish /clock (rosgraph_msgs/Clock) at the bag's log "
+              "times as they are replayed, for nodes run with use_sim_time"),
     ]
 
 

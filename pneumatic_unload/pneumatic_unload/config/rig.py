@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The simulated rig: the tank (:class:`~pneumatic_unload.config.tank.TankSpec`), the
 component, the real-rig effects and the pressure sensor.
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The tank and its gas: declared once, embedded by every settings class.
 
 :class:`TankSpec` holds what is known about the rig's tank and gas (V, L/D, T10, the wall

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The model-based curve fits of a record: an unload's final curve fit, and the re-heating.
 
 The final curve fit gives C, b, the start, p10 and the heat law the data choose, with what

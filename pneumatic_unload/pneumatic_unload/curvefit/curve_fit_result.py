@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The result of the final curve fit (:func:`pneumatic_unload.curvefit.fitting.fit_curve`): the
 fitted values of the chosen heat law, their standard deviations, the laws compared, and the
 fitted model's configuration; and where the fitted samples lie (:class:`CurveSpan`).

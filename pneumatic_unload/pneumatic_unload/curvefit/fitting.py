@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Model-based sonic conductance from the whole record: the final curve fit.
 
 :func:`fit_curve` fits the estimator's parametric model

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Which heat laws of the curve fit's family a record can carry: the laws with a second
 parameter (the density law's exponent, the natural law's turbulent branch) are offered to
 the information criterion only where the record determines that parameter; elsewhere they

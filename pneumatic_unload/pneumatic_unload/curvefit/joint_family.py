@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The law family fitted again with the logged gas temperature beside the pressure
 (:func:`with_temperature`; used by :func:`~pneumatic_unload.curvefit.fitting.fit_curve`):
 the heat law and the wall's temperature then come from both channels. SI units: s, Pa, K.

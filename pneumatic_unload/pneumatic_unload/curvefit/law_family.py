@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The family of models the final curve fit compares: the heat laws, their hot-start
 variants, each with the subsonic index m held at 0.5 or fitted; and the information
 criterion that chooses among them.

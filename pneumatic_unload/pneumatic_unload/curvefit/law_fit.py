@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """One heat law's fit of the final curve fit (:func:`fit_law`), for
 :func:`pneumatic_unload.curvefit.fitting.fit_curve`, which compares the laws.
 

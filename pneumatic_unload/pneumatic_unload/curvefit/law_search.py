@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The search of a law family: the heat laws fitted with the subsonic index m held, and
 with m free where the record asks for it, and the criterion's choice (:func:`choose_laws`;
 used by :func:`~pneumatic_unload.curvefit.fitting.fit_curve` and

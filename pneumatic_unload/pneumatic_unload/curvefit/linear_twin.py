@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A fit's twin with one parameter more, to first order: what freeing it would gain.
 
 Freeing the subsonic index m or a transducer's zero offset costs a fit of its own (hundreds

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The transducer's zero offset offered to the curve fit (SI units): a record that settles
 away from the given p_atm has the offset fitted where the criterion clearly prefers it
 (:func:`offer_offset`, :func:`offset_verdict`, :func:`keep_probe`; used by

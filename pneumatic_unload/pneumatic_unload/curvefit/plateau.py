@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The plateau before the valve opens as evidence of the gas's temperature (SI units): its
 drift (a gas warmer or colder than the wall relaxing toward it, or a leak) and its bend
 toward a level (a gas reaching the wall's temperature decays exponentially; a leak's decay

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """SSE recovery: the isochoric re-heating after an aborted unload (the paper's eq 23).
 
 When the valve closes early (t*), the gas re-heats at constant mass on the wall and the

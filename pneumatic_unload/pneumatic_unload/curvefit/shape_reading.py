@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The flow curve's shape beyond the ISO 6358-1 law: a reading of the record, and the
 ISO (b, m) nearest it.
 

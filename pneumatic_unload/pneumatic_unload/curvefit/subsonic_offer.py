@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Whether a record carries the subsonic index m of ISO 6358-1:2013, and what holding it
 costs (and the line of a fitted transducer zero offset).
 

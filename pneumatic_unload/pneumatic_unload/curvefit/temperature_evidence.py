@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The logged gas temperature as evidence on the final curve fit: does the fitted model's
 gas temperature, seen through a thermometer, follow the one the record carries?
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The wall temperature's and the heat laws' moves of the curve fit's C, b and m, for the
 lines of their budgets (:mod:`pneumatic_unload.uncertainty.budget`).
 

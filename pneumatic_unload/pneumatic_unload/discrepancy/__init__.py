@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Discrepancy workflow: find where the discharge model and a measurement disagree, name
 the missing effect, add it and show the gap shrink (ROS-free; SI units).
 

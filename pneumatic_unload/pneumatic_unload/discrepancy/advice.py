@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The end of a discrepancy report: what to do next, and which C to report and why.
 
 Written for the test-bench engineer from a :class:`~pneumatic_unload.discrepancy.types.

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Equal fits, different C: the conductance ambiguity of a discrepancy verdict.
 
 Naming an effect is not enough when models that explain the trace about equally well give

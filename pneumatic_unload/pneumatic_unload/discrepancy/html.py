@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """One self-contained HTML page from the discrepancy report's Markdown.
 
 The page is the same text as ``report.md`` (so the two never disagree), rendered from the

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Intervals and independent checks of a fitted discrepancy model.
 
 SI units: s, Pa, K.

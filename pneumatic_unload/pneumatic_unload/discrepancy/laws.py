@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The heat-law family against further effects, and the tank's L/D when it is not stated.
 
 A further effect must beat the named heat transfer with its law at its best

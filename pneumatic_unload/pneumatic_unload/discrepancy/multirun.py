@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Several runs, one shared law: the chamber-geometry factor on C (the paper's fig. 6).
 
 On a single trace a constant factor f on the sonic conductance is exactly collinear with

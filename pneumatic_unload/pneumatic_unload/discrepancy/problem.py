@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A recorded trace prepared for the discrepancy workflow: start values, noise, likelihood.
 
 The unloading-time estimate (:func:`pneumatic_unload.estimation.analyze`, adiabatic, no

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The discrepancy workflow's report: Markdown with PNG plots, and one self-contained HTML page.
 
 Written for a test-bench engineer: what the model misses (by name), how sure the

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The search of the discrepancy workflow: diagnostics, candidate rounds, the BIC decision.
 
 SI units: s, Pa.

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Randomised synthetic discharges with hidden effects: the acceptance harness's cases.
 
 Conditions (issue #5): 1 kHz, white noise 0.1 % of a 1 MPa full scale (sigma = 1 kPa),

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A logged gas temperature as evidence for the models a discrepancy verdict weighs.
 
 The search names effects on the pressure alone; where the record carries the gas

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Types of the discrepancy workflow: settings, fits, diagnostics, rounds and the result.
 
 SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa).

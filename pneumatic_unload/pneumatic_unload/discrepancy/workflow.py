@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The discrepancy workflow: where do simulation and measurement disagree, and why?
 
 Steps (SI units throughout: s, Pa absolute, K, m^3, m^3/(s Pa)):

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The unloading-time method as a streaming estimator (live node and offline analysis).
 
 :class:`StreamingEstimator` is fed pressure samples one at a time (:meth:`push`) or in

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Batch analysis of a whole trace, one result per unload, and why a trace gave none
 (SI units: s, Pa absolute)."""
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Sample storage of the streaming estimator: stamps, values and running prefix sums.
 
 The prefix sums make every periodic statistic O(1): ``cs[k]`` is the sum of the samples

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The p* crossing's estimate of a charge: the unloading-time method mirrored.
 
 A tank filled from p10 toward the supply's p_s reaches p* = p10 + 0.632 (p_s - p10) at

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Analysis of a record read in chunks, in memory bounded whatever its length.
 
 :func:`analyze_chunks` feeds each chunk to one :class:`StreamingEstimator` (its block path

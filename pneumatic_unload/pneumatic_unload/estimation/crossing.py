@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The p* crossing's estimate from the crossing time, prepared before the crossing.
 
 Everything of the crossing estimate but the crossing time tau_exp is known once p10, p_atm

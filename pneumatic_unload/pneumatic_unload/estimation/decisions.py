@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The detector's per-sample decisions, each written once (vectorised over check indices).
 
 Every predicate takes the prefix sums (see :mod:`.buffer`) and a check index ``k``: a

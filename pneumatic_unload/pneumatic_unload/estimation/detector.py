@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Waiting and confirming phases: the pre-step plateau, the trigger and its confirmation.
 
 :func:`step_waiting` takes the waiting phase's decision at one index, :func:`scan_waiting`

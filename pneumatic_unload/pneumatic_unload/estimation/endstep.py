@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A step at the end of an unload's tail, after the record had settled: not the discharge.
 
 A real bench's record may go on after the tank has emptied, and something other than the

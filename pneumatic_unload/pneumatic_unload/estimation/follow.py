@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A confirmed fall that nothing follows: back to waiting, or no unload at the stream's end.
 
 Correlated noise (a transducer low-passed below its logging rate) wanders on a plateau; in

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Bounded histories of the streaming estimator: its diagnostics and its results.
 
 A live estimator runs for days and a record may hold millions of bad samples (each a

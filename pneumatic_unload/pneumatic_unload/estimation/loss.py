@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Samples missing from a stream, counted from its stamps (SI units: s; stamps in ns).
 
 A live pressure stream at kHz rates loses messages where its transport or its receiver does

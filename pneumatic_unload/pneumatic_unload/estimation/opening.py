@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A live stream whose unload begins at a given opening: the start is not detected.
 
 The estimator node's ``start_time`` mode (a record that begins at the valve opening, as

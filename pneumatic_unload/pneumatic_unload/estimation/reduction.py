@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Memory bounded whatever the length of one unload: its old samples reduced to bins.
 
 The final curve fit of an unload needs its samples from the pre-step plateau to the end of

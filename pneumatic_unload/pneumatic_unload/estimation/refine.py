@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Refinement: model inversion at the crossing, final curve fit, SSE recovery fit.
 
 The only module of the estimator that calls :mod:`pneumatic_unload.curvefit.fitting`,

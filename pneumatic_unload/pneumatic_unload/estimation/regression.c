@@ -1,3 +1,6 @@
+/* SPDX-License-Identifier: Apache-2.0
+ * Copyright 2026 pneumatic_unload maintainers
+ */
 /* The p* crossing fit of the streaming estimator and its block intake, compiled (issue #10:
  * the crossing estimate published within a millisecond of the sample that completes it).
  *

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Small regressions of the detector: noise from first differences, the start (hinge) fit,
 the p* crossing fit (compiled: ``regression.c``) and the closing-instant (corner) fit. Times
 in s, pressures in Pa (or the input's signal units: every fit is linear in p)."""

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Records that begin at the valve opening: sparse, irregular, without a plateau.
 
 Labs publish discharges as they were logged or digitised: a 1 Hz logger started with the

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Aborted unload and SSE (eq 23): closing instant, pressure recovery, SSE result.
 
 When the valve closes before p*, the closing instant comes from a corner fit, the abort is

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Stamps that do not follow: a sample out of order, a duplicate, a clock stepped back.
 
 :class:`StampChecks` is the part of :class:`~.streaming.StreamingEstimator` that decides

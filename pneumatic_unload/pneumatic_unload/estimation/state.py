@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Mutable state of the streaming estimator, shared by its phase modules.
 
 :class:`UnloadState` holds what one unload has established (start, p10, p*, the pending

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The streaming estimator: samples in (one by one or in blocks), results out.
 
 :class:`StreamingEstimator` is fed pressure samples one at a time (:meth:`push`) or in

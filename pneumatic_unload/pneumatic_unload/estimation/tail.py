@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Tail phase: after the crossing, wait for the final plateau (or a new charge), then close
 the unload with the full-curve fit; and the skip phase, the rest of an unload already
 reported as bad data, which re-arms only once the signal settles on a live plateau or

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Charges and discharges of one component in one stream (``direction`` 'both').
 
 A cycle that fills a tank through the component from a supply and empties it through the

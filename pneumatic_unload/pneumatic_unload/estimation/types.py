@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Types of the estimator: statuses, settings, results, diagnostics and its error (SI units).
 
 Everything here is plain data: :class:`EstimatorSettings` (tank, gas and detection settings),

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Unloading phase: the start (hinge) fit, the stall test, p_atm auto and the p* crossing.
 
 Values in signal units unless stated, times in s, indices in buffer samples.

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The last look at a result before it is published: no 'ok' that is not.
 
 Every result of the estimator (crossing and final, streaming, deferred or from a given

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Moments of detrended AR(1) noise: rho and sigma of the plateaus without detrending bias.
 
 Noise on a plateau is measured after removing a low-order polynomial (the plateau may

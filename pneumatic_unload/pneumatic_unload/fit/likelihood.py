@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The one likelihood of the package: adaptive bins, AR(1) prewhitening, model per bin.
 
 A trace of N samples is cut into bins (:func:`make_bins`) that are narrow near the valve

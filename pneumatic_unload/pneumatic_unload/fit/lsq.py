@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The one bounded least-squares minimiser of the package (the lmfit ``Minimizer`` shape).
 
 :func:`minimize` takes a residual function of named parameter values and a

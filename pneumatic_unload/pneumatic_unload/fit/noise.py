@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Noise model of a recorded discharge and the likelihood the discrepancy workflow uses.
 
 The sensor noise is modelled as a stationary AR(1) process e_k = rho e_(k-1) + u_k with

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Named, bounded fit parameters (the lmfit ``Parameters`` shape).
 
 A :class:`Parameter` carries its value, bounds, unit and whether it varies. The engine fits

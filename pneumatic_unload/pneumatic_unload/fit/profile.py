@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Profile likelihood: intervals and curvature checks that refit through the one engine.
 
 A profile holds one parameter at a value and refits the others

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A record reduced to bins while it streams, and the fit's bins made from them at its end.
 
 A streaming estimator cannot keep every sample of an unload of any length for its final

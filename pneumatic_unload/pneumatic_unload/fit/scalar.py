@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Minimisation of a function of one variable on an interval (numpy and math only).
 
 The estimator's start-time searches and the thermometer's lag search use it; scipy's

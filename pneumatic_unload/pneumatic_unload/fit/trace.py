@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A recorded trace prepared for fitting a parametric model with the binned likelihood.
 
 :class:`Trace` holds relative times, the noise model and the

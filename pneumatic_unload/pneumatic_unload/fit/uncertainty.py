@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Uncertainty of a least-squares fit: covariance, inflation for structured residuals.
 
 Profiles and intervals refit through :func:`pneumatic_unload.fit.lsq.minimize`

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """ROS-free input/output of tank-discharge data: rosbag2 bags (MCAP) and data-logger CSV files.
 
 Units at this API: pressures in Pa absolute, temperatures in K, times in s or, for bag

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Header of a data-logger CSV file: columns, units, separator; the errors of the reader.
 
 :func:`resolve_layout` finds the time, pressure and (optional) gas-temperature columns of a

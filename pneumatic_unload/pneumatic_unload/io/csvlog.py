@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Data-logger CSV files of tank discharges: time, pressure and (optionally) gas temperature.
 
 Units: the returned time is in s (starting wherever the logger clock starts), pressures in

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The names in a data-logger CSV file and in the reader's hints.
 
 Which header names are the time, date, pressure and gas-temperature columns (the unit,

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The text of a data-logger CSV file: its encoding, its lines, where its rows end.
 
 :func:`open_text` finds the encoding from the first bytes (a byte-order mark: UTF-8, UTF-16

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The time column of a data-logger CSV file: numbers, epoch stamps, date-times, times of day.
 
 A time column holds one of

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The discharge model: one ODE with one integrator, one heat law, one sensor chain.
 
 Modules, each of one role (SI units throughout):

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The registry of real-rig effects (the parametric model built from it:
 :mod:`pneumatic_unload.model.parametric`).
 

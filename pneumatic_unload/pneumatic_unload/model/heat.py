@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Wall heat transfer of the tank gas: the one place a heat law lives.
 
 The gas exchanges heat with the wall, Q = hA (T_wall - T) [W]. The wall conductance hA

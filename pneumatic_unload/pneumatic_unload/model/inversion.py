@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Model inversion at the p* crossing: the C for which the discharge model reaches p* at the
 measured tau_exp, directly (a secant on log t(C)) or from a table of the model's crossing
 times built half way to p* (so that the live estimate is a lookup at the crossing sample).

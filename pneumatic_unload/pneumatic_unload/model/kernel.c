@@ -1,3 +1,6 @@
+/* SPDX-License-Identifier: Apache-2.0
+ * Copyright 2026 pneumatic_unload maintainers
+ */
 /* The compiled core of the pneumatic_unload discharge model (see kernel.py, which builds
  * and loads this file): the ISO 6358 flow function, the wall heat laws, the right-hand
  * side of the tank's mass and energy balance, and a Dormand-Prince 5(4) integrator with

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The compiled core of the discharge model: flow law, heat laws, right-hand side, integrator.
 
 The formulae live once, in C (``kernel.c`` beside this file): the ISO 6358 flow function,

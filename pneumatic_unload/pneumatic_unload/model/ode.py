@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The discharge ODE and its one integrator.
 
 The gas in the tank obeys a mass and an energy balance (ideal gas, uniform state):

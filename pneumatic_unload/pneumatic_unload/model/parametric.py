@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The discharge model with effects as a function of named parameter values: what every
 fit evaluates (the curve fit, the crossing inversion, the discrepancy search).
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """An endless, stateful sample stream of a simulated rig: what the simulator node publishes.
 
 :class:`RigStream` holds the tank charged at p10, unloads when told (:meth:`RigStream.open_valve`),

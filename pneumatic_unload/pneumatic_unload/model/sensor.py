@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The pressure-sensor chain: one implementation, batch and stateful.
 
 True tank pressure -> first-order lag (``sensor_lag``) -> gain (``sensor_gain``) -> offset

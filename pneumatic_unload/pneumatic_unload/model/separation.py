@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Which extra measurement separates two real-rig effects that fit a trace alike.
 
 Advice only (text): the discrepancy workflow quotes it when its ambiguity set holds

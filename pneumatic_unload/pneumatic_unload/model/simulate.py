@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A simulated discharge as a rig records it: the ODE on the sample grid, then the sensor.
 
 SI units: s, Pa absolute, K.

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The ROS 2 nodes: one module each, run as ``python -m pneumatic_unload.nodes.<node>`` or as
 the console script ``<node>`` (``ros2 run pneumatic_unload <node>``); :mod:`.common` is their
 shared plumbing.

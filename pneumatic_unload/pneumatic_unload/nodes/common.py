@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Shared plumbing of the ROS 2 nodes: QoS profiles, parameters from RigConfig, start,
 spinning and stop.
 

@@ -1,9 +1,14 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``estimator`` node: the streaming unloading-time estimator on a live pressure topic.
 
 Subscribes
     /tank/pressure (sensor_msgs/FluidPressure; parameter ``pressure_topic``), sensor-data QoS
         (best effort, deep queue) or reliable (``qos``); or blocks of samples
-        (pneumatic_unload_msgs/PressureBlock) when ``input`` is 'block'.
+        (pneumatic_unload_msgs/PressureBlock) when ``input`` is 'block'; or an uncalibrated
+        transducer's volts, /tank/pressure_volts (pneumatic_unload_msgs/Voltage; parameter
+        ``volts_topic``) when ``input`` is 'volts' (converted with signal_gain [Pa/V] and
+        signal_offset [Pa]).
     /tank/temperature (sensor_msgs/Temperature), when ``temperature_from_topic``: T10 is
         the gas temperature last received before the unload starts.
 Publishes
@@ -96,6 +101,8 @@ from pneumatic_unload.testline import ResultsDBError, SpecError, load_spec
 from pneumatic_unload.testline.job import result_row
 from pneumatic_unload.testline.live import LiveResults, PendingWrite, ResultWriter
 
+#: Values of the ``input`` parameter: FluidPressure per sample, PressureBlock, Voltage.
+INPUTS = ("sample", "block", "volts")
 #: Node states reported on /diagnostics and in the action's feedback.
 STATES = ("waiting", "unloading", "done", "error")
 #: Most queued single samples fed to the core as one block [-] (the queue is drained in
@@ -164,7 +171,7 @@ class EstimatorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("estimator", **kwargs)
         from pneumatic_unload_msgs.action import Measure
-        from pneumatic_unload_msgs.msg import PressureBlock, UnloadEstimate
+        from pneumatic_unload_msgs.msg import PressureBlock, UnloadEstimate, Voltage
 
         self._Measure = Measure
         self._UnloadEstimate = UnloadEstimate
@@ -175,11 +182,18 @@ class EstimatorNode(Node):
             self._settings = self._settings_from({})
         except EstimationError as exc:
             raise common.StartupError("estimator", f"invalid parameters: {exc}") from exc
-        for name, allowed in (("input", ("sample", "block")),
+        for name, allowed in (("input", INPUTS),
                               ("qos", ("sensor_data", "reliable"))):
             if self._p(name) not in allowed:
                 raise common.StartupError(
                     "estimator", f"{name} must be one of {allowed}, got {self._p(name)!r}")
+        if self._p("input") == "volts" and self._settings.signal_gain == 1.0 \
+                and self._settings.signal_offset == 0.0:
+            # gain 1, offset 0 is the Pa input: volts taken as pascals give a wrong C
+            raise common.StartupError(
+                "estimator", "input:=volts needs the transducer's calibration: signal_gain "
+                "[Pa/V] and signal_offset [Pa] (e.g. -p signal_gain:=1e5 -p signal_offset:=0.0 "
+                "for 0-10 V over 0-10 bar absolute)")
         self.add_on_set_parameters_callback(common.validating_callback(self._check))
         # the test line: verdicts against a specification, estimates into a results database
         try:
@@ -274,6 +288,8 @@ class EstimatorNode(Node):
         if self._p("input") == "block":
             self.create_subscription(PressureBlock, self._p("block_topic"),
                                      self._on_block, qos)
+        elif self._p("input") == "volts":
+            self.create_subscription(Voltage, self._p("volts_topic"), self._on_volts, qos)
         else:
             self.create_subscription(FluidPressure, self._p("pressure_topic"),
                                      self._on_pressure, qos)
@@ -296,7 +312,7 @@ class EstimatorNode(Node):
         sys.setswitchinterval(5e-4)
         self._worker = threading.Thread(target=self._work, name="estimator", daemon=True)
         self._worker.start()
-        topic = self._p("block_topic" if self._p("input") == "block" else "pressure_topic")
+        topic = self._input_topic()
         self.get_logger().info(
             f"estimating on {topic}"
             f" ({self._p('input')}, {self._p('qos')}):"
@@ -316,7 +332,8 @@ class EstimatorNode(Node):
         return EstimatorSettings(**adapters.from_parameters(EstimatorSettings, v))
 
     def _check(self, changes: dict[str, Any]) -> str:
-        fixed = {"pressure_topic", "block_topic", "input", "qos", "frame_id", "diagnostics_period"}
+        fixed = {"pressure_topic", "block_topic", "volts_topic", "input", "qos", "frame_id",
+                 "diagnostics_period"}
         if fixed & set(changes):
             return f"{', '.join(sorted(fixed & set(changes)))} cannot change at run time"
         try:
@@ -359,6 +376,19 @@ class EstimatorNode(Node):
         self._samples.append((common.stamp_to_ns(msg.header.stamp), msg.fluid_pressure,
                               arrived))
         self._wake.set()
+
+    def _on_volts(self, msg: Any) -> None:
+        """A Voltage sample [V]: the core converts it with signal_gain/signal_offset."""
+        arrived = time.monotonic()
+        if not self._frame_ok(msg.header.frame_id):
+            return
+        self._samples.append((common.stamp_to_ns(msg.header.stamp), msg.voltage, arrived))
+        self._wake.set()
+
+    def _input_topic(self) -> str:
+        """The topic of the pressure input (``input``: sample, block or volts)."""
+        return str(self._p({"block": "block_topic", "volts": "volts_topic"}.get(
+            self._p("input"), "pressure_topic")))
 
     def _on_block(self, msg: Any) -> None:
         collect = gc.isenabled()  # no collection on the way to the push (see _feed)
@@ -526,8 +556,7 @@ class EstimatorNode(Node):
         now = time.monotonic()
         if now - self._pub_count_at >= 1.0:
             self._pub_count_at = now
-            topic = self._p("block_topic" if self._p("input") == "block"
-                            else "pressure_topic")
+            topic = self._input_topic()
             try:
                 infos = self.get_publishers_info_by_topic(topic)
                 names = sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}"
@@ -543,7 +572,7 @@ class EstimatorNode(Node):
         n, names = self._count_publishers()
         if n <= 1:
             return ""
-        topic = self._p("block_topic" if self._p("input") == "block" else "pressure_topic")
+        topic = self._input_topic()
         return (f"; {n} publishers on {topic} ({', '.join(names)}): two sources interleave "
                 "their stamps (e.g. a simulator or a replay beside the rig); stop all but "
                 "one")

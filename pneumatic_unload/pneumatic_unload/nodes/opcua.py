@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``opcua`` node: the bench's OPC UA server for the cell's PLC (issue #27).
 
 The server (:mod:`pneumatic_unload.plc`: asyncua, ROS-free) runs in an asyncio event loop

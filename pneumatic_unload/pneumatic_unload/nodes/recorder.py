@@ -1,8 +1,11 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``recorder`` node: the rig's topics into rosbag2 bags (MCAP storage), crash-safe.
 
-Records ``/tank/pressure``, ``/tank/pressure_block``, ``/tank/temperature``, ``/tank/valve``,
-``/estimator/estimate``, ``/estimator/settings``, ``/diagnostics`` and ``/rig/config`` (the
-package's topics; see :data:`PACKAGE_TOPICS` for their QoS) plus any extra topics named in the
+Records ``/tank/pressure``, ``/tank/pressure_volts`` (an uncalibrated rig's volts),
+``/tank/pressure_block``, ``/tank/temperature``, ``/tank/valve``, ``/estimator/estimate``,
+``/estimator/settings``, ``/diagnostics`` and ``/rig/config`` (the package's topics; see
+:data:`PACKAGE_TOPICS` for their QoS) plus any extra topics named in the
 ``topics`` parameter (their types are discovered from the ROS graph; the recorder waits for
 them to appear). Messages are received serialised (``raw=True``) and written to the bag as
 they came, through :class:`pneumatic_unload.io.bag.BagRecorder`: no per-message
@@ -71,12 +74,14 @@ from pneumatic_unload.io.bag import (
     MSGTYPE_PRESSURE,
     MSGTYPE_TEMPERATURE,
     MSGTYPE_VALVE,
+    MSGTYPE_VOLTAGE,
     TOPIC_CONFIG,
     TOPIC_ESTIMATE,
     TOPIC_PRESSURE,
     TOPIC_SETTINGS,
     TOPIC_TEMPERATURE,
     TOPIC_VALVE,
+    TOPIC_VOLTS,
     BagError,
     BagRecorder,
     cdr_header_stamp_ns,
@@ -95,6 +100,7 @@ MSGTYPE_PRESSURE_BLOCK = "pneumatic_unload_msgs/msg/PressureBlock"
 #: volatile writer, so publishers of these topics must be latched).
 PACKAGE_TOPICS: dict[str, tuple[str, str, int]] = {
     TOPIC_PRESSURE: (MSGTYPE_PRESSURE, "volatile", 1000),
+    TOPIC_VOLTS: (MSGTYPE_VOLTAGE, "volatile", 1000),
     TOPIC_PRESSURE_BLOCK: (MSGTYPE_PRESSURE_BLOCK, "volatile", 1000),
     TOPIC_TEMPERATURE: (MSGTYPE_TEMPERATURE, "volatile", 1000),
     TOPIC_VALVE: (MSGTYPE_VALVE, "transient_local", 10),

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``replay`` node: publishes a bag's topics with their original timing, scaled, or as fast
 as the subscribers take them, without loss.
 
@@ -20,8 +22,13 @@ Parameters:
     * min_subscribers (int): how many subscribers to wait for (default 1).
     * wait_timeout (double, s): give up waiting after this long and start anyway with a
       warning (default 10.0).
+    * publish_clock (bool): also publish ``/clock`` (rosgraph_msgs/Clock) at the log time of
+      each replayed message as it goes out (at most one per ``CLOCK_STEP_NS`` of bag time,
+      and the last message's time at the end of each pass), so that nodes run with
+      ``use_sim_time:=true`` see the bag's time (default false).
 
-QoS: reliable; ``/rig/config`` transient local depth 1, ``/estimator/estimate`` transient
+QoS: reliable; ``/clock`` keep-last depth 1 volatile (as ``ros2 bag play --clock``);
+``/rig/config`` transient local depth 1, ``/estimator/estimate`` transient
 local depth 10, everything else volatile depth 1000. The rig configuration (first
 ``/rig/config`` message of the bag or, without one, the configuration in the bag's metadata)
 is published once, latched, before the timed stream and is not paced. Also in paced mode
@@ -68,6 +75,11 @@ ACK_POLL = 0.5
 MATCH_SETTLE = 0.2
 #: Time to wait for the last acknowledgements at the end [s].
 FINAL_ACK_TIMEOUT = 10.0
+#: Interval of bag time with at most one /clock message [ns] (1 ms: a clock of at most
+#: 1 kHz at rate 1, finer than any period the estimator's timers use).
+CLOCK_STEP_NS = 1_000_000
+#: The topic of ROS time for ``use_sim_time`` nodes.
+TOPIC_CLOCK = "/clock"
 
 
 class ReplayParameterError(ValueError):
@@ -167,6 +179,34 @@ def pace(
         publish(msg)
         n += 1
     return n
+
+
+class SimClock:
+    """Which replayed log times go out on ``/clock`` (ROS-free): the first message's time in
+    each ``CLOCK_STEP_NS`` interval of bag time (so a 1 kHz bag's clock ticks with nearly
+    every sample even when the stamps' spacing is a little under 1 ms), a time before the
+    last one sent at once (a new pass of a loop), and by :meth:`flush` the last message's
+    time at the end of a pass."""
+
+    def __init__(self, send: Callable[[int], None], step_ns: int = CLOCK_STEP_NS) -> None:
+        self._send = send
+        self._step = step_ns
+        self._sent: int | None = None
+        self._last: int | None = None
+
+    def tick(self, log_time_ns: int) -> None:
+        """Called before the message of ``log_time_ns`` is published."""
+        self._last = log_time_ns
+        if self._sent is None or log_time_ns < self._sent \
+                or log_time_ns // self._step != self._sent // self._step:
+            self._send(log_time_ns)
+            self._sent = log_time_ns
+
+    def flush(self) -> None:
+        """Send the last message's time if it has not gone out."""
+        if self._last is not None and self._last != self._sent:
+            self._send(self._last)
+            self._sent = self._last
 
 
 _FAST_HEARTBEAT_XML = """<?xml version="1.0" encoding="UTF-8" ?>
@@ -304,6 +344,21 @@ def main(argv: list[str] | None = None) -> int:
 
         sent: Counter[str] = Counter()
         unacked: Counter[str] = Counter()
+        sim_clock: SimClock | None = None
+        if node.get_parameter("publish_clock").value:
+            from rosgraph_msgs.msg import Clock
+
+            clock_pub = node.create_publisher(Clock, TOPIC_CLOCK, QoSProfile(
+                history=HistoryPolicy.KEEP_LAST, depth=1,
+                reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE))
+
+            def send_clock(t_ns: int) -> None:
+                msg = Clock()
+                msg.clock.sec, msg.clock.nanosec = divmod(t_ns, 1_000_000_000)
+                clock_pub.publish(msg)
+                sent[TOPIC_CLOCK] += 1
+
+            sim_clock = SimClock(send_clock)
 
         def wait_acked(topic: str) -> None:
             while rclpy.ok() and not pubs[topic].wait_for_all_acked(
@@ -315,6 +370,8 @@ def main(argv: list[str] | None = None) -> int:
             pub = pubs.get(msg.topic)
             if pub is None:
                 return
+            if sim_clock is not None and msg.topic != TOPIC_CONFIG:
+                sim_clock.tick(msg.log_time_ns)
             if unacked[msg.topic] >= FLOW_WINDOW:
                 wait_acked(msg.topic)
             while True:
@@ -335,6 +392,8 @@ def main(argv: list[str] | None = None) -> int:
                 publish(plan.config)
             while rclpy.ok():
                 pace(plan.stream(), plan.rate, publish, keep_going=rclpy.ok)
+                if sim_clock is not None:
+                    sim_clock.flush()
                 passes += 1
                 if not plan.loop:
                     break

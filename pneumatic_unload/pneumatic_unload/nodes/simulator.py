@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """``simulator`` node: a simulated tank-discharge rig publishing at rig rates.
 
 Publishes
@@ -25,8 +27,10 @@ Parameters
     ``start_delay`` [s] (open once by
     itself after this delay; < 0: never), ``settle_time`` [s], ``vent_time`` [s],
     ``charge_time`` [s], ``cycles`` (0: forever), ``auto_charge``, ``temperature_rate`` [Hz],
-    ``block_size``, ``frame_id``, ``output_volts`` (publish the transducer's volts instead of
-    Pa, as an uncalibrated rig does; the estimator converts with signal_gain/offset).
+    ``block_size``, ``frame_id``, ``output_volts`` (publish the transducer's volts, as an
+    uncalibrated rig does, on /tank/pressure_volts (pneumatic_unload_msgs/Voltage) instead
+    of Pa on /tank/pressure; blocks then carry volts too; the estimator converts with
+    ``input:=volts`` and signal_gain/offset).
     Load them from ``share/pneumatic_unload/config/simulator.yaml``
     with ``--ros-args --params-file``. Rig changes at run time apply from the next unload;
     out-of-range values are rejected with the reason.
@@ -53,6 +57,10 @@ from pneumatic_unload.model.rig import RigStream
 from pneumatic_unload.nodes import common
 
 MODES = ("service", "cycle", "alternate")
+#: The calibrated pressure topic [Pa absolute] (sensor_msgs/FluidPressure).
+TOPIC_PRESSURE = "/tank/pressure"
+#: The transducer's output voltage with ``output_volts`` (pneumatic_unload_msgs/Voltage).
+TOPIC_VOLTS = "/tank/pressure_volts"
 
 
 #: Above this sample rate [Hz] the node publishes blocks by default and advises the block
@@ -71,7 +79,7 @@ class SimulatorNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("simulator", **kwargs)
-        from pneumatic_unload_msgs.msg import PressureBlock, ValveState
+        from pneumatic_unload_msgs.msg import PressureBlock, ValveState, Voltage
 
         self._ValveState = ValveState
         self._PressureBlock = PressureBlock
@@ -90,7 +98,12 @@ class SimulatorNode(Node):
         self._lock = threading.Lock()
         self._stream = RigStream(self._cfg, charge_time=self._p("charge_time"))
         self._frame = self._p("frame_id")
-        self._pub_p = self.create_publisher(FluidPressure, "/tank/pressure", common.PRESSURE_QOS)
+        # an uncalibrated rig's volts go on a topic and type of their own (FluidPressure is
+        # pascals by its definition)
+        self._Sample = Voltage if self._p("output_volts") else FluidPressure
+        self._pub_p = self.create_publisher(
+            self._Sample, TOPIC_VOLTS if self._p("output_volts") else TOPIC_PRESSURE,
+            common.PRESSURE_QOS)
         self._pub_block = self.create_publisher(PressureBlock, "/tank/pressure_block",
                                                 common.PRESSURE_QOS)
         self._pub_t = self.create_publisher(Temperature, "/tank/temperature", 10)
@@ -228,7 +241,7 @@ class SimulatorNode(Node):
         last_phase = self._stream.phase
         unloads_done = 0
         max_burst = max(1, int(rate * 0.05))
-        msg = FluidPressure()
+        msg = self._Sample()
         msg.header.frame_id = self._frame
         msg.variance = (self._cfg.noise_std
                         * (self._cfg.transducer_sensitivity if volts else 1.0)) ** 2
@@ -255,7 +268,10 @@ class SimulatorNode(Node):
                         ns = wall0 + round(k * 1e9 / rate)
                     if per_sample:
                         common.ns_to_stamp(ns, msg.header.stamp)
-                        msg.fluid_pressure = y
+                        if volts:
+                            msg.voltage = y
+                        else:
+                            msg.fluid_pressure = y
                         self.published += self._publish(self._pub_p, msg)
                     if block_size:
                         pending.append((ns, y))

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The cell's PLC's way in: the OPC UA server of the bench (asyncua), ROS-free.
 
 :mod:`.address` declares the address space (object ``PneumaticUnload`` in namespace

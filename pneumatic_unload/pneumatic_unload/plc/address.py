@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The address space of the bench's OPC UA server (ROS-free): its object's variables and
 methods as data (:data:`VARIABLES`, :data:`METHODS`; :func:`address_space` is the table of
 the docs), their units, and what a measurement hands the server (:class:`Estimate`,

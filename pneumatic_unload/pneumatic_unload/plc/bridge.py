@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The OPC UA server of the bench (asyncua, ROS-free): its address space and methods.
 
 Under ``Objects`` the object ``PneumaticUnload`` (browse names and node ids in the

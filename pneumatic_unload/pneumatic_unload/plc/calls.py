@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Method calls that take tens of seconds without stalling the caller's session.
 
 asyncua's server handles the requests of one connection strictly one after the other: a

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """An estimate as the PLC sees it, and its verdict (ROS-free: the node hands over a
 message's fields)."""
 

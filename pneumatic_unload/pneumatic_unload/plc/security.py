@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Security of the OPC UA bridge: who may connect, and who may start a measurement.
 
 Secure by default: the bridge listens on loopback unless told another address (the

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The test line: many inputs analysed in batch (on Dask), the results database, the
 specifications parts are judged against.
 

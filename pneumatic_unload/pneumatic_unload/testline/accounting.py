@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """CPU-time accounting of a batch: where the CPU seconds and the idle time of a batch go.
 
 A wall-clock speed-up measured on a shared machine says little; CPU seconds do not depend

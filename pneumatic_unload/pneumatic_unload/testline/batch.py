@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Batch analysis of many inputs on Dask, results kept in the results database.
 
 :func:`run_batch` reads the content hashes the database holds for these options (one

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The results database of a test line, the system of record: an embedded SQLite file
 (the default) or a PostgreSQL server shared by many benches (see :mod:`~.schema`).
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """One input of a batch: read it, analyse it, judge it against the part's specification.
 
 :func:`analyze_file` is what a batch worker runs (a plain function of picklable values,

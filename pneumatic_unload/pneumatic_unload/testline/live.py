@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A live estimator's final estimates in the results database, judged against a spec.
 
 :class:`LiveResults` is what the estimator node holds when its ``results_db`` parameter is

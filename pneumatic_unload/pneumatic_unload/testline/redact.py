@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A database URL's password kept out of every message, whatever the URL's form.
 
 :func:`redact` is the one function every message of the results database goes through

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The quality engineer's report of a results database: one self-contained HTML page.
 
 :func:`html_report` writes a single file (no network, no other file needed to open it):

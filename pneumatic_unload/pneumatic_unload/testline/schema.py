@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The results database's schema, its two backends and its migrations.
 
 Where the database is: a plain path is an embedded SQLite file (WAL mode, the default); a

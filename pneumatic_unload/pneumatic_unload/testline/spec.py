@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Specifications of part types: the ranges a measured C and b must lie in to pass.
 
 A specification is a YAML (or JSON) file::

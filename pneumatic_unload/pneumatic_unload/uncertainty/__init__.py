@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The uncertainty budget of a sonic conductance C and of a critical pressure ratio b.
 
 In the manner of the GUM: type A (the record's noise), type B (the inputs' stated standard

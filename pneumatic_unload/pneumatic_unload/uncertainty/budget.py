@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Uncertainty budget of a sonic conductance, in the manner of the GUM (ISO 6358-2's test).
 
 A C from a tank discharge depends on what was measured in the record (type A: the noise,

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Uncertainty budget of the critical pressure ratio b of the final curve fit, with the
 lines of C's (:mod:`pneumatic_unload.uncertainty.budget`: the same :class:`Budget`, type A, type
 B and model form), so that b's sigma carries what the inputs' stated uncertainties do to it.

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Tank discharges and charges under heat laws outside the package's family: an oracle.
 
 Written apart from ``pneumatic_unload`` on purpose (it imports nothing from it): a fit that

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """HydDown discharges (``test/data/hyddown/*.npz``, made by ``bench/hyddown_traces.py`` in a
 venv with HydDown) turned into records as a transducer would give them. Imports nothing from
 the package. SI units: s, Pa absolute, K, m^3, m^3/(s Pa).

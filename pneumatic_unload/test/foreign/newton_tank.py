@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """An independent tank-discharge model for validation: it imports nothing from the package.
 
 Ideal gas in a rigid tank, uniform state, wall heat transfer by Newton cooling with a constant

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Rosbag2 bags (MCAP storage) of tank discharges, read and written without ROS.
 
 This package never imports rclpy or a ROS message package: messages are (de)serialised with
@@ -9,7 +11,8 @@ messages carry degrees C; the conversion happens here), valve opening as a fract
 durations in s, timestamps as int nanoseconds (``t_ns``).
 
 Topics (see the ``TOPIC_*`` / ``MSGTYPE_*`` constants): ``/tank/pressure``
-(sensor_msgs/msg/FluidPressure), ``/tank/temperature`` (sensor_msgs/msg/Temperature),
+(sensor_msgs/msg/FluidPressure) or an uncalibrated rig's ``/tank/pressure_volts``
+(pneumatic_unload_msgs/msg/Voltage), ``/tank/temperature`` (sensor_msgs/msg/Temperature),
 ``/tank/valve`` (pneumatic_unload_msgs/msg/ValveState), ``/estimator/estimate``
 (pneumatic_unload_msgs/msg/UnloadEstimate) and ``/rig/config`` (std_msgs/msg/String holding
 the JSON rig configuration; the first message of every bag written by :class:`BagRecorder`).
@@ -76,11 +79,13 @@ from .schema import (
     MSGTYPE_PRESSURE,
     MSGTYPE_TEMPERATURE,
     MSGTYPE_VALVE,
+    MSGTYPE_VOLTAGE,
     TOPIC_CONFIG,
     TOPIC_ESTIMATE,
     TOPIC_PRESSURE,
     TOPIC_TEMPERATURE,
     TOPIC_VALVE,
+    TOPIC_VOLTS,
     ZERO_CELSIUS,
     find_msg_definition,
     find_msg_dir,
@@ -101,6 +106,7 @@ __all__ = [
     "MSGTYPE_PRESSURE",
     "MSGTYPE_TEMPERATURE",
     "MSGTYPE_VALVE",
+    "MSGTYPE_VOLTAGE",
     "MSG_PACKAGE",
     "RECOVER_HINT",
     "TOPIC_CONFIG",
@@ -108,6 +114,7 @@ __all__ = [
     "TOPIC_PRESSURE",
     "TOPIC_TEMPERATURE",
     "TOPIC_VALVE",
+    "TOPIC_VOLTS",
     "ZERO_CELSIUS",
     "BagError",
     "BagFormatError",

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """CDR encoding and decoding of header-stamped messages with numpy (the fast paths).
 
 FluidPressure and Temperature (``Header header; float64 a; float64 b``) are encoded N at a

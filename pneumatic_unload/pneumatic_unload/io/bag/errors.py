@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Errors of :mod:`pneumatic_unload.io.bag`, and the hint for a bag left unclosed.
 
 The lowest module of the package: it imports nothing from it. Every error derives from

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Bounded decompression of MCAP chunks: a crafted bag cannot make a reader allocate or
 churn through more than a fixed budget.
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Message contents built from Python values for writing.
 
 The rig configuration as JSON text (for ``/rig/config`` and the metadata ``custom_data``),

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Reading tank-discharge data from bags, without ROS.
 
 Pressure and temperature series go through a numpy fast path (the MCAP summary's chunk
@@ -32,7 +34,6 @@ from .schema import (
     CONFIG_METADATA_KEY,
     MSGTYPE_CONFIG,
     MSGTYPE_ESTIMATE,
-    MSGTYPE_PRESSURE,
     MSGTYPE_TEMPERATURE,
     MSGTYPE_VALVE,
     NS_PER_S,
@@ -43,6 +44,7 @@ from .schema import (
     TOPIC_VALVE,
     ZERO_CELSIUS,
     field_names,
+    pressure_msgtype,
 )
 from .source import BagSource, bag_typestore, open_reader, resolve_bag, topic_connections
 
@@ -261,7 +263,8 @@ def read_pressure(
 
     Args:
         path: bag directory or single ``.mcap`` file.
-        topic: pressure topic (sensor_msgs/msg/FluidPressure).
+        topic: pressure topic (sensor_msgs/msg/FluidPressure; pneumatic_unload_msgs/msg/Voltage
+            on ``/tank/pressure_volts``, whose values are volts).
         order: ``"log"`` (log-time order) or ``"write"`` (the order the messages were
             written, see :func:`read_stamped_pairs`; the analysis uses it, so that a clock
             stepping back in the header stamps is seen).
@@ -273,7 +276,7 @@ def read_pressure(
     Raises:
         BagNotFoundError, BagFormatError, TopicNotFoundError, WrongMessageTypeError.
     """
-    t, p, _ = read_stamped_pairs(path, topic, MSGTYPE_PRESSURE, order=order)
+    t, p, _ = read_stamped_pairs(path, topic, pressure_msgtype(topic), order=order)
     return PressureSeries(t, p)
 
 

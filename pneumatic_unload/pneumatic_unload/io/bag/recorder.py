@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Streaming bag writer for the live recorder and simulations (:class:`BagRecorder`).
 
 Crash safety: :class:`BagRecorder` closes its pending MCAP chunk at least every

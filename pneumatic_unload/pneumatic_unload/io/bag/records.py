@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """MCAP record layout used where this package reads or writes records itself.
 
 The file magic, the Chunk, Message Index and Message opcodes and the fixed record heads

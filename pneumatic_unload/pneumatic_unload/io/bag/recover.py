@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Repair of a bag whose writer was killed (:func:`recover`).
 
 Such a writer leaves a directory without ``metadata.yaml`` and an MCAP file without summary

@@ -1,7 +1,10 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Topics, message types and the rosbags typestore of the tank-discharge bags.
 
 Topics (see the ``TOPIC_*`` / ``MSGTYPE_*`` constants): ``/tank/pressure``
-(sensor_msgs/msg/FluidPressure), ``/tank/temperature`` (sensor_msgs/msg/Temperature),
+(sensor_msgs/msg/FluidPressure) or an uncalibrated rig's ``/tank/pressure_volts``
+(pneumatic_unload_msgs/msg/Voltage), ``/tank/temperature`` (sensor_msgs/msg/Temperature),
 ``/tank/valve`` (pneumatic_unload_msgs/msg/ValveState), ``/estimator/estimate``
 (pneumatic_unload_msgs/msg/UnloadEstimate) and ``/rig/config`` (std_msgs/msg/String holding
 the JSON rig configuration; the first message of every bag written by
@@ -38,6 +41,7 @@ __all__ = [
     "MSGTYPE_PRESSURE",
     "MSGTYPE_TEMPERATURE",
     "MSGTYPE_VALVE",
+    "MSGTYPE_VOLTAGE",
     "MSG_PACKAGE",
     "NS_PER_S",
     "TOPIC_CONFIG",
@@ -46,16 +50,22 @@ __all__ = [
     "TOPIC_SETTINGS",
     "TOPIC_TEMPERATURE",
     "TOPIC_VALVE",
+    "TOPIC_VOLTS",
     "ZERO_CELSIUS",
     "field_names",
     "find_msg_definition",
     "find_msg_dir",
     "make_typestore",
     "missing_types",
+    "pressure_msgtype",
 ]
 
 
 TOPIC_PRESSURE: Final = "/tank/pressure"
+#: An uncalibrated transducer's output [V] (pneumatic_unload_msgs/msg/Voltage): the
+#: estimator converts it with signal_gain/signal_offset. Bags made before this topic carry
+#: such volts in a FluidPressure on /tank/pressure, and read as before.
+TOPIC_VOLTS: Final = "/tank/pressure_volts"
 TOPIC_TEMPERATURE: Final = "/tank/temperature"
 TOPIC_VALVE: Final = "/tank/valve"
 TOPIC_ESTIMATE: Final = "/estimator/estimate"
@@ -69,6 +79,13 @@ MSGTYPE_TEMPERATURE: Final = "sensor_msgs/msg/Temperature"
 MSGTYPE_VALVE: Final = f"{MSG_PACKAGE}/msg/ValveState"
 MSGTYPE_ESTIMATE: Final = f"{MSG_PACKAGE}/msg/UnloadEstimate"
 MSGTYPE_CONFIG: Final = "std_msgs/msg/String"
+MSGTYPE_VOLTAGE: Final = f"{MSG_PACKAGE}/msg/Voltage"
+
+
+def pressure_msgtype(topic: str) -> str:
+    """The message type of a pressure input topic: Voltage on :data:`TOPIC_VOLTS`, else
+    FluidPressure (both ``Header header; float64 value; float64 variance``)."""
+    return MSGTYPE_VOLTAGE if topic == TOPIC_VOLTS else MSGTYPE_PRESSURE
 
 #: Key of the JSON rig configuration in the rosbag2 metadata ``custom_data``.
 CONFIG_METADATA_KEY: Final = "pneumatic_unload.config"

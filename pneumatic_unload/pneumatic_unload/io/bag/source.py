@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Opening a bag for reading: path checks, rosbags' Reader with its errors mapped.
 
 A bag is a rosbag2 directory (``metadata.yaml`` plus storage files) or a single ``.mcap``

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A bag's pressure topic read in pieces, in memory bounded whatever the bag's length.
 
 :func:`iter_pressure` yields the samples of :func:`~.reader.read_pressure` (``order="write"``)
@@ -16,7 +18,7 @@ from rosbags.interfaces import Connection
 from .cdr import NotFastDecodable
 from .errors import BagFormatError
 from .reader import PressureSeries, decode_pairs, fast_chunk_pairs
-from .schema import MSGTYPE_PRESSURE, TOPIC_PRESSURE
+from .schema import TOPIC_PRESSURE, pressure_msgtype
 from .source import BagSource, open_reader, resolve_bag, topic_connections
 
 #: Messages decoded per piece on the generic (rosbags reader) path [-] (about 100 B each).
@@ -29,7 +31,8 @@ def iter_pressure(path: str | os.PathLike[str], *, topic: str = TOPIC_PRESSURE,
 
     Args:
         path: bag directory or single ``.mcap`` file.
-        topic: pressure topic (sensor_msgs/msg/FluidPressure).
+        topic: pressure topic (sensor_msgs/msg/FluidPressure; pneumatic_unload_msgs/msg/Voltage
+            on ``/tank/pressure_volts``, whose values are volts).
         fast: False forces the generic (rosbags reader) path.
 
     Returns:
@@ -44,13 +47,13 @@ def iter_pressure(path: str | os.PathLike[str], *, topic: str = TOPIC_PRESSURE,
     """
     src = resolve_bag(path)
     with open_reader(src) as reader:
-        topic_connections(reader, src, topic, MSGTYPE_PRESSURE)
+        topic_connections(reader, src, topic, pressure_msgtype(topic))
     return _pieces(src, topic, fast)
 
 
 def _pieces(src: BagSource, topic: str, fast: bool) -> Iterator[PressureSeries]:
     if fast and src.mcap_files:
-        gens = [fast_chunk_pairs(f, topic, MSGTYPE_PRESSURE) for f in src.mcap_files]
+        gens = [fast_chunk_pairs(f, topic, pressure_msgtype(topic)) for f in src.mcap_files]
         firsts = []
         try:  # every file checked (first chunk decoded) before anything is yielded
             firsts = [next(g, None) for g in gens]
@@ -74,14 +77,15 @@ def _pieces(src: BagSource, topic: str, fast: bool) -> Iterator[PressureSeries]:
 def _generic_pieces(src: BagSource, topic: str) -> Iterator[PressureSeries]:
     """Batches of messages through rosbags' reader (log-time order)."""
     with open_reader(src) as reader:
-        conns: list[Connection] = topic_connections(reader, src, topic, MSGTYPE_PRESSURE)
+        conns: list[Connection] = topic_connections(reader, src, topic,
+                                                    pressure_msgtype(topic))
         datas: list[bytes] = []
         for _conn, _log, data in reader.messages(connections=conns):
             datas.append(data)
             if len(datas) >= BATCH_MESSAGES:
-                t, p, _ = decode_pairs(datas, conns, MSGTYPE_PRESSURE)
+                t, p, _ = decode_pairs(datas, conns, pressure_msgtype(topic))
                 datas = []
                 yield PressureSeries(t, p)
         if datas:
-            t, p, _ = decode_pairs(datas, conns, MSGTYPE_PRESSURE)
+            t, p, _ = decode_pairs(datas, conns, pressure_msgtype(topic))
             yield PressureSeries(t, p)

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Overview of a bag: topics, message types, counts and time span [s]."""
 
 from __future__ import annotations

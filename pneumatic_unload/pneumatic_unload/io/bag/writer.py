@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """rosbag2 writing with MCAP storage: rosbags' writer with chunks closed by size or on
 demand (flush), CRC-checked, each followed by its message indexes, and a vectorised block
 write for N equal-size messages.

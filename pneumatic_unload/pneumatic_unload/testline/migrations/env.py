@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Alembic environment of the results database.
 
 Run by :func:`pneumatic_unload.testline.schema.migrate` with its connection (in

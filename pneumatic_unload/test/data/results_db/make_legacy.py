@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Make schema1/2/3.sqlite: results databases written by the package's own testline/db.py
 of the commits that wrote schema versions 1, 2 and 3 (before Alembic), two unloads each.
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Schema 1: a row per input (files) and per unload (unloads).
 
 Revision ID: 0001

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Schema 2: the ISO 6358-1:2013 subsonic index m and its uncertainty [-], the transducer's
 fitted zero offset and its uncertainty [Pa].
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Schema 3: the flow's direction ('discharge' or 'charge'; NULL in older rows: discharges)
 and a charge's supply pressure [Pa absolute].
 

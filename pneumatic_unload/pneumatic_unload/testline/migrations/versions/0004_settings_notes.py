@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """Schema 4: an input's settings notes (where a command-line setting met a different value
 recorded in the input: which one was used, and why; NULL in older rows and where none
 did).
