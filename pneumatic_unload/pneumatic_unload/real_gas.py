@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The real gas beside the ideal one of the model: second virial coefficients B(T) of the
 gases the package knows, and the compressibility Z = 1 + B p / (R_u T) they give, so that a
 record at a pressure where the ideal gas departs from the real one can be flagged.

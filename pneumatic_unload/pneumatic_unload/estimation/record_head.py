@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """The head of an unload: whether the samples before a fitted start are a plateau, and
 whether a record without one holds its valve opening.
 

@@ -1,3 +1,5 @@
+# SPDX-License-Identifier: Apache-2.0
+# Copyright 2026 pneumatic_unload maintainers
 """A deadline on a database server's answers: the connections of an engine and a timer
 that shuts their sockets down when one operation outlives it, so that a call blocked on a
 PostgreSQL server that does not answer (stopped processes, a frozen virtual machine, a
