@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from realdata import aerolab_args
 
 from pneumatic_unload.app.cli import main
 from pneumatic_unload.config import RigConfig
@@ -772,9 +773,9 @@ def test_real_aerolab_unidentifiable_c_is_reported_in_words(tmp_path, capsys, mo
     monkeypatch.setattr(report, "write_plots",  # the text only: fast
                         lambda res, out: out.mkdir(parents=True, exist_ok=True) or {})
     rep = tmp_path / "rep"
-    code = main(["discrepancy", str(path), "--volume", "0.125", "--gauge", "--atmosphere",
-                 "101500", "--pressure-unit", "kPa", "--fit-wall-temperature", "--no-profile",
-                 "--max-effects", "1", "--report", str(rep)])
+    # read as analyze reads it (the run begins after its opening: its --start-time)
+    code = main(["discrepancy", str(path), *aerolab_args(path.name), "--fit-wall-temperature",
+                 "--no-profile", "--max-effects", "1", "--report", str(rep)])
     out = capsys.readouterr().out
     assert code == 0
     md = (rep / "report.md").read_text()
