@@ -28,6 +28,7 @@ from pneumatic_unload.estimation.batch import charge_reason, explain_no_unload
 from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
 from pneumatic_unload.estimation.refine import CHARGE_SECOND_START
 from pneumatic_unload.estimation.sparse import analyze_from_start
+from pneumatic_unload.estimation.unloading import OPENING_HINT
 from pneumatic_unload.fit.noise import estimate_noise
 from pneumatic_unload.fit.trace import TemperatureChannel, Trace
 from pneumatic_unload.model.effects import HEAT_VARIANTS, Start
@@ -82,6 +83,11 @@ class Problem:
                 r.tau_exp, r.p10, r.p_atm, r.conductance)) and math.isfinite(r.t_start))]
         if not results:
             _refuse_bad_data(every, math.inf)
+            # the estimator refused a record whose opening it does not show: its words,
+            # with the start time to give, not a generic "no unload"
+            refused = [r for r in every if OPENING_HINT in r.status_text]
+            if refused:
+                raise DiscrepancyError(refused[0].status_text)
             if not est.charge and charge_reason(y[np.isfinite(y)], est) is not None:
                 raise DiscrepancyError(
                     "the pressure rises and never falls: a charge; give the direction "
