@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from realdata import aerolab_args
 
 from pneumatic_unload.app.cli import main
 from pneumatic_unload.config import RigConfig
@@ -774,9 +775,9 @@ def test_real_aerolab_unidentifiable_c_is_reported_in_words(tmp_path, capsys, mo
     monkeypatch.setattr(report, "write_plots",  # the text only: fast
                         lambda res, out: out.mkdir(parents=True, exist_ok=True) or {})
     rep = tmp_path / "rep"
-    code = main(["discrepancy", str(path), "--volume", "0.125", "--gauge", "--atmosphere",
-                 "101500", "--pressure-unit", "kPa", "--fit-wall-temperature", "--no-profile",
-                 "--max-effects", "1", "--report", str(rep)])
+    # read as analyze reads it (the run begins after its opening: its --start-time)
+    code = main(["discrepancy", str(path), *aerolab_args(path.name), "--fit-wall-temperature",
+                 "--no-profile", "--max-effects", "1", "--report", str(rep)])
     out = capsys.readouterr().out
     assert code == 0
     md = (rep / "report.md").read_text()
@@ -818,3 +819,22 @@ def test_a_profile_open_at_one_end_keeps_the_closed_end_and_says_where_it_is_fla
                            "within 3.84 of its minimum) from the estimate 8.3e-09 m^3/(s Pa) "
                            "to the upper end of its range, 1e-05 m^3/(s Pa)"), text
     assert "what would identify it: " in text
+
+
+def test_a_record_cut_after_its_opening_is_refused_in_words_and_read_from_its_start():
+    """A discharge record that begins 0.5 s after its valve opening (no plateau, its fall
+    under way at the first sample): the workflow passes on the estimator's refusal, which
+    names the start time to give, not a bare 'no complete unload'; given the opening as
+    ``start_time`` (and the atmosphere) the unload is located from there."""
+    from pneumatic_unload.estimation.record_head import OPENING_HINT
+
+    cfg = RigConfig(pre_time=1.0, duration=20.0, seed=5)
+    sim = simulate(cfg)
+    keep = sim.t >= 1.5
+    t, y = sim.t[keep], sim.measured[keep]
+    with pytest.raises(DiscrepancyError, match=OPENING_HINT):
+        Problem(t, y, DiscrepancySettings(volume=cfg.volume, atmosphere=cfg.atmosphere))
+    prob = Problem(t, y, DiscrepancySettings(volume=cfg.volume, atmosphere=cfg.atmosphere,
+                                             start_time=float(t[0])))
+    assert prob.start.t_open == pytest.approx(0.0, abs=1e-9)  # the shifted record's clock
+    assert math.isfinite(prob.start.tau) and prob.start.tau > 0

@@ -227,7 +227,10 @@ def test_degenerate_curve_fit_never_gives_an_ok_negative_tau_or_infinite_sigma()
     est = EstimatorSettings(volume=1e-7, length_diameter_ratio=0.1, initial_temperature=150.0,
                             heat_model="adiabatic", critical_ratio=0.0,
                             signal_gain=1.0947270656484223)
-    res = analyze(sim.t[keep], sim.measured[keep] * 1e30, est)
+    # the simulated record opens at its first sample: a plateau before it, so that the
+    # unload is analysed (not refused for its missing opening)
+    t, p = _with_plateau(sim.t[keep], sim.measured[keep] * 1e30, cfg.noise_std * 1e30)
+    res = analyze(t, p, est)
     fz.check_results(res)
     assert res and all(r.status == "bad_data" and "outside" in r.status_text for r in res)
 
@@ -302,6 +305,22 @@ def _fuzz_data(name):
     from pathlib import Path
 
     return np.load(Path(__file__).parent / "data" / f"{name}.npz")
+
+
+def _with_plateau(t, p, sd, n=64, seed=0):
+    """(t, p) led by ``n`` samples held at the first sample's pressure (noise ``sd``), at
+    the record's period, from its first stamp on (the record moved ``n`` periods later):
+    the record's fall then starts after a plateau, as an offline record must show its
+    opening (a record falling at its first sample is refused), and the estimator's path
+    after the start is the one the case was found on. ``t``'s dtype is kept (the bags'
+    integer ns stamps)."""
+    t = np.asarray(t)
+    p = np.asarray(p, dtype=float)
+    period = np.median(np.diff(t[:50]))
+    head = (t[0] + period * np.arange(n)).astype(t.dtype)
+    level = p[0] + sd * np.random.default_rng(seed).standard_normal(n)
+    return (np.concatenate((head, (t + period * n).astype(t.dtype))),
+            np.concatenate((level, p)))
 
 
 def _bag_json(folder, case):
@@ -381,7 +400,9 @@ def test_the_fitted_models_crossing_within_the_integrators_budget(tmp_path, monk
     from pneumatic_unload.physics import P_STAR_FRACTION
 
     d = _fuzz_data("fuzz_bag_fitted_tau_budget")
-    case = {"t_ns": d["t_ns"], "p": d["p"], "config": json.loads(str(d["config_json"])),
+    # its 5 samples before the opening are no plateau: 64 more at its noise (30 kPa)
+    t_ns, p = _with_plateau(d["t_ns"], d["p"], 3e4)
+    case = {"t_ns": t_ns, "p": p, "config": json.loads(str(d["config_json"])),
             "settings": str(d["settings_json"]),
             "damage": [tuple(x) for x in json.loads(str(d["damage_json"]))],
             "volume": float(d["volume"]), "variance": float(d["variance"])}
@@ -427,14 +448,16 @@ def test_a_crossing_without_an_instant_still_ends_its_tail(tmp_path):
     from pneumatic_unload.estimation.decisions import PERIOD
 
     d = _fuzz_data("fuzz_bag_tail_nan_tau")
-    case = {"t_ns": d["t_ns"], "p": d["p"], "config": None, "settings": None, "damage": [],
+    # the bag falls from its first sample: a plateau before it at its noise (240 Pa)
+    t_ns, p = _with_plateau(d["t_ns"], d["p"], 240.0)
+    case = {"t_ns": t_ns, "p": p, "config": None, "settings": None, "damage": [],
             "volume": float(d["volume"]), "variance": float(d["variance"])}
     fio.prop_bag(tmp_path, case)
     es = EstimatorSettings(volume=float(d["volume"]))
     # as found (stamps in s as the bag reader gives them): the crossing without an
     # instant, its tail ended (here by the sensor stuck at 0 Pa), the next unload found
     # after it with its final result
-    res = analyze(d["t_ns"] * 1e-9, d["p"], es)
+    res = analyze(t_ns * 1e-9, p, es)
     first, *rest = res
     assert (first.index, first.status, first.final) == (0, "bad_data", False)
     assert math.isnan(first.tau_exp) and math.isfinite(first.t_complete)
@@ -444,12 +467,11 @@ def test_a_crossing_without_an_instant_still_ends_its_tail(tmp_path):
     # its stuck stretch made a noisy level, so that only the level test can end the
     # tail: it ends at the first check at which the test's age for tau = the time the
     # window took to close (tau plus two windows of tau / 2) is reached
-    p = np.asarray(d["p"], dtype=float)
     stuck = np.flatnonzero(p == 0.0)
     level = np.random.default_rng(1).normal(0.0, 30.0, 3000)
     p2 = np.concatenate((p[:stuck[0]], level, p[stuck[-1] + 1:]))
     dt = 2e-4  # the bag's period [s]
-    t2 = (int(d["t_ns"][0]) + np.arange(p2.size) * 200_000) * 1e-9
+    t2 = (int(t_ns[0]) + np.arange(p2.size) * 200_000) * 1e-9
     est = StreamingEstimator(es)
     (first, *_rest) = est.push_block(t2, p2) + est.finish()
     assert first.status == "bad_data" and math.isnan(first.tau_exp)
@@ -473,7 +495,9 @@ def test_a_fitted_p_atm_beyond_any_atmosphere_is_a_curve_fit_error_not_a_config_
 
     d = _fuzz_data("fuzz_fitted_patm_out_of_range")
     es = EstimatorSettings(**json.loads(str(d["settings_json"])))
-    res = fz.run_analyze(d["t"], d["p"], es)
+    # the record falls from its first sample: a plateau before it at its noise (30 kPa)
+    t, p = _with_plateau(d["t"], d["p"], 3e4)
+    res = fz.run_analyze(t, p, es)
     fz.check_results(res)
     real = refine.fit_curve
 
@@ -481,7 +505,7 @@ def test_a_fitted_p_atm_beyond_any_atmosphere_is_a_curve_fit_error_not_a_config_
         return dataclasses.replace(real(*args, **kwargs), p_atm=853.0)
 
     monkeypatch.setattr(refine, "fit_curve", off_range)
-    res = fz.run_analyze(d["t"], d["p"], es)
+    res = fz.run_analyze(t, p, es)
     fz.check_results(res)
     (final,) = [r for r in res if r.final]
     assert "not an atmosphere" in final.extra["curve_fit_error"]

@@ -297,7 +297,8 @@ def test_results_database_of_schema_1_gains_the_m_columns(tmp_path):
     cols = {row[1] for row in con.execute("PRAGMA table_info(unloads)")}
     assert {"subsonic_index", "subsonic_index_std", "pressure_offset",
             "pressure_offset_std", "direction", "supply_pressure"} <= cols
-    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3
+    # the upgrade runs every migration: the file ends at the package's current schema
+    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
 
 
 def test_a_held_m_carries_the_heat_laws_spread_of_m():

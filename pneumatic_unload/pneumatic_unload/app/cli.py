@@ -415,7 +415,7 @@ def add_discrepancy_parser(sub: Any) -> None:
                          only=("fit_wall_temperature", "profile", "bic_threshold",
                                "resolution", "candidates", "time_limit",
                                "model_uncertainty", "direction", "supply_pressure",
-                               "supply_temperature"))
+                               "supply_temperature", "start_time"))
     dc.add_argument("--max-effects", type=int, default=None, choices=(1, 2, 3),
                     help="add at most this many effects (greedy), default 3")
     add_input_options(dc)

@@ -28,7 +28,9 @@ from pneumatic_unload.estimation import (
 )
 from pneumatic_unload.estimation.batch import charge_reason, explain_no_unload
 from pneumatic_unload.estimation.crossing import crossing_estimate, plan_crossing
+from pneumatic_unload.estimation.record_head import OPENING_HINT
 from pneumatic_unload.estimation.refine import CHARGE_SECOND_START
+from pneumatic_unload.estimation.sparse import analyze_from_start
 from pneumatic_unload.fit.noise import estimate_noise
 from pneumatic_unload.fit.trace import TemperatureChannel, Trace
 from pneumatic_unload.model.effects import HEAT_VARIANTS, Start
@@ -66,10 +68,13 @@ class Problem:
         self.settings = settings
         self.t_ref = float(t[0])
         t = t - self.t_ref
+        # a given opening in the record's clock is one on the shifted stamps
+        start = None if settings.start_time is None else settings.start_time - self.t_ref
         est = EstimatorSettings(**settings.tank_fields(), heat_model="adiabatic",
                                 curve_fit=False, direction=settings.direction,
                                 supply_pressure=settings.supply_pressure,
-                                supply_temperature=settings.supply_temperature)
+                                supply_temperature=settings.supply_temperature,
+                                start_time=start)
         every = _unloads(t, y, est)
         # the estimator's results locate the unload and give the fit its starting values;
         # one it called bad data for a reason of its own timing (e.g. a start it could not
@@ -80,6 +85,11 @@ class Problem:
                 r.tau_exp, r.p10, r.p_atm, r.conductance)) and math.isfinite(r.t_start))]
         if not results:
             _refuse_bad_data(every, math.inf)
+            # the estimator refused a record whose opening it does not show: its words,
+            # with the start time to give, not a generic "no unload"
+            refused = [r for r in every if OPENING_HINT in r.status_text]
+            if refused:
+                raise DiscrepancyError(refused[0].status_text)
             if not est.charge and charge_reason(y[np.isfinite(y)], est) is not None:
                 raise DiscrepancyError(
                     "the pressure rises and never falls: a charge; give the direction "
@@ -204,6 +214,11 @@ def _unloads(t: FloatArray, y: FloatArray, est: EstimatorSettings) -> list[Unloa
     """Every unload result of the trace (t [s], y [Pa]), with the estimator's stuck-sensor
     findings as ``bad_data`` results (a stuck stretch after the p* crossing is only a
     warning for the estimator, whose crossing stands; a fit would take it for data)."""
+    if est.start_time is not None:  # a record that begins at the given opening
+        try:
+            return list(analyze_from_start(t, y, est))
+        except EstimationError as exc:
+            raise DiscrepancyError(str(exc)) from exc
     try:
         se = StreamingEstimator(est)
         out = se.push_block(t, y) + se.finish()

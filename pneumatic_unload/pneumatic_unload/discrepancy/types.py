@@ -110,6 +110,12 @@ class DiscrepancySettings(TankSpec):
     supply_temperature : float or None
         A charge's supply gas temperature T_s [K] (None: the wall's where given, else
         293.15 K).
+    start_time : float or None
+        Valve opening instant in the record's clock [s] for a record that begins at the
+        opening (no plateau before its fall): the unload is located from there, as
+        ``analyze --start-time`` does (:mod:`pneumatic_unload.estimation.sparse`; needs
+        ``atmosphere``), not detected (None: detected; a record without a plateau whose
+        fall is under way at its first sample is then refused).
     """
 
     fit_wall_temperature: bool = flag(False, "fit the wall temperature with heat transfer")
@@ -137,6 +143,10 @@ class DiscrepancySettings(TankSpec):
     supply_temperature: float | None = optional(
         None, "K", 150.0, 600.0, "a charge's supply gas temperature T_s",
         "the wall's where given, else 293.15 K")
+    start_time: float | None = optional(
+        None, "s", -1e10, 1e10, "valve opening instant in the record's clock (its time "
+        "stamps), for records that begin at the opening (no plateau): the start is not "
+        "detected", "detected")
 
     def __post_init__(self) -> None:
         """Validate (raises :class:`DiscrepancyError` with the reason)."""

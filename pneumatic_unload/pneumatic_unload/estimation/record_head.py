@@ -94,6 +94,12 @@ def first_unload_check(st: EstimatorState, i: int, t: FloatArray, p: FloatArray,
 OPENING_IN_RECORD_Z = 4.0
 
 
+#: The words of a refusal of :func:`opening_in_record` that say what to pass instead (the
+#: opening as the start time); a caller that locates unloads with the estimator (the
+#: discrepancy workflow) passes such a refusal on.
+OPENING_HINT = "give the opening: --start-time"
+
+
 #: Samples at the head of a record that show whether its fall is still gathering pace [-]:
 #: the fewest through which a straight line has a residual (a rate and its noise).
 RAMP_SAMPLES = 3
@@ -129,7 +135,7 @@ def opening_in_record(t_head: FloatArray, p_head: FloatArray, t0: float, t0_std:
             f"errors of the start, fewer than {OPENING_IN_RECORD_Z:g}; no opening ramp in "
             f"its first {t_head.size} samples): the record begins at or after the valve "
             f"opening, and its p10 and start are not measured. If it begins at the "
-            f"opening, give the opening: --start-time {t_first:.6g} (start_time) with "
+            f"opening, {OPENING_HINT} {t_first:.6g} (start_time) with "
             f"--atmosphere PA and, when no sample falls on the opening, --initial-pressure "
             f"PA (docs: Records that begin at the opening); if it begins later, the unload "
             f"cannot be measured from it")

@@ -37,7 +37,7 @@ from pneumatic_unload.estimation.reduction import fit_window, reduce_due, reduce
 from pneumatic_unload.estimation.refine import final_curve_fit
 from pneumatic_unload.estimation.state import EstimatorState
 from pneumatic_unload.estimation.types import STUCK_TEXT, FloatArray, UnloadResult
-from pneumatic_unload.estimation.vetting import vet
+from pneumatic_unload.estimation.vetting import as_computed, vet
 from pneumatic_unload.fit.reduced import Reducer
 
 
@@ -260,7 +260,7 @@ def finish_tail(st: EstimatorState, i: int, ended: bool, decided: int | None = N
         s = st.settings
         if s.curve_fit:
             t, p, reduced = fit_window(st, i)
-            job = FinalFit(res, None if t is None else np.array(t), p, s,
+            job = FinalFit(as_computed(res), None if t is None else np.array(t), p, s,
                            abs(st.sigma * s.signal_gain), dec + st.buf.shift,
                            float(st.buf.t[dec]), reduced)
             job = job.with_temperature(st.temperature)

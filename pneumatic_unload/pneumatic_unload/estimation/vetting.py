@@ -21,6 +21,7 @@ one place.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -46,6 +47,9 @@ REAL_GAS_TERM = "real gas (the model's ideal gas)"
 #: record is flagged [-]: the ideal gas's density, and with it the tank's capacity, is then
 #: off by more than 1 %.
 REAL_GAS_DEPARTURE = 0.01
+#: Key of ``extra`` under which :func:`vet` keeps a result's (status, status text,
+#: quality) when it makes the result no result (:func:`as_computed` reads it).
+AS_COMPUTED = "as_computed"
 #: Why a model-based C is missing when nothing more specific is known.
 NO_MODEL_C_DEFAULT = ("the model inversion at the p* crossing found no C for this record "
                       "(its crossing lies outside the model's reach)")
@@ -71,11 +75,27 @@ def vet(r: UnloadResult, settings: EstimatorSettings) -> UnloadResult:
         largest = (r.extra or {}).get(key, {}).get("largest") or "not known"
         size = (f"{sd:.3g} m^3/(s Pa), {sd / c:.3g} times C = {c:.4g} m^3/(s Pa)"
                 if math.isfinite(sd) else f"not known, for C = {c:.4g} m^3/(s Pa)")
+        r.extra = {**r.extra, AS_COMPUTED: (r.status, r.status_text, r.quality)}
         r.status = NO_RESULT_STATUS
         r.status_text = (f"{UNCERTAIN_TEXT} ({rec['source']}) is {size} (largest line: "
                          f"{largest}): the record does not determine C; {r.status_text}")
         r.quality = 0.0
     return r
+
+
+def as_computed(r: UnloadResult) -> UnloadResult:
+    """``r`` as the estimator computed it, before :func:`vet` made it no result for its
+    uncertainty (``r`` itself when it did not): the vetting judges what is published, not
+    how the estimator goes on. A crossing result whose C the crossing does not determine
+    still starts its unload's full-curve fit, whose result is vetted on its own (the whole
+    curve may determine C where the samples about p* do not)."""
+    kept = r.extra.get(AS_COMPUTED)
+    if kept is None:
+        return r
+    status, text, quality = kept
+    extra = {k: v for k, v in r.extra.items() if k != AS_COMPUTED}
+    return dataclasses.replace(r, status=status, status_text=text, quality=quality,
+                               extra=extra)
 
 
 def real_gas_departure(r: UnloadResult, settings: EstimatorSettings
