@@ -70,9 +70,9 @@ def test_the_combined_uncertainty_is_the_root_sum_of_squares_of_the_lines(final)
 def test_a_hot_start_claimed_in_an_inadequate_fit_has_the_best_law_without_it_as_a_line():
     """heat_law_offer.hot_start_terms, closed forms: the line is |C_alt - C|/sqrt(3) with
     C_alt the lowest-BIC law without a wall, where its chi^2 exceeds the claim's by no more
-    than the structure the claim leaves (chi^2 (1 - 1/structure); foreign draw 200's
-    numbers); none where the fit is adequate (structure 1), where a real warm gas leaves
-    the laws without it far behind (draw 39 without T: 50 x the chi^2 at structure 1.37),
+    than the structure the claim leaves (chi^2 (1 - 1/structure); the numbers of a foreign
+    record's fit); none where the fit is adequate (structure 1), where a real warm gas leaves
+    the laws without it far behind (50 x the chi^2 at structure 1.37),
     where no hot start is claimed, where a log was used, or where the reading lacks b."""
     from types import SimpleNamespace
 

@@ -361,7 +361,7 @@ def test_a_wall_move_beyond_float_range_is_refitted_not_an_overflow(tmp_path):
 
 
 def test_a_discrepancy_fit_at_the_upper_bound_of_c_checks_the_geometry_factor():
-    # bench_fuzz (discrepancy), session 9: a straight-line "discharge" over 1.5e10 s fitted
+    # found by bench_fuzz (discrepancy): a straight-line "discharge" over 1.5e10 s fitted
     # with C at its upper bound (1e-5): the geometry-factor check stepped C up, out of
     # RigConfig's range (ConfigError out of find_discrepancy). It steps down there.
     import dataclasses
@@ -389,7 +389,7 @@ def test_a_discrepancy_fit_at_the_upper_bound_of_c_checks_the_geometry_factor():
 
 
 def test_the_fitted_models_crossing_within_the_integrators_budget(tmp_path, monkeypatch):
-    # bench_fuzz (bag), session 9: a 5 Hz bag of a heat-transfer discharge with a
+    # found by bench_fuzz (bag): a 5 Hz bag of a heat-transfer discharge with a
     # downstream leak and a gain fault (30 kPa noise): the tau_exp of the fitted model,
     # refined at rtol 1e-10, ran out of the integrator's 2 M steps (IntegrationError out of
     # `analyze`). The coarse crossing is kept then (tau_exp_model is information only).
@@ -414,7 +414,7 @@ def test_the_fitted_models_crossing_within_the_integrators_budget(tmp_path, monk
 
     def discharge(*a, **k):
         # as found, the refinement at rtol 1e-10 ran out of the integrator's steps; since
-        # b's range reaches 0 (session 19) the fit of this bag lands where it does not (on
+        # b's range reaches 0 the fit of this bag lands where it does not (on
         # another CPU it may again): the budget is run out here, so that the branch is
         # tested on every machine
         if k.get("rtol") == 1e-10:
@@ -440,7 +440,7 @@ def test_the_fitted_models_crossing_within_the_integrators_budget(tmp_path, monk
 
 
 def test_a_crossing_without_an_instant_still_ends_its_tail(tmp_path):
-    # bench_fuzz (bag), session 9: a 5 kHz bag of a 60 mL tank whose crossing window
+    # found by bench_fuzz (bag): a 5 kHz bag of a 60 mL tank whose crossing window
     # closed with no crossing instant (tau_exp NaN, 'bad_data'): the tail's level test
     # took int(NaN) (ValueError out of `analyze`). It takes the time the crossing window
     # took to close then.
@@ -482,10 +482,10 @@ def test_a_crossing_without_an_instant_still_ends_its_tail(tmp_path):
 
 def test_a_fitted_p_atm_beyond_any_atmosphere_is_a_curve_fit_error_not_a_config_error(
         monkeypatch):
-    # helper search, session 11: an aborted-looking record with p_atm auto; the curve fit
+    # found by a search: an aborted-looking record with p_atm auto; the curve fit
     # moved p_atm to 853 Pa (ConfigError out of `analyze` when the fitted model was built).
     # The crossing estimate stands; the final result says why the fit is not used. Where
-    # that fit lands depends on the machine's last bits (session 18's CPU: 5266 Pa, an
+    # that fit lands depends on the machine's last bits (on one CPU: 5266 Pa, an
     # atmosphere of a vacuum chamber, a valid fit): the record is checked as it comes out,
     # and the branch with the fit's p_atm put at 853 Pa.
     import dataclasses
