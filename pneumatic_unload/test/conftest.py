@@ -19,7 +19,9 @@ would slow or share the machine with. A module with any of these carries
 
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from pneumatic_unload import single_threaded_blas
 
@@ -81,3 +83,24 @@ def repo_root() -> Path:
 def venv_python() -> Path:
     """The interpreter running the tests (the project's venv python)."""
     return Path(sys.executable)
+
+
+@pytest.fixture()
+def ros_node() -> Iterator[tuple[Any, Any]]:
+    """An rclpy context and observer node in this process, with its executor (torn down
+    after the test): the node tests' view of the DDS graph."""
+    import time
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node(f"observer_{time.time_ns()}", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    yield node, ex
+    ex.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown(context=ctx)

@@ -31,23 +31,6 @@ C_TRUE = orifice_conductance(2.5e-3)
 T0_NS = 1_800_000_000 * 10**9  # the publishers' clock at the stream's start [ns]
 
 
-@pytest.fixture()
-def ros_node() -> Any:
-    """An rclpy context and observer node in this process (torn down after the test)."""
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-
-    ctx = Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node(f"observer_{time.time_ns()}", context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    yield node, ex
-    ex.shutdown()
-    node.destroy_node()
-    rclpy.try_shutdown(context=ctx)
-
-
 def _subscribe(node: Any) -> tuple[list[Any], list[str]]:
     """(estimates, diagnostics messages of the estimator) as they come."""
     from diagnostic_msgs.msg import DiagnosticArray

@@ -42,23 +42,6 @@ RIG = {"volume": 1e-3, "conductance": C_TRUE, "critical_ratio": 0.4,
 SERVICE_TIMEOUT = 30.0
 
 
-@pytest.fixture()
-def ros_node() -> Any:
-    """An rclpy context and observer node in this process (torn down after the test)."""
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-
-    ctx = Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node(f"observer_{time.time_ns()}", context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    yield node, ex
-    ex.shutdown()
-    node.destroy_node()
-    rclpy.try_shutdown(context=ctx)
-
-
 def _estimates(node: Any) -> list[Any]:
     from pneumatic_unload_msgs.msg import UnloadEstimate
 
