@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 from nodeproc import NodeProcess, spin_until
-from test_nodes import _estimates, ros_node  # noqa: F401  (the fixture)
+from test_nodes import _estimates
 
 pytest.importorskip("rclpy")
 
@@ -27,7 +27,7 @@ C_TRUE, B_TRUE, V = 8e-9, 0.45, 1e-3
 STEPS = 3
 
 
-def test_a_live_cycle_of_charges_and_discharges(tmp_path: Path, ros_node: Any,  # noqa: F811
+def test_a_live_cycle_of_charges_and_discharges(tmp_path: Path, ros_node: Any,
                                                 venv_python: Path) -> None:
     node, ex = ros_node
     got = _estimates(node)
