@@ -75,18 +75,21 @@ def test_each_package_is_shown_while_pip_still_runs(tmp_path: Path):
 
     _prepare(tmp_path)
     gate = tmp_path / "gate"
-    proc = subprocess.Popen(["bash", "scripts/setup_venv.sh"], cwd=tmp_path, text=True,
+    proc = subprocess.Popen(["bash", "scripts/setup_venv.sh"], cwd=tmp_path,
                             env={**os.environ, "FAIL": "", "GATE": str(gate)},
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-    seen = ""
+    # the pipe is read with os.read, not through a buffered file object: its buffer may
+    # hold the awaited line already read while select() waits on the empty descriptor
+    seen = b""
     try:
         assert proc.stdout is not None
-        while "1/2 click" not in seen:
-            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+        fd = proc.stdout.fileno()
+        while b"1/2 click" not in seen:
+            ready, _, _ = select.select([fd], [], [], 30.0)
             assert ready, f"no progress line while pip runs: {seen!r}"
-            line = proc.stdout.readline()
-            assert line, f"the script ended before its first package line: {seen!r}"
-            seen += line
+            chunk = os.read(fd, 4096)
+            assert chunk, f"the script ended before its first package line: {seen!r}"
+            seen += chunk
     finally:
         gate.touch()
         proc.communicate(timeout=60)
