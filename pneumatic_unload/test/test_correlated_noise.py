@@ -12,6 +12,8 @@ unloads (an idle minute at rho 0.8-0.99 gave 6-89 phantom starts, each 'aborted'
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from scipy.signal import lfilter
@@ -104,21 +106,46 @@ def test_a_plateau_at_the_end_pressure_has_nothing_to_unload(direction):
             cfg.pre_time, abs=0.05), [(r.status, r.t_start, r.status_text) for r in res]
 
 
+#: Idle seconds of the phantom-fall plateau at 1 kHz [s].
+IDLE = 60.0
+
+
+@functools.lru_cache(maxsize=1)
+def _phantom_seeds() -> tuple[int, ...]:
+    """The seeds among 0-39 whose idle 6 bar plateau of AR(1) noise (rho 0.9, 300 Pa,
+    :data:`IDLE` s) has a fall confirmed (an 'unload step detected'): the inputs the
+    not-followed rule is tested on, found by the detector itself (which seeds they are
+    moves with any change to its plateau windows)."""
+    n = int(IDLE * 1e3)
+    t = np.arange(n) * 1e-3
+    found = []
+    for seed in range(40):
+        est = StreamingEstimator(EstimatorSettings(volume=2e-3))
+        est.push_block(t, 6e5 + _ar1(n, 0.9, 300.0, seed))
+        est.finish()
+        if any(d.message == "unload step detected" for d in est.diagnostics):
+            found.append(seed)
+    return tuple(found)
+
+
 def test_a_fall_not_followed_on_a_charged_plateau_is_no_unload():
-    """Idle minutes of AR(1) noise (300 Pa) on a 6 bar plateau: a fall in the plateau's
-    first second, whose 32-sample window cannot show the correlation, is confirmed
-    (seeds 4 and 9 at rho 0.9) and nothing follows it. The unload waited for a drop that
-    never came, its samples never trimmed, and the stream's end reported it as 'aborted:
-    stream ended before the p* crossing'. The samples since show no fall (follow.no_fall):
-    waiting again, a diagnostic says why; no result; per-sample and block input decide
-    alike. A slow discharge (50 L, tau about 500 s) cut 9 s after its opening, far short
-    of its 10 % drop, is still an unload the stream ended in."""
+    """Idle minutes of AR(1) noise (300 Pa) on a 6 bar plateau: a fall in the plateau's first
+    second, whose 32-sample window cannot show the correlation, is confirmed (a few seeds in
+    40 at rho 0.9: :func:`_phantom_seeds`) and nothing follows it. The unload waited for a
+    drop that never came, its samples never trimmed, and the stream's end reported it as
+    'aborted: stream ended before the p* crossing'. The samples since show no fall
+    (follow.no_fall): waiting again, a diagnostic says why; no result; per-sample and block
+    input decide alike. A slow discharge (50 L, tau about 500 s) cut 9 s after its opening,
+    far short of its 10 % drop, is still an unload the stream ended in.
+    """
     from pneumatic_unload.config import RigConfig
     from pneumatic_unload.model.simulate import simulate
 
-    n = 60_000
+    n = int(IDLE * 1e3)
     t = np.arange(n) * 1e-3
-    for seed in (4, 9):
+    seeds = _phantom_seeds()
+    assert len(seeds) >= 2, seeds  # the rule needs a confirmed fall to be tested on
+    for seed in seeds[:2]:
         p = 6e5 + _ar1(n, 0.9, 300.0, seed)
         est = StreamingEstimator(EstimatorSettings(volume=2e-3))
         out = est.push_block(t, p) + est.finish()
@@ -141,8 +168,8 @@ def test_a_fall_not_followed_on_a_charged_plateau_is_no_unload():
 
 
 def test_an_unload_after_a_fall_not_followed_is_found_at_its_opening():
-    """The idle 6 bar plateau of seed 4 above (its phantom fall at 0.35 s, waiting again 8
-    s later), then a discharge opened at 20 s under the same noise: one unload, found at
+    """An idle 6 bar plateau with a phantom fall (:func:`_phantom_seeds`; waiting again 8 s
+    later), then a discharge opened at 20 s under the same noise: one unload, found at
     its opening, C within 1 %; block and per-sample input give the same numbers."""
     from pneumatic_unload.config import RigConfig
     from pneumatic_unload.model.simulate import simulate
@@ -150,7 +177,7 @@ def test_an_unload_after_a_fall_not_followed_is_found_at_its_opening():
     cfg = RigConfig(volume=2e-3, conductance=8e-9, critical_ratio=0.4, initial_pressure=6e5,
                     noise_std=0.0, pre_time=20.0, seed=1)
     sim = simulate(cfg)
-    p = sim.measured + _ar1(sim.t.size, 0.9, 300.0, 4)
+    p = sim.measured + _ar1(sim.t.size, 0.9, 300.0, _phantom_seeds()[0])
     est = StreamingEstimator(EstimatorSettings(volume=cfg.volume))
     res = est.push_block(sim.t, p) + est.finish()
     assert [d for d in est.diagnostics if "not followed" in d.message]

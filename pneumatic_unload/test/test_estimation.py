@@ -476,3 +476,25 @@ def test_settings_changed_between_unloads_apply_to_the_next():
     assert second[0].conductance == pytest.approx(2 * first[0].conductance, rel=1e-9, abs=0)
     with pytest.raises(EstimationError, match="start_time"):
         est.settings = dataclasses.replace(st, start_time=0.0)
+
+
+@pytest.mark.parametrize("settle", [0.3, 0.9])
+def test_an_unload_soon_after_a_step_charge_has_its_plateau_from_after_the_rise(settle):
+    """A charge valve that fills the vented tank within a sample or two, then the discharge
+    valve opened 0.3-0.9 s later (a PLC's cycle, as over OPC UA after an Abort): the
+    plateau begins after the block that rose. With the rise's block in the plateau the
+    start fit took vented samples as p10's (p10 -2 %, its misfit read as the noise: a
+    crossing window below p_atm, never closed, the unload 'unloading' until the record
+    ended)."""
+    from pneumatic_unload.model.rig import run_cycles
+
+    cfg = RigConfig(volume=1e-3, conductance=8e-9, initial_pressure=7e5, critical_ratio=0.4,
+                    noise_std=FS_NOISE, seed=7, pre_time=1.0)
+    cfg = cfg.replace(duration=1.2 * default_duration(cfg))
+    run = run_cycles(cfg, 3, settle_time=settle, vent_time=1.5, charge_time=0.002)
+    st = dataclasses.replace(settings_for(cfg), curve_fit=False)
+    res = analyze(run.t, run.measured, st)
+    assert [r.status for r in res] == ["ok"] * 3, [r.status_text for r in res]
+    for r in res:
+        assert r.p10 == pytest.approx(7e5, abs=4 * FS_NOISE)
+        assert r.conductance == pytest.approx(res[0].conductance, rel=0.01)

@@ -240,9 +240,6 @@ def test_start_and_poll(bench: Bench) -> None:
     _run(main())
 
 
-@pytest.mark.skip(reason="known defect: after Abort the next Measure times out with the "
-                  "estimator left 'unloading' when this runs after the whole serial suite "
-                  "(passes alone); open in issue 55 until fixed")
 def test_a_plc_waits_for_ready_measures_again_and_reads_every_result(bench: Bench) -> None:
     """As a PLC integrator sees it: the nodes resolve by browse path in the package's
     namespace (``Objects/2:PneumaticUnload/2:Ready``); after a measurement Ready is True

@@ -106,8 +106,9 @@ def step_waiting(st: EstimatorState, i: int) -> list[UnloadResult]:
         st.sigma = sig
         st.level = float(c.trigger_level)
         if c.rise:
-            # the signal rose (the tank is being charged): the plateau starts again
-            st.arm_index = n - PERIOD
+            # the signal rose (the tank is being charged): the plateau starts again after
+            # the block that rose (its samples hold the rise, not the plateau)
+            st.arm_index = n
             st.stream_start = False
             st.level = -math.inf
             st.rearm_floor = -math.inf

@@ -48,6 +48,11 @@ CROSSING_WINDOW_MAX = 1 << 20
 #: [-]: P_STAR_FRACTION of it for an exponential fall, halved for the slower fall of a
 #: flow turning subsonic (a lower bound of the slope: a bound on the samples).
 SLOPE_AT_PSTAR = 0.5 * P_STAR_FRACTION
+#: The crossing window's half-width at most this fraction of p*'s height above the end
+#: pressure [-]: the window's lower edge, whose first sample closes it, then lies above the
+#: end pressure that every unload reaches (a noise read from a start fit that missed the
+#: record would put it below, and the unload would wait for a level it never reaches).
+CROSSING_HALF_MAX = 0.5
 
 
 def crossing_half_width(drop: float, sigma: float, slope0: float, dt: float) -> float:
@@ -59,12 +64,13 @@ def crossing_half_width(drop: float, sigma: float, slope0: float, dt: float) -> 
     bound, but never binds on an unload the detector sees: its trigger needs the mean of
     the last PERIOD samples a block threshold (3/4 of a sigma) below a plateau that ends
     LAG samples earlier, a fall of at least 0.0026 sigma per sample at the start, so that
-    12 sigmas span at most 12 / (0.184 x 0.0026) = 25 k samples at p*."""
+    12 sigmas span at most 12 / (0.184 x 0.0026) = 25 k samples at p*. Whatever the noise,
+    at most :data:`CROSSING_HALF_MAX` of p*'s height above the end pressure."""
     half = 0.05 * drop
     cap = 0.5 * CROSSING_WINDOW_MAX * dt * SLOPE_AT_PSTAR * slope0
     if math.isfinite(cap) and cap > 0:
         half = min(half, cap)
-    return max(6.0 * sigma, half)
+    return min(max(6.0 * sigma, half), CROSSING_HALF_MAX * P_STAR_FRACTION * drop)
 
 
 @dataclass
