@@ -455,15 +455,16 @@ def test_a_crossing_without_an_instant_still_ends_its_tail(tmp_path):
     fio.prop_bag(tmp_path, case)
     es = EstimatorSettings(volume=float(d["volume"]))
     # as found (stamps in s as the bag reader gives them): the crossing without an
-    # instant, its tail ended (here by the sensor stuck at 0 Pa), the next unload found
-    # after it with its final result
+    # instant, its tail ended (here by the sensor stuck at 0 Pa). The sensor comes back at
+    # 193 kPa mid-fall, with no plateau before it: no unload starts there (a plateau taken
+    # from the block that rose from 0 Pa read one at 165 kPa, its 'ok_subsonic' C a
+    # phantom's)
     res = analyze(t_ns * 1e-9, p, es)
     first, *rest = res
     assert (first.index, first.status, first.final) == (0, "bad_data", False)
     assert math.isnan(first.tau_exp) and math.isfinite(first.t_complete)
-    assert first.t_complete <= first.t_end < rest[0].t_start
-    assert [(r.index, r.final) for r in rest] == [(1, False), (1, True)]
-    assert rest[0].i_start > first.i_complete and math.isfinite(rest[1].tau_exp)
+    assert first.t_complete <= first.t_end
+    assert rest == [], [(r.index, r.status, r.p10) for r in rest]
     # its stuck stretch made a noisy level, so that only the level test can end the
     # tail: it ends at the first check at which the test's age for tau = the time the
     # window took to close (tau plus two windows of tau / 2) is reached
