@@ -12,7 +12,7 @@ demo: setup
 	@$(PY) -m pneumatic_unload.app.demo
 
 # the tests not marked serial on every core, then the serial ones (node processes in real
-# time, servers, a browser: test/conftest.py) alone
+# time, servers: test/conftest.py) alone
 # (the PostgreSQL tests may install Debian's postgresql: test/pgserver.py)
 test: export PNEUMATIC_UNLOAD_TEST_INSTALL_POSTGRES = 1
 test: setup

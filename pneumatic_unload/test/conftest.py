@@ -12,7 +12,7 @@ small and generic.
 
 ``make test`` runs the suite in two parts: the tests not marked ``serial`` on every core
 (pytest-xdist), then the ``serial`` ones alone: node processes over DDS in real time,
-servers on ports, a browser, kill -9 and latency bounds, which a parallel worker's load
+servers on ports, kill -9 and latency bounds, which a parallel worker's load
 would slow or share the machine with. A module with any of these carries
 ``pytestmark = pytest.mark.serial`` (``test_layout.py`` checks it).
 """
@@ -43,7 +43,7 @@ os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers", "serial: run alone, after the parallel part of make test (real-time node "
-        "processes, servers, a browser, timings)")
+        "processes, servers, timings)")
 
 
 def _suite_run(config: pytest.Config) -> bool:

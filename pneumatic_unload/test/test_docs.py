@@ -25,9 +25,6 @@ from pneumatic_unload.app.cli import build_parser, main
 from pneumatic_unload.config import nodes
 from pneumatic_unload.estimation import UnloadResult
 
-#: run alone, after the parallel part of make test (see conftest.py)
-pytestmark = pytest.mark.serial
-
 REPO = Path(__file__).resolve().parents[2]  # the repository (docs/, README.md)
 BUILD_TIMEOUT_S = 300
 README_MAX_LINES = 150

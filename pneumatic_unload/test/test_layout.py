@@ -526,10 +526,11 @@ def test_core_modules_are_small(repo_root):
 
 
 #: what makes a test module run alone after the parallel part of ``make test``
-#: (conftest.py): node processes in real time over DDS, servers on ports, a browser, a
-#: Dask cluster's processes, kill -9 timings
-SERIAL_SIGNS = ("NodeProcess", "ros_node", "rclpy", "asyncua", "pg_url", "chromium",
-                "LocalCluster", "SIGKILL")
+#: (conftest.py): node processes in real time over DDS, servers on ports, a Dask
+#: cluster's processes, kill -9 timings (a headless browser, which only renders a file
+#: within a generous timeout, runs with the rest)
+SERIAL_SIGNS = ("NodeProcess", "ros_node", "rclpy", "asyncua", "pg_url", "LocalCluster",
+                "SIGKILL")
 
 
 def test_modules_with_nodes_servers_or_timings_run_alone(repo_root):

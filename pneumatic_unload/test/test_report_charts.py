@@ -16,9 +16,6 @@ import pytest
 
 from pneumatic_unload.testline.report import control_chart, nice_ticks
 
-#: run alone, after the parallel part of make test (a browser: see conftest.py)
-pytestmark = pytest.mark.serial
-
 SVG = "{http://www.w3.org/2000/svg}"
 
 
