@@ -148,11 +148,13 @@ def test_the_launcher_runs_the_bench_and_stops_cleanly(tmp_path: Path,
     env = {**os.environ, "ROS_DOMAIN_ID": str(free_domain_id()),
            "PNEUMATIC_UNLOAD_LOG_DIR": str(tmp_path / "logs")}
     bag = tmp_path / "bag"
+    # started as a shell script's background job is: SIGINT ignored, which the SIGINT
+    # below (a user's kill -INT) must still stop
     proc = subprocess.Popen(
         [str(venv_python), "-m", "pneumatic_unload.app.launch", str(LAUNCH), "volume:=0.001",
          "rate:=1000", "start_delay:=1", f"output:={bag}", f"opcua_port:={_free_port()}"], env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True)
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     logs = tmp_path / "logs"
     try:
         deadline = time.monotonic() + 180.0

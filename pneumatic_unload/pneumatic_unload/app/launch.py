@@ -371,6 +371,9 @@ def main(argv: list[str] | None = None) -> int:
     def interrupt(_sig: int, _frame: Any) -> None:
         raise KeyboardInterrupt
     signal.signal(signal.SIGTERM, interrupt)  # a supervisor's stop: as Ctrl-C
+    # SIGINT's handler set here too: a launcher started as a shell script's background job
+    # has SIGINT ignored, and Python then installs none (a `kill -INT` did nothing)
+    signal.signal(signal.SIGINT, interrupt)
     procs = start_launch(nodes, log_dir)
     print(f"launch: {', '.join(n['name'] for n in nodes)} started on ROS_DOMAIN_ID="
           f"{os.environ.get('ROS_DOMAIN_ID', '0')}; logs in {log_dir}/; Ctrl-C stops them",
