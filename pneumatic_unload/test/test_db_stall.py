@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -26,6 +27,7 @@ from pneumatic_unload.testline import ResultsDBError, open_db
 from pneumatic_unload.testline.db import write_files
 from pneumatic_unload.testline.redact import redact, secrets_of
 from pneumatic_unload.testline.schema import FILES, hide_password
+from pneumatic_unload.testline.watchdog import LIBPQ_MIN_CONNECT
 
 #: run alone, after the parallel part of make test (see conftest.py)
 pytestmark = pytest.mark.serial
@@ -34,9 +36,11 @@ RUN = [sys.executable, "-m", "pneumatic_unload.app.cli"]
 #: The deadline the tests give an operation [s].
 TIMEOUT = 3.0
 #: Longest a test waits for an operation that should fail within TIMEOUT before calling it
-#: a hang [s]: TIMEOUT plus a new connection's timeout (10 s), with room for a loaded
-#: machine. Without the deadline the operation never returns.
+#: a hang [s]. Without the deadline the operation never returns.
 HANG = 60.0
+#: How far past its deadline (at least libpq's 2 s for a new connection) an operation may
+#: return [s]: the timer's thread and the error's path on a loaded machine.
+LATE = 2.0
 
 
 def _family(pid: int) -> list[int]:
@@ -73,9 +77,11 @@ def _stop(server: PgServer) -> list[int]:
     return pids
 
 
-def _outcome(fn: object) -> BaseException | None:
-    """What ``fn()`` raised (None: it returned); fails the test if it hangs past HANG."""
+def _outcome(fn: object, deadline: float = TIMEOUT) -> BaseException | None:
+    """What ``fn()`` raised (None: it returned); fails the test if it hangs past HANG or
+    returns more than LATE s after ``deadline`` [s] (or libpq's shortest connect wait)."""
     box: list[BaseException | None] = []
+    start = time.monotonic()
 
     def run() -> None:
         try:
@@ -88,6 +94,8 @@ def _outcome(fn: object) -> BaseException | None:
     t.start()
     t.join(HANG)
     assert box, f"hung for more than {HANG} s"
+    took = time.monotonic() - start
+    assert took < max(deadline, LIBPQ_MIN_CONNECT) + LATE, f"{took:.1f} s for {deadline} s"
     return box[0]
 
 
@@ -103,7 +111,7 @@ def test_a_stopped_server_fails_each_operation_within_the_timeout(own_server: Pg
         assert f"no answer from the server within {TIMEOUT:g} s while {what}" in str(exc)
         assert "\n" not in str(exc)
     # a caller's own deadline (a node's callback): a write that gives up in 1 s
-    exc = _outcome(lambda: write_files(con, [record("c", 5e-9)], timeout=1.0))
+    exc = _outcome(lambda: write_files(con, [record("c", 5e-9)], timeout=1.0), 1.0)
     assert isinstance(exc, ResultsDBError), exc
     exc = _outcome(lambda: open_db(own_server.url("r"), timeout=TIMEOUT))
     assert isinstance(exc, ResultsDBError) and "while opening" in str(exc), exc

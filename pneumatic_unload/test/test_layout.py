@@ -4,13 +4,16 @@
 
 import ast
 import configparser
+import contextlib
 import json
 import os
+import select
 import shutil
 import signal
 import subprocess
 import sys
 import textwrap
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -361,10 +364,28 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, venv_python, tmp_path):
     proc = sourced("command -v pneumatic-unload && pneumatic-unload --help")
     assert proc.returncode == 0, proc.stderr[-1500:]
     assert proc.stdout.splitlines()[0] == str(pkg_prefix / "bin" / "pneumatic-unload")
-    # the simulator comes up over DDS (its start line), stopped by SIGINT after 40 s
-    proc = sourced(f'timeout -s INT 40 "{pkg_prefix / "lib" / PKG / "simulator"}"',
-                   timeout=120)
-    assert "rig at" in proc.stdout + proc.stderr, (proc.stdout[-2000:], proc.stderr[-2000:])
+    # the simulator comes up over DDS (its start line), stopped by SIGINT once it is up
+    sim = subprocess.Popen(
+        ["bash", "-c", 'source "$1/local_setup.bash" && exec "$2"', "run", str(install),
+         str(pkg_prefix / "lib" / PKG / "simulator")],
+        cwd=tmp_path, env=run_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        start_new_session=True)
+    seen, deadline = b"", time.monotonic() + 120.0
+    try:
+        assert sim.stdout is not None
+        fd = sim.stdout.fileno()
+        while b"rig at" not in seen and time.monotonic() < deadline:
+            ready, _, _ = select.select([fd], [], [], 1.0)
+            chunk = os.read(fd, 4096) if ready else b""
+            if ready and not chunk:
+                break  # it exited
+            seen += chunk
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(sim.pid, signal.SIGINT)
+        rest, _ = sim.communicate(timeout=60)
+    assert b"rig at" in seen, (seen + rest)[-2000:]
+    assert sim.returncode == 0, (sim.returncode, (seen + rest)[-2000:])
 
 
 # ------------------------------------------------------------- layers, cycles and sizes

@@ -85,6 +85,16 @@ CHARGE_TIMEOUT = 10.0
 CANCEL_WAIT = 5.0
 
 
+class _AnswerPending:
+    """The draining mark of an aborted measurement whose goal was sent and not yet
+    answered: not done until the answer comes (:meth:`OpcUaNode._on_goal_response` puts the
+    goal's result in its place, or ends the wait if the goal was refused)."""
+
+    @staticmethod
+    def done() -> bool:
+        return False
+
+
 @dataclass
 class _Measurement:
     """The one measurement under way (executor thread only)."""
@@ -294,6 +304,8 @@ class OpcUaNode(Node):
                 if m.handle is not None:  # the next goal waits for this one's end
                     m.handle.cancel_goal_async()
                     self._draining = (m.result, time.monotonic() + CANCEL_WAIT)
+                elif m.sent:  # and for its answer, which is cancelled when it comes
+                    self._draining = (_AnswerPending(), time.monotonic() + CANCEL_WAIT)
                 self._done(Outcome("BadRequestCancelledByClient", "aborted by a client's "
                                    "Abort call"))
         while self._charges:
@@ -387,6 +399,8 @@ class OpcUaNode(Node):
                 handle.cancel_goal_async()
                 self._draining = (handle.get_result_async(),
                                   time.monotonic() + CANCEL_WAIT)
+            elif self._draining is not None and isinstance(self._draining[0], _AnswerPending):
+                self._draining = None  # refused: nothing runs there
             return
         if handle is None or not handle.accepted:
             self._done(Outcome("BadInvalidState", f"{self._action} refused the goal (a "

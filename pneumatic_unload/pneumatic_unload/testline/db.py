@@ -375,7 +375,7 @@ def write_files(con: ResultsDB, recs: Sequence[FileRecord], *,
     """Write inputs with their unloads, in the order given, in one transaction: each input
     whole or not at all, and one commit (one sync to disk) for many inputs. On PostgreSQL
     it returns or fails within ``timeout`` s (None: the database's
-    :attr:`ResultsDB.timeout`), plus at most CONNECT_TIMEOUT for a new connection: a
+    :attr:`ResultsDB.timeout`; a new connection's wait included, at least libpq's 2 s): a
     caller that must not block (a node's callback) passes its own.
 
     Returns

@@ -9,9 +9,11 @@ network gone) returns with a clear error instead of hanging the batch or the nod
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import socket
 import threading
+import time
 import weakref
 from collections.abc import Iterator
 from typing import Any
@@ -21,14 +23,17 @@ import sqlalchemy as sa
 from pneumatic_unload.testline.redact import redact
 from pneumatic_unload.testline.schema import ResultsDBError, one_line
 
-#: Longest one operation of :class:`~.db.ResultsDB` (a query, a write with its retries) waits
-#: for a PostgreSQL server's answers [s] before it fails with a ResultsDBError, plus at
-#: most CONNECT_TIMEOUT for a new connection. A server whose processes are stopped
-#: (SIGSTOP, a frozen virtual machine) never answers while its host's kernel still
-#: acknowledges every packet, so neither TCP keepalives nor ``statement_timeout`` end the
-#: wait: this deadline does, by shutting the connections' sockets down. Above
-#: :data:`BUSY_TIMEOUT` (a write's retries) and the server's STATEMENT_TIMEOUT.
+#: Longest one operation of :class:`~.db.ResultsDB` (a query, a write with its retries) waits for a
+#: PostgreSQL server's answers [s] before it fails with a ResultsDBError (a new connection's wait
+#: included, at least :data:`LIBPQ_MIN_CONNECT` s). A server whose processes are stopped (SIGSTOP, a
+#: frozen virtual machine) never answers while its host's kernel still acknowledges every packet, so
+#: neither TCP keepalives nor ``statement_timeout`` end the wait: this deadline does, by shutting
+#: the connections' sockets down. Above :data:`BUSY_TIMEOUT` (a write's retries) and the server's
+#: STATEMENT_TIMEOUT.
 ANSWER_TIMEOUT = 90.0
+#: The shortest connect_timeout libpq takes [s] (it counts whole seconds, 1 read as 2): a
+#: new connection within a deadline waits what is left of it, rounded up, but not less.
+LIBPQ_MIN_CONNECT = 2
 
 
 class Watchdog:
@@ -39,8 +44,26 @@ class Watchdog:
     def __init__(self, engine: sa.Engine) -> None:
         self.conns: weakref.WeakSet[Any] = weakref.WeakSet()
         self.lock = threading.Lock()
+        #: The calling thread's deadline [s, monotonic] while it runs a block of
+        #: :meth:`deadline`.
+        self._ends = threading.local()
         if engine.dialect.name == "postgresql":
             sa.event.listen(engine, "connect", self._on_connect)
+            sa.event.listen(engine, "do_connect", self._on_do_connect)
+
+    def _on_do_connect(self, _dialect: Any, _record: Any, _cargs: Any,
+                       cparams: dict[str, Any]) -> None:
+        """A connection made within a deadline waits what is left of it (its socket is
+        not registered, so not shut down, until it has connected); none is tried past it
+        (a write's retry after the deadline shut its connection down)."""
+        end = getattr(self._ends, "end", None)
+        if end is None:
+            return
+        left = end - time.monotonic()
+        if left <= 0.0:
+            raise TimeoutError("the deadline passed before a new connection")
+        cparams["connect_timeout"] = max(LIBPQ_MIN_CONNECT, min(
+            int(cparams.get("connect_timeout", math.ceil(left))), math.ceil(left)))
 
     def _on_connect(self, dbapi_con: Any, _record: Any) -> None:
         with self.lock:
@@ -64,6 +87,9 @@ class Watchdog:
             yield
             return
         fired = threading.Event()
+        end = time.monotonic() + seconds
+        outer = getattr(self._ends, "end", None)
+        self._ends.end = end if outer is None else min(end, outer)
 
         def fire() -> None:
             fired.set()
@@ -75,7 +101,9 @@ class Watchdog:
         try:
             yield
         except Exception as exc:
-            if fired.is_set():
+            # past the deadline, or within libpq's second of it (a connection that waited
+            # what was left of it)
+            if fired.is_set() or time.monotonic() > end - 1.0:
                 raise ResultsDBError(redact(
                     f"results database {label}: no answer from the server within "
                     f"{seconds:g} s while {what} (the server stopped, or the network to it "
@@ -83,3 +111,4 @@ class Watchdog:
             raise
         finally:
             timer.cancel()
+            self._ends.end = outer
