@@ -78,7 +78,7 @@ def test_settings_refuse_junk_with_typed_errors(kw):
     fz.prop_settings(kw)
 
 
-@settings(max_examples=6)
+@settings(max_examples=3)
 @example(fio.clean_csv())
 @given(fio.csv_files(max_samples=1500))
 def test_csv_reader_and_cli(tmp_path_factory, case):
@@ -86,7 +86,7 @@ def test_csv_reader_and_cli(tmp_path_factory, case):
         fio.prop_csv(tmp_path_factory.mktemp("csv"), case[0], case[1])
 
 
-@settings(max_examples=6)
+@settings(max_examples=4)
 @example(fio.clean_bag())
 @given(fio.bag_cases(max_samples=1500))
 def test_bag_reader_and_cli(tmp_path_factory, case):
