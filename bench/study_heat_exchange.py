@@ -40,7 +40,8 @@ BIC_k = n log(RSS_k / n) + k_k log n (n samples, k_k parameters). The treatments
   FILE --temper X``: E recomputed from the stored fits with T = X f tau0);
 * ``F``: E with T measured on the record: the integrated correlation time [samples] of the
   lowest-BIC candidate's residual, by batch means over BATCHES = 32 batches (1 for a white
-  residual; a wrong heat law's slow misfit makes it its span), no constant tuned to draws.
+  residual; a wrong heat law's slow misfit makes it its span), no constant tuned to draws;
+* ``G``: the five with equal weights, var = mean var_k + the spread (no constant at all).
 
 Coverage is |error| <= 2 sigma with sigma as above (``2 sigma``) and with the covariance
 multiplied by the residual's AR(1) variance factor (1 + r1) / (1 - r1), r1 the lag-1
@@ -60,7 +61,8 @@ against E's median 360; the lowest-BIC candidate's residual RMS is 297-345 Pa fo
 noise (median 301): the candidates fit to the noise and their residual does not show the
 confounding of the heat law with b that moves C by 1-3 %. Held-out draws 12-19 (32
 records): E 11, 12, 32 / 25, 29, 32 / 21 (every C miss a bound); F 14, 15, 32 / 9, 7, 16 /
-7; A, B, C, D C within 1 %: 8, 13, 13, 14.
+7; A, B, C, D C within 1 %: 8, 13, 13, 14. G (``--summary``): 8, 8, 28 / 19, 23, 28 / 22 on
+draws 0-7, 9, 7, 30 / 20, 28, 29 / 20 on draws 12-19.
 """
 
 from __future__ import annotations
@@ -100,7 +102,8 @@ TREATMENTS: dict[str, tuple[tuple[str, ...], str]] = {
     "C": (("A", "B1", "B2"), "average"), "D": (("A", "D1", "D2"), "select"),
     "C+D": (("A", "B1", "B2", "D1", "D2"), "average"),
     "E": (("A", "B1", "B2", "D1", "D2"), "tempered"),
-    "F": (("A", "B1", "B2", "D1", "D2"), "measured")}
+    "F": (("A", "B1", "B2", "D1", "D2"), "measured"),
+    "G": (("A", "B1", "B2", "D1", "D2"), "equal")}
 #: The tempered rule's correlation time of a heat law's misfit, in units of tau0: the
 #: residual a wrong heat law leaves is smooth on the scale of the discharge's time constant,
 #: so a record of n samples at a rate f holds about n / (f tau0 x this) independent looks at it.
@@ -253,6 +256,8 @@ def combine(fits: dict[str, Fit], names: tuple[str, ...], rule: str, temper: flo
         temper, rule = fits[names[int(np.argmin(bic))]].tau_int, "tempered"
     if rule == "select":
         w = (bic == bic.min()).astype(float)
+    elif rule == "equal":
+        w = np.ones(bic.size)
     else:
         w = np.exp(-(bic - bic.min()) / (2.0 * (temper if rule == "tempered" else 1.0)))
     w /= w.sum()
@@ -317,6 +322,20 @@ def tempered(row: dict, time_tau0: float) -> dict:
         var = temper * float(np.dot(w, [fits[k]["std"][i] ** 2 for k in names])) \
             + float(np.dot(w, (xs - mean) ** 2))
         out[key] = mean
+        out[f"{key}_std"] = out[f"{key}_std_ar1"] = math.sqrt(var)
+    return out
+
+
+def equal(row: dict) -> dict:
+    """Treatment G of a stored row: its five candidates with equal weights."""
+    names, fits = TREATMENTS["G"][0], row["fits"]
+    out: dict = {"weights": dict.fromkeys(names, 1.0 / len(names)),
+                 "cpu": sum(fits[k]["cpu"] for k in names)}
+    for i, key in enumerate(("c", "b", "m")):
+        xs = np.array([fits[k]["x"][i] for k in names])
+        var = float(np.mean([fits[k]["std"][i] ** 2 for k in names])) \
+            + float(np.mean((xs - xs.mean()) ** 2))
+        out[key] = float(xs.mean())
         out[f"{key}_std"] = out[f"{key}_std_ar1"] = math.sqrt(var)
     return out
 
@@ -406,6 +425,7 @@ def main(argv: list[str]) -> int:
         rows = [json.loads(line) for line in args.summary.read_text().splitlines() if line]
         for r in rows:
             r["treatments"]["E"] = tempered(r, args.temper)
+            r["treatments"]["G"] = equal(r)
         print(summary([r for r in rows if r["law"] in laws], laws))
         return 0
     jobs = [(law, k) for k in range(args.first, args.first + args.draws) for law in laws]
