@@ -307,37 +307,35 @@ def one(job: tuple[str, int]) -> dict:
     return out
 
 
-def tempered(row: dict, time_tau0: float) -> dict:
-    """Treatment E of a stored row, recomputed from its fits with T = f tau0 x time_tau0."""
-    names, fits = TREATMENTS["E"][0], row["fits"]
-    temper = max(1.0, row["temper"] / row["time_tau0"] * time_tau0)
-    bic = np.array([fits[k]["bic"] for k in names])
-    w = np.exp(-(bic - bic.min()) / (2.0 * temper))
-    w /= w.sum()
+def _stored_average(row: dict, names: tuple[str, ...], w: np.ndarray, inflate: float) -> dict:
+    """C, b, m of a stored row's fits averaged with weights ``w`` (normalised here), var =
+    inflate sum w_k var_k + sum w_k (x_k - xbar)^2, as :func:`combine` does with fits."""
+    fits = row["fits"]
+    w = w / w.sum()
     out: dict = {"weights": dict(zip(names, [float(v) for v in w], strict=True)),
                  "cpu": sum(fits[k]["cpu"] for k in names)}
     for i, key in enumerate(("c", "b", "m")):
         xs = np.array([fits[k]["x"][i] for k in names])
         mean = float(np.dot(w, xs))
-        var = temper * float(np.dot(w, [fits[k]["std"][i] ** 2 for k in names])) \
+        var = inflate * float(np.dot(w, [fits[k]["std"][i] ** 2 for k in names])) \
             + float(np.dot(w, (xs - mean) ** 2))
         out[key] = mean
         out[f"{key}_std"] = out[f"{key}_std_ar1"] = math.sqrt(var)
     return out
 
 
+def tempered(row: dict, time_tau0: float) -> dict:
+    """Treatment E of a stored row, recomputed from its fits with T = f tau0 x time_tau0."""
+    names = TREATMENTS["E"][0]
+    temper = max(1.0, row["temper"] / row["time_tau0"] * time_tau0)
+    bic = np.array([row["fits"][k]["bic"] for k in names])
+    return _stored_average(row, names, np.exp(-(bic - bic.min()) / (2.0 * temper)), temper)
+
+
 def equal(row: dict) -> dict:
     """Treatment G of a stored row: its five candidates with equal weights."""
-    names, fits = TREATMENTS["G"][0], row["fits"]
-    out: dict = {"weights": dict.fromkeys(names, 1.0 / len(names)),
-                 "cpu": sum(fits[k]["cpu"] for k in names)}
-    for i, key in enumerate(("c", "b", "m")):
-        xs = np.array([fits[k]["x"][i] for k in names])
-        var = float(np.mean([fits[k]["std"][i] ** 2 for k in names])) \
-            + float(np.mean((xs - xs.mean()) ** 2))
-        out[key] = float(xs.mean())
-        out[f"{key}_std"] = out[f"{key}_std_ar1"] = math.sqrt(var)
-    return out
+    names = TREATMENTS["G"][0]
+    return _stored_average(row, names, np.ones(len(names)), 1.0)
 
 
 def _corr(f: Fit, i: int, j: int) -> float:

@@ -101,9 +101,9 @@ class Watchdog:
         try:
             yield
         except Exception as exc:
-            # past the deadline, or within libpq's second of it (a connection that waited
-            # what was left of it)
-            if fired.is_set() or time.monotonic() > end - 1.0:
+            # past the deadline (a connection that waited what was left of it may fail
+            # just before the timer's thread has fired)
+            if fired.is_set() or time.monotonic() >= end:
                 raise ResultsDBError(redact(
                     f"results database {label}: no answer from the server within "
                     f"{seconds:g} s while {what} (the server stopped, or the network to it "
