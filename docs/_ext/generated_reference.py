@@ -58,6 +58,9 @@ API_MODULES: tuple[str, ...] = (
     "pneumatic_unload.discrepancy",
     "pneumatic_unload.testline",
     "pneumatic_unload.fit",
+    "pneumatic_unload.selection",
+    "pneumatic_unload.selection.evidence",
+    "pneumatic_unload.selection.averaging",
 )
 #: The generated pages, in the order of the site's table of contents.
 PAGES: tuple[str, ...] = ("cli", "nodes", "interfaces", "json", "api", "architecture")

@@ -398,6 +398,7 @@ LAYERS: dict[str, int] = {
     "config": 1,  # settings declared once: units, ranges, meanings
     "io": 2,  # bags and CSV files: data, no physics
     "fit": 2,  # the fitting engine: parameters, likelihood, least squares, uncertainty
+    "selection": 2,  # the one rule among candidate models: criterion, weights, model average
     "model": 3,  # the discharge model (ODE, heat law, sensor, effects), its stream, its inversion
     "uncertainty": 4,  # the uncertainty budget of C and b (GUM: type A, type B, model form)
     "curvefit": 5,  # model-based C and b: the final curve fit, its budget lines; the SSE fit

@@ -537,7 +537,8 @@ def test_the_estimator_model_takes_the_three_shapes_and_refuses_another():
 def test_a_reading_counts_its_own_variance_in_the_spread():
     """``law_spread`` with ``own``: a reading named there adds its own variance beyond the
     chosen law's, weighted as its distance (the model average's variance, closed form);
-    without it only the distance counts; one outside the criterion's window adds nothing."""
+    without it only the distance counts; one far behind in the criterion adds next to
+    nothing (its weight exp(-6))."""
     from pneumatic_unload.curvefit.wall_moves import law_spread
 
     def entry(b: float, sd: float) -> tuple[CurveFit, float, int]:
@@ -547,12 +548,14 @@ def test_a_reading_counts_its_own_variance_in_the_spread():
     fits = {"fixed|m": entry(0.30, 0.01), "flow-curve pair: fixed|m": entry(0.26, 0.05)}
     bic = {"fixed|m": 0.0, "flow-curve pair: fixed|m": 2.0}
     w = math.exp(-1.0)
-    plain = law_spread(fits, bic, "fixed|m", 10.0, "critical_ratio")
+    plain = law_spread(fits, bic, "fixed|m", "critical_ratio")
     assert plain == pytest.approx(math.sqrt(w * 0.04**2 / (1.0 + w)), rel=1e-12)
-    own = law_spread(fits, bic, "fixed|m", 10.0, "critical_ratio",
+    own = law_spread(fits, bic, "fixed|m", "critical_ratio",
                      own=frozenset({"flow-curve pair: fixed|m"}))
     assert own == pytest.approx(math.sqrt(w * (0.04**2 + 0.05**2 - 0.01**2) / (1.0 + w)),
                                 rel=1e-12)
     bic["flow-curve pair: fixed|m"] = 12.0
-    assert law_spread(fits, bic, "fixed|m", 10.0, "critical_ratio",
-                      own=frozenset({"flow-curve pair: fixed|m"})) == 0.0
+    w = math.exp(-6.0)
+    assert law_spread(fits, bic, "fixed|m", "critical_ratio",
+                      own=frozenset({"flow-curve pair: fixed|m"})) == pytest.approx(
+        math.sqrt(w * (0.04**2 + 0.05**2 - 0.01**2) / (1.0 + w)), rel=1e-12)

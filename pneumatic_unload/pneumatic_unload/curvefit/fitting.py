@@ -99,10 +99,9 @@ def fit_curve(
 
     With the natural model on, every law of ``laws`` (default :data:`CURVE_FIT_LAWS`: the
     natural-convection correlation with a fitted scale, and a constant hA with a fitted
-    thermal time constant) is fitted; the lowest BIC wins. A law within
-    :data:`LAW_BIC_THRESHOLD` of it fits about as well: its weight exp(-dBIC/2) times the
-    square of its C's distance from the winner's enters the variance of C (the model-form
-    term, never hidden).
+    thermal time constant) is fitted; the lowest BIC wins. Every law's weight
+    exp(-dBIC/2) times the square of its C's distance from the winner's enters the variance
+    of C (the model-form term, never hidden: :mod:`pneumatic_unload.selection`).
 
     Parameters
     ----------
@@ -251,16 +250,14 @@ def fit_curve(
         spread_bic = criterion({**fits, **readings}, span.n)
     with_m = {k: f for k, f in readings.items() if k.endswith(M_SUFFIX)}
     own = frozenset(shape)  # the shape's readings: their own variance counts
-    mf = law_spread(pool, spread_bic, ref_law, LAW_BIC_THRESHOLD, "conductance", empty=0.0,
-                    own=own)
-    mf_b = spread_b(pool, spread_bic, ref_law, LAW_BIC_THRESHOLD, own=own)
+    mf = law_spread(pool, spread_bic, ref_law, "conductance", empty=0.0, own=own)
+    mf_b = spread_b(pool, spread_bic, ref_law, own=own)
     if best.endswith(M_SUFFIX):
-        mf_m = law_spread({**same, **with_m}, spread_bic, best, LAW_BIC_THRESHOLD,
-                          "subsonic_index", own=own)
+        mf_m = law_spread({**same, **with_m}, spread_bic, best, "subsonic_index", own=own)
     elif best + M_SUFFIX in fits:  # m held, the laws fitted with m too: their spread of m
         mf_m = law_spread({**{k: f for k, f in fits.items() if k.endswith(M_SUFFIX)},
-                           **with_m}, spread_bic, best + M_SUFFIX, LAW_BIC_THRESHOLD,
-                          "subsonic_index", own=own)
+                           **with_m}, spread_bic, best + M_SUFFIX, "subsonic_index",
+                          own=own)
         m_c, m_b, m_u = held_spread(m_c, m_b, m_u, mf_m)
     else:
         mf_m = math.nan

@@ -49,6 +49,7 @@ from pneumatic_unload.curvefit.subsonic_offer import M_SUFFIX, split_key, subson
 from pneumatic_unload.model.effects import WALL_TEMPERATURE
 from pneumatic_unload.model.inversion import estimator_model
 from pneumatic_unload.model.parametric import SUBSONIC_INDEX_START
+from pneumatic_unload.selection.evidence import information_criterion
 
 #: Residual inflation above which, with the wall assumed at T10, the hot-start variants
 #: (wall temperature fitted) are tried too [-] (they are also tried when T10 is more than
@@ -502,9 +503,9 @@ def offer_m(fam: Family, key: str) -> str | None:
 def criterion(fits: dict[str, Fit], n: int) -> dict[str, float]:
     """BIC [-] of every fit: chi^2 normalised by the lowest-chi^2 fit's residual variance
     (inflated when structured: correlated residuals carry less information), n samples."""
-    log_n = math.log(max(n, 2))
     unit = criterion_unit(fits)
-    return {law: chi2 / unit + k * log_n for law, (_cf, chi2, k) in fits.items()}
+    return {law: information_criterion(chi2 / unit, k, max(n, 2))
+            for law, (_cf, chi2, k) in fits.items()}
 
 
 def criterion_unit(fits: dict[str, Fit]) -> float:

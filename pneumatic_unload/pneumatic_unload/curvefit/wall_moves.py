@@ -7,8 +7,8 @@ A wall temperature assumed (= T10) or given has a standard uncertainty; the fitt
 (and m, where fitted) move with it. :func:`wall_linear` takes the move to first order from
 the fit's Jacobian (two model evaluations); the full refit is
 :func:`pneumatic_unload.curvefit.fitting.fit_curve`'s.
-:func:`spread_b` is b's model-form spread over the heat laws that fit about equally well
-(C's is computed beside the BIC table in :mod:`pneumatic_unload.curvefit.fitting`).
+:func:`law_spread` is a quantity's model-form spread over the heat laws, weighted by the
+criterion (:mod:`pneumatic_unload.selection`).
 
 SI units: K, m^3/(s Pa); b is a pressure ratio [-].
 """
@@ -25,6 +25,8 @@ from pneumatic_unload.config.tank import WALL_RANGE
 from pneumatic_unload.curvefit.curve_fit_result import CurveFit
 from pneumatic_unload.fit.trace import Trace
 from pneumatic_unload.model.inversion import estimator_model
+from pneumatic_unload.selection.averaging import model_average
+from pneumatic_unload.selection.evidence import weights
 
 #: Singular values of the fit's Jacobian below this fraction of the largest are held in
 #: the first-order step where the full step leaves the float range [-]: a heat exchange
@@ -100,37 +102,32 @@ def rms_moves(moves: list[float]) -> float:
 
 
 def law_spread(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, float],
-               best: str, threshold: float, attr: str, empty: float = math.nan,
+               best: str, attr: str, empty: float = math.nan,
                own: frozenset[str] = frozenset()) -> float:
     """Model-form 1-sigma of a fitted quantity ``attr`` ('conductance' [m^3/(s Pa)],
-    'critical_ratio' [-]): the spread of its values over the laws within ``threshold`` in
-    BIC (the curve fit's LAW_BIC_THRESHOLD) of ``best`` about the best law's value,
-    weighted exp(-dBIC/2); ``empty`` when no law carries a finite value, NaN when the
-    chosen law's value is not finite. The fits named in ``own`` add their own variance
-    beyond the chosen law's (``attr + '_std'``), weighted alike: the model average's
-    variance (a reading that determines the quantity loosely widens it)."""
+    'critical_ratio' [-], 'subsonic_index' [-]) about the chosen law ``best``'s value: the
+    weighted spread sqrt(sum_k w_k (x_k - x_best)^2) over the laws of ``fits``, with the
+    criterion's weights w_k ~ exp(-(BIC_k - BIC_min)/2) (:mod:`pneumatic_unload.selection`,
+    over the laws that carry a finite value); ``empty`` when none does, NaN when the chosen
+    law's value is not finite. The fits named in ``own`` add their own variance beyond the
+    chosen law's (``attr + '_std'``), weighted alike: the model average's within term (a
+    reading that determines the quantity loosely widens it)."""
     v0 = getattr(fits[best][0], attr)
-    var, w_sum = 0.0, 0.0
-    near = {law: bic[law] - bic[best] for law, f in fits.items()
-            if bic[law] - bic[best] < threshold and math.isfinite(getattr(f[0], attr))}
-    # the weights relative to the lowest BIC among them (a reading that fits far better
-    # than ``best``, e.g. an unclaimed warm gas, must not overflow exp)
-    d_min = min(near.values(), default=0.0)
-    for law, d in near.items():
-        w = math.exp(-0.5 * (d - d_min))
-        w_sum += w
-        var += w * (getattr(fits[law][0], attr) - v0) ** 2
-        if law in own:
-            extra = getattr(fits[law][0], attr + "_std") ** 2 \
-                - getattr(fits[best][0], attr + "_std") ** 2
-            var += w * extra if math.isfinite(extra) else 0.0
-    if not w_sum > 0:
+    values = {law: getattr(f[0], attr) for law, f in fits.items()}
+    if not any(math.isfinite(v) for v in values.values()):
         return empty
-    return math.sqrt(max(var, 0.0) / w_sum) if math.isfinite(v0) else math.nan
+    if not math.isfinite(v0):
+        return math.nan
+    sd0 = getattr(fits[best][0], attr + "_std") if own else 0.0
+    extra = {law: (getattr(fits[law][0], attr + "_std") ** 2 - sd0**2 if law in own else 0.0)
+             for law in values}
+    extra = {law: v if math.isfinite(v) else 0.0 for law, v in extra.items()}
+    avg = model_average(values, weights({law: bic[law] for law in values}), extra)
+    return math.sqrt(max(avg.spread_about(v0) ** 2 + avg.within, 0.0))
 
 
 def spread_b(fits: dict[str, tuple[CurveFit, float, int]], bic: dict[str, float],
-             best: str, threshold: float = 10.0, own: frozenset[str] = frozenset()) -> float:
+             best: str, own: frozenset[str] = frozenset()) -> float:
     """b's model-form 1-sigma [-] (:func:`law_spread` of the critical ratio); NaN when the
     chosen law did not determine b."""
-    return law_spread(fits, bic, best, threshold, "critical_ratio", own=own)
+    return law_spread(fits, bic, best, "critical_ratio", own=own)
