@@ -470,7 +470,8 @@ def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--draws", type=int, default=8, help="draws per law (default 8)")
     ap.add_argument("--first", type=int, default=0, help="the first draw's index")
-    ap.add_argument("--laws", default=",".join(LAWS), help=f"comma-separated, of {LAWS} and {CONTROL!r}")
+    ap.add_argument("--laws", default=",".join(LAWS),
+                    help=f"comma-separated, of {LAWS} and {CONTROL!r}")
     ap.add_argument("--jobs", type=int, default=1, help="processes (default 1)")
     ap.add_argument("--rows", type=Path, help="append every record's row as a JSON line")
     ap.add_argument("--summary", type=Path, help="print the table from a --rows file")

@@ -44,8 +44,8 @@ def information_criterion(chi2: float, k: int, n: int) -> float:
     return float(chi2) + k * math.log(n)
 
 
-def weights(criteria: Mapping[str, float]) -> dict[str, float]:
-    """The candidates' weights exp(-(BIC_k - BIC_min) / 2), normalised to sum to 1 [-].
+def weights(criteria: Mapping[str, float], temperature: float = 1.0) -> dict[str, float]:
+    """The candidates' weights exp(-(BIC_k - BIC_min) / (2 T)), normalised to sum to 1 [-].
 
     A candidate whose criterion is not finite (a fit that failed) has weight 0. The
     differences are taken from the lowest criterion, so no weight overflows or
@@ -55,6 +55,10 @@ def weights(criteria: Mapping[str, float]) -> dict[str, float]:
     ----------
     criteria : mapping of str to float
         Each candidate's :func:`information_criterion`.
+    temperature : float
+        T >= 1, the samples per independent look at the misfit the candidates differ by
+        (the criterion counted on n / T effective samples: a misfit correlated over T
+        samples carries a T-th of the evidence white residuals would); 1: white residuals.
 
     Returns
     -------
@@ -66,12 +70,14 @@ def weights(criteria: Mapping[str, float]) -> dict[str, float]:
     ValueError
         No candidate has a finite criterion.
     """
+    if not temperature >= 1.0:
+        raise ValueError(f"the weights' temperature must be at least 1 (got {temperature})")
     finite = {k: v for k, v in criteria.items() if math.isfinite(v)}
     if not finite:
         raise ValueError("no candidate model has a finite information criterion "
                          f"(candidates: {', '.join(criteria) or 'none'})")
     low = min(finite.values())
-    raw = {k: math.exp(-0.5 * (v - low)) if k in finite else 0.0
+    raw = {k: math.exp(-0.5 * (v - low) / temperature) if k in finite else 0.0
            for k, v in criteria.items()}
     total = sum(raw.values())  # >= 1: the lowest's own term
     return {k: v / total for k, v in raw.items()}
