@@ -1,8 +1,8 @@
 """The final fit as one estimator beside the curve fit, on records the package did not make.
 
 ``PYTHONPATH=. .venv/bin/python bench/bench_final_fit_rule.py [--draws N] [--first K]
-[--laws a,b] [--jobs J] [--rows FILE] [--summary FILE]`` analyses draw k of each law of
-``pneumatic_unload/test/foreign/heat_laws.py`` (and of the Newton-cooling control of
+[--laws a,b] [--heat-laws a,b] [--jobs J] [--rows FILE] [--summary FILE]`` analyses draw k
+of each law of ``pneumatic_unload/test/foreign/heat_laws.py`` (and of the Newton-cooling control of
 ``bench/study_heat_exchange.py``: a constant hA, inside every candidate set), the inputs
 stated exact (V, T10 = 293.15 K, p_atm = 101325 Pa, every input's uncertainty and the
 model-limits line 0), in-process:
@@ -10,9 +10,12 @@ model-limits line 0), in-process:
 * ``curvefit``: :func:`pneumatic_unload.estimation.batch.analyze`, the final result's C,
   b, m and sigmas (the curve fit of :mod:`pneumatic_unload.curvefit`);
 * ``one rule``: :func:`pneumatic_unload.estimation.final_fit.final_fit` from the same
-  crossing's starting values, T = 1 (the criterion on every sample);
-* ``one rule, T``: the same fits with T = TIME_TAU0 f tau0 (f the sampling rate, tau0 =
-  V / (gamma 1e5 C) of the fit): weights and covariances counted on n / T samples.
+  crossing's starting values, its candidates the ``--heat-laws`` (default the package's
+  default set) each with m held and fitted, its rule's default T = f tau0 (samples per
+  discharge time constant) in the weights;
+* ``T = 1``: the same fits weighed with T = 1 (the criterion on every sample);
+* ``T in var``: the same fits with T = f tau0 in the weights and the candidates' variances
+  multiplied by it too (weights and covariances counted on n / T samples).
 
 Printed per law and over all: C within 1 %, b within 0.03, m within 0.05 (issue 52's
 tolerances), |error| <= 2 sigma for C / b / m, the C misses whose sigma is above half the
@@ -34,19 +37,21 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "pneumatic_unload" / "test"))
 sys.path.insert(0, str(ROOT / "bench"))
-from foreign.heat_laws import GAMMA, LAWS, P_ATM, T_ROOM, draw  # noqa: E402
+from foreign.heat_laws import LAWS, P_ATM, T_ROOM, draw  # noqa: E402
 from study_heat_exchange import CONTROL, control  # noqa: E402
 
 from pneumatic_unload.config.estimator import EstimatorSettings  # noqa: E402
 from pneumatic_unload.estimation.batch import analyze  # noqa: E402
 from pneumatic_unload.estimation.final_fit import final_fit  # noqa: E402
+from pneumatic_unload.model.candidates import (  # noqa: E402
+    DEFAULT_HEAT_LAWS,
+    default_candidates,
+)
 from pneumatic_unload.selection.averaging import model_average  # noqa: E402
 from pneumatic_unload.selection.evidence import weights  # noqa: E402
 
 C_TOL, B_TOL, M_TOL = 0.01, 0.03, 0.05
-#: The tempered rule's misfit correlation time in units of tau0 (the study's E).
-TIME_TAU0 = 0.1
-METHODS = ("curvefit", "one rule", "one rule, T")
+METHODS = ("curvefit", "one rule", "T = 1", "T in var")
 
 
 def exact_settings(volume: float) -> EstimatorSettings:
@@ -63,9 +68,10 @@ def _est(c: float, c_sd: float, b: float, b_sd: float, m: float, m_sd: float,
             "cpu": cpu, "note": note}
 
 
-def one(job: tuple[str, int]) -> dict:
-    """Draw k of a law: the curve fit's reading and the one rule's (T = 1 and tempered)."""
-    law, k = job
+def one(job: tuple[str, int, tuple[str, ...]]) -> dict:
+    """Draw k of a law: the curve fit's reading and the one rule's (T = 1 and tempered)
+    with the candidates of ``heat_laws``."""
+    law, k, heat_laws = job
     rec = control(k) if law == CONTROL else draw(law, k)
     settings = exact_settings(rec.rig.volume)
     truth = {"c": rec.rig.conductance, "b": rec.rig.b, "m": rec.rig.m}
@@ -87,7 +93,8 @@ def one(job: tuple[str, int]) -> dict:
     start = time.process_time()
     try:
         ff = final_fit(rec.t, rec.p, settings, t_start=c0.t_start, p10=c0.p10,
-                       p_atm=c0.end_pressure, conductance=c0.conductance_model)
+                       p_atm=c0.end_pressure, conductance=c0.conductance_model,
+                       candidates=default_candidates(heat_laws=heat_laws))
     except ValueError as exc:
         out["error"] = f"final_fit: {exc}"
         return out
@@ -98,22 +105,24 @@ def one(job: tuple[str, int]) -> dict:
         "m_std": c.fit.subsonic_index_std, "bic": c.criterion, "fit_m": c.candidate.fit_m}
         for c in ff.candidates}
     out["failed"] = dict(ff.failed)
-    rate = (rec.t.size - 1) / float(rec.t[-1] - rec.t[0])
-    tau0 = rec.rig.volume / (GAMMA * 1e5 * ff.conductance.mean)
-    out["temper"] = max(1.0, TIME_TAU0 * rate * tau0)
-    for name, temper in (("one rule", 1.0), ("one rule, T", out["temper"])):
-        out["methods"][name] = {**rule(out["candidates"], temper), "cpu": cpu,
+    out["temper"] = ff.temperature
+    for name, temper, in_var in (("one rule", ff.temperature, False), ("T = 1", 1.0, False),
+                                 ("T in var", ff.temperature, True)):
+        out["methods"][name] = {**rule(out["candidates"], temper, in_var), "cpu": cpu,
                                 "note": ff.best.candidate.name}
+    got = out["methods"]["one rule"]
+    assert math.isclose(got["c"], ff.conductance.mean, rel_tol=1e-12), "rule != final_fit"
     return out
 
 
-def rule(cands: dict, temper: float) -> dict:
-    """The one rule over stored candidates with temperature ``temper``."""
+def rule(cands: dict, temper: float, in_var: bool = False) -> dict:
+    """The one rule over stored candidates with temperature ``temper`` in the weights (and
+    in the variances, ``in_var``)."""
     w = weights({k: v["bic"] for k, v in cands.items()}, temper)
     res = {}
     for key, only_m in (("c", False), ("b", False), ("m", True)):
         vals = {k: v[key] for k, v in cands.items() if v["fit_m"] or not only_m}
-        var = {k: temper * cands[k][f"{key}_std"] ** 2 for k in vals}
+        var = {k: (temper if in_var else 1.0) * cands[k][f"{key}_std"] ** 2 for k in vals}
         try:
             avg = model_average(vals, w, var)
             res[key], res[f"{key}_std"] = avg.mean, avg.std
@@ -175,6 +184,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--draws", type=int, default=8)
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--laws", default=",".join((CONTROL, *LAWS)))
+    ap.add_argument("--heat-laws", default=",".join(DEFAULT_HEAT_LAWS),
+                    help="the candidates' heat laws (keys of model.effects.FIT_HEAT_LAWS)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--rows", type=Path)
     ap.add_argument("--summary", type=Path)
@@ -187,7 +198,9 @@ def main(argv: list[str]) -> int:
         rows = [json.loads(x) for x in args.summary.read_text().splitlines() if x]
         print(summary([r for r in rows if r["law"] in laws], laws))
         return 0
-    jobs = [(law, k) for k in range(args.first, args.first + args.draws) for law in laws]
+    heat_laws = tuple(x.strip() for x in args.heat_laws.split(",") if x.strip())
+    jobs = [(law, k, heat_laws) for k in range(args.first, args.first + args.draws)
+            for law in laws]
     pool = Pool(args.jobs) if args.jobs > 1 else None
     rows = []
     start = time.perf_counter()

@@ -61,6 +61,8 @@ API_MODULES: tuple[str, ...] = (
     "pneumatic_unload.selection",
     "pneumatic_unload.selection.evidence",
     "pneumatic_unload.selection.averaging",
+    "pneumatic_unload.model.candidates",
+    "pneumatic_unload.estimation.final_fit",
 )
 #: The generated pages, in the order of the site's table of contents.
 PAGES: tuple[str, ...] = ("cli", "nodes", "interfaces", "json", "api", "architecture")

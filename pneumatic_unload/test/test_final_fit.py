@@ -64,8 +64,11 @@ def test_the_result_is_typed_and_its_weights_are_the_rule(fitted):
     low = min(c.criterion for c in fitted.candidates)
     for c in fitted.candidates:
         ratio = c.weight / fitted.best.weight
-        assert ratio == pytest.approx(math.exp(-0.5 * (c.criterion - low)), rel=1e-9,
-                                      abs=1e-300)
+        assert ratio == pytest.approx(
+            math.exp(-0.5 * (c.criterion - low) / fitted.temperature), rel=1e-9, abs=1e-300)
+    # T: the samples per discharge time constant, f V / (gamma p_N C)
+    assert fitted.temperature == pytest.approx(
+        RATE * RIG.volume / (GAMMA * 1e5 * RIG.conductance), rel=0.01)
     # m's average is over the candidates that fit m
     assert set(fitted.subsonic_index.weights) <= {c.candidate.name for c in
                                                   fitted.candidates if c.candidate.fit_m}

@@ -95,15 +95,25 @@ class RigConfig(TankSpec):
     # --- switchable effects
     effects: tuple[str, ...] = names((), EFFECTS, "real-rig effects switched on (names)")
     heat_transfer_mode: str = choice(
-        "natural", ("natural", "fixed", "density"),
-        "wall heat transfer: natural-convection correlation, fixed h*A, or h*A varying as "
-        "the gas density to the power heat_transfer_exponent")
+        "natural", ("natural", "fixed", "density", "time"),
+        "wall heat transfer: natural-convection correlation, fixed h*A, h*A varying as "
+        "the gas density to the power heat_transfer_exponent, or h*A varying with the time "
+        "since the opening (heat_transfer_time_slope, _curvature, _constant)")
     heat_transfer_coefficient: float = number(
         1.0, "W/K", 0.0, 1e4, "wall conductance h*A when heat_transfer_mode is fixed (at the "
         "initial gas density p10/(R T10) when it is density)")
     heat_transfer_exponent: float = number(
         0.5, "-", -2.0, 4.0, "exponent n of h*A = h*A_0 (rho/rho_0)^n when "
         "heat_transfer_mode is density")
+    heat_transfer_time_slope: float = number(
+        0.0, "-", -10.0, 10.0, "g1 of h*A = h*A_0 exp(g1 u + g2 u^2), u = ln(1 + s/tau_t), s "
+        "the time since the opening, when heat_transfer_mode is time (h*A_0: "
+        "heat_transfer_coefficient)")
+    heat_transfer_time_curvature: float = number(
+        0.0, "-", -10.0, 10.0, "g2 of the time law's h*A (heat_transfer_time_slope)")
+    heat_transfer_time_constant: float = number(
+        1.0, "s", 1e-4, 1e6, "tau_t, the time scale of the time law's h*A "
+        "(heat_transfer_time_slope)")
     heat_transfer_scale: float = number(
         1.0, "-", 0.0, 100.0, "multiplier on the natural-convection correlation")
     heat_transfer_turbulent_ratio: float = number(

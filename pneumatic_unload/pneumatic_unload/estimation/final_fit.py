@@ -8,14 +8,19 @@ record through the one engine (each candidate's fit is
 criterion and reports C, b and m as model averages (:mod:`pneumatic_unload.selection`):
 
     BIC_k = chi^2_k / s^2 + k_k ln n,   w_k ~ exp(-(BIC_k - BIC_min) / (2 T)),
-    x = sum_k w_k x_k,   u^2(x) = T sum_k w_k u_k^2 + sum_k w_k (x_k - x)^2,
+    x = sum_k w_k x_k,   u^2(x) = sum_k w_k u_k^2 + sum_k w_k (x_k - x)^2,
 
 s^2 the residual variance of the lowest-chi^2 candidate (inflated where its residual is
 structured, as each candidate's covariance is), n the samples, u_k each candidate's
-standard deviation from its covariance, T >= 1 the samples per independent look at the
-misfit the candidates differ by (``temperature``: 1 counts every sample as independent).
-There is no other rule and no threshold: a candidate that fails to fit, or that does not
-determine b (or m), is left out of that quantity's average and says why.
+standard deviation from its covariance. T is the number of samples per independent look at
+the misfit by which the candidates differ: the heat exchange's misfit is a smooth function
+of time on the scale of the discharge's own time constant tau0 = V / (gamma p_N C), so a
+record sampled at f holds one look per f tau0 samples, T = f tau0 (:func:`misfit_looks`),
+and the criterion's differences count n / T looks, not n samples. T enters the weights
+alone: each candidate's covariance is its own residual's, white within the noise, so the
+within term is not scaled. There is no other rule and no threshold: a candidate that fails
+to fit, or that does not determine b (or m), is left out of that quantity's average and
+says why.
 
 This is the estimator built beside the curve fit of :mod:`pneumatic_unload.curvefit`
 (its offers, readings and twins); ``bench/bench_final_fit_rule.py`` compares the two on
@@ -84,7 +89,7 @@ class FinalFit:
     temperature : float
         The rule's T [-].
     conductance : ModelAverage
-        C [m^3/(s Pa)]; its ``within`` carries T u_k^2.
+        C [m^3/(s Pa)].
     critical_ratio : ModelAverage or None
         b [-]; None where no candidate determines it.
     subsonic_index : ModelAverage or None
@@ -104,10 +109,25 @@ class FinalFit:
         return max(self.candidates, key=lambda c: c.weight)
 
 
+def misfit_looks(rate: float, volume: float, conductance: float, gamma: float) -> float:
+    """The rule's T [samples]: the samples per discharge time constant, f tau0 with tau0 =
+    V / (gamma p_N C) (p_N = 1e5 Pa, eq 28's starting time constant at T_N), at least 1.
+
+    Parameters
+    ----------
+    rate : float
+        Sampling rate f [Hz].
+    volume, conductance, gamma : float
+        V [m^3], C [m^3/(s Pa)], the gas's gamma [-].
+    """
+    tau0 = volume / (gamma * 1e5 * conductance)
+    return max(1.0, rate * tau0)
+
+
 def final_fit(t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_start: float,
               p10: float, p_atm: float, conductance: float,
-              candidates: tuple[Candidate, ...] | None = None, temperature: float = 1.0,
-              hold: tuple[str, ...] = ()) -> FinalFit:
+              candidates: tuple[Candidate, ...] | None = None,
+              temperature: float | None = None, hold: tuple[str, ...] = ()) -> FinalFit:
     """Fit every candidate to the record and average C, b and m over them.
 
     Parameters
@@ -124,8 +144,9 @@ def final_fit(t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_st
         :func:`~pneumatic_unload.model.candidates.default_candidates`). A candidate
         with m fitted starts from the same law's fit with m held where that was fitted
         before it.
-    temperature : float
-        The rule's T >= 1 (see the module's text).
+    temperature : float, optional
+        The rule's T >= 1 (default :func:`misfit_looks` at the record's rate and the
+        lowest-chi^2 candidate's C; 1 counts every sample as an independent look).
     hold : tuple of str
         't_open' and/or 'p10' held at what was given (a record that begins at the
         opening; a given initial pressure).
@@ -145,7 +166,7 @@ def final_fit(t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_st
     if t.shape != p.shape or t.ndim != 1 or t.size < 8:
         raise ValueError(f"the final fit needs matching 1-d arrays of at least 8 samples "
                          f"(got t {t.shape}, p {p.shape})")
-    if not temperature >= 1.0:
+    if temperature is not None and not temperature >= 1.0:
         raise ValueError(f"the rule's temperature must be at least 1 (got {temperature})")
     if settings.heat_model != "natural":
         raise ValueError("the final fit's candidates are heat laws: it needs the heat "
@@ -181,25 +202,25 @@ def final_fit(t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_st
     unit = max(ref.rms**2 * ref.inflation, 1e-300)
     crit = {c: information_criterion(f[1] / unit, f[2], max(span.n, 2))
             for c, f in made.items()}
+    if temperature is None:
+        temperature = misfit_looks(1.0 / dt, settings.volume, ref.conductance,
+                                   settings.gas.gamma)
     w = weights({c.name: v for c, v in crit.items()}, temperature)
     fits = tuple(CandidateFit(c, f[0], f[1], f[2], crit[c], w[c.name])
                  for c, f in made.items())
-    return FinalFit(fits, failed, temperature,
-                    _average(fits, "conductance", temperature),
-                    _average_or_none(fits, "critical_ratio", temperature),
+    return FinalFit(fits, failed, temperature, _average(fits, "conductance"),
+                    _average_or_none(fits, "critical_ratio"),
                     _average_or_none(tuple(f for f in fits if f.candidate.fit_m),
-                                     "subsonic_index", temperature))
+                                     "subsonic_index"))
 
 
-def _average(fits: tuple[CandidateFit, ...], attr: str, temperature: float) -> ModelAverage:
+def _average(fits: tuple[CandidateFit, ...], attr: str) -> ModelAverage:
     values = {f.candidate.name: getattr(f.fit, attr) for f in fits}
-    variances = {f.candidate.name: temperature * getattr(f.fit, attr + "_std") ** 2
-                 for f in fits}
+    variances = {f.candidate.name: getattr(f.fit, attr + "_std") ** 2 for f in fits}
     return model_average(values, {f.candidate.name: f.weight for f in fits}, variances)
 
 
-def _average_or_none(fits: tuple[CandidateFit, ...], attr: str,
-                     temperature: float) -> ModelAverage | None:
+def _average_or_none(fits: tuple[CandidateFit, ...], attr: str) -> ModelAverage | None:
     if not any(math.isfinite(getattr(f.fit, attr)) and f.weight > 0.0 for f in fits):
         return None
-    return _average(fits, attr, temperature)
+    return _average(fits, attr)

@@ -288,6 +288,51 @@ HEAT_DENSITY = Effect(
     _heat_density,
 )
 
+#: The time law's slope g1 and curvature g2 [-]: hA = hA_0 exp(g1 u + g2 u^2), u = ln(1 +
+#: s/tau_t) over the 5-10 tau_t of a record spans 0-2.4, so |g| up to 5 moves hA by e^12:
+#: beyond any wall exchange a record can follow.
+HEAT_TIME_SLOPE = EffectParam("heat_time_slope", "-", False, -5.0, 5.0, lambda s: 0.0, 0.3,
+                              "slope g1 of log hA in u = ln(1 + s/tau_t), s the time since "
+                              "the opening")
+HEAT_TIME_CURVATURE = EffectParam("heat_time_curvature", "-", False, -5.0, 5.0,
+                                  lambda s: 0.0, 0.3, "curvature g2 of log hA in u")
+#: The key of the values that carries the time law's time scale tau_t [s] to ``apply`` (not
+#: a parameter: :class:`~pneumatic_unload.model.parametric.ParametricModel` holds it at its
+#: start's unloading time, the record's own scale).
+HEAT_TIME_SCALE = "heat_time_scale"
+
+
+def _heat_time(v: Values, tank: TankSpec) -> dict[str, object]:
+    return {**_heat_fixed(v, tank), "heat_transfer_mode": "time",
+            "heat_transfer_time_slope": clamp(v["heat_time_slope"], -10.0, 10.0),
+            "heat_transfer_time_curvature": clamp(v.get("heat_time_curvature", 0.0),
+                                                  -10.0, 10.0),
+            "heat_transfer_time_constant": clamp(v[HEAT_TIME_SCALE], 1e-4, 1e6)}
+
+
+HEAT_TIME = Effect(
+    "heat_transfer",
+    "the tank wall: heat flows from the wall into the gas through an hA that changes with "
+    "the time since the opening, log hA = log hA_0 + g1 u, u = ln(1 + s/tau_t) (a stirring "
+    "that fades, a wall that cools with the gas); tau_heat = m0 c_v/(hA_0)",
+    (HEAT_FIXED.params[0], HEAT_TIME_SLOPE),
+    lambda s: {"tau_heat": 1e3 * s.tau, "heat_time_slope": 0.0},
+    lambda s: [{"tau_heat": 0.7 * s.tau, "heat_time_slope": 0.0},
+               {"tau_heat": 7.0 * s.tau, "heat_time_slope": 0.0}],
+    _heat_time,
+)
+HEAT_TIME2 = Effect(
+    "heat_transfer",
+    "the tank wall: as 'time', log hA = log hA_0 + g1 u + g2 u^2 (an exchange that rises "
+    "then falls, or the reverse)",
+    (HEAT_FIXED.params[0], HEAT_TIME_SLOPE, HEAT_TIME_CURVATURE),
+    lambda s: {"tau_heat": 1e3 * s.tau, "heat_time_slope": 0.0, "heat_time_curvature": 0.0},
+    lambda s: [{"tau_heat": 0.7 * s.tau, "heat_time_slope": 0.0, "heat_time_curvature": 0.0},
+               {"tau_heat": 7.0 * s.tau, "heat_time_slope": 0.0, "heat_time_curvature": 0.0}],
+    _heat_time,
+)
+
+
 def exchange_extremes(law: str, tau: float, isothermal: bool = False
                       ) -> list[dict[str, float]]:
     """Starts of a heat law's own parameter at a strong and at a weak exchange, for a
@@ -387,6 +432,11 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
 HEAT_VARIANTS: dict[str, Effect] = {"natural": HEAT_NATURAL, "fixed": HEAT_FIXED,
                                      "density": HEAT_DENSITY,
                                      "natural+turbulent": HEAT_NATURAL_TURBULENT}
+
+#: The heat laws of the final fit's candidates (:mod:`pneumatic_unload.model.candidates`):
+#: :data:`HEAT_VARIANTS` and the time laws, an hA that changes with the time since the
+#: opening with one or two parameters.
+FIT_HEAT_LAWS: dict[str, Effect] = {**HEAT_VARIANTS, "time": HEAT_TIME, "time2": HEAT_TIME2}
 
 WALL_TEMPERATURE = EffectParam("t_wall", "K", False, 150.0, 600.0, lambda s: math.nan, 5.0,
                                "wall temperature")

@@ -18,6 +18,12 @@ The gas exchanges heat with the wall, Q = hA (T_wall - T) [W]. The wall conducta
   law of HydDown's fills): hA_jet = A_w k/L 0.56 Re^0.67, Re = 4 |G_in| / (mu pi D) on the
   tank's diameter D, times ``heat_transfer_jet_scale`` [-] (:func:`jet_coefficient`; 0:
   none, as in a discharge, whose outflow drives no jet inside the tank).
+* ``time`` - hA = hA_0 exp(g1 u + g2 u^2), u = ln(1 + s/tau_t), s the time since the
+  opening: ``heat_transfer_coefficient`` hA_0 [W/K] at the opening,
+  ``heat_transfer_time_slope`` g1 and ``heat_transfer_time_curvature`` g2 [-], the time
+  scale ``heat_transfer_time_constant`` tau_t [s] (an exchange that changes as the
+  discharge goes on - a jet's stirring that fades, a wall that cools with the gas - whatever
+  drives it; g1 = g2 = 0 is ``fixed``).
 * ``density`` - hA = hA_0 (rho/rho_0)^n: ``heat_transfer_coefficient`` hA_0 [W/K] at the
   initial density rho_0 = p10/(R T10), the exponent n = ``heat_transfer_exponent`` [-]
   (convection whose h follows the gas density: n = 0 is ``fixed``; laminar natural
@@ -43,6 +49,7 @@ from pneumatic_unload.model.kernel import (
     HEAT_FIXED,
     HEAT_NATURAL,
     HEAT_NONE,
+    HEAT_TIME,
     JET_EXPONENT,
     heat_flow,
 )
@@ -51,7 +58,7 @@ from pneumatic_unload.physics import G_ACCEL, tank_geometry
 FloatArray = NDArray[np.float64]
 
 #: Heat laws (values of ``RigConfig.heat_transfer_mode``).
-HEAT_LAWS: tuple[str, ...] = ("natural", "fixed", "density")
+HEAT_LAWS: tuple[str, ...] = ("natural", "fixed", "density", "time")
 
 
 #: Rayleigh number where the natural-convection correlation turns turbulent [-].
@@ -72,8 +79,9 @@ def heat_parameters(cfg: RigConfig) -> tuple[float, float, float, float]:
     -------
     tuple of float
         (mode: :data:`~pneumatic_unload.model.kernel.HEAT_NONE`, ``HEAT_NATURAL``,
-        ``HEAT_FIXED`` or ``HEAT_DENSITY``; coefficient: A_w k/L x scale for the natural law
-        [W/K], hA for the fixed one [W/K], hA_0 (T10/p10)^n for the density law
+        ``HEAT_FIXED``, ``HEAT_DENSITY`` or ``HEAT_TIME``; coefficient: A_w k/L x scale for
+        the natural law [W/K], hA for the fixed one and the time law's at the opening
+        [W/K], hA_0 (T10/p10)^n for the density law
         [W/K / (Pa/K)^n]; shape constant: for the natural law the Ra constant
         g L^3 c_p/(mu k R^2) [K^3/Pa^2, such that Ra is dimensionless], for the density law
         the exponent n [-], else 0; the multiplier on the natural law's turbulent branch
@@ -84,6 +92,8 @@ def heat_parameters(cfg: RigConfig) -> tuple[float, float, float, float]:
         return HEAT_NONE, 0.0, 0.0, 1.0
     if cfg.heat_transfer_mode == "fixed":
         return HEAT_FIXED, float(cfg.heat_transfer_coefficient), 0.0, 1.0
+    if cfg.heat_transfer_mode == "time":  # hA at the opening; time_parameters: its change
+        return HEAT_TIME, float(cfg.heat_transfer_coefficient), 0.0, 1.0
     if cfg.heat_transfer_mode == "density":
         n = float(cfg.heat_transfer_exponent)
         # (rho/rho_0)^n = ((p/T)/(p10/T10))^n: the reference folded into the coefficient
@@ -94,6 +104,16 @@ def heat_parameters(cfg: RigConfig) -> tuple[float, float, float, float]:
     ra_const = _rayleigh_constant(cfg)
     hk = area * gas.conductivity / length * cfg.heat_transfer_scale
     return HEAT_NATURAL, hk, ra_const, float(cfg.heat_transfer_turbulent_ratio)
+
+
+def time_parameters(cfg: RigConfig) -> tuple[float, float, float]:
+    """The time law's change of hA as the kernel's (g1 [-], g2 [-], tau_t [s]): hA = hA_0
+    exp(g1 u + g2 u^2), u = ln(1 + s/tau_t), s the time since the opening; (0, 0, 1) for the
+    other laws (hA a function of the state alone)."""
+    if not cfg.has("heat_transfer") or cfg.heat_transfer_mode != "time":
+        return 0.0, 0.0, 1.0
+    return (float(cfg.heat_transfer_time_slope), float(cfg.heat_transfer_time_curvature),
+            float(cfg.heat_transfer_time_constant))
 
 
 #: Forced-convection correlation of a charge's jet, Nu = JET_NU Re^JET_EXPONENT [-].

@@ -19,7 +19,7 @@ enum {
     T_OPEN, RAMP, T_CLOSE, R_LIN, SQRT_TN,
     LEAK_DOWN, OLEAK_C_RHO, OLEAK_B, OLEAK_DOWN_C_RHO, OLEAK_DOWN_B, HEAT_TURB,
     CHARGE, P_SUPPLY, T_SUPPLY, HEAT_JET, Q_EXPONENT, SERIES_KAPPA, SERIES_B, SERIES_M,
-    SERIES_X0, N_PARAMETERS
+    SERIES_X0, HEAT_G1, HEAT_G2, HEAT_TREF, N_PARAMETERS
 };
 
 /* Exponent of the inflow's Reynolds number in a charge's jet-driven convection [-]. */
@@ -28,7 +28,7 @@ enum {
 /* Subsonic index of the orifice-law leaks [-] (a sharp-edged orifice). */
 #define LEAK_M_INDEX 0.5
 
-enum { HEAT_NONE = 0, HEAT_NATURAL = 1, HEAT_FIXED = 2, HEAT_DENSITY = 3 };
+enum { HEAT_NONE = 0, HEAT_NATURAL = 1, HEAT_FIXED = 2, HEAT_DENSITY = 3, HEAT_TIME = 4 };
 enum { OK = 0, TOO_MANY_STEPS = 1, STEP_TOO_SMALL = 2, NOT_FINITE = 3 };
 
 #define MAX_STATES 8
@@ -171,17 +171,31 @@ void pu_component_phi_array(int n, const double *r, double b, double m, double q
  * gives McAdams' 0.13), Nu >= 1, Ra = ra_const |Tw - T|/T (p/T)^2; fixed: Q = coeff (Tw - T); density:
  * Q = coeff (p/T)^n (Tw - T), n = ra_const (an hA that varies as the gas density to a
  * power n; coeff = hA_0 (T_0/p_0)^n [W/K / (Pa/K)^n], hA_0 at the density of p_0, T_0);
- * none: 0. */
+ * time: Q = coeff (Tw - T), coeff = hA at the opening (the right-hand side multiplies it by
+ * heat_time_factor); none: 0. */
 double pu_heat_flow(double mode, double coeff, double ra_const, double t_wall, double p,
                     double t_gas, double turb)
 {
     if (mode == HEAT_NONE) return 0.0;
     double dt_w = t_wall - t_gas;
-    if (mode == HEAT_FIXED) return coeff * dt_w;
+    if (mode == HEAT_FIXED || mode == HEAT_TIME) return coeff * dt_w;
     if (mode == HEAT_DENSITY) return coeff * pow(p / t_gas, ra_const) * dt_w;
     double ra = ra_const * fabs(dt_w) / t_gas * (p / t_gas) * (p / t_gas);
     double nu = ra < 1e9 ? 0.59 * pow(ra, 0.25) : turb * 0.10 * cbrt(ra);
     return coeff * (nu > 1.0 ? nu : 1.0) * dt_w;
+}
+
+/* The time law's factor on hA at t [s]: exp(g1 u + g2 u^2), u = ln(1 + s/t_ref) with s the
+ * time since the opening (0 before it), t_ref the HEAT_TREF slot [s]; 1 for the other laws
+ * (whose hA is a function of the state alone). The exponent is capped at 50 (hA e^50 times
+ * the opening's: the exchange is then isothermal to the integrator). */
+static double heat_time_factor(double t, const double *prm)
+{
+    if (prm[HEAT_MODE] != HEAT_TIME) return 1.0;
+    double s = t - prm[T_OPEN];
+    double u = s > 0.0 ? log1p(s / prm[HEAT_TREF]) : 0.0;
+    double e = prm[HEAT_G1] * u + prm[HEAT_G2] * u * u;
+    return exp(e < 50.0 ? e : 50.0);
 }
 
 /* Valve effective-area fraction a(t) [-]: a linear ramp of `ramp` s from t_open, shut
@@ -243,7 +257,7 @@ void pu_rhs(double t, const double *y, const double *prm, double *dy)
             g_leak += prm[OLEAK_C_RHO] * p1 * sq_tn / sqrt(t1)
                       * pu_flow_phi(p_atm / p1, prm[OLEAK_B], LEAK_M_INDEX, 2.0, r_lin);
         double q = pu_heat_flow(prm[HEAT_MODE], prm[HEAT_A], prm[HEAT_RA], t_wall, p1, t1,
-                                prm[HEAT_TURB]);
+                                prm[HEAT_TURB]) * heat_time_factor(t, prm);
         /* forced convection by the incoming jet: hA = HEAT_JET |g_in|^0.67 [W/K] */
         if (prm[HEAT_JET] > 0.0 && g_in != 0.0)
             q += prm[HEAT_JET] * pow(fabs(g_in), JET_EXPONENT) * (t_wall - t1);
@@ -269,7 +283,7 @@ void pu_rhs(double t, const double *y, const double *prm, double *dy)
         g_out += prm[OLEAK_C_RHO] * p1 * sq_tn / sqrt(t1)
                  * pu_flow_phi(p_atm / p1, prm[OLEAK_B], LEAK_M_INDEX, 2.0, r_lin);
     double q = pu_heat_flow(prm[HEAT_MODE], prm[HEAT_A], prm[HEAT_RA], t_wall, p1, t1,
-                            prm[HEAT_TURB]);
+                            prm[HEAT_TURB]) * heat_time_factor(t, prm);
     /* The gas leaving (or, for g < 0, entering) is taken at the tank gas temperature.
      * Reverse flow through the component happens in these models only as the numerical
      * overshoot of a discharge that ends on g = 0 (the valve closes before p_atm, heat

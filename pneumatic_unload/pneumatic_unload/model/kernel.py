@@ -75,7 +75,10 @@ Q_EXPONENT = 31
 # b and m [-]; C_RHO is then the pair's and B_RATIO, M_INDEX the upstream element's
 # (and the choked pair's intermediate ratio, :func:`series_choked`, packed with them)
 SERIES_KAPPA, SERIES_B, SERIES_M, SERIES_X0 = 32, 33, 34, 35
-N_PARAMETERS = 36
+# the time law's hA = HEAT_A exp(g1 u + g2 u^2), u = ln(1 + s / HEAT_TREF), s the time since
+# the opening: g1, g2 [-] and the time scale [s]
+HEAT_G1, HEAT_G2, HEAT_TREF = 36, 37, 38
+N_PARAMETERS = 39
 #: Exponent of the inflow's Reynolds number in a charge's jet-driven convection
 #: (JET_EXPONENT of kernel.c) [-].
 JET_EXPONENT = 0.67
@@ -84,7 +87,7 @@ JET_EXPONENT = 0.67
 LEAK_M_INDEX = 0.5
 
 #: Heat-law codes of the HEAT_MODE slot.
-HEAT_NONE, HEAT_NATURAL, HEAT_FIXED, HEAT_DENSITY = 0.0, 1.0, 2.0, 3.0
+HEAT_NONE, HEAT_NATURAL, HEAT_FIXED, HEAT_DENSITY, HEAT_TIME = 0.0, 1.0, 2.0, 3.0, 4.0
 
 #: Return codes of :func:`dopri5`.
 OK, TOO_MANY_STEPS, STEP_TOO_SMALL, NOT_FINITE = 0, 1, 2, 3
@@ -286,7 +289,9 @@ def heat_flow(mode: float, coeff: float, ra_const: float, t_wall: float, p: floa
     mode :data:`HEAT_FIXED`: Q = coeff (T_w - T), coeff = hA [W/K]; mode
     :data:`HEAT_DENSITY`: Q = coeff (p/T)^n (T_w - T), n = ra_const [-],
     coeff = hA_0 (T_0/p_0)^n (hA_0 [W/K] at the gas density of p_0 [Pa], T_0 [K]);
-    :data:`HEAT_NONE`: 0. t_wall: wall temperature [K].
+    mode :data:`HEAT_TIME`: Q = coeff (T_w - T) at the opening (the right-hand side
+    multiplies coeff by exp(g1 u + g2 u^2) as time passes); :data:`HEAT_NONE`: 0. t_wall:
+    wall temperature [K].
     """
     return float(_LIB.pu_heat_flow(mode, coeff, ra_const, t_wall, p, t_gas, turb))
 

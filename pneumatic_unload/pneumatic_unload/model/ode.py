@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 import pneumatic_unload.model.kernel as kernel
 from pneumatic_unload.config import RigConfig
-from pneumatic_unload.model.heat import heat_parameters, jet_coefficient
+from pneumatic_unload.model.heat import heat_parameters, jet_coefficient, time_parameters
 from pneumatic_unload.physics import R_LINEAR, RHO_N, T_N
 
 FloatArray = NDArray[np.float64]
@@ -141,6 +141,7 @@ def kernel_parameters(cfg: RigConfig, t_open: float) -> FloatArray:
         prm[kernel.OLEAK_DOWN_B] = cfg.orifice_leak_downstream_critical_ratio
     (prm[kernel.HEAT_MODE], prm[kernel.HEAT_A], prm[kernel.HEAT_RA],
      prm[kernel.HEAT_TURB]) = heat_parameters(cfg)
+    prm[kernel.HEAT_G1], prm[kernel.HEAT_G2], prm[kernel.HEAT_TREF] = time_parameters(cfg)
     if cfg.has("pipe_volume"):
         prm[kernel.PIPE] = 1.0
         prm[kernel.PIPE_VOLUME] = cfg.pipe_volume

@@ -18,8 +18,10 @@ from pneumatic_unload.config.fields import with_changes
 from pneumatic_unload.fit.params import Parameter, Parameters
 from pneumatic_unload.model.effects import (
     CANDIDATES,
+    FIT_HEAT_LAWS,
     FIT_MAX_STEPS,
     FIT_RTOL,
+    HEAT_TIME_SCALE,
     HEAT_VARIANTS,
     HOT_START,
     HOT_START_DROPS,
@@ -90,8 +92,10 @@ class ParametricModel:
     start : Start
         Neutral values (centres of the fitted coordinates, bounds of t_open).
     heat_law : str
-        Law of the heat-transfer effect: 'natural', 'fixed', 'density' or
-        'natural+turbulent' (:data:`HEAT_VARIANTS`).
+        Law of the heat-transfer effect: 'natural', 'fixed', 'density',
+        'natural+turbulent' (:data:`HEAT_VARIANTS`), 'time' or 'time2' (an hA that changes
+        with the time since the opening, on the scale of the start's unloading time:
+        :data:`FIT_HEAT_LAWS`).
     fit_wall_temperature : bool
         Fit the wall temperature with the heat-transfer effect (start: ``tank.wall``).
         ``hot_start`` in ``effects`` is the heat-transfer effect with the wall temperature
@@ -146,8 +150,8 @@ class ParametricModel:
         if HOT_START in effects and "heat_transfer" in effects:
             raise ValueError("hot_start is heat_transfer with the wall temperature fitted: "
                              "give one of them")
-        if heat_law not in HEAT_VARIANTS:
-            raise ValueError(f"unknown heat law {heat_law!r}; known: {list(HEAT_VARIANTS)}")
+        if heat_law not in FIT_HEAT_LAWS:
+            raise ValueError(f"unknown heat law {heat_law!r}; known: {list(FIT_HEAT_LAWS)}")
         self.effects = tuple(effects)
         self.tank = tank
         self.start = start
@@ -259,7 +263,7 @@ class ParametricModel:
         """The record whose parameters the effect adds (the heat law's for the hot start:
         its wall temperature is added with the heat-transfer record's parameters)."""
         if effect in ("heat_transfer", HOT_START):
-            return HEAT_VARIANTS[self.heat_law]
+            return FIT_HEAT_LAWS[self.heat_law]
         if effect == SUBSONIC:
             return SUBSONIC_RECORD
         return REGISTRY[effect]
@@ -280,7 +284,7 @@ class ParametricModel:
     def _build_config(self, v: Values) -> RigConfig:
         tank = self.tank
         c = clamp(v["C"], 1e-13, 1e-5)
-        vv = {**v, "C": c}
+        vv = {**v, "C": c, HEAT_TIME_SCALE: self.start.tau}  # the time laws' scale
         room = tank.atmosphere if tank.atmosphere is not None else 101325.0
         kw: dict[str, object] = {
             "conductance": c, "critical_ratio": clamp(v["b"], 0.0, 0.99),
