@@ -504,8 +504,7 @@ def criterion(fits: dict[str, Fit], n: int) -> dict[str, float]:
     """BIC [-] of every fit: chi^2 normalised by the lowest-chi^2 fit's residual variance
     (inflated when structured: correlated residuals carry less information), n samples."""
     unit = criterion_unit(fits)
-    return {law: information_criterion(chi2 / unit, k, max(n, 2))
-            for law, (_cf, chi2, k) in fits.items()}
+    return {k: information_criterion(f[1] / unit, f[2], max(n, 2)) for k, f in fits.items()}
 
 
 def criterion_unit(fits: dict[str, Fit]) -> float:

@@ -105,6 +105,8 @@ from pneumatic_unload.testline.live import LiveResults, PendingWrite, ResultWrit
 INPUTS = ("sample", "block", "volts")
 #: Node states reported on /diagnostics and in the action's feedback.
 STATES = ("waiting", "unloading", "done", "error")
+#: The start of the reason reported while the core skips the unload under way.
+SKIPPING = "skipping the unload under way"
 #: Most queued single samples fed to the core as one block [-] (the queue is drained in
 #: such blocks; a block is the same decisions as its samples one by one).
 MAX_BATCH = 4096
@@ -256,6 +258,9 @@ class EstimatorNode(Node):
         self._temperature_seen = False
         self._state = "waiting"
         self._why = "no unload yet"
+        #: The core skips the unload under way (no result for it): every reason reported
+        #: while it waits says so, the periodic reports' too (a late subscriber's only ones).
+        self._skipping = False
         self._last: UnloadResult | None = None
         self._last_pressure = math.nan
         self._n_diag = 0
@@ -512,7 +517,8 @@ class EstimatorNode(Node):
                     if "going backwards" in message or "out of order" in message:
                         message += self._sources_note()
                     if self._state == "waiting":  # the periodic report says it too
-                        self._why = message
+                        self._why = (f"{SKIPPING}: {message}" if self._skipping
+                                     else message)
                 self._diagnose(level, message)
             self._n_diag = est.diagnostics.total
 
@@ -701,9 +707,10 @@ class EstimatorNode(Node):
             # no result for this unload (e.g. the node started mid-unload): say why
             why = next((d.message for d in reversed(self._est.diagnostics)
                         if d.level != "ok"), "no estimate for the unload under way")
-            self._state, self._why = "waiting", f"skipping the unload under way: {why}"
+            self._state, self._why, self._skipping = "waiting", f"{SKIPPING}: {why}", True
             self._report()
             return
+        self._skipping = False
         self._state, self._why = "unloading", f"unload in progress ({core_state})"
         self._report()
 
