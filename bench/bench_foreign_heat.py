@@ -54,7 +54,10 @@ shared cores, load 5-18; medians per record, CPU / wall [s]):
 | all | Newton fit | 28/120 | 28/120 | 82/120 | 1 / 2 / 4 | 3.1 / 8.1 |
 
 ``--speed``: the 400-sample 1 Hz record 1.6-2.0 s of CPU (median 1.82 s over seven
-runs), the AeroLab runs 18.0 s and 17.1 s.
+runs). At 4455b6c+ (session 36, a slower machine: the 400-sample record 2.66 s) the
+AeroLab runs take 13.3 s (0.094 in, read from its first stamp) and 22.4 s (0.125 in,
+144 samples): the curve fit's 81 law fits and 34 600 residual evaluations, more than half
+of them in the joint fit with the logged temperature (cProfile).
 """
 
 from __future__ import annotations
