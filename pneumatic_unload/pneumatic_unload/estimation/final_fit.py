@@ -38,10 +38,11 @@ from numpy.typing import NDArray
 
 from pneumatic_unload.config.estimator import EstimatorSettings
 from pneumatic_unload.curvefit.curve_fit_result import CurveFit, CurveSpan
+from pneumatic_unload.curvefit.law_family import criterion
 from pneumatic_unload.curvefit.law_fit import curve_fit_trace, fit_law, heat_of, start_from
 from pneumatic_unload.model.candidates import Candidate, default_candidates
 from pneumatic_unload.selection.averaging import ModelAverage, model_average
-from pneumatic_unload.selection.evidence import information_criterion, weights
+from pneumatic_unload.selection.evidence import weights
 
 FloatArray = NDArray[np.float64]
 
@@ -199,9 +200,8 @@ def final_fit(t: FloatArray, p: FloatArray, settings: EstimatorSettings, *, t_st
         raise ValueError("no candidate model could be fitted to the record: " + "; ".join(
             f"{k}: {v}" for k, v in failed.items()))
     ref = min(made.values(), key=lambda f: f[1])[0]
-    unit = max(ref.rms**2 * ref.inflation, 1e-300)
-    crit = {c: information_criterion(f[1] / unit, f[2], max(span.n, 2))
-            for c, f in made.items()}
+    by_name = criterion({c.name: f for c, f in made.items()}, span.n)
+    crit = {c: by_name[c.name] for c in made}
     if temperature is None:
         temperature = misfit_looks(1.0 / dt, settings.volume, ref.conductance,
                                    settings.gas.gamma)
